@@ -1,0 +1,138 @@
+//! The interface every reflectance representation offers (tables, analytic fits, networks), and
+//! the structure-of-arrays batch types the hot loops and the C ABI use.
+
+use glam::Vec3;
+
+/// A batch of directions in the local shading frame, one slice per component.
+#[derive(Clone, Copy, Debug)]
+pub struct Directions<'a> {
+    pub x: &'a [f32],
+    pub y: &'a [f32],
+    pub z: &'a [f32],
+}
+
+impl<'a> Directions<'a> {
+    /// Splits a planar buffer `[x0..xn, y0..yn, z0..zn]` of length `3 n`.
+    pub fn from_planar(buffer: &'a [f32]) -> Option<Self> {
+        if buffer.len() % 3 != 0 {
+            return None;
+        }
+        let n = buffer.len() / 3;
+        Some(Directions { x: &buffer[..n], y: &buffer[n..2 * n], z: &buffer[2 * n..] })
+    }
+
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    pub fn get(&self, i: usize) -> Vec3 {
+        Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+
+    /// The sub-batch `range`, for splitting work across threads.
+    pub fn slice(&self, start: usize, end: usize) -> Directions<'a> {
+        Directions { x: &self.x[start..end], y: &self.y[start..end], z: &self.z[start..end] }
+    }
+}
+
+/// Output directions, planar like [`Directions`].
+#[derive(Debug)]
+pub struct DirectionsMut<'a> {
+    pub x: &'a mut [f32],
+    pub y: &'a mut [f32],
+    pub z: &'a mut [f32],
+}
+
+impl<'a> DirectionsMut<'a> {
+    pub fn from_planar(buffer: &'a mut [f32]) -> Option<Self> {
+        if buffer.len() % 3 != 0 {
+            return None;
+        }
+        let n = buffer.len() / 3;
+        let (x, rest) = buffer.split_at_mut(n);
+        let (y, z) = rest.split_at_mut(n);
+        Some(DirectionsMut { x, y, z })
+    }
+
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    pub fn set(&mut self, i: usize, v: Vec3) {
+        self.x[i] = v.x;
+        self.y[i] = v.y;
+        self.z[i] = v.z;
+    }
+}
+
+/// RGB output, one slice per channel.
+#[derive(Debug)]
+pub struct RgbMut<'a> {
+    pub r: &'a mut [f32],
+    pub g: &'a mut [f32],
+    pub b: &'a mut [f32],
+}
+
+impl<'a> RgbMut<'a> {
+    pub fn from_planar(buffer: &'a mut [f32]) -> Option<Self> {
+        if buffer.len() % 3 != 0 {
+            return None;
+        }
+        let n = buffer.len() / 3;
+        let (r, rest) = buffer.split_at_mut(n);
+        let (g, b) = rest.split_at_mut(n);
+        Some(RgbMut { r, g, b })
+    }
+
+    pub fn len(&self) -> usize {
+        self.r.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.r.is_empty()
+    }
+
+    pub fn set(&mut self, i: usize, rgb: [f32; 3]) {
+        self.r[i] = rgb[0];
+        self.g[i] = rgb[1];
+        self.b[i] = rgb[2];
+    }
+}
+
+/// An isotropic reflectance function `f_r(light, view)` in linear RGB.
+pub trait Brdf: Send + Sync {
+    /// `f_r(light, view)` (not cosine weighted). Zero when either direction is at or below the
+    /// horizon; finite and non-negative for every input, unit length or not.
+    fn eval(&self, light: Vec3, view: Vec3) -> [f32; 3];
+
+    /// `f_r(light, view) * cos(theta_light)` for a batch (what Mitsuba's `BSDF.eval` returns).
+    /// `view`, `light` and `out` have the same length (the caller checks). Implementations
+    /// override this with a vectorised, multi-threaded version.
+    fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
+        let mut out = out;
+        for i in 0..view.len() {
+            let l = light.get(i);
+            let cos = cos_theta_light(l);
+            let f = self.eval(l, view.get(i));
+            out.set(i, [f[0] * cos, f[1] * cos, f[2] * cos]);
+        }
+    }
+}
+
+/// `cos(theta)` of a possibly non-normalised direction, 0 for zero-length vectors.
+pub fn cos_theta_light(light: Vec3) -> f32 {
+    let len = light.length();
+    if len > 0.0 && len.is_finite() {
+        (light.z / len).max(0.0)
+    } else {
+        0.0
+    }
+}
