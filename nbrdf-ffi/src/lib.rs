@@ -1,1 +1,771 @@
-//! C ABI of nbrdf (see `include/nbrdf.h`). Filled in by the FFI work.
+//! C ABI of nbrdf: load, evaluate, sample and pdf of NBRDFs and MERL tables, batched.
+//!
+//! The header `include/nbrdf.h` is generated from this file by cbindgen (see `cbindgen.toml`;
+//! `NBRDF_BLESS=1 cargo test -p nbrdf-ffi --test header` regenerates it). The crate is a thin
+//! shell around `nbrdf-core`: it checks pointers and lengths, turns errors and panics into status
+//! codes with a thread-local message, and hands planar slices to the core.
+//!
+//! Conventions: every array is planar (structure of arrays): a batch of `n` directions is `3 n`
+//! floats `[x0..x(n-1), y0..y(n-1), z0..z(n-1)]`, uniforms are `[u0.., u1.., u2..]`, colours are
+//! `[r.., g.., b..]`, pdfs are `n` floats. Directions live in the local shading frame (z = normal);
+//! `view` points towards the viewer (Mitsuba's `si.wi`), `light` towards the light (Mitsuba's
+//! `wo`). Output arrays must not overlap the inputs.
+
+#![deny(unsafe_op_in_unsafe_fn)]
+
+use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
+use nbrdf_core::sampling::{self, SamplingStrategy};
+use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
+use std::any::Any;
+use std::cell::RefCell;
+use std::ffi::{c_char, CStr, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+
+/// Status code returned (as `int32_t`) by every fallible function. On any value other than
+/// `NBRDF_OK`, `nbrdf_last_error()` describes the failure.
+#[repr(C)]
+#[allow(non_camel_case_types)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NbrdfStatus {
+    /// Success.
+    NBRDF_OK = 0,
+    /// A required pointer argument was null; the message names the argument.
+    NBRDF_ERROR_NULL_POINTER = 1,
+    /// An argument is outside its domain (sampler parameters, misaligned arrays, sizes).
+    NBRDF_ERROR_INVALID_ARGUMENT = 2,
+    /// A file could not be opened or read; the message names the file.
+    NBRDF_ERROR_IO = 3,
+    /// A file was read but is not a valid network or MERL table; the message names the file.
+    NBRDF_ERROR_FORMAT = 4,
+    /// The library caught an internal panic (a bug); the message carries the panic message.
+    NBRDF_ERROR_PANIC = 5,
+}
+
+/// Importance-sampling strategy of an `NbrdfSampler`.
+#[repr(C)]
+#[allow(non_camel_case_types)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NbrdfSamplingKind {
+    /// Uniform over the upper hemisphere.
+    NBRDF_SAMPLING_UNIFORM = 0,
+    /// Cosine-weighted over the upper hemisphere.
+    NBRDF_SAMPLING_COSINE = 1,
+    /// Mixture of a Blinn-Phong lobe (`exponent`, weight `specular_weight`) and a cosine lobe.
+    NBRDF_SAMPLING_PHONG = 2,
+}
+
+/// An importance-sampling strategy. `exponent` (finite, >= 0) and `specular_weight` (in [0, 1])
+/// are read only for `NBRDF_SAMPLING_PHONG`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NbrdfSampler {
+    pub kind: NbrdfSamplingKind,
+    pub exponent: f32,
+    pub specular_weight: f32,
+}
+
+/// Summary of a loaded network.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NbrdfNetworkInfo {
+    /// Width of the two hidden layers (21 for the paper's networks).
+    pub hidden_width: u32,
+    /// Number of weights and biases (675 for width 21).
+    pub parameter_count: u32,
+    /// 1 when the file carries Blinn-Phong sampling parameters, else 0.
+    pub has_sampling: u32,
+    /// Blinn-Phong exponent stored with the network (0 when `has_sampling` is 0).
+    pub exponent: f32,
+    /// Blinn-Phong specular weight stored with the network (0 when `has_sampling` is 0).
+    pub specular_weight: f32,
+}
+
+/// A neural BRDF loaded from an `*.nbrdf.json` file. Immutable: one handle may be used by many
+/// threads at once.
+pub struct NbrdfNetwork {
+    network: Nbrdf,
+    name: CString,
+}
+
+/// A MERL-format BRDF table loaded from a `.binary` file. Immutable: one handle may be used by
+/// many threads at once.
+pub struct NbrdfMerl {
+    table: MerlTable,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Errors and the panic guard.
+
+thread_local! {
+    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
+}
+
+/// A failed call: the status to return and the message for `nbrdf_last_error`.
+#[derive(Debug)]
+struct Failure {
+    status: NbrdfStatus,
+    message: String,
+}
+
+type FfiResult<T> = Result<T, Failure>;
+
+impl Failure {
+    fn null(argument: &str) -> Self {
+        Failure {
+            status: NbrdfStatus::NBRDF_ERROR_NULL_POINTER,
+            message: format!("argument `{argument}` is a null pointer"),
+        }
+    }
+
+    fn invalid(message: impl Into<String>) -> Self {
+        Failure {
+            status: NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT,
+            message: message.into(),
+        }
+    }
+}
+
+impl From<NbrdfError> for Failure {
+    fn from(error: NbrdfError) -> Self {
+        let status = match &error {
+            NbrdfError::Io { .. } => NbrdfStatus::NBRDF_ERROR_IO,
+            NbrdfError::Format { .. } => NbrdfStatus::NBRDF_ERROR_FORMAT,
+            _ => NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT,
+        };
+        Failure {
+            status,
+            message: error.to_string(),
+        }
+    }
+}
+
+fn set_last_error(message: String) {
+    let message = CString::new(message.replace('\0', "\\0")).unwrap_or_default();
+    // `try_with` fails only while the thread is being torn down; there is nobody to tell then.
+    let _ = LAST_ERROR.try_with(|cell| *cell.borrow_mut() = message);
+}
+
+fn panic_message(payload: &(dyn Any + Send)) -> &str {
+    if let Some(message) = payload.downcast_ref::<&'static str>() {
+        message
+    } else if let Some(message) = payload.downcast_ref::<String>() {
+        message
+    } else {
+        "(panic payload is not a string)"
+    }
+}
+
+/// Runs `body`, catching panics; returns the status code and records the message of a failure
+/// (prefixed with `function`) for `nbrdf_last_error`.
+fn guard(function: &str, body: impl FnOnce() -> FfiResult<()>) -> i32 {
+    let failure = match catch_unwind(AssertUnwindSafe(body)) {
+        Ok(Ok(())) => return NbrdfStatus::NBRDF_OK as i32,
+        Ok(Err(failure)) => failure,
+        Err(payload) => Failure {
+            status: NbrdfStatus::NBRDF_ERROR_PANIC,
+            message: format!(
+                "internal error (panic): {}",
+                panic_message(payload.as_ref())
+            ),
+        },
+    };
+    set_last_error(format!("{function}: {}", failure.message));
+    failure.status as i32
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pointer and slice checks.
+
+/// A shared reference to `*ptr`, or an error naming `argument` when null or misaligned.
+///
+/// # Safety
+/// A non-null `ptr` must point to a live, initialised `T` for the lifetime `'a`.
+unsafe fn reference<'a, T>(ptr: *const T, argument: &str) -> FfiResult<&'a T> {
+    if ptr.is_null() {
+        return Err(Failure::null(argument));
+    }
+    if !ptr.is_aligned() {
+        return Err(Failure::invalid(format!(
+            "argument `{argument}` is misaligned"
+        )));
+    }
+    // SAFETY: non-null and aligned; validity is the caller's contract.
+    Ok(unsafe { &*ptr })
+}
+
+/// Checks an array argument for null and alignment.
+fn check_array<T>(ptr: *const T, argument: &str) -> FfiResult<()> {
+    if ptr.is_null() {
+        return Err(Failure::null(argument));
+    }
+    if !ptr.is_aligned() {
+        return Err(Failure::invalid(format!(
+            "array `{argument}` is not aligned to {} bytes",
+            align_of::<T>()
+        )));
+    }
+    Ok(())
+}
+
+/// `factor * n` floats, checked against overflow and the largest possible allocation.
+fn array_len(n: usize, factor: usize) -> FfiResult<usize> {
+    n.checked_mul(factor)
+        .filter(|len| {
+            len.checked_mul(size_of::<f32>())
+                .is_some_and(|bytes| bytes <= isize::MAX as usize)
+        })
+        .ok_or_else(|| Failure::invalid(format!("batch size n = {n} is too large")))
+}
+
+/// # Safety
+/// `ptr` passed [`check_array`] and points to `len` readable floats.
+unsafe fn input<'a>(ptr: *const f32, len: usize) -> &'a [f32] {
+    // SAFETY: the caller's contract; `len` fits in isize (array_len).
+    unsafe { std::slice::from_raw_parts(ptr, len) }
+}
+
+/// # Safety
+/// `ptr` passed [`check_array`] and points to `len` writable floats that no other slice aliases.
+unsafe fn output<'a>(ptr: *mut f32, len: usize) -> &'a mut [f32] {
+    // SAFETY: the caller's contract; `len` fits in isize (array_len).
+    unsafe { std::slice::from_raw_parts_mut(ptr, len) }
+}
+
+fn directions(buffer: &[f32]) -> Directions<'_> {
+    Directions::from_planar(buffer).expect("planar buffers have length 3 n")
+}
+
+/// Reads a sampler passed by C and validates it with the core.
+///
+/// # Safety
+/// A non-null `sampler` must point to a live `NbrdfSampler`.
+unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrategy> {
+    check_array(sampler, "sampler")?;
+    // Read the fields through the raw pointer and the kind as a plain integer: C may store any
+    // int there, and materialising an out-of-range Rust enum would be undefined behaviour.
+    // SAFETY: non-null and aligned (checked), initialised by contract; `NbrdfSamplingKind` is a
+    // repr(C) fieldless enum, laid out as a C int.
+    let (kind, exponent, specular_weight) = unsafe {
+        (
+            std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
+            std::ptr::addr_of!((*sampler).exponent).read(),
+            std::ptr::addr_of!((*sampler).specular_weight).read(),
+        )
+    };
+    let strategy = match kind {
+        0 => SamplingStrategy::Uniform,
+        1 => SamplingStrategy::Cosine,
+        2 => SamplingStrategy::BlinnPhong {
+            exponent: f64::from(exponent),
+            specular_weight: f64::from(specular_weight),
+        },
+        other => {
+            return Err(Failure::invalid(format!(
+                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
+            )))
+        }
+    };
+    Ok(strategy.validated()?)
+}
+
+/// A path argument: bytes on Unix (any encoding), UTF-8 elsewhere.
+///
+/// # Safety
+/// A non-null `path` must point to a NUL-terminated string.
+unsafe fn read_path(path: *const c_char) -> FfiResult<PathBuf> {
+    if path.is_null() {
+        return Err(Failure::null("path"));
+    }
+    // SAFETY: non-null, NUL-terminated by contract.
+    let bytes = unsafe { CStr::from_ptr(path) }.to_bytes();
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        Ok(PathBuf::from(std::ffi::OsStr::from_bytes(bytes)))
+    }
+    #[cfg(not(unix))]
+    {
+        std::str::from_utf8(bytes)
+            .map(PathBuf::from)
+            .map_err(|_| Failure::invalid("path is not valid UTF-8"))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Generic implementations shared by networks and tables.
+
+/// What the batched entry points need from a handle.
+trait BrdfHandle: Sized {
+    /// The name of the handle argument in error messages.
+    const ARGUMENT: &'static str;
+    fn brdf(&self) -> &dyn Brdf;
+}
+
+impl BrdfHandle for NbrdfNetwork {
+    const ARGUMENT: &'static str = "network";
+    fn brdf(&self) -> &dyn Brdf {
+        &self.network
+    }
+}
+
+impl BrdfHandle for NbrdfMerl {
+    const ARGUMENT: &'static str = "merl";
+    fn brdf(&self) -> &dyn Brdf {
+        &self.table
+    }
+}
+
+/// # Safety
+/// See the exported `*_load` functions.
+unsafe fn load_impl<H>(
+    function: &str,
+    path: *const c_char,
+    out: *mut *mut H,
+    load: impl FnOnce(PathBuf) -> Result<H, NbrdfError>,
+) -> i32 {
+    guard(function, || {
+        if out.is_null() {
+            return Err(Failure::null("out"));
+        }
+        // SAFETY: `out` is non-null and writable by contract; cleared first so that it never
+        // holds a stale pointer after a failure.
+        unsafe { out.write(std::ptr::null_mut()) };
+        // SAFETY: forwarded contract.
+        let path = unsafe { read_path(path)? };
+        let handle = load(path)?;
+        // SAFETY: as above.
+        unsafe { out.write(Box::into_raw(Box::new(handle))) };
+        Ok(())
+    })
+}
+
+/// # Safety
+/// `handle` is null or came from the matching `*_load` and was not freed yet.
+unsafe fn free_impl<H>(handle: *mut H) {
+    if !handle.is_null() {
+        // Dropping plain data cannot panic, but no unwind may ever cross the boundary.
+        // SAFETY: ownership returns from C, by contract.
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(handle) })));
+    }
+}
+
+/// # Safety
+/// See the exported `*_eval` functions.
+unsafe fn eval_impl<H: BrdfHandle>(
+    function: &str,
+    handle: *const H,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_rgb: *mut f32,
+) -> i32 {
+    guard(function, || {
+        // SAFETY: forwarded contract.
+        let handle = unsafe { reference(handle, H::ARGUMENT)? };
+        check_array(view, "view")?;
+        check_array(light, "light")?;
+        check_array(out_rgb, "out_rgb")?;
+        let len = array_len(n, 3)?;
+        if n == 0 {
+            return Ok(());
+        }
+        // SAFETY: checked above; sizes and aliasing are the caller's contract.
+        let (view, light, rgb) =
+            unsafe { (input(view, len), input(light, len), output(out_rgb, len)) };
+        let rgb = RgbMut::from_planar(rgb).expect("planar buffers have length 3 n");
+        handle
+            .brdf()
+            .eval_cos_batch(directions(view), directions(light), rgb);
+        Ok(())
+    })
+}
+
+/// # Safety
+/// See the exported `*_sample` functions.
+#[allow(clippy::too_many_arguments)]
+unsafe fn sample_impl<H: BrdfHandle>(
+    function: &str,
+    handle: *const H,
+    sampler: *const NbrdfSampler,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    guard(function, || {
+        // SAFETY: forwarded contract.
+        let handle = unsafe { reference(handle, H::ARGUMENT)? };
+        check_array(sampler, "sampler")?;
+        check_array(view, "view")?;
+        check_array(u, "u")?;
+        check_array(out_light, "out_light")?;
+        check_array(out_weight, "out_weight")?;
+        check_array(out_pdf, "out_pdf")?;
+        // SAFETY: forwarded contract.
+        let strategy = unsafe { read_sampler(sampler)? };
+        let len = array_len(n, 3)?;
+        if n == 0 {
+            return Ok(());
+        }
+        // SAFETY: checked above; sizes and aliasing are the caller's contract.
+        let (view, u, light, weight, pdf) = unsafe {
+            (
+                input(view, len),
+                input(u, len),
+                output(out_light, len),
+                output(out_weight, len),
+                output(out_pdf, n),
+            )
+        };
+        sampling::sample_batch(
+            &strategy,
+            handle.brdf(),
+            directions(view),
+            directions(u),
+            DirectionsMut::from_planar(light).expect("planar buffers have length 3 n"),
+            RgbMut::from_planar(weight).expect("planar buffers have length 3 n"),
+            pdf,
+        );
+        Ok(())
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Exported functions.
+
+/// Message of the last failed call on this thread, prefixed with the name of the function that
+/// failed; an empty string when no call has failed on this thread. Successful calls leave it
+/// unchanged. The pointer stays valid until the next call into this library on the same thread.
+#[no_mangle]
+pub extern "C" fn nbrdf_last_error() -> *const c_char {
+    LAST_ERROR
+        .try_with(|cell| cell.borrow().as_ptr())
+        .unwrap_or(c"".as_ptr())
+}
+
+/// Version of the library (the crate version, e.g. "0.1.0"); a static string.
+#[no_mangle]
+pub extern "C" fn nbrdf_version() -> *const c_char {
+    concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast()
+}
+
+/// Loads a network from an `*.nbrdf.json` file and stores a new handle in `*out` (null on
+/// failure). Free it with `nbrdf_network_free`.
+///
+/// # Safety
+/// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_load(
+    path: *const c_char,
+    out: *mut *mut NbrdfNetwork,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        load_impl("nbrdf_network_load", path, out, |path| {
+            let network = Nbrdf::load(&path)?;
+            let name = CString::new(network.name.replace('\0', "")).unwrap_or_default();
+            Ok(NbrdfNetwork { network, name })
+        })
+    }
+}
+
+/// Frees a network handle; null is accepted and ignored.
+///
+/// # Safety
+/// `network` is null or a handle from `nbrdf_network_load` that was not freed yet.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_free(network: *mut NbrdfNetwork) {
+    // SAFETY: forwarded contract.
+    unsafe { free_impl(network) }
+}
+
+/// Fills `*out` with the hidden width, parameter count and stored sampling parameters.
+///
+/// # Safety
+/// `network` is a live handle; `out` points to a writable `NbrdfNetworkInfo`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_info(
+    network: *const NbrdfNetwork,
+    out: *mut NbrdfNetworkInfo,
+) -> i32 {
+    guard("nbrdf_network_info", || {
+        // SAFETY: forwarded contract.
+        let network = &unsafe { reference(network, "network")? }.network;
+        check_array(out, "out")?;
+        let to_u32 = |value: usize| u32::try_from(value).unwrap_or(u32::MAX);
+        let sampling = network.sampling.as_ref();
+        let info = NbrdfNetworkInfo {
+            hidden_width: to_u32(network.hidden_width()),
+            parameter_count: to_u32(network.parameter_count()),
+            has_sampling: u32::from(sampling.is_some()),
+            exponent: sampling.map_or(0.0, |s| s.exponent),
+            specular_weight: sampling.map_or(0.0, |s| s.specular_weight),
+        };
+        // SAFETY: non-null, aligned, writable by contract.
+        unsafe { out.write(info) };
+        Ok(())
+    })
+}
+
+/// Stores in `*out_name` the network's name (UTF-8, NUL-terminated, possibly empty). The string
+/// belongs to the handle and stays valid until `nbrdf_network_free`.
+///
+/// # Safety
+/// `network` is a live handle; `out_name` points to writable storage for one pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_name(
+    network: *const NbrdfNetwork,
+    out_name: *mut *const c_char,
+) -> i32 {
+    guard("nbrdf_network_name", || {
+        // SAFETY: forwarded contract.
+        let network = unsafe { reference(network, "network")? };
+        check_array(out_name, "out_name")?;
+        // SAFETY: non-null, aligned, writable by contract.
+        unsafe { out_name.write(network.name.as_ptr()) };
+        Ok(())
+    })
+}
+
+/// Evaluates `f_r(light, view) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
+/// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
+/// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon.
+///
+/// # Safety
+/// `network` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
+/// input.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_eval(
+    network: *const NbrdfNetwork,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_rgb: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe { eval_impl("nbrdf_network_eval", network, view, light, n, out_rgb) }
+}
+
+/// Importance-samples `n` light directions for the planar `view` directions from the planar
+/// uniforms `u = [u0.., u1.., u2..]` (in [0, 1]; `u0` picks the lobe of the Blinn-Phong mixture).
+/// Writes the planar light directions `out_light` (3 n), the weights
+/// `f_r * cos(theta_light) / pdf` as planar RGB `out_weight` (3 n) and the solid-angle pdfs
+/// `out_pdf` (n). Invalid samples (below the horizon) have pdf 0 and weight 0.
+///
+/// # Safety
+/// `network` is a live handle, `sampler` points to an `NbrdfSampler`; the arrays have the sizes
+/// above and the outputs overlap neither each other nor the inputs.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_sample(
+    network: *const NbrdfNetwork,
+    sampler: *const NbrdfSampler,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        sample_impl(
+            "nbrdf_network_sample",
+            network,
+            sampler,
+            view,
+            u,
+            n,
+            out_light,
+            out_weight,
+            out_pdf,
+        )
+    }
+}
+
+/// Loads a MERL-format table (a `.binary` file of 34,992,012 bytes) and stores a new handle in
+/// `*out` (null on failure). Free it with `nbrdf_merl_free`.
+///
+/// # Safety
+/// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_load(path: *const c_char, out: *mut *mut NbrdfMerl) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        load_impl("nbrdf_merl_load", path, out, |path| {
+            Ok(NbrdfMerl {
+                table: MerlTable::read(&path)?,
+            })
+        })
+    }
+}
+
+/// Frees a table handle; null is accepted and ignored.
+///
+/// # Safety
+/// `merl` is null or a handle from `nbrdf_merl_load` that was not freed yet.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_free(merl: *mut NbrdfMerl) {
+    // SAFETY: forwarded contract.
+    unsafe { free_impl(merl) }
+}
+
+/// Evaluates `f_r(light, view) * cos(theta_light)` of a table (trilinear lookup) for `n`
+/// direction pairs; the layout is that of `nbrdf_network_eval`.
+///
+/// # Safety
+/// As `nbrdf_network_eval`, with a live table handle.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_eval(
+    merl: *const NbrdfMerl,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_rgb: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe { eval_impl("nbrdf_merl_eval", merl, view, light, n, out_rgb) }
+}
+
+/// Importance-samples light directions for a table; the layout is that of
+/// `nbrdf_network_sample`.
+///
+/// # Safety
+/// As `nbrdf_network_sample`, with a live table handle.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_sample(
+    merl: *const NbrdfMerl,
+    sampler: *const NbrdfSampler,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        sample_impl(
+            "nbrdf_merl_sample",
+            merl,
+            sampler,
+            view,
+            u,
+            n,
+            out_light,
+            out_weight,
+            out_pdf,
+        )
+    }
+}
+
+/// Solid-angle pdf with which `sampler` draws each planar `light` direction given the planar
+/// `view` direction (`3 n` floats each); writes `n` floats to `out_pdf` (0 at or below the
+/// horizon).
+///
+/// # Safety
+/// `sampler` points to an `NbrdfSampler`; the arrays have the sizes above and `out_pdf` overlaps
+/// neither input.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_sampler_pdf(
+    sampler: *const NbrdfSampler,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_pdf: *mut f32,
+) -> i32 {
+    guard("nbrdf_sampler_pdf", || {
+        check_array(sampler, "sampler")?;
+        check_array(view, "view")?;
+        check_array(light, "light")?;
+        check_array(out_pdf, "out_pdf")?;
+        // SAFETY: forwarded contract.
+        let strategy = unsafe { read_sampler(sampler)? };
+        let len = array_len(n, 3)?;
+        if n == 0 {
+            return Ok(());
+        }
+        // SAFETY: checked above; sizes and aliasing are the caller's contract.
+        let (view, light, pdf) =
+            unsafe { (input(view, len), input(light, len), output(out_pdf, n)) };
+        sampling::pdf_batch(&strategy, directions(view), directions(light), pdf);
+        Ok(())
+    })
+}
+
+/// Checks a sampler's kind and parameters (finite exponent >= 0, specular weight in [0, 1] for
+/// `NBRDF_SAMPLING_PHONG`): `NBRDF_OK` or `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
+///
+/// # Safety
+/// `sampler` points to an `NbrdfSampler`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_sampler_validate(sampler: *const NbrdfSampler) -> i32 {
+    // SAFETY: forwarded contract.
+    guard("nbrdf_sampler_validate", || {
+        unsafe { read_sampler(sampler) }.map(drop)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn last_error() -> String {
+        // SAFETY: the library returns a valid NUL-terminated string.
+        unsafe { CStr::from_ptr(nbrdf_last_error()) }
+            .to_string_lossy()
+            .into_owned()
+    }
+
+    #[test]
+    fn guard_catches_panics_with_their_message() {
+        let status = guard("some_function", || panic!("boom {}", 42));
+        assert_eq!(status, NbrdfStatus::NBRDF_ERROR_PANIC as i32);
+        assert_eq!(
+            last_error(),
+            "some_function: internal error (panic): boom 42"
+        );
+        let status = guard("other", || std::panic::panic_any(7_u8));
+        assert_eq!(status, NbrdfStatus::NBRDF_ERROR_PANIC as i32);
+        assert!(last_error().contains("not a string"), "{}", last_error());
+    }
+
+    #[test]
+    fn guard_keeps_the_last_failure_across_successes() {
+        guard("f", || Err(Failure::invalid("bad")));
+        assert_eq!(guard("g", || Ok(())), 0);
+        assert_eq!(last_error(), "f: bad");
+    }
+
+    #[test]
+    fn messages_with_nul_bytes_survive() {
+        guard("f", || Err(Failure::invalid("a\0b")));
+        assert_eq!(last_error(), "f: a\\0b");
+    }
+
+    #[test]
+    fn core_errors_map_to_status_codes() {
+        let io = NbrdfError::io("x.json", std::io::Error::from(std::io::ErrorKind::NotFound));
+        assert_eq!(Failure::from(io).status, NbrdfStatus::NBRDF_ERROR_IO);
+        let format = NbrdfError::format("x.json", "bad");
+        assert_eq!(
+            Failure::from(format).status,
+            NbrdfStatus::NBRDF_ERROR_FORMAT
+        );
+        let invalid = NbrdfError::InvalidArgument("n".into());
+        assert_eq!(
+            Failure::from(invalid).status,
+            NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT
+        );
+    }
+
+    #[test]
+    fn array_len_rejects_overflow() {
+        assert_eq!(array_len(4, 3).unwrap(), 12);
+        assert!(array_len(usize::MAX / 2, 3).is_err());
+        assert!(array_len(usize::MAX / 4, 1).is_err());
+        assert!(array_len(usize::MAX / 8, 1).is_ok());
+    }
+}

@@ -1,0 +1,603 @@
+//! The C ABI as a C caller sees it: status codes, messages, null pointers, planar layouts.
+
+use glam::Vec3;
+use nbrdf_core::brdf::Brdf;
+use nbrdf_core::{MerlTable, Nbrdf, SamplingStrategy};
+use nbrdf_ffi::*;
+use std::ffi::{c_char, CStr, CString};
+use std::path::{Path, PathBuf};
+use std::ptr::{null, null_mut};
+
+const OK: i32 = NbrdfStatus::NBRDF_OK as i32;
+const NULL: i32 = NbrdfStatus::NBRDF_ERROR_NULL_POINTER as i32;
+const INVALID: i32 = NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT as i32;
+const IO: i32 = NbrdfStatus::NBRDF_ERROR_IO as i32;
+const FORMAT: i32 = NbrdfStatus::NBRDF_ERROR_FORMAT as i32;
+
+fn last_error() -> String {
+    // SAFETY: the library returns a valid NUL-terminated string.
+    unsafe { CStr::from_ptr(nbrdf_last_error()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// A scratch directory unique to this test process and `name`.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("nbrdf-ffi-test-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn c_path(path: &Path) -> CString {
+    CString::new(path.to_str().unwrap()).unwrap()
+}
+
+/// A small deterministic network of hidden width 4 with Blinn-Phong parameters, as JSON text.
+fn network_json(hidden: usize) -> String {
+    let mut state = 12345_u32;
+    let mut next = move || {
+        state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
+        ((state >> 8) as f32 / (1u32 << 24) as f32 - 0.5) * 0.8
+    };
+    let layer = |inputs: usize, outputs: usize, next: &mut dyn FnMut() -> f32| {
+        let weights: Vec<String> = (0..inputs * outputs).map(|_| next().to_string()).collect();
+        let bias: Vec<String> = (0..outputs).map(|_| next().to_string()).collect();
+        format!(
+            r#"{{"inputs": {inputs}, "outputs": {outputs}, "weights": [{}], "bias": [{}]}}"#,
+            weights.join(", "),
+            bias.join(", ")
+        )
+    };
+    let layers = [
+        layer(6, hidden, &mut next),
+        layer(hidden, hidden, &mut next),
+        layer(hidden, 3, &mut next),
+    ];
+    format!(
+        r#"{{"format": "nbrdf", "version": 1, "name": "ffi-test", "layers": [{}],
+            "sampling": {{"model": "blinn-phong", "exponent": 40.0, "specular_weight": 0.25, "source": "manual"}},
+            "provenance": {{"source": "nbrdf-ffi tests"}}}}"#,
+        layers.join(", ")
+    )
+}
+
+struct Network(*mut NbrdfNetwork);
+
+impl Drop for Network {
+    fn drop(&mut self) {
+        // SAFETY: the handle came from nbrdf_network_load.
+        unsafe { nbrdf_network_free(self.0) }
+    }
+}
+
+fn load_network(hidden: usize) -> (Network, PathBuf) {
+    let path = scratch(&format!("net{hidden}")).join("test.nbrdf.json");
+    std::fs::write(&path, network_json(hidden)).unwrap();
+    let mut handle = null_mut();
+    // SAFETY: valid path and out pointer.
+    let status = unsafe { nbrdf_network_load(c_path(&path).as_ptr(), &mut handle) };
+    assert_eq!(status, OK, "{}", last_error());
+    assert!(!handle.is_null());
+    (Network(handle), path)
+}
+
+/// Directions on the upper hemisphere plus grazing and degenerate ones.
+fn direction_pairs() -> Vec<(Vec3, Vec3)> {
+    let dir = |theta: f32, phi: f32| {
+        Vec3::new(
+            theta.sin() * phi.cos(),
+            theta.sin() * phi.sin(),
+            theta.cos(),
+        )
+    };
+    let mut pairs = Vec::new();
+    for i in 0..7 {
+        for j in 0..5 {
+            let v = dir(0.2 * i as f32, 0.9 * j as f32);
+            let l = dir(0.25 * j as f32 + 0.05, 2.0 - 0.7 * i as f32);
+            pairs.push((v, l));
+        }
+    }
+    pairs.push((Vec3::Z, Vec3::Z));
+    pairs.push((dir(1.5707, 0.0), dir(1.5707, 3.14159)));
+    pairs.push((Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 1.0)));
+    pairs.push((Vec3::Z, Vec3::new(0.3, 0.0, -0.5)));
+    pairs
+}
+
+fn planar(vectors: impl Iterator<Item = Vec3> + Clone) -> Vec<f32> {
+    let xs = vectors.clone().map(|v| v.x);
+    let ys = vectors.clone().map(|v| v.y);
+    let zs = vectors.map(|v| v.z);
+    xs.chain(ys).chain(zs).collect()
+}
+
+fn assert_close(a: f32, b: f32, what: &str) {
+    assert!((a - b).abs() <= 1e-6 + 1e-5 * b.abs(), "{what}: {a} vs {b}");
+}
+
+#[test]
+fn version_and_fresh_thread_error_are_strings() {
+    // SAFETY: static strings.
+    let version = unsafe { CStr::from_ptr(nbrdf_version()) }.to_str().unwrap();
+    assert_eq!(version, env!("CARGO_PKG_VERSION"));
+    std::thread::spawn(|| assert_eq!(last_error(), ""))
+        .join()
+        .unwrap();
+}
+
+#[test]
+fn missing_files_are_io_errors_naming_the_file() {
+    let path = scratch("missing").join("does-not-exist.nbrdf.json");
+    let c = c_path(&path);
+    let mut network = 1 as *mut NbrdfNetwork; // must be overwritten with null
+                                              // SAFETY: valid pointers.
+    assert_eq!(unsafe { nbrdf_network_load(c.as_ptr(), &mut network) }, IO);
+    assert!(network.is_null());
+    let message = last_error();
+    assert!(message.starts_with("nbrdf_network_load: "), "{message}");
+    assert!(message.contains("does-not-exist.nbrdf.json"), "{message}");
+
+    let path = scratch("missing").join("nothing.binary");
+    let mut merl = null_mut();
+    // SAFETY: valid pointers.
+    assert_eq!(
+        unsafe { nbrdf_merl_load(c_path(&path).as_ptr(), &mut merl) },
+        IO
+    );
+    assert!(merl.is_null());
+    assert!(last_error().contains("nothing.binary"), "{}", last_error());
+}
+
+#[test]
+fn malformed_files_are_format_errors_naming_the_file() {
+    let dir = scratch("malformed");
+    let json = dir.join("broken.nbrdf.json");
+    std::fs::write(
+        &json,
+        "{\"format\": \"nbrdf\", \"version\": 1, \"layers\": [",
+    )
+    .unwrap();
+    let mut network = null_mut();
+    // SAFETY: valid pointers.
+    assert_eq!(
+        unsafe { nbrdf_network_load(c_path(&json).as_ptr(), &mut network) },
+        FORMAT
+    );
+    assert!(network.is_null());
+    assert!(
+        last_error().contains("broken.nbrdf.json"),
+        "{}",
+        last_error()
+    );
+
+    let binary = dir.join("short.binary");
+    std::fs::write(
+        &binary,
+        [90_i32, 90, 180]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect::<Vec<u8>>(),
+    )
+    .unwrap();
+    let mut merl = null_mut();
+    // SAFETY: valid pointers.
+    assert_eq!(
+        unsafe { nbrdf_merl_load(c_path(&binary).as_ptr(), &mut merl) },
+        FORMAT
+    );
+    assert!(merl.is_null());
+    assert!(last_error().contains("short.binary"), "{}", last_error());
+}
+
+#[test]
+fn null_pointers_name_the_argument() {
+    let (network, path) = load_network(4);
+    let net = network.0.cast_const();
+    let sampler = NbrdfSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_COSINE,
+        exponent: 0.0,
+        specular_weight: 0.0,
+    };
+    let v = [0.0_f32, 0.0, 1.0];
+    let mut out = [0.0_f32; 3];
+    let mut pdf = [0.0_f32; 1];
+    let mut info = NbrdfNetworkInfo::default();
+    let mut name: *const c_char = null();
+    let mut handle = null_mut();
+    let c = c_path(&path);
+
+    let check = |status: i32, argument: &str| {
+        assert_eq!(status, NULL, "argument {argument}: {}", last_error());
+        let message = last_error();
+        assert!(message.contains(&format!("`{argument}`")), "{message}");
+    };
+    // SAFETY: every pointer is either null or valid.
+    unsafe {
+        check(nbrdf_network_load(null(), &mut handle), "path");
+        check(nbrdf_network_load(c.as_ptr(), null_mut()), "out");
+        check(nbrdf_merl_load(null(), &mut null_mut()), "path");
+        check(nbrdf_merl_load(c.as_ptr(), null_mut()), "out");
+        check(nbrdf_network_info(null(), &mut info), "network");
+        check(nbrdf_network_info(net, null_mut()), "out");
+        check(nbrdf_network_name(null(), &mut name), "network");
+        check(nbrdf_network_name(net, null_mut()), "out_name");
+
+        check(
+            nbrdf_network_eval(null(), v.as_ptr(), v.as_ptr(), 1, out.as_mut_ptr()),
+            "network",
+        );
+        check(
+            nbrdf_network_eval(net, null(), v.as_ptr(), 1, out.as_mut_ptr()),
+            "view",
+        );
+        check(
+            nbrdf_network_eval(net, v.as_ptr(), null(), 1, out.as_mut_ptr()),
+            "light",
+        );
+        check(
+            nbrdf_network_eval(net, v.as_ptr(), v.as_ptr(), 1, null_mut()),
+            "out_rgb",
+        );
+        check(
+            nbrdf_network_eval(net, v.as_ptr(), v.as_ptr(), 0, null_mut()),
+            "out_rgb",
+        );
+        check(
+            nbrdf_merl_eval(null(), v.as_ptr(), v.as_ptr(), 1, out.as_mut_ptr()),
+            "merl",
+        );
+
+        let mut l = [0.0_f32; 3];
+        let mut w = [0.0_f32; 3];
+        let s = &sampler as *const NbrdfSampler;
+        let sample = |net, s, view, u, light, weight, pdf| {
+            nbrdf_network_sample(net, s, view, u, 1, light, weight, pdf)
+        };
+        let (vp, lp, wp, pp) = (v.as_ptr(), l.as_mut_ptr(), w.as_mut_ptr(), pdf.as_mut_ptr());
+        check(sample(null(), s, vp, vp, lp, wp, pp), "network");
+        check(sample(net, null(), vp, vp, lp, wp, pp), "sampler");
+        check(sample(net, s, null(), vp, lp, wp, pp), "view");
+        check(sample(net, s, vp, null(), lp, wp, pp), "u");
+        check(sample(net, s, vp, vp, null_mut(), wp, pp), "out_light");
+        check(sample(net, s, vp, vp, lp, null_mut(), pp), "out_weight");
+        check(sample(net, s, vp, vp, lp, wp, null_mut()), "out_pdf");
+        check(nbrdf_merl_sample(null(), s, vp, vp, 1, lp, wp, pp), "merl");
+
+        check(nbrdf_sampler_pdf(null(), vp, vp, 1, pp), "sampler");
+        check(nbrdf_sampler_pdf(s, null(), vp, 1, pp), "view");
+        check(nbrdf_sampler_pdf(s, vp, null(), 1, pp), "light");
+        check(nbrdf_sampler_pdf(s, vp, vp, 1, null_mut()), "out_pdf");
+        check(nbrdf_sampler_validate(null()), "sampler");
+
+        // Freeing null is a no-op.
+        nbrdf_network_free(null_mut());
+        nbrdf_merl_free(null_mut());
+    }
+}
+
+#[test]
+fn bad_samplers_are_invalid_arguments() {
+    let v = [0.0_f32, 0.0, 1.0];
+    let mut pdf = [0.0_f32];
+    let phong = |exponent: f32, specular_weight: f32| NbrdfSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_PHONG,
+        exponent,
+        specular_weight,
+    };
+    for bad in [
+        phong(-1.0, 0.5),
+        phong(f32::NAN, 0.5),
+        phong(f32::INFINITY, 0.5),
+        phong(10.0, 1.5),
+        phong(10.0, -0.1),
+    ] {
+        // SAFETY: valid pointers.
+        unsafe {
+            assert_eq!(nbrdf_sampler_validate(&bad), INVALID, "{bad:?}");
+            assert!(
+                last_error().starts_with("nbrdf_sampler_validate: "),
+                "{}",
+                last_error()
+            );
+            assert_eq!(
+                nbrdf_sampler_pdf(&bad, v.as_ptr(), v.as_ptr(), 1, pdf.as_mut_ptr()),
+                INVALID,
+                "{bad:?}"
+            );
+        }
+    }
+    // An out-of-range kind written by C.
+    let mut raw = [0_i32; 3];
+    raw[0] = 7;
+    let sampler = raw.as_ptr().cast::<NbrdfSampler>();
+    // SAFETY: same size and alignment as NbrdfSampler; the kind is read as an integer.
+    unsafe {
+        assert_eq!(nbrdf_sampler_validate(sampler), INVALID);
+        assert!(
+            last_error().contains("unknown sampling kind 7"),
+            "{}",
+            last_error()
+        );
+    }
+    for good in [
+        phong(0.0, 0.0),
+        phong(1e6, 1.0),
+        NbrdfSampler {
+            kind: NbrdfSamplingKind::NBRDF_SAMPLING_UNIFORM,
+            exponent: f32::NAN,
+            specular_weight: -3.0,
+        },
+    ] {
+        // SAFETY: valid pointer.
+        assert_eq!(
+            unsafe { nbrdf_sampler_validate(&good) },
+            OK,
+            "{good:?}: {}",
+            last_error()
+        );
+    }
+}
+
+#[test]
+fn empty_batches_are_ok() {
+    let (network, _) = load_network(4);
+    let sampler = NbrdfSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_PHONG,
+        exponent: 10.0,
+        specular_weight: 0.5,
+    };
+    let mut buf = [0.0_f32; 3];
+    let p = buf.as_mut_ptr();
+    // SAFETY: valid pointers, n = 0.
+    unsafe {
+        assert_eq!(nbrdf_network_eval(network.0, p, p, 0, p), OK);
+        assert_eq!(
+            nbrdf_network_sample(network.0, &sampler, p, p, 0, p, p, p),
+            OK
+        );
+        assert_eq!(nbrdf_sampler_pdf(&sampler, p, p, 0, p), OK);
+    }
+}
+
+#[test]
+fn misaligned_and_oversized_arrays_are_rejected() {
+    let (network, _) = load_network(4);
+    let buf = [0.0_f32; 8];
+    let mut out = [0.0_f32; 8];
+    let misaligned = buf.as_ptr().cast::<u8>().wrapping_add(1).cast::<f32>();
+    // SAFETY: rejected before any access.
+    unsafe {
+        assert_eq!(
+            nbrdf_network_eval(network.0, misaligned, buf.as_ptr(), 1, out.as_mut_ptr()),
+            INVALID
+        );
+        assert!(last_error().contains("`view`"), "{}", last_error());
+        assert_eq!(
+            nbrdf_network_eval(
+                network.0,
+                buf.as_ptr(),
+                buf.as_ptr(),
+                usize::MAX / 2,
+                out.as_mut_ptr()
+            ),
+            INVALID
+        );
+    }
+}
+
+#[test]
+fn network_info_and_name() {
+    for hidden in [4, 9] {
+        let (network, _) = load_network(hidden);
+        let mut info = NbrdfNetworkInfo::default();
+        let mut name: *const c_char = null();
+        // SAFETY: valid pointers.
+        unsafe {
+            assert_eq!(nbrdf_network_info(network.0, &mut info), OK);
+            assert_eq!(nbrdf_network_name(network.0, &mut name), OK);
+            assert_eq!(CStr::from_ptr(name).to_str().unwrap(), "ffi-test");
+        }
+        let expected = 6 * hidden + hidden + hidden * hidden + hidden + hidden * 3 + 3;
+        assert_eq!(
+            info,
+            NbrdfNetworkInfo {
+                hidden_width: hidden as u32,
+                parameter_count: expected as u32,
+                has_sampling: 1,
+                exponent: 40.0,
+                specular_weight: 0.25
+            }
+        );
+    }
+}
+
+/// The planar batch entry points agree lane by lane with the core's single-direction functions.
+fn check_layouts(
+    brdf: &dyn Brdf,
+    eval: &dyn Fn(&[f32], &[f32], usize, &mut [f32]) -> i32,
+    sample: &dyn Fn(
+        &NbrdfSampler,
+        &[f32],
+        &[f32],
+        usize,
+        &mut [f32],
+        &mut [f32],
+        &mut [f32],
+    ) -> i32,
+) {
+    let pairs = direction_pairs();
+    let n = pairs.len();
+    let view = planar(pairs.iter().map(|p| p.0));
+    let light = planar(pairs.iter().map(|p| p.1));
+    let mut rgb = vec![f32::NAN; 3 * n];
+    assert_eq!(eval(&view, &light, n, &mut rgb), OK, "{}", last_error());
+    for (i, &(v, l)) in pairs.iter().enumerate() {
+        let f = brdf.eval(l, v);
+        let cos = nbrdf_core::brdf::cos_theta_light(l);
+        for c in 0..3 {
+            assert_close(
+                rgb[c * n + i],
+                f[c] * cos,
+                &format!("eval lane {i} channel {c}"),
+            );
+        }
+    }
+
+    let u = planar((0..n).map(|i| {
+        let t = i as f32 / (n - 1) as f32;
+        Vec3::new(t, (t * 7.3).fract(), (t * 3.1 + 0.2).fract())
+    }));
+    let samplers = [
+        (
+            NbrdfSamplingKind::NBRDF_SAMPLING_UNIFORM,
+            SamplingStrategy::Uniform,
+        ),
+        (
+            NbrdfSamplingKind::NBRDF_SAMPLING_COSINE,
+            SamplingStrategy::Cosine,
+        ),
+        (
+            NbrdfSamplingKind::NBRDF_SAMPLING_PHONG,
+            SamplingStrategy::BlinnPhong {
+                exponent: 40.0,
+                specular_weight: 0.3,
+            },
+        ),
+    ];
+    for (kind, strategy) in samplers {
+        let sampler = NbrdfSampler {
+            kind,
+            exponent: 40.0,
+            specular_weight: 0.3,
+        };
+        let (mut l_out, mut w_out, mut pdf_out) = (
+            vec![f32::NAN; 3 * n],
+            vec![f32::NAN; 3 * n],
+            vec![f32::NAN; n],
+        );
+        assert_eq!(
+            sample(&sampler, &view, &u, n, &mut l_out, &mut w_out, &mut pdf_out),
+            OK,
+            "{}",
+            last_error()
+        );
+        let mut pdf_again = vec![f32::NAN; n];
+        // SAFETY: buffers of 3 n and n floats.
+        let status = unsafe {
+            nbrdf_sampler_pdf(
+                &sampler,
+                view.as_ptr(),
+                l_out.as_ptr(),
+                n,
+                pdf_again.as_mut_ptr(),
+            )
+        };
+        assert_eq!(status, OK, "{}", last_error());
+        for i in 0..n {
+            let v = Vec3::new(view[i], view[n + i], view[2 * n + i]);
+            let expected = strategy.sample(v, [u[i], u[n + i], u[2 * n + i]]);
+            let what = format!("{kind:?} lane {i}");
+            assert_close(pdf_out[i], expected.pdf, &what);
+            if expected.pdf > 0.0 {
+                let l = Vec3::new(l_out[i], l_out[n + i], l_out[2 * n + i]);
+                assert!(
+                    (l - expected.light).length() < 1e-5,
+                    "{what}: {l} vs {}",
+                    expected.light
+                );
+                assert_close(pdf_again[i], strategy.pdf(v, l), &what);
+                let f = brdf.eval(l, v);
+                let cos = nbrdf_core::brdf::cos_theta_light(l);
+                for c in 0..3 {
+                    assert_close(
+                        w_out[c * n + i],
+                        f[c] * cos / expected.pdf,
+                        &format!("{what} weight {c}"),
+                    );
+                }
+            } else {
+                assert!(
+                    (0..3).all(|c| w_out[c * n + i] == 0.0),
+                    "{what}: invalid sample with weight"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn network_batches_are_planar() {
+    let (network, path) = load_network(5);
+    let core = Nbrdf::load(&path).unwrap();
+    let handle = network.0.cast_const();
+    check_layouts(
+        &core,
+        // SAFETY: slices of the documented sizes.
+        &|view, light, n, rgb| unsafe {
+            nbrdf_network_eval(handle, view.as_ptr(), light.as_ptr(), n, rgb.as_mut_ptr())
+        },
+        &|s, view, u, n, l, w, p| unsafe {
+            nbrdf_network_sample(
+                handle,
+                s,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                l.as_mut_ptr(),
+                w.as_mut_ptr(),
+                p.as_mut_ptr(),
+            )
+        },
+    );
+}
+
+#[test]
+fn merl_batches_are_planar() {
+    // A smooth table: value grows along each axis, with one unmeasured region.
+    let cells = nbrdf_core::merl::CELLS;
+    let mut stored = vec![0.0_f64; 3 * cells];
+    for (i, value) in stored.iter_mut().enumerate() {
+        let (c, cell) = (i / cells, i % cells);
+        *value = 100.0
+            + (cell % 180) as f64 * 0.5
+            + ((cell / 180) % 90) as f64
+            + (cell / 16200) as f64 * 3.0
+            + c as f64;
+    }
+    stored[..180].iter_mut().for_each(|v| *v = -1.0);
+    let table = MerlTable::from_stored(stored).unwrap();
+    let path = scratch("merl").join("smooth.binary");
+    table.write(&path).unwrap();
+    let mut handle = null_mut();
+    // SAFETY: valid pointers.
+    assert_eq!(
+        unsafe { nbrdf_merl_load(c_path(&path).as_ptr(), &mut handle) },
+        OK,
+        "{}",
+        last_error()
+    );
+    let handle = handle.cast_const();
+    check_layouts(
+        &table,
+        // SAFETY: slices of the documented sizes.
+        &|view, light, n, rgb| unsafe {
+            nbrdf_merl_eval(handle, view.as_ptr(), light.as_ptr(), n, rgb.as_mut_ptr())
+        },
+        &|s, view, u, n, l, w, p| unsafe {
+            nbrdf_merl_sample(
+                handle,
+                s,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                l.as_mut_ptr(),
+                w.as_mut_ptr(),
+                p.as_mut_ptr(),
+            )
+        },
+    );
+    // SAFETY: handle from nbrdf_merl_load.
+    unsafe { nbrdf_merl_free(handle.cast_mut()) };
+    std::fs::remove_file(&path).unwrap();
+}
