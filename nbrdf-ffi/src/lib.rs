@@ -17,10 +17,11 @@ use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 use nbrdf_core::sampling::{self, SamplingStrategy};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
 use std::any::Any;
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
+use std::sync::Once;
 
 /// Status code returned (as `int32_t`) by every fallible function. On any value other than
 /// `NBRDF_OK`, `nbrdf_last_error()` describes the failure.
@@ -156,19 +157,56 @@ fn panic_message(payload: &(dyn Any + Send)) -> &str {
     }
 }
 
+thread_local! {
+    /// True while this thread runs inside [`guard`].
+    static IN_GUARD: Cell<bool> = const { Cell::new(false) };
+    /// Where the last panic inside [`guard`] on this thread happened.
+    static PANIC_LOCATION: RefCell<Option<String>> = const { RefCell::new(None) };
+}
+
+static PANIC_HOOK: Once = Once::new();
+
+/// Chains a panic hook that keeps panics caught by [`guard`] quiet (their message and location
+/// go to `nbrdf_last_error` instead of the host's stderr); other panics, and all of them when
+/// `RUST_BACKTRACE` is set to anything but 0, still reach the previous hook.
+fn install_panic_hook() {
+    PANIC_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        let verbose = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
+        std::panic::set_hook(Box::new(move |info| {
+            let guarded = IN_GUARD.try_with(Cell::get).unwrap_or(false);
+            if guarded {
+                let location = info.location().map(|l| l.to_string());
+                let _ = PANIC_LOCATION.try_with(|cell| *cell.borrow_mut() = location);
+            }
+            if !guarded || verbose {
+                previous(info);
+            }
+        }));
+    });
+}
+
 /// Runs `body`, catching panics; returns the status code and records the message of a failure
 /// (prefixed with `function`) for `nbrdf_last_error`.
 fn guard(function: &str, body: impl FnOnce() -> FfiResult<()>) -> i32 {
-    let failure = match catch_unwind(AssertUnwindSafe(body)) {
+    install_panic_hook();
+    let outer = IN_GUARD.with(|g| g.replace(true));
+    let result = catch_unwind(AssertUnwindSafe(body));
+    IN_GUARD.with(|g| g.set(outer));
+    let failure = match result {
         Ok(Ok(())) => return NbrdfStatus::NBRDF_OK as i32,
         Ok(Err(failure)) => failure,
-        Err(payload) => Failure {
-            status: NbrdfStatus::NBRDF_ERROR_PANIC,
-            message: format!(
-                "internal error (panic): {}",
-                panic_message(payload.as_ref())
-            ),
-        },
+        Err(payload) => {
+            let location = PANIC_LOCATION.with(|cell| cell.borrow_mut().take());
+            let at = location.map(|l| format!(" (at {l})")).unwrap_or_default();
+            Failure {
+                status: NbrdfStatus::NBRDF_ERROR_PANIC,
+                message: format!(
+                    "internal error (panic): {}{at}",
+                    panic_message(payload.as_ref())
+                ),
+            }
+        }
     };
     set_last_error(format!("{function}: {}", failure.message));
     failure.status as i32
@@ -723,10 +761,9 @@ mod tests {
     fn guard_catches_panics_with_their_message() {
         let status = guard("some_function", || panic!("boom {}", 42));
         assert_eq!(status, NbrdfStatus::NBRDF_ERROR_PANIC as i32);
-        assert_eq!(
-            last_error(),
-            "some_function: internal error (panic): boom 42"
-        );
+        let message = last_error();
+        let expected = "some_function: internal error (panic): boom 42 (at nbrdf-ffi/src/lib.rs:";
+        assert!(message.starts_with(expected), "{message}");
         let status = guard("other", || std::panic::panic_any(7_u8));
         assert_eq!(status, NbrdfStatus::NBRDF_ERROR_PANIC as i32);
         assert!(last_error().contains("not a string"), "{}", last_error());

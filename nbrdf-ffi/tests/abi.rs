@@ -99,7 +99,8 @@ fn direction_pairs() -> Vec<(Vec3, Vec3)> {
         }
     }
     pairs.push((Vec3::Z, Vec3::Z));
-    pairs.push((dir(1.5707, 0.0), dir(1.5707, 3.14159)));
+    let grazing = std::f32::consts::FRAC_PI_2 - 1e-4;
+    pairs.push((dir(grazing, 0.0), dir(grazing, std::f32::consts::PI)));
     pairs.push((Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 1.0)));
     pairs.push((Vec3::Z, Vec3::new(0.3, 0.0, -0.5)));
     pairs
@@ -412,20 +413,14 @@ fn network_info_and_name() {
     }
 }
 
+/// `eval(view, light, n, out_rgb)` through the C ABI.
+type EvalFn<'a> = &'a dyn Fn(&[f32], &[f32], usize, &mut [f32]) -> i32;
+/// `sample(sampler, view, u, n, out_light, out_weight, out_pdf)` through the C ABI.
+type SampleFn<'a> =
+    &'a dyn Fn(&NbrdfSampler, &[f32], &[f32], usize, &mut [f32], &mut [f32], &mut [f32]) -> i32;
+
 /// The planar batch entry points agree lane by lane with the core's single-direction functions.
-fn check_layouts(
-    brdf: &dyn Brdf,
-    eval: &dyn Fn(&[f32], &[f32], usize, &mut [f32]) -> i32,
-    sample: &dyn Fn(
-        &NbrdfSampler,
-        &[f32],
-        &[f32],
-        usize,
-        &mut [f32],
-        &mut [f32],
-        &mut [f32],
-    ) -> i32,
-) {
+fn check_layouts(brdf: &dyn Brdf, eval: EvalFn<'_>, sample: SampleFn<'_>) {
     let pairs = direction_pairs();
     let n = pairs.len();
     let view = planar(pairs.iter().map(|p| p.0));
