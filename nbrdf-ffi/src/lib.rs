@@ -130,6 +130,11 @@ impl Failure {
 impl From<NbrdfError> for Failure {
     fn from(error: NbrdfError) -> Self {
         let status = match &error {
+            // Reading text that is not UTF-8 fails with InvalidData: the file was readable but
+            // its content is wrong, which is a format error to the caller.
+            NbrdfError::Io { source, .. } if source.kind() == std::io::ErrorKind::InvalidData => {
+                NbrdfStatus::NBRDF_ERROR_FORMAT
+            }
             NbrdfError::Io { .. } => NbrdfStatus::NBRDF_ERROR_IO,
             NbrdfError::Format { .. } => NbrdfStatus::NBRDF_ERROR_FORMAT,
             _ => NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT,
@@ -786,6 +791,14 @@ mod tests {
     fn core_errors_map_to_status_codes() {
         let io = NbrdfError::io("x.json", std::io::Error::from(std::io::ErrorKind::NotFound));
         assert_eq!(Failure::from(io).status, NbrdfStatus::NBRDF_ERROR_IO);
+        let binary = NbrdfError::io(
+            "x.json",
+            std::io::Error::from(std::io::ErrorKind::InvalidData),
+        );
+        assert_eq!(
+            Failure::from(binary).status,
+            NbrdfStatus::NBRDF_ERROR_FORMAT
+        );
         let format = NbrdfError::format("x.json", "bad");
         assert_eq!(
             Failure::from(format).status,
