@@ -1,0 +1,116 @@
+"""Fixtures of the end-to-end tests of the Mitsuba plugin (pytest).
+
+* ``variant`` - parametrised over scalar_rgb and llvm_ad_rgb; sets the Mitsuba variant.
+* ``shared`` - the read-only data directory ``../shared`` next to the repository (or
+  $NBRDF_SHARED); tests that need it are skipped, with the reason, when it is absent.
+* ``merl_table`` - a MERL-format table synthesised once per session with
+  ``target/release/nbrdf synth --model sgd --material gold-metallic-paint`` (or $NBRDF_CLI), or,
+  when the CLI is not built, by a NumPy helper tabulating a simple analytic BRDF.
+* ``keras_networks`` - a few of the authors' Keras NBRDFs converted by the package's importer.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import nbrdf_mitsuba  # noqa: F401  (first: points Dr.Jit at a usable libLLVM)
+import mitsuba as mi
+import pytest
+
+from nbrdf_testing import write_merl
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
+KERAS_MATERIALS = ["alum-bronze", "blue-metallic-paint", "specular-black-phenolic", "white-diffuse-bball", "pink-fabric"]
+SYNTH_MATERIAL = "gold-metallic-paint"
+VARIANTS = ["scalar_rgb", "llvm_ad_rgb"]
+
+
+def _llvm_problem() -> str | None:
+    try:
+        return nbrdf_mitsuba.llvm.problem()
+    except Exception as error:  # pragma: no cover - defensive
+        return str(error)
+
+
+@pytest.fixture(params=VARIANTS)
+def variant(request):
+    """Sets (and yields) each tested Mitsuba variant in turn."""
+    name = request.param
+    if name.startswith("llvm"):
+        problem = _llvm_problem()
+        if problem:
+            pytest.skip(f"llvm variant unavailable: {problem}")
+    mi.set_variant(name)
+    return name
+
+
+@pytest.fixture
+def llvm_variant():
+    """Only the llvm_ad_rgb variant (for tests that need vectorised Mitsuba machinery)."""
+    problem = _llvm_problem()
+    if problem:
+        pytest.skip(f"llvm variant unavailable: {problem}")
+    mi.set_variant("llvm_ad_rgb")
+    return "llvm_ad_rgb"
+
+
+@pytest.fixture(scope="session")
+def shared() -> Path:
+    if not SHARED.is_dir():
+        pytest.skip(f"shared data directory {SHARED} is absent (set NBRDF_SHARED to its location)")
+    return SHARED
+
+
+def _cli() -> Path | None:
+    if os.environ.get("NBRDF_CLI"):
+        return Path(os.environ["NBRDF_CLI"])
+    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
+    if not target.is_absolute():
+        target = REPO / target
+    exe = target / "release" / ("nbrdf.exe" if os.name == "nt" else "nbrdf")
+    return exe if exe.is_file() else None
+
+
+@pytest.fixture(scope="session")
+def merl_table(tmp_path_factory) -> Path:
+    """Path of a synthesised MERL-format table (SGD fit via the CLI, else a NumPy BRDF)."""
+    out = tmp_path_factory.mktemp("merl") / f"{SYNTH_MATERIAL}.binary"
+    cli = _cli()
+    if cli is not None:
+        subprocess.run([str(cli), "synth", "--model", "sgd", "--material", SYNTH_MATERIAL, "-o", str(out)],
+                       check=True, capture_output=True)
+    else:
+        write_merl(out, analytic=True)
+    return out
+
+
+@pytest.fixture(scope="session")
+def keras_networks(shared, tmp_path_factory) -> list[tuple[Path, Path]]:
+    """(Keras .h5, imported .nbrdf.json) for a few MERL materials, through the CLI entry point."""
+    from nbrdf_mitsuba import import_keras
+
+    source = shared / "data" / "reference-nbrdf" / "merl"
+    out = tmp_path_factory.mktemp("keras")
+    pairs = []
+    for name in KERAS_MATERIALS:
+        h5 = source / f"{name}.h5"
+        target = out / f"{name}.nbrdf.json"
+        assert import_keras.main([str(h5), "-o", str(target), "-q"]) == 0
+        pairs.append((h5, target))
+    return pairs
+
+
+@pytest.fixture(scope="session")
+def network_file(keras_networks) -> Path:
+    """One imported network (no stored sampling parameters)."""
+    return keras_networks[1][1]
+
+
+@pytest.fixture
+def workdir(tmp_path):
+    yield tmp_path
+    shutil.rmtree(tmp_path, ignore_errors=True)

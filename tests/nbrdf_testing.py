@@ -1,0 +1,307 @@
+"""Independent NumPy references and helpers for the plugin tests.
+
+Everything here is written from DESIGN.md (sections 2-4 and 6) in float64 NumPy, without
+calling the Rust code, so that the tests compare two implementations.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+N_TH, N_TD, N_PD = 90, 90, 180
+CELLS = N_TH * N_TD * N_PD
+SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
+HALF_PI = np.pi / 2
+
+
+# ---------------------------------------------------------------------------------------------
+# Directions
+
+
+def sph(theta, phi) -> np.ndarray:
+    """Planar (3, n) unit directions from polar angle ``theta`` and azimuth ``phi``."""
+    theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+
+
+def normalize(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=0, keepdims=True)
+
+
+def random_pairs(n: int, seed: int, min_cos: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """(view, light), uniform on the hemisphere above ``min_cos``."""
+    rng = np.random.default_rng(seed)
+    def draw():
+        return sph(np.arccos(rng.uniform(min_cos, 1.0, n)), rng.uniform(-np.pi, np.pi, n))
+    return draw(), draw()
+
+
+def grazing_pairs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(view, light) with at least one direction within ~3 degrees of the horizon."""
+    rng = np.random.default_rng(seed)
+    grazing = sph(rng.uniform(np.radians(87.0), np.radians(89.9), n), rng.uniform(-np.pi, np.pi, n))
+    other = sph(np.arccos(rng.uniform(0.0, 1.0, n)), rng.uniform(-np.pi, np.pi, n))
+    swap = rng.uniform(size=n) < 0.5
+    view = np.where(swap, grazing, other)
+    light = np.where(swap, other, grazing)
+    return view, light
+
+
+def f32(a: np.ndarray) -> np.ndarray:
+    """Rounds to float32 (what Mitsuba passes) and back to float64 for the reference."""
+    return np.asarray(a, dtype=np.float32).astype(np.float64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Rusinkiewicz coordinates (DESIGN.md section 2), with trigonometry and rotation matrices
+
+
+def rot_z(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    o, i = np.zeros_like(angle), np.ones_like(angle)
+    return np.array([[c, -s, o], [s, c, o], [o, o, i]])  # (3, 3, n)
+
+
+def rot_y(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    o, i = np.zeros_like(angle), np.ones_like(angle)
+    return np.array([[c, o, s], [o, i, o], [-s, o, c]])
+
+
+def apply(m, v):
+    return np.einsum("ijn,jn->in", m, v)
+
+
+def to_angles(light: np.ndarray, view: np.ndarray):
+    """(theta_h, phi_h, theta_d, phi_d, d) of planar light/view directions."""
+    l, v = normalize(light), normalize(view)
+    h = normalize(l + v)
+    theta_h = np.arccos(np.clip(h[2], -1, 1))
+    phi_h = np.arctan2(h[1], h[0])
+    d = apply(rot_y(-theta_h), apply(rot_z(-phi_h), l))
+    theta_d = np.arccos(np.clip(d[2], -1, 1))
+    phi_d = np.arctan2(d[1], d[0])
+    return theta_h, phi_h, theta_d, phi_d, d
+
+
+def from_angles(theta_h, phi_h, theta_d, phi_d):
+    """(light, view): ``l = R_z(phi_h) R_y(theta_h) d``, ``v = 2 (l . h) h - l``."""
+    theta_h, phi_h, theta_d, phi_d = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_h, phi_h, theta_d, phi_d)))
+    d = sph(theta_d, phi_d)
+    l = apply(rot_z(phi_h), apply(rot_y(theta_h), d))
+    h = sph(theta_h, phi_h)
+    v = 2 * np.sum(l * h, axis=0) * h - l
+    return l, v
+
+
+# ---------------------------------------------------------------------------------------------
+# MERL tables (DESIGN.md section 3)
+
+
+def write_merl(path: Path, stored: np.ndarray | None = None, analytic: bool = False) -> Path:
+    """Writes a MERL-format file; ``stored`` is (3, 90, 90, 180) as stored (unscaled)."""
+    if stored is None:
+        stored = analytic_table()
+    stored = np.asarray(stored, dtype="<f8").reshape(3, CELLS)
+    with open(path, "wb") as f:
+        f.write(np.array([N_TH, N_TD, N_PD], dtype="<i4").tobytes())
+        f.write(stored.tobytes())
+    return Path(path)
+
+
+def read_merl(path: Path) -> np.ndarray:
+    """Stored (unscaled) values, shape (3, 90, 90, 180) = (channel, theta_h, theta_d, phi_d)."""
+    raw = Path(path).read_bytes()
+    header = np.frombuffer(raw[:12], dtype="<i4")
+    assert tuple(header) == (N_TH, N_TD, N_PD), header
+    return np.frombuffer(raw[12:], dtype="<f8").reshape(3, N_TH, N_TD, N_PD)
+
+
+def cell_centre_angles(i_th, i_td, i_pd):
+    """Angles at continuous index i + 0.5 on each axis."""
+    u = (np.asarray(i_th) + 0.5) / N_TH
+    return u * u * HALF_PI, (np.asarray(i_td) + 0.5) / N_TD * HALF_PI, (np.asarray(i_pd) + 0.5) / N_PD * np.pi
+
+
+def analytic_table() -> np.ndarray:
+    """A smooth Blinn-Phong-like table: the fallback when the `nbrdf` CLI is not built."""
+    i_th, i_td, i_pd = np.meshgrid(np.arange(N_TH), np.arange(N_TD), np.arange(N_PD), indexing="ij")
+    th, td, pd = cell_centre_angles(i_th, i_td, i_pd)
+    kd = np.array([0.15, 0.1, 0.05]) / np.pi
+    ks = np.array([0.5, 0.45, 0.3]) * (60 + 2) / (2 * np.pi)
+    lobe = np.cos(th) ** 60 * (1 + 0.1 * np.cos(pd)) * (1 + 0.2 * np.sin(td))
+    f = kd[:, None, None, None] + ks[:, None, None, None] * lobe
+    return f / SCALE[:, None, None, None]
+
+
+def continuous_index(theta_h, theta_d, phi_d):
+    phi = np.where(phi_d < 0, phi_d + np.pi, phi_d)
+    phi = np.where(phi >= np.pi, phi - np.pi, phi)
+    return (N_TH * np.sqrt(np.maximum(theta_h, 0) / HALF_PI), N_TD * theta_d / HALF_PI, N_PD * phi / np.pi)
+
+
+def merl_trilinear(stored: np.ndarray, light: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """Reference f_r (3, n): trilinear between cell centres (index i + 0.5), clamped at the theta
+    borders, wrapping in phi_d; invalid cells (any channel < 0) skipped with renormalised
+    weights; zero-weight corners ignored; all invalid -> 0."""
+    theta_h, _, theta_d, phi_d, _ = to_angles(light, view)
+    xh, xd, xp = continuous_index(theta_h, theta_d, phi_d)
+
+    def clamped(x, n):
+        x = np.clip(x - 0.5, 0.0, n - 1.0)
+        i0 = np.minimum(np.floor(x).astype(int), n - 1)
+        i1 = np.minimum(i0 + 1, n - 1)
+        return i0, i1, x - i0
+
+    def wrapped(x, n):
+        x = x - 0.5
+        f = np.floor(x)
+        i0 = f.astype(int) % n
+        return i0, (i0 + 1) % n, x - f
+
+    h0, h1, wh = clamped(xh, N_TH)
+    d0, d1, wd = clamped(xd, N_TD)
+    p0, p1, wp = wrapped(xp, N_PD)
+    values = stored * SCALE[:, None, None, None]
+    valid_cell = np.all(stored >= 0, axis=0)
+    total = np.zeros((3, len(xh)))
+    weight_sum = np.zeros(len(xh))
+    for ih, w_h in ((h0, 1 - wh), (h1, wh)):
+        for id_, w_d in ((d0, 1 - wd), (d1, wd)):
+            for ip, w_p in ((p0, 1 - wp), (p1, wp)):
+                w = w_h * w_d * w_p
+                use = (w > 0) & valid_cell[ih, id_, ip]
+                w = np.where(use, w, 0.0)
+                total += w * values[:, ih, id_, ip]
+                weight_sum += w
+    return np.where(weight_sum > 0, total / np.where(weight_sum > 0, weight_sum, 1), 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# The NBRDF network (DESIGN.md section 4), read from the Keras file with h5py
+
+
+def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    import h5py
+
+    with h5py.File(h5_path, "r") as f:
+        return [(np.asarray(f[f"dense_{k}/dense_{k}/kernel:0"], np.float64),
+                 np.asarray(f[f"dense_{k}/dense_{k}/bias:0"], np.float64)) for k in (1, 2, 3)]
+
+
+def network_input(light: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """(n, 6) isotropic input ``[sin th, 0, cos th, d.x, d.y, d.z]``."""
+    theta_h, _, _, _, d = to_angles(light, view)
+    n = theta_h.shape[0]
+    return np.stack([np.sin(theta_h), np.zeros(n), np.cos(theta_h), d[0], d[1], d[2]], axis=1)
+
+
+def nbrdf_reference(layers, light: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """f_r cos(theta_l), (3, n), float64; zero when either direction is below the horizon."""
+    (w1, b1), (w2, b2), (w3, b3) = layers
+    x = network_input(light, view)
+    y = np.maximum(x @ w1 + b1, 0)
+    y = np.maximum(y @ w2 + b2, 0)
+    f = np.maximum(np.exp(y @ w3 + b3) - 1, 0).T
+    cos_l = normalize(light)[2]
+    above = (normalize(light)[2] > 0) & (normalize(view)[2] > 0)
+    return np.where(above, f * cos_l, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Blinn-Phong mixture pdf (DESIGN.md section 6)
+
+
+def phong_pdf(view: np.ndarray, light: np.ndarray, exponent: float, weight: float) -> np.ndarray:
+    v, l = normalize(view), normalize(light)
+    h = normalize(v + l)
+    cos_h = np.clip(h[2], 0, 1)
+    spec = (exponent + 1) / (2 * np.pi) * cos_h ** exponent / (4 * np.abs(np.sum(v * h, axis=0)))
+    diff = np.maximum(l[2], 0) / np.pi
+    return np.where(l[2] > 0, weight * spec + (1 - weight) * diff, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Calling a Mitsuba BSDF on planar NumPy batches, in scalar and JIT variants
+
+
+def _mi():
+    import drjit as dr
+    import mitsuba as mi
+
+    return mi, dr
+
+
+def _si(view_cols):
+    mi, dr = _mi()
+    si = dr.zeros(mi.SurfaceInteraction3f, view_cols.shape[1])
+    si.wi = mi.Vector3f(np.ascontiguousarray(view_cols, dtype=np.float32))
+    return si
+
+
+def _scalar_si(v):
+    mi, dr = _mi()
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wi = mi.Vector3f(*map(float, v))
+    return si
+
+
+def is_jit() -> bool:
+    mi, dr = _mi()
+    return dr.is_jit_v(mi.Float)
+
+
+def bsdf_eval(bsdf, view, light, ctx=None) -> np.ndarray:
+    mi, dr = _mi()
+    ctx = ctx or mi.BSDFContext()
+    if is_jit():
+        out = bsdf.eval(ctx, _si(view), mi.Vector3f(np.ascontiguousarray(light, dtype=np.float32)))
+        return np.asarray(out.numpy(), dtype=np.float64).reshape(3, -1)
+    return np.stack([np.asarray(bsdf.eval(ctx, _scalar_si(view[:, i]), mi.Vector3f(*map(float, light[:, i]))),
+                                dtype=np.float64) for i in range(view.shape[1])], axis=1).reshape(3, -1)
+
+
+def bsdf_pdf(bsdf, view, light, ctx=None) -> np.ndarray:
+    mi, dr = _mi()
+    ctx = ctx or mi.BSDFContext()
+    if is_jit():
+        out = bsdf.pdf(ctx, _si(view), mi.Vector3f(np.ascontiguousarray(light, dtype=np.float32)))
+        return np.asarray(out.numpy(), dtype=np.float64).reshape(-1)
+    return np.array([float(bsdf.pdf(ctx, _scalar_si(view[:, i]), mi.Vector3f(*map(float, light[:, i]))))
+                     for i in range(view.shape[1])])
+
+
+def bsdf_eval_pdf(bsdf, view, light, ctx=None):
+    mi, dr = _mi()
+    ctx = ctx or mi.BSDFContext()
+    if is_jit():
+        value, pdf = bsdf.eval_pdf(ctx, _si(view), mi.Vector3f(np.ascontiguousarray(light, dtype=np.float32)))
+        return np.asarray(value.numpy(), np.float64).reshape(3, -1), np.asarray(pdf.numpy(), np.float64).reshape(-1)
+    values, pdfs = [], []
+    for i in range(view.shape[1]):
+        value, pdf = bsdf.eval_pdf(ctx, _scalar_si(view[:, i]), mi.Vector3f(*map(float, light[:, i])))
+        values.append(np.asarray(value, np.float64))
+        pdfs.append(float(pdf))
+    return np.stack(values, axis=1).reshape(3, -1), np.array(pdfs)
+
+
+def bsdf_sample(bsdf, view, u, ctx=None):
+    """(wo (3, n), weight (3, n), pdf (n,), sampled_type (n,)) for uniforms ``u`` (3, n)."""
+    mi, dr = _mi()
+    ctx = ctx or mi.BSDFContext()
+    u = np.asarray(u, dtype=np.float32)
+    if is_jit():
+        bs, weight = bsdf.sample(ctx, _si(view), mi.Float(u[0]), mi.Point2f(np.ascontiguousarray(u[1:])))
+        return (np.asarray(bs.wo.numpy(), np.float64).reshape(3, -1), np.asarray(weight.numpy(), np.float64).reshape(3, -1),
+                np.asarray(bs.pdf.numpy(), np.float64).reshape(-1),
+                np.broadcast_to(np.asarray(bs.sampled_type.numpy()).reshape(-1), (view.shape[1],)))
+    wos, weights, pdfs, types = [], [], [], []
+    for i in range(view.shape[1]):
+        bs, weight = bsdf.sample(ctx, _scalar_si(view[:, i]), float(u[0, i]), mi.Point2f(float(u[1, i]), float(u[2, i])))
+        wos.append(np.asarray(bs.wo, np.float64))
+        weights.append(np.asarray(weight, np.float64))
+        pdfs.append(float(bs.pdf))
+        types.append(int(bs.sampled_type))
+    return np.stack(wos, axis=1), np.stack(weights, axis=1), np.array(pdfs), np.array(types)
