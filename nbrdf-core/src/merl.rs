@@ -47,7 +47,8 @@ pub enum Interpolation {
 ///
 /// The three channels of a cell are kept side by side: a lookup then touches a few cache lines
 /// instead of one per channel (lookups at random directions are memory-bound; this layout made
-/// them about twice as fast). The file's channel-major layout is built on demand by
+/// nearest lookups about 2x and trilinear ones about 1.5x faster). The file's channel-major
+/// layout is built on demand by
 /// [`MerlTable::stored`].
 #[derive(Clone)]
 pub struct MerlTable {
