@@ -1,0 +1,66 @@
+# nbrdf: `make demo` builds everything and runs the main job; `make test` builds everything and
+# runs every test. Both start from `make setup`, which is idempotent.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+CARGO ?= cargo
+VENV := .venv
+PY := $(VENV)/bin/python
+LIB := target/release/libnbrdf_ffi.so
+CLI := target/release/nbrdf
+PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*') mitsuba-plugin/pyproject.toml nbrdf-ffi/include/nbrdf.h
+
+.PHONY: setup build demo test test-rust test-python bench lint clean FORCE
+
+setup: $(VENV)/.plugin-installed llvm
+
+# Python environment: Mitsuba, Dr.Jit and the script and test dependencies.
+$(VENV)/.deps-installed: python/requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r python/requirements.txt
+	touch $@
+
+# One release build gives the CLI (target/release/nbrdf) and the C ABI library.
+build: $(LIB)
+$(LIB): FORCE
+	$(CARGO) build --release --workspace
+
+# The plugin package, bundling the library just built (no second cargo build).
+$(VENV)/.plugin-installed: $(VENV)/.deps-installed $(LIB) $(PLUGIN_SOURCES)
+	NBRDF_LIBRARY=$(abspath $(LIB)) $(PY) -m pip install -q --no-deps --no-build-isolation --force-reinstall ./mitsuba-plugin
+	touch $@
+
+# Dr.Jit's LLVM backend needs libLLVM >= 16; install Debian's libllvm19 only when none is found.
+llvm: $(VENV)/.plugin-installed
+	@if ! $(PY) -m nbrdf_mitsuba.llvm --quiet; then \
+	  if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+	    echo "installing libllvm19 for Dr.Jit's LLVM backend"; \
+	    apt-get install -y -q libllvm19 >/dev/null || { apt-get update -q >/dev/null && apt-get install -y -q libllvm19 >/dev/null; }; \
+	  else \
+	    echo "error: no libLLVM >= 16 found; install one (Debian: sudo apt-get install libllvm19) or set DRJIT_LIBLLVM_PATH"; exit 1; \
+	  fi; \
+	  $(PY) -m nbrdf_mitsuba.llvm; \
+	fi
+
+demo: setup
+	$(PY) python/demo.py
+
+test: setup test-rust test-python
+
+test-rust:
+	$(CARGO) test --workspace --release
+
+test-python: setup
+	$(PY) -m pytest tests -q
+
+# Speed figures (criterion): NBRDF evaluations, MERL lookups and Blinn-Phong samples per second.
+bench:
+	$(CARGO) bench --workspace
+
+lint:
+	$(CARGO) fmt --all --check
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+clean:
+	rm -rf target $(VENV) out mitsuba-plugin/build
