@@ -6,7 +6,7 @@ the current variant if one is set, and again whenever ``mi.set_variant`` switche
 
 Import it **before** ``mitsuba``/``drjit`` when you use the ``llvm_*`` variants: Dr.Jit picks its
 libLLVM once, at its first import, and this package points it at a libLLVM >= 16
-(``DRJIT_LIBLLVM_PATH``) when the variable is unset; see :mod:`nbrdf_mitsuba.llvm`.
+(``DRJIT_LIBLLVM_PATH``) when the variable is unset; see :mod:`nbrdf_mitsuba._llvm`.
 
 Example::
 
@@ -18,9 +18,9 @@ Example::
 
 from __future__ import annotations
 
-from . import llvm
+from . import _llvm
 
-llvm.configure()  # must precede the first import of drjit
+_llvm.configure()  # must precede the first import of drjit
 
 import mitsuba as mi  # noqa: E402
 
@@ -78,6 +78,10 @@ def __getattr__(name):
         from . import _native
 
         return getattr(_native, name)
+    if name == "llvm":
+        import importlib
+
+        return importlib.import_module(f"{__name__}.llvm")
     raise AttributeError(f"module 'nbrdf_mitsuba' has no attribute {name!r}")
 
 

@@ -18,7 +18,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import _native, llvm
+from . import _llvm, _native
 
 SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
 
@@ -172,7 +172,7 @@ class _NativeBSDFMixin:
         if _is_jit():
             if mi.variant().startswith("llvm"):
                 try:
-                    llvm.check_backend()
+                    _llvm.check_backend()
                 except RuntimeError as error:
                     raise RuntimeError(f"{self._type_name()}: {error}") from None
             use_wavefront_mode(f'{self.PLUGIN} BSDF "{self._filename}" constructed')
