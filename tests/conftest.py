@@ -7,12 +7,13 @@
   ``target/release/nbrdf synth --model sgd --material gold-metallic-paint`` (or $NBRDF_CLI), or,
   when the CLI is not built, by a NumPy helper tabulating a simple analytic BRDF.
 * ``keras_networks`` - a few of the authors' Keras NBRDFs converted by the package's importer.
+* ``network_file`` - one network for the tests that need any NBRDF (imported when ../shared is
+  there, synthetic otherwise).
 """
 
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import nbrdf_mitsuba  # noqa: F401  (first: points Dr.Jit at a usable libLLVM)
 import mitsuba as mi
 import pytest
 
-from nbrdf_testing import write_merl
+from nbrdf_testing import write_merl, write_network
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
@@ -105,12 +106,15 @@ def keras_networks(shared, tmp_path_factory) -> list[tuple[Path, Path]]:
 
 
 @pytest.fixture(scope="session")
-def network_file(keras_networks) -> Path:
-    """One imported network (no stored sampling parameters)."""
-    return keras_networks[1][1]
+def network_file(tmp_path_factory) -> Path:
+    """One network without stored sampling parameters: an imported Keras NBRDF when ../shared is
+    present, else a small synthetic network (so that only the Keras parity tests need ../shared)."""
+    out = tmp_path_factory.mktemp("network")
+    h5 = SHARED / "data" / "reference-nbrdf" / "merl" / "blue-metallic-paint.h5"
+    if h5.is_file():
+        from nbrdf_mitsuba import import_keras
 
-
-@pytest.fixture
-def workdir(tmp_path):
-    yield tmp_path
-    shutil.rmtree(tmp_path, ignore_errors=True)
+        target = out / "blue-metallic-paint.nbrdf.json"
+        assert import_keras.main([str(h5), "-o", str(target), "-q"]) == 0
+        return target
+    return write_network(out / "synthetic.nbrdf.json")

@@ -183,6 +183,35 @@ def merl_trilinear(stored: np.ndarray, light: np.ndarray, view: np.ndarray) -> n
 # The NBRDF network (DESIGN.md section 4), read from the Keras file with h5py
 
 
+def random_layers(hidden: int = 21, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """float32 weights of a random, smooth network (a stand-in when no trained one is at hand)."""
+    rng = np.random.default_rng(seed)
+    layers = [(rng.uniform(-0.5, 0.5, s).astype(np.float32), rng.uniform(-0.1, 0.1, s[1]).astype(np.float32))
+              for s in [(6, hidden), (hidden, hidden)]]
+    # A positive last layer keeps f_r > 0 everywhere, as for a real material (Mitsuba's chi^2
+    # adapter counts zero-weight samples as failures).
+    layers.append((rng.uniform(0.0, 0.3, (hidden, 3)).astype(np.float32), np.full(3, 0.5, np.float32)))
+    return layers
+
+
+def write_network(path: Path, layers=None, sampling: dict | None = None, name: str = "synthetic") -> Path:
+    """Writes an ``*.nbrdf.json`` file (DESIGN.md section 4)."""
+    import json
+
+    layers = random_layers() if layers is None else layers
+    document = {
+        "format": "nbrdf", "version": 1, "name": name,
+        "layers": [{"inputs": int(w.shape[0]), "outputs": int(w.shape[1]),
+                    "weights": [float(v) for v in np.asarray(w, np.float32).ravel()],
+                    "bias": [float(v) for v in np.asarray(b, np.float32)]} for w, b in layers],
+        "provenance": {"source": "nbrdf tests"},
+    }
+    if sampling is not None:
+        document["sampling"] = sampling
+    Path(path).write_text(json.dumps(document))
+    return Path(path)
+
+
 def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     import h5py
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nbrdf_testing import (bsdf_eval, f32, grazing_pairs, is_jit, keras_layers, nbrdf_reference, network_input,
-                           normalize, random_pairs)
+                           normalize, random_layers, random_pairs, write_network)
 
 RTOL = 1e-5
 ATOL = 1e-7  # f_r cos is computed in float32: exp(z) - 1 near z = 0 loses ~6e-8 absolute
@@ -118,19 +118,9 @@ def test_reciprocity_as_the_reference(variant, keras_networks):
 
 @pytest.mark.parametrize("hidden", [4, 32])
 def test_other_hidden_widths(variant, tmp_path, hidden):
-    rng = np.random.default_rng(hidden)
-    shapes = [(6, hidden), (hidden, hidden), (hidden, 3)]
-    layers = [(rng.uniform(-0.5, 0.5, s).astype(np.float32), rng.uniform(-0.1, 0.1, s[1]).astype(np.float32))
-              for s in shapes]
-    document = {
-        "format": "nbrdf", "version": 1, "name": f"random-{hidden}",
-        "layers": [{"inputs": w.shape[0], "outputs": w.shape[1], "weights": [float(v) for v in w.ravel()],
-                    "bias": [float(v) for v in b]} for w, b in layers],
-        "sampling": {"model": "blinn-phong", "exponent": 25.0, "specular_weight": 0.4, "source": "manual"},
-        "provenance": {"source": "test"},
-    }
-    path = tmp_path / "random.nbrdf.json"
-    path.write_text(json.dumps(document))
+    layers = random_layers(hidden, seed=hidden)
+    path = write_network(tmp_path / "random.nbrdf.json", layers, name=f"random-{hidden}", sampling={
+        "model": "blinn-phong", "exponent": 25.0, "specular_weight": 0.4, "source": "manual"})
     bsdf = mi.load_dict({"type": "nbrdf", "filename": str(path)})
     assert f"hidden_width = {hidden}" in str(bsdf) and "sampling = phong" in str(bsdf)
     view, light = (f32(a) for a in random_pairs(100 if is_jit() else 20, 3))
