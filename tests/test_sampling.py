@@ -153,3 +153,13 @@ def test_component_selection(variant, merl_table):
     assert bsdf.flags() == int(mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide)
     assert bsdf.component_count() == 1
     assert dr.all(mi.has_flag(bsdf.flags(), mi.BSDFFlags.Glossy))
+
+
+def test_empty_wavefront(llvm_variant, merl_table):
+    bsdf = mi.load_dict({"type": "merl", "filename": str(merl_table)})
+    ctx, si, wo = mi.BSDFContext(), dr.zeros(mi.SurfaceInteraction3f, 0), dr.zeros(mi.Vector3f, 0)
+    assert dr.width(bsdf.eval(ctx, si, wo)) == 0 and dr.width(bsdf.pdf(ctx, si, wo)) == 0
+    value, pdf = bsdf.eval_pdf(ctx, si, wo)
+    assert dr.width(value) == 0 and dr.width(pdf) == 0
+    bs, weight = bsdf.sample(ctx, si, dr.zeros(mi.Float, 0), dr.zeros(mi.Point2f, 0))
+    assert dr.width(weight) == 0 and dr.width(bs.wo) == 0

@@ -213,7 +213,7 @@ class _NativeBSDFMixin:
     # -- Mitsuba interface --------------------------------------------------------------------
 
     def eval(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0):
+        if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Color3f, _width(si.wi, wo) if _is_jit() else 1)
         _require_wavefront(self._type_name())
         view, light = _directions(si.wi, wo)
@@ -221,7 +221,7 @@ class _NativeBSDFMixin:
         return dr.select(_both_above(active, si.wi, wo), value, 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0):
+        if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Float, _width(si.wi, wo) if _is_jit() else 1)
         _require_wavefront(self._type_name())
         view, light = _directions(si.wi, wo)
@@ -229,7 +229,7 @@ class _NativeBSDFMixin:
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0):
+        if not self._enabled(ctx, si.wi, wo):
             n = _width(si.wi, wo) if _is_jit() else 1
             return dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
         _require_wavefront(self._type_name())
@@ -242,7 +242,7 @@ class _NativeBSDFMixin:
     def sample(self, ctx, si, sample1, sample2, active=True):
         n = _width(si.wi, sample1, sample2) if _is_jit() else 1
         bs = dr.zeros(mi.BSDFSample3f, n) if _is_jit() else mi.BSDFSample3f()
-        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0):
+        if not self._enabled(ctx, si.wi, sample1, sample2):
             return bs, dr.zeros(mi.Color3f, n) if _is_jit() else mi.Color3f(0.0)
         _require_wavefront(self._type_name())
         _evaluate(si.wi, sample1, sample2)
@@ -257,6 +257,14 @@ class _NativeBSDFMixin:
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (bs.pdf > 0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
         return bs, dr.select(active, _to_color(weight), 0.0)
+
+    @staticmethod
+    def _enabled(ctx, *values) -> bool:
+        """Whether there is anything to compute: the glossy lobe is selected and, in JIT
+        variants, the wavefront is not empty (Dr.Jit cannot broadcast literals to width 0)."""
+        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0):
+            return False
+        return not _is_jit() or _width(*values) > 0
 
     def traverse(self, callback):
         # Mitsuba types (not Python floats) so that SceneParameters can update them in place.
