@@ -22,18 +22,18 @@ EXP_ARGUMENT_MAX = 80.0  # keeps exp() finite in float32, as the Rust evaluator 
 SIN_THETA_H_EPS = 1e-7
 
 
-def _safe_inverse_length(x, y, z):
-    """1/|v|, or 0 for the zero vector, so degenerate inputs give zeros instead of NaN."""
+def _unit_or_normal(x, y, z):
+    """Unit vector, or the normal +z for zero, infinite or NaN input (as the Rust core)."""
     length2 = dr.fma(x, x, dr.fma(y, y, z * z))
-    return dr.select(length2 > 0, dr.rsqrt(length2), 0.0)
+    usable = (length2 > 0) & (length2 < float("inf"))
+    inv = dr.rsqrt(length2)
+    return dr.select(usable, x * inv, 0.0), dr.select(usable, y * inv, 0.0), dr.select(usable, z * inv, 1.0)
 
 
 def network_input(view: mi.Vector3f, light: mi.Vector3f) -> list:
     """``[sin th, 0, cos th, d.x, d.y, d.z]`` (DESIGN.md section 2), branch-free like the Rust code."""
-    li = _safe_inverse_length(light.x, light.y, light.z)
-    vi = _safe_inverse_length(view.x, view.y, view.z)
-    lx, ly, lz = light.x * li, light.y * li, light.z * li
-    vx, vy, vz = view.x * vi, view.y * vi, view.z * vi
+    lx, ly, lz = _unit_or_normal(light.x, light.y, light.z)
+    vx, vy, vz = _unit_or_normal(view.x, view.y, view.z)
     hx, hy, hz = lx + vx, ly + vy, lz + vz
     h_len2 = dr.fma(hx, hx, dr.fma(hy, hy, hz * hz))
     degenerate = h_len2 <= 0
@@ -119,43 +119,87 @@ def _expm1_nonpositive(x):
 def _cos_power(cos_theta, exponent):
     """cos^n as exp(n ln cos), with n = 0 -> 1 and cos <= 0 -> 0 (never NaN)."""
     positive = cos_theta > 0
-    value = dr.exp(exponent * dr.log(dr.select(positive, cos_theta, 1.0)))
+    value = dr.exp(exponent * dr.log(dr.select(positive, dr.minimum(cos_theta, 1.0), 1.0)))
     value = dr.select(positive, value, 0.0)
     return dr.select(exponent == 0, 1.0, value)
 
 
-def phong_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight):
-    """The Blinn-Phong mixture pdf per unit solid angle of ``light`` (DESIGN.md section 6)."""
-    v = dr.normalize(view)
-    l = dr.normalize(light)
-    h = v + l
-    h_len2 = dr.squared_norm(h)
-    h = h * dr.select(h_len2 > 0, dr.rsqrt(h_len2), 0.0)
-    cos_th = h.z
+def _spherical(cos_theta, sin_theta, u):
+    sin_phi, cos_phi = dr.sincos(2.0 * math.pi * u)
+    return mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
+
+
+def uniform_hemisphere(u1, u2) -> mi.Vector3f:
+    """Same warp as ``sampling::uniform_hemisphere``: ``cos theta = u1``."""
+    z = dr.clip(u1, 0.0, 1.0)
+    return _spherical(z, dr.safe_sqrt((1.0 - z) * (1.0 + z)), u2)
+
+
+def cosine_hemisphere(u1, u2) -> mi.Vector3f:
+    """Same warp as ``sampling::cosine_hemisphere``: ``sin theta = sqrt(u1)``."""
+    u1 = dr.clip(u1, 0.0, 1.0)
+    return _spherical(dr.safe_sqrt(1.0 - u1), dr.safe_sqrt(u1), u2)
+
+
+def blinn_phong_half_vector(exponent, u1, u2) -> mi.Vector3f:
+    """``cos theta_h = u1^(1/(n+1))``; ``1 - cos`` from expm1 keeps sharp lobes' spread."""
+    u1 = dr.clip(u1, 0.0, 1.0)
+    positive = u1 > 0
+    log_u1 = dr.log(dr.select(positive, u1, 1.0))
+    one_minus_cos = dr.select(positive, -_expm1_nonpositive(log_u1 / (exponent + 1.0)), 1.0)
+    one_minus_cos = dr.clip(one_minus_cos, 0.0, 1.0)
+    cos_theta = 1.0 - one_minus_cos
+    return _spherical(cos_theta, dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta)), u2)
+
+
+def _unit(v: mi.Vector3f):
+    """Unit vector and whether ``v`` had one (zero, infinite and NaN vectors give zero)."""
+    length2 = dr.squared_norm(v)
+    usable = (length2 > 0) & (length2 < float("inf"))
+    return dr.select(usable, v * dr.rsqrt(length2), 0.0), usable
+
+
+def mixture_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight):
+    """The Blinn-Phong mixture pdf per unit solid angle of ``light`` (DESIGN.md section 6),
+    zero unless both directions are above the horizon."""
+    v, v_ok = _unit(view)
+    l, l_ok = _unit(light)
+    h, h_ok = _unit(v + l)
     v_dot_h = dr.abs(dr.dot(v, h))
-    lobe = (exponent + 1.0) * (0.5 / math.pi) * _cos_power(cos_th, exponent)
-    specular = dr.select(v_dot_h > 0, lobe / (4.0 * v_dot_h), 0.0)
-    diffuse = dr.maximum(l.z, 0.0) / math.pi
-    pdf = specular_weight * specular + (1.0 - specular_weight) * diffuse
-    valid = (v.z > 0) & (l.z > 0) & (h_len2 > 0)
-    return dr.select(valid, pdf, 0.0)
+    lobe = (exponent + 1.0) * (0.5 / math.pi) * _cos_power(dr.abs(h.z), exponent)
+    specular = dr.select(h_ok & (v_dot_h > 0), lobe / (4.0 * v_dot_h), 0.0)
+    specular = dr.select(specular_weight > 0, specular_weight * specular, 0.0)
+    pdf = specular + (1.0 - specular_weight) * dr.maximum(l.z, 0.0) / math.pi
+    return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
-def phong_sample(view: mi.Vector3f, u0, u1, u2, exponent, specular_weight, cosine_sample):
-    """Draws a light direction from the mixture; returns ``(light, pdf)`` with pdf 0 for invalid
-    samples. ``cosine_sample(u1, u2)`` must be the same cosine-hemisphere warp as the Rust core's."""
-    v = dr.normalize(view)
-    # Specular lobe: 1 - cos th = -expm1(ln u1 / (n + 1)) keeps precision for huge exponents.
-    one_minus_cos = dr.select(
-        u1 > 0, -_expm1_nonpositive(dr.log(dr.select(u1 > 0, u1, 1.0)) / (exponent + 1.0)), 1.0
-    )
-    cos_th = 1.0 - one_minus_cos
-    sin_th = dr.safe_sqrt(one_minus_cos * (2.0 - one_minus_cos))
-    sin_phi, cos_phi = dr.sincos(2.0 * math.pi * u2)
-    h = mi.Vector3f(sin_th * cos_phi, sin_th * sin_phi, cos_th)
-    reflected = 2.0 * dr.dot(v, h) * h - v
-    specular = u0 < specular_weight
-    light = dr.select(specular, reflected, cosine_sample(u1, u2))
-    pdf = phong_pdf(v, light, exponent, specular_weight)
-    valid = (v.z > 0) & (light.z > 0)
-    return light, dr.select(valid, pdf, 0.0)
+STRATEGIES = ("uniform", "cosine", "phong")
+
+
+def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0):
+    """Density of ``light`` given ``view`` for a strategy of ``STRATEGIES``."""
+    if strategy == "phong":
+        return mixture_pdf(view, light, exponent, specular_weight)
+    v, v_ok = _unit(view)
+    l, l_ok = _unit(light)
+    density = 0.5 / math.pi if strategy == "uniform" else l.z / math.pi
+    return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), density, 0.0)
+
+
+def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
+    """Draws a light direction like ``SamplingStrategy::sample``: ``(light, pdf)`` with pdf 0
+    for invalid samples (a specular reflection below the horizon, a view below it)."""
+    if strategy == "uniform":
+        light = uniform_hemisphere(u1, u2)
+    elif strategy == "cosine":
+        light = cosine_hemisphere(u1, u2)
+    elif strategy == "phong":
+        v, _ = _unit(view)
+        h = blinn_phong_half_vector(exponent, u1, u2)
+        reflected = 2.0 * dr.dot(v, h) * h - v
+        specular = (u0 < specular_weight) | (specular_weight >= 1.0)
+        light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
+    else:
+        raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
+    light, _ = _unit(light)
+    return light, pdf(strategy, view, light, exponent, specular_weight)
