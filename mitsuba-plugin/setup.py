@@ -19,7 +19,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from setuptools import setup
+from setuptools import Distribution, setup
 from setuptools.command.build_py import build_py as _build_py
 
 HERE = Path(__file__).resolve().parent
@@ -105,7 +105,14 @@ class build_py(_build_py):
 
 cmdclass = {"build_py": build_py}
 
-# The wheel carries a native library: tag it for this platform, but any Python 3 (cffi ABI mode).
+class BinaryDistribution(Distribution):
+    """The wheel carries a native library: install it as platform-specific (platlib)."""
+
+    def has_ext_modules(self):
+        return True
+
+
+# ...for this platform, but any Python 3 (cffi ABI mode, no extension module).
 try:
     try:
         from setuptools.command.bdist_wheel import bdist_wheel as _bdist_wheel
@@ -113,10 +120,6 @@ try:
         from wheel.bdist_wheel import bdist_wheel as _bdist_wheel
 
     class bdist_wheel(_bdist_wheel):
-        def finalize_options(self):
-            super().finalize_options()
-            self.root_is_pure = False
-
         def get_tag(self):
             _, _, platform = super().get_tag()
             return "py3", "none", platform
@@ -125,4 +128,4 @@ try:
 except ImportError:
     pass
 
-setup(cmdclass=cmdclass)
+setup(cmdclass=cmdclass, distclass=BinaryDistribution)
