@@ -271,3 +271,20 @@ def test_strip_preprocessor_keeps_declarations_only():
     assert "int32_t nbrdf_network_eval(" in text
     nested = "#ifdef __cplusplus\n#if X\nint bad;\n#endif\nint bad2;\n#endif\nint good;"
     assert strip_preprocessor(nested).split() == ["int", "good;"]
+
+
+def test_missing_native_library_warns_on_set_variant_and_raises_on_register(tmp_path):
+    import subprocess
+    import sys
+
+    code = ("import warnings; warnings.simplefilter('always')\n"
+            "import nbrdf_mitsuba, mitsuba as mi\n"
+            "mi.set_variant('scalar_rgb')\n"
+            "print('set_variant ok')\n"
+            "nbrdf_mitsuba.register()\n")
+    missing = tmp_path / "libnbrdf_ffi.so"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                            env={**__import__("os").environ, "NBRDF_LIBRARY": str(missing)})
+    assert "set_variant ok" in result.stdout
+    assert "could not register the nbrdf/merl BSDFs" in result.stderr
+    assert result.returncode != 0 and f"native library {missing} is missing" in result.stderr

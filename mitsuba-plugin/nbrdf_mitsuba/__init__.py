@@ -54,8 +54,16 @@ def register(variant: str | None = None) -> bool:
 
 
 def _on_variant_change(old, new) -> None:
+    # Runs inside mi.set_variant: a broken plugin installation must not break Mitsuba itself,
+    # so failures become warnings here (an explicit register() call raises them).
     if new is not None:
-        register(new)
+        try:
+            register(new)
+        except Exception as error:  # noqa: BLE001
+            import warnings
+
+            warnings.warn(f"nbrdf_mitsuba: could not register the nbrdf/merl BSDFs for {new}: {error}",
+                          stacklevel=2)
 
 
 def _install_variant_hook() -> bool:
