@@ -4,7 +4,10 @@ parameters, error messages, registration across variants."""
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 
 import drjit as dr
 import mitsuba as mi
@@ -274,9 +277,6 @@ def test_strip_preprocessor_keeps_declarations_only():
 
 
 def test_missing_native_library_warns_on_set_variant_and_raises_on_register(tmp_path):
-    import subprocess
-    import sys
-
     code = ("import warnings; warnings.simplefilter('always')\n"
             "import nbrdf_mitsuba, mitsuba as mi\n"
             "mi.set_variant('scalar_rgb')\n"
@@ -284,7 +284,7 @@ def test_missing_native_library_warns_on_set_variant_and_raises_on_register(tmp_
             "nbrdf_mitsuba.register()\n")
     missing = tmp_path / "libnbrdf_ffi.so"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                            env={**__import__("os").environ, "NBRDF_LIBRARY": str(missing)})
+                            env={**os.environ, "NBRDF_LIBRARY": str(missing)})
     assert "set_variant ok" in result.stdout
     assert "could not register the nbrdf/merl BSDFs" in result.stderr
     assert result.returncode != 0 and f"native library {missing} is missing" in result.stderr
