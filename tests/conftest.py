@@ -21,6 +21,7 @@ import nbrdf_mitsuba  # noqa: F401  (first: points Dr.Jit at a usable libLLVM)
 import mitsuba as mi
 import pytest
 
+import nbrdf_testing
 from nbrdf_testing import write_merl, write_network
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,16 +38,37 @@ def _llvm_problem() -> str | None:
         return str(error)
 
 
-@pytest.fixture(params=VARIANTS)
+# (variant, backend): the Rust reference in both variants (wavefront mode in the JIT one) and
+# the traced backend in Dr.Jit's default symbolic mode.
+CONFIGURATIONS = [("scalar_rgb", "rust"), ("llvm_ad_rgb", "rust"), ("llvm_ad_rgb", "jit")]
+
+
+def _set_symbolic(enabled: bool) -> None:
+    import drjit as dr
+
+    dr.set_flag(dr.JitFlag.SymbolicLoops, enabled)
+    dr.set_flag(dr.JitFlag.SymbolicCalls, enabled)
+
+
+@pytest.fixture(params=CONFIGURATIONS, ids=[f"{v}-{b}" for v, b in CONFIGURATIONS])
 def variant(request):
-    """Sets (and yields) each tested Mitsuba variant in turn."""
-    name = request.param
+    """Sets each tested Mitsuba variant and BSDF backend in turn; yields the variant name
+    (the backend is ``nbrdf_testing.current_backend()``)."""
+    name, backend = request.param
     if name.startswith("llvm"):
         problem = _llvm_problem()
         if problem:
             pytest.skip(f"llvm variant unavailable: {problem}")
     mi.set_variant(name)
-    return name
+    previous = nbrdf_mitsuba.set_default_backend(backend)
+    nbrdf_testing.CURRENT_BACKEND = backend
+    if name.startswith("llvm"):
+        _set_symbolic(backend == "jit")
+    yield name
+    nbrdf_mitsuba.set_default_backend(previous)
+    nbrdf_testing.CURRENT_BACKEND = "rust"
+    if name.startswith("llvm"):
+        _set_symbolic(True)
 
 
 @pytest.fixture
@@ -56,7 +78,9 @@ def llvm_variant():
     if problem:
         pytest.skip(f"llvm variant unavailable: {problem}")
     mi.set_variant("llvm_ad_rgb")
-    return "llvm_ad_rgb"
+    _set_symbolic(True)
+    yield "llvm_ad_rgb"
+    _set_symbolic(True)  # a rust-backed BSDF switches wavefront mode on
 
 
 @pytest.fixture(scope="session")

@@ -20,6 +20,19 @@ HALF_PI = np.pi / 2
 # Directions
 
 
+CURRENT_BACKEND = "rust"  # set by the `variant` fixture
+
+
+def current_backend() -> str:
+    return CURRENT_BACKEND
+
+
+def float32_rtol(rust_rtol: float) -> float:
+    """The traced backend computes angles in float32 (the Rust one in float64), which moves
+    table lookups by a few float32 ulps of the continuous index: allow 1e-4 there."""
+    return rust_rtol if CURRENT_BACKEND == "rust" else max(rust_rtol, 1e-4)
+
+
 def sph(theta, phi) -> np.ndarray:
     """Planar (3, n) unit directions from polar angle ``theta`` and azimuth ``phi``."""
     theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
@@ -210,6 +223,15 @@ def write_network(path: Path, layers=None, sampling: dict | None = None, name: s
         document["sampling"] = sampling
     Path(path).write_text(json.dumps(document))
     return Path(path)
+
+
+def read_network_layers(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(W, b) pairs of an ``*.nbrdf.json`` file, float64."""
+    import json
+
+    layers = json.loads(Path(path).read_text())["layers"]
+    return [(np.asarray(l["weights"], np.float64).reshape(l["inputs"], l["outputs"]),
+             np.asarray(l["bias"], np.float64)) for l in layers]
 
 
 def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -22,15 +22,17 @@ def make(plugin, sampling, network_file, merl_table, **extra):
     return mi.load_dict(params)
 
 
+@pytest.mark.parametrize("backend", ["rust", "jit"])
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
 @pytest.mark.parametrize("sampling", ["phong", "cosine"])
-def test_chi2(llvm_variant, plugin, sampling, network_file, merl_table):
-    """Mitsuba's chi^2 goodness-of-fit test of sample() against pdf() (vectorised variants only:
-    mitsuba.chi2 runs on Dr.Jit arrays)."""
+def test_chi2(llvm_variant, backend, plugin, sampling, network_file, merl_table):
+    """Mitsuba's chi^2 goodness-of-fit test of sample() against pdf() for both backends
+    (vectorised variants only: mitsuba.chi2 runs on Dr.Jit arrays)."""
     from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
     filename = network_file if plugin == "nbrdf" else merl_table
-    xml = f'<string name="filename" value="{filename}"/><string name="sampling" value="{sampling}"/>'
+    xml = (f'<string name="filename" value="{filename}"/><string name="sampling" value="{sampling}"/>'
+           f'<string name="backend" value="{backend}"/>')
     if sampling == "phong":
         xml += '<float name="exponent" value="60"/><float name="specular_weight" value="0.7"/>'
     for theta in (0.1, 0.7, 1.3):

@@ -210,16 +210,45 @@ def test_register_is_idempotent_across_variants(network_file):
         assert type(bsdf).__name__ == "NbrdfBSDF" and isinstance(bsdf, mi.BSDF)
 
 
-def test_jit_variants_switch_to_wavefront_mode(llvm_variant, network_file):
-    dr.set_flag(dr.JitFlag.SymbolicLoops, True)
-    dr.set_flag(dr.JitFlag.SymbolicCalls, True)
-    mi.load_dict({"type": "nbrdf", "filename": str(network_file)})
-    assert not dr.flag(dr.JitFlag.SymbolicLoops) and not dr.flag(dr.JitFlag.SymbolicCalls)
+def test_rust_backend_switches_to_wavefront_mode_and_jit_does_not(llvm_variant, network_file, merl_table):
+    try:
+        for plugin, path in (("nbrdf", network_file), ("merl", merl_table)):
+            dr.set_flag(dr.JitFlag.SymbolicLoops, True)
+            dr.set_flag(dr.JitFlag.SymbolicCalls, True)
+            bsdf = mi.load_dict({"type": plugin, "filename": str(path)})
+            assert "backend = jit" in str(bsdf)
+            assert dr.flag(dr.JitFlag.SymbolicLoops) and dr.flag(dr.JitFlag.SymbolicCalls)
+            mi.load_dict({"type": plugin, "filename": str(path), "backend": "rust"})
+            assert not dr.flag(dr.JitFlag.SymbolicLoops) and not dr.flag(dr.JitFlag.SymbolicCalls)
+    finally:
+        dr.set_flag(dr.JitFlag.SymbolicLoops, True)
+        dr.set_flag(dr.JitFlag.SymbolicCalls, True)
+
+
+def test_scene_with_builtin_bsdfs_renders_in_symbolic_mode(llvm_variant, network_file, merl_table):
+    """The default (traced) backend needs no Dr.Jit flag: symbolic loops and calls stay on."""
+    assert dr.flag(dr.JitFlag.SymbolicLoops) and dr.flag(dr.JitFlag.SymbolicCalls)
+    for integrator in ("direct", "path"):
+        description = scene_dict({"type": "nbrdf", "filename": str(network_file)}, integrator)
+        description["floor"]["bsdf"] = {"type": "roughconductor", "alpha": 0.2}
+        description["merl_ball"] = {"type": "sphere", "center": [0.6, 0, 0.3], "radius": 0.2,
+                                    "bsdf": {"type": "merl", "filename": str(merl_table)}}
+        image = np.array(mi.render(mi.load_dict(description), spp=4))
+        assert np.all(np.isfinite(image)) and image.max() > 0
+    assert dr.flag(dr.JitFlag.SymbolicLoops) and dr.flag(dr.JitFlag.SymbolicCalls)
+
+
+def test_unknown_backend_and_jit_in_scalar_are_errors(network_file):
+    mi.set_variant("scalar_rgb")
+    with pytest.raises(Exception, match="unknown backend"):
+        mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": "gpu"})
+    with pytest.raises(Exception, match="needs a JIT variant"):
+        mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": "jit"})
 
 
 def test_symbolic_mode_gives_a_clear_error(llvm_variant, network_file):
-    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(network_file)})
-    scene = mi.load_dict(scene_dict({"type": "nbrdf", "filename": str(network_file)}, "path"))
+    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": "rust"})
+    scene = mi.load_dict(scene_dict({"type": "nbrdf", "filename": str(network_file), "backend": "rust"}, "path"))
     try:
         dr.set_flag(dr.JitFlag.SymbolicLoops, True)
         dr.set_flag(dr.JitFlag.SymbolicCalls, True)
@@ -231,8 +260,8 @@ def test_symbolic_mode_gives_a_clear_error(llvm_variant, network_file):
             error = error.__cause__ or error.__context__
         assert any("symbolic Dr.Jit loop or call" in message for message in chain), chain
     finally:
-        dr.set_flag(dr.JitFlag.SymbolicLoops, False)
-        dr.set_flag(dr.JitFlag.SymbolicCalls, False)
+        dr.set_flag(dr.JitFlag.SymbolicLoops, True)
+        dr.set_flag(dr.JitFlag.SymbolicCalls, True)
     assert bsdf is not None
 
 

@@ -33,9 +33,10 @@ _registered: set[str] = set()
 def register(variant: str | None = None) -> bool:
     """Registers the ``nbrdf`` and ``merl`` BSDFs for the current Mitsuba variant.
 
-    Idempotent per variant. In JIT variants it also switches Dr.Jit to wavefront mode on the
-    calling thread (see :func:`nbrdf_mitsuba.bsdf.use_wavefront_mode`). Returns False when no
-    variant is set (nothing to register for yet).
+    Idempotent per variant; Dr.Jit's flags are left alone (the default ``jit`` backend traces
+    into Mitsuba's symbolic kernels; only ``backend="rust"`` in a JIT variant needs
+    :func:`use_wavefront_mode`). Returns False when no variant is set (nothing to register for
+    yet).
     """
     variant = variant or mi.variant()
     if variant is None:
@@ -44,7 +45,6 @@ def register(variant: str | None = None) -> bool:
         raise ValueError(f"register({variant!r}): the current Mitsuba variant is {mi.variant()!r}")
     from . import bsdf
 
-    bsdf.use_wavefront_mode(f"nbrdf_mitsuba registered for variant {variant}")
     if variant not in _registered:
         nbrdf_cls, merl_cls = bsdf.classes()
         mi.register_bsdf("nbrdf", lambda props: nbrdf_cls(props))
@@ -82,6 +82,10 @@ register()
 def __getattr__(name):
     # Lazy access to the native layer, so that `python -m nbrdf_mitsuba.import_keras` works
     # without loading the library.
+    if name in ("use_wavefront_mode", "set_default_backend"):
+        from . import bsdf
+
+        return getattr(bsdf, name)
     if name in ("NbrdfError", "version"):
         from . import _native
 
@@ -93,4 +97,4 @@ def __getattr__(name):
     raise AttributeError(f"module 'nbrdf_mitsuba' has no attribute {name!r}")
 
 
-__all__ = ["register", "PLUGINS", "NbrdfError", "llvm"]
+__all__ = ["register", "use_wavefront_mode", "set_default_backend", "PLUGINS", "NbrdfError", "llvm"]

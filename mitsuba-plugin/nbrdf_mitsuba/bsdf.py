@@ -1,26 +1,45 @@
 """The Mitsuba BSDF plugins ``nbrdf`` (a neural BRDF, ``*.nbrdf.json``) and ``merl`` (a
-MERL-format ``.binary`` table), both evaluated and sampled by the native library.
+MERL-format ``.binary`` table).
 
 Mitsuba's ``BSDF`` base class differs per variant, so :func:`classes` builds the two plugin
-classes for the current variant from the variant-independent mixins below. RGB variants only
-(the library returns linear RGB).
+classes for the current variant from the variant-independent mixins below. RGB variants only.
 
-Evaluation runs on the host: the directions are evaluated (``dr.eval``), copied to NumPy in
-the planar (3, N) layout of Dr.Jit, handed to the library for the whole wavefront, and the
-result is copied back. That cannot happen while Dr.Jit records a symbolic loop or call, so in
-JIT variants the plugin switches Dr.Jit to wavefront mode (see :func:`use_wavefront_mode`).
-Outputs are not differentiable.
+Two backends (parameter ``backend``):
+
+* ``jit`` (default in JIT variants): the network, the table lookup and the Blinn-Phong mixture
+  written as Dr.Jit arithmetic (:mod:`nbrdf_mitsuba.jit`), traced into Mitsuba's own kernels.
+  Symbolic loops and calls stay on; it runs at Mitsuba's full speed, on LLVM and CUDA alike.
+* ``rust`` (default in scalar variants, the reference): the native library evaluates whole
+  wavefronts on the host. Directions are evaluated (``dr.eval``), copied to NumPy in Dr.Jit's
+  planar (3, N) layout, handed to the library, and copied back. That cannot happen while Dr.Jit
+  records a symbolic loop or call, so in JIT variants this backend needs wavefront mode (see
+  :func:`use_wavefront_mode`). Outputs are not differentiable.
 """
 
 from __future__ import annotations
+
+import json
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import _llvm, _native
+from . import _llvm, _native, jit
 
 SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
+BACKENDS = ("auto", "jit", "rust")
+_default_backend = "auto"
+
+
+def set_default_backend(backend: str) -> str:
+    """The backend of BSDFs whose scene omits ``backend`` (``auto`` unless changed); returns
+    the previous one. ``rust`` renders a whole scene through the reference library."""
+    global _default_backend
+    backend = str(backend).strip().lower()
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend '{backend}' (expected one of: {', '.join(BACKENDS)})")
+    previous, _default_backend = _default_backend, backend
+    return previous
 
 # --------------------------------------------------------------------------------------------
 # Wavefront mode
@@ -28,15 +47,15 @@ SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
 _WAVEFRONT_FLAGS = ("SymbolicLoops", "SymbolicCalls")
 
 
-def use_wavefront_mode(reason: str) -> list[str]:
+def use_wavefront_mode(reason: str = "requested") -> list[str]:
     """Switches Dr.Jit's symbolic loops and calls off on the calling thread (JIT variants).
 
-    Mitsuba's ``direct`` integrator records the BSDF call symbolically (needs SymbolicCalls
-    off); ``path`` also runs the bounce loop symbolically (needs SymbolicLoops off as well).
-    Dr.Jit's flags are per thread, and Mitsuba may construct plugins on a scene-loading
-    thread, so this is done both by :func:`nbrdf_mitsuba.register` (on the thread that sets the
-    variant, usually the one that renders) and when a BSDF is constructed. Returns the flags
-    that were switched off.
+    Only the ``rust`` backend needs this. Mitsuba's ``direct`` integrator records the BSDF call
+    symbolically (needs SymbolicCalls off); ``path`` also runs the bounce loop symbolically
+    (needs SymbolicLoops off as well). Dr.Jit's flags are per thread and Mitsuba may construct
+    plugins on a scene-loading thread, so constructing a ``rust``-backed BSDF switches them on
+    the constructing thread, and a render on another thread must call this first (a BSDF called
+    inside a symbolic scope raises an error that says so). Returns the flags switched off.
     """
     if not dr.is_jit_v(mi.Float):
         return []
@@ -59,7 +78,8 @@ def _require_wavefront(type_name: str) -> None:
             f"{type_name}: called inside a symbolic Dr.Jit loop or call, but the BSDF evaluates "
             "native code on host arrays. Render with wavefront mode on the rendering thread: "
             "dr.set_flag(dr.JitFlag.SymbolicLoops, False); dr.set_flag(dr.JitFlag.SymbolicCalls, "
-            "False) (nbrdf_mitsuba.register() does this on the calling thread)"
+            "False) (nbrdf_mitsuba.use_wavefront_mode() does this on the calling thread), or use "
+            'the traced backend: <string name="backend" value="jit"/>'
         )
 
 
@@ -168,6 +188,7 @@ class _NativeBSDFMixin:
         exponent = _get(props, "exponent")
         weight = _get(props, "specular_weight")
         self._configure_sampling(sampling, exponent, weight)
+        self._backend = self._choose_backend(_get(props, "backend", _default_backend))
 
         if _is_jit():
             if mi.variant().startswith("llvm"):
@@ -175,7 +196,22 @@ class _NativeBSDFMixin:
                     _llvm.check_backend()
                 except RuntimeError as error:
                     raise RuntimeError(f"{self._type_name()}: {error}") from None
-            use_wavefront_mode(f'{self.PLUGIN} BSDF "{self._filename}" constructed')
+            if self._backend == "rust":
+                use_wavefront_mode(f'{self.PLUGIN} BSDF "{self._filename}" with backend "rust"')
+            else:
+                self._traced = self._trace(path)
+
+    def _choose_backend(self, backend) -> str:
+        backend = str(backend).strip().lower()
+        if backend not in BACKENDS:
+            raise ValueError(f'{self._type_name()} "{self._filename}": unknown backend "{backend}" '
+                             f"(expected one of: {', '.join(BACKENDS)})")
+        if backend == "auto":
+            return "jit" if _is_jit() else "rust"
+        if backend == "jit" and not _is_jit():
+            raise ValueError(f'{self._type_name()} "{self._filename}": backend "jit" needs a JIT '
+                             f"variant (llvm_* or cuda_*); {mi.variant()} uses the rust backend")
+        return backend
 
     # -- configuration ------------------------------------------------------------------------
 
@@ -194,6 +230,9 @@ class _NativeBSDFMixin:
         self._set_sampler(exponent, weight)
         self.exponent = _parameter(exponent)
         self.specular_weight = _parameter(weight)
+        if _is_jit():
+            # Kernel parameters rather than constants: new values do not recompile kernels.
+            dr.make_opaque(self.exponent, self.specular_weight)
 
     def _phong_parameters(self, sampling, exponent, weight) -> tuple[float, float]:
         """(exponent, weight) with file defaults applied; errors when phong lacks them."""
@@ -212,7 +251,37 @@ class _NativeBSDFMixin:
 
     # -- Mitsuba interface --------------------------------------------------------------------
 
+    # -- traced backend -----------------------------------------------------------------------
+
+    def _jit_eval(self, si, wo, active):
+        f = self._traced.eval(si.wi, wo)
+        return dr.select(_both_above(active, si.wi, wo), f * mi.Frame3f.cos_theta(wo), 0.0)
+
+    def _jit_pdf(self, si, wo, active):
+        pdf = jit.pdf(self._sampling, si.wi, wo, self.exponent, self.specular_weight)
+        return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
+
+    def _jit_sample(self, ctx, si, sample1, sample2, active):
+        bs = dr.zeros(mi.BSDFSample3f)
+        light, pdf = jit.sample(self._sampling, si.wi, sample1, sample2.x, sample2.y,
+                                self.exponent, self.specular_weight)
+        active = active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
+        active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (pdf > 0)
+        bs.wo = light
+        bs.pdf = dr.select(active, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+        bs.sampled_component = mi.UInt32(0)
+        f_cos = self._traced.eval(si.wi, light) * mi.Frame3f.cos_theta(light)
+        weight = dr.select(active, f_cos / dr.select(active, pdf, 1.0), 0.0)
+        return bs, weight
+
+    # -- Mitsuba interface --------------------------------------------------------------------
+
     def eval(self, ctx, si, wo, active=True):
+        if self._backend == "jit" and _width(si.wi, wo) > 0:
+            enabled = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
+            return self._jit_eval(si, wo, active & enabled)
         if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Color3f, _width(si.wi, wo) if _is_jit() else 1)
         _require_wavefront(self._type_name())
@@ -221,6 +290,8 @@ class _NativeBSDFMixin:
         return dr.select(_both_above(active, si.wi, wo), value, 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
+        if self._backend == "jit" and _width(si.wi, wo) > 0:
+            return self._jit_pdf(si, wo, active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0))
         if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Float, _width(si.wi, wo) if _is_jit() else 1)
         _require_wavefront(self._type_name())
@@ -229,6 +300,9 @@ class _NativeBSDFMixin:
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
+        if self._backend == "jit" and _width(si.wi, wo) > 0:
+            active = active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
+            return self._jit_eval(si, wo, active), self._jit_pdf(si, wo, active)
         if not self._enabled(ctx, si.wi, wo):
             n = _width(si.wi, wo) if _is_jit() else 1
             return dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
@@ -240,6 +314,8 @@ class _NativeBSDFMixin:
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
+        if self._backend == "jit" and _width(si.wi, sample1, sample2) > 0:
+            return self._jit_sample(ctx, si, sample1, sample2, active)
         n = _width(si.wi, sample1, sample2) if _is_jit() else 1
         bs = dr.zeros(mi.BSDFSample3f, n) if _is_jit() else mi.BSDFSample3f()
         if not self._enabled(ctx, si.wi, sample1, sample2):
@@ -271,22 +347,34 @@ class _NativeBSDFMixin:
         put = getattr(callback, "put", None) or callback.put_parameter
         put("exponent", self.exponent, mi.ParamFlags.NonDifferentiable)
         put("specular_weight", self.specular_weight, mi.ParamFlags.NonDifferentiable)
+        if self._backend == "jit":
+            self._traverse_traced(put)
 
     def parameters_changed(self, keys=None):
         """Re-validates the sampling parameters; invalid ones raise and leave the previous
         (valid) sampler in use."""
+        if self._backend == "jit":
+            self._traced_changed(keys)
         exponent = _scalar(self.exponent)
         weight = _scalar(self.specular_weight)
         if (exponent, weight) == (self._exponent_value, self._weight_value):
             return
-        self._set_sampler(exponent, weight)
+        try:
+            self._set_sampler(exponent, weight)
+        except ValueError:
+            self.exponent = _parameter(self._exponent_value)
+            self.specular_weight = _parameter(self._weight_value)
+            raise
+        if _is_jit():
+            dr.make_opaque(self.exponent, self.specular_weight)
         if self._sampling != "phong":
             mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
                                      f'specular_weight only affect sampling "phong" (this BSDF '
                                      f'uses "{self._sampling}")')
 
     def to_string(self):
-        lines = [f'filename = "{self._filename}"', *self._describe(), f"sampling = {self._sampling}"]
+        lines = [f'filename = "{self._filename}"', *self._describe(), f"backend = {self._backend}",
+                 f"sampling = {self._sampling}"]
         if self._sampling == "phong":
             lines += [f"exponent = {self._exponent_value:g}", f"specular_weight = {self._weight_value:g}"]
         return f"{type(self).__name__}[\n" + ",\n".join("  " + line for line in lines) + "\n]"
@@ -307,6 +395,27 @@ class NbrdfMixin(_NativeBSDFMixin):
 
     def _load(self, path):
         return _native.Network(path)
+
+    def _trace(self, path):
+        # The library has validated the file; its layers are plain JSON.
+        with open(path, encoding="utf-8") as file:
+            layers = json.load(file)["layers"]
+        return jit.TracedNetwork([
+            (np.asarray(layer["weights"], dtype=np.float32).reshape(layer["inputs"], layer["outputs"]),
+             np.asarray(layer["bias"], dtype=np.float32)) for layer in layers
+        ])
+
+    def _traverse_traced(self, put):
+        # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3: differentiable, so that
+        # an optimiser can fit them through renders, and updatable (call scene params.update()).
+        put("weights", self._traced.flat, mi.ParamFlags.Differentiable)
+
+    def _traced_changed(self, keys):
+        if keys is None or any(str(key).endswith("weights") for key in keys):
+            if dr.width(self._traced.flat) != self._traced.parameter_count:
+                raise ValueError(f'{self._type_name()} "{self._filename}": "weights" must hold '
+                                 f"{self._traced.parameter_count} values")
+            self._traced.refresh()
 
     def _default_sampling(self, exponent, weight) -> str:
         if self._native.has_sampling or (exponent is not None and weight is not None):
@@ -339,6 +448,17 @@ class MerlMixin(_NativeBSDFMixin):
 
     def _load(self, path):
         return _native.MerlTable(path)
+
+    def _trace(self, path):
+        # The library has validated size, header and values.
+        stored = np.fromfile(path, dtype="<f8", offset=12)
+        return jit.TracedMerl(stored)
+
+    def _traverse_traced(self, put):
+        pass
+
+    def _traced_changed(self, keys):
+        pass
 
     def _default_sampling(self, exponent, weight) -> str:
         return "phong" if exponent is not None and weight is not None else "cosine"
@@ -407,4 +527,4 @@ def classes() -> tuple[type, type]:
     return _CLASSES[variant]
 
 
-__all__ = ["classes", "use_wavefront_mode", "NbrdfMixin", "MerlMixin", "SAMPLING_NAMES"]
+__all__ = ["classes", "use_wavefront_mode", "set_default_backend", "NbrdfMixin", "MerlMixin", "SAMPLING_NAMES", "BACKENDS"]

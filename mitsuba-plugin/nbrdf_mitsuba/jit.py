@@ -52,6 +52,15 @@ def network_input(view: mi.Vector3f, light: mi.Vector3f) -> list:
     return [sin_th, None, hz, dx, ty, dz]  # None: the constant-zero input, skipped in layer 1
 
 
+def expm1(x):
+    """exp(x) - 1 accurate for small |x| (Kahan): plain exp(x) - 1 loses all relative precision
+    of the small reflectances that most of a BRDF's domain holds. x must keep exp(x) finite."""
+    u = dr.exp(x)
+    u_minus_1 = u - 1.0
+    ratio = u_minus_1 * x / dr.log(dr.select(u == 1.0, 2.0, u))
+    return dr.select(u == 1.0, x, dr.select(u_minus_1 == -1.0, -1.0, ratio))
+
+
 class TracedNetwork:
     """An NBRDF as Dr.Jit arithmetic. ``layers`` are ``(W, b)`` NumPy pairs with ``y = x W + b``.
 
@@ -64,6 +73,7 @@ class TracedNetwork:
             raise ValueError(f"weights must be 'opaque' or 'literal', got '{weights}'")
         self.mode = weights
         self.shapes = [(int(W.shape[0]), int(W.shape[1])) for W, _ in layers]
+        self.parameter_count = sum(i * o + o for i, o in self.shapes)
         flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
         self.flat = mi.Float(flat.astype(np.float32))
         self.refresh()
@@ -99,7 +109,7 @@ class TracedNetwork:
                         acc = dr.fma(h_i, W[i][o], acc)
                 out.append(acc)
             h = [dr.maximum(v, 0.0) for v in out] if k < len(self._layers) - 1 else out
-        rgb = [dr.maximum(dr.exp(dr.minimum(v, EXP_ARGUMENT_MAX)) - 1.0, 0.0) for v in h]
+        rgb = [dr.maximum(expm1(dr.minimum(v, EXP_ARGUMENT_MAX)), 0.0) for v in h]
         return mi.Color3f(rgb[0], rgb[1], rgb[2])
 
     def eval(self, view: mi.Vector3f, light: mi.Vector3f) -> mi.Color3f:
@@ -203,3 +213,66 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
         raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
     light, _ = _unit(light)
     return light, pdf(strategy, view, light, exponent, specular_weight)
+
+
+# MERL grid (DESIGN.md section 3), as in nbrdf-core's merl.rs.
+N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
+MERL_SCALE = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
+
+
+def _lerp_clamped(t, n: int):
+    """Lower cell, upper cell and upper weight between centres, clamped (``lerp_clamped``)."""
+    t = dr.clip(t, 0.0, float(n - 1))
+    i0 = dr.minimum(mi.UInt32(dr.floor(t)), n - 2)
+    return i0, i0 + 1, t - mi.Float(i0)
+
+
+def _lerp_wrapped(t, n: int):
+    """As ``_lerp_clamped`` on the periodic phi_d axis (``lerp_wrapped``)."""
+    floor = dr.floor(t)
+    i0 = mi.Int32(floor)
+    i0 = mi.UInt32(dr.select(i0 < 0, i0 + n, dr.select(i0 >= n, i0 - n, i0)))
+    i1 = dr.select(i0 + 1 >= n, 0, i0 + 1)
+    return i0, i1, t - floor
+
+
+class TracedMerl:
+    """A MERL-format table as a Dr.Jit array with gathers and trilinear interpolation, the
+    same rule as ``MerlTable::trilinear``: cell values at cell centres, clamped in theta,
+    wrapping in phi_d, unmeasured neighbours left out and the weights renormalised."""
+
+    def __init__(self, stored: np.ndarray):
+        """``stored``: the file's values, channel-major ``(3, 90*90*180)``, unscaled."""
+        stored = np.asarray(stored, dtype=np.float64).reshape(3, -1)
+        invalid = np.any(stored < 0, axis=0)
+        reflectance = stored * np.asarray(MERL_SCALE)[:, None]
+        reflectance[:, invalid] = -1.0  # one sentinel for the whole cell
+        self.table = mi.Float(np.ascontiguousarray(reflectance.T).ravel().astype(np.float32))
+
+    def eval(self, view: mi.Vector3f, light: mi.Vector3f) -> mi.Color3f:
+        """``f_r(light, view)``, zero at or below the horizon."""
+        sin_th, _, cos_th, dx, dy, dz = network_input(view, light)
+        theta_h = dr.atan2(sin_th, cos_th)
+        theta_d = dr.acos(dr.clip(dz, -1.0, 1.0))
+        phi_d = dr.atan2(dy, dx)
+        phi_d = dr.select(phi_d < 0, phi_d + math.pi, phi_d)
+        phi_d = dr.select(phi_d >= math.pi, phi_d - math.pi, phi_d)
+        index_h = N_THETA_H * dr.sqrt(dr.maximum(theta_h, 0.0) / (0.5 * math.pi))
+        index_d = N_THETA_D * theta_d / (0.5 * math.pi)
+        index_p = N_PHI_D * phi_d / math.pi
+        h = _lerp_clamped(index_h - 0.5, N_THETA_H)
+        d = _lerp_clamped(index_d - 0.5, N_THETA_D)
+        p = _lerp_wrapped(index_p - 0.5, N_PHI_D)
+        total = mi.Color3f(0.0)
+        weight_sum = mi.Float(0.0)
+        for ih, wh in ((h[0], 1.0 - h[2]), (h[1], h[2])):
+            for id_, wd in ((d[0], 1.0 - d[2]), (d[1], d[2])):
+                for ip, wp in ((p[0], 1.0 - p[2]), (p[1], p[2])):
+                    w = wh * wd * wp
+                    cell = ip + N_PHI_D * (id_ + N_THETA_D * ih)
+                    rgb = dr.gather(mi.Color3f, self.table, cell, w > 0)
+                    use = (w > 0) & (rgb[0] >= 0)
+                    total += dr.select(use, w * rgb, 0.0)
+                    weight_sum += dr.select(use, w, 0.0)
+        f = dr.select(weight_sum > 0, total / weight_sum, 0.0)
+        return dr.select((view.z > 0) & (light.z > 0), f, 0.0)
