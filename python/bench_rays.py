@@ -66,6 +66,7 @@ def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
     """BSDFs to time in `mode`; the Rust-backed ones exist in wavefront mode only."""
     bsdfs = {}
     bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit"}
+    bsdfs["nbrdf-opaque"] = {"type": "nbrdf", "filename": str(network), "backend": "jit", "jit_weights": "opaque"}
     if mode == "wavefront":
         bsdfs["nbrdf-rust"] = {"type": "nbrdf", "filename": str(network), "backend": "rust"}
         bsdfs["merl"] = {"type": "merl", "filename": str(table)}

@@ -97,11 +97,13 @@ def test_renders_match(llvm_variant, plugin, network_file, merl_table):
     assert np.abs(a - b).mean() <= 1e-3 * a.mean(), (np.abs(a - b).mean(), a.mean())
 
 
-def test_weights_are_scene_parameters(llvm_variant, network_file):
-    scene = mi.load_dict(veach_like({"type": "nbrdf", "filename": str(network_file)}, spp=2))
+@pytest.mark.parametrize("jit_weights", ["literal", "opaque"])
+def test_weights_are_scene_parameters(llvm_variant, network_file, jit_weights):
+    scene = mi.load_dict(veach_like({"type": "nbrdf", "filename": str(network_file), "jit_weights": jit_weights}, spp=2))
     params = mi.traverse(scene)
     key = next(k for k in params.keys() if k.endswith("weights"))
     assert dr.width(params[key]) == 675
+    assert (params.flags(key) & mi.ParamFlags.NonDifferentiable) == (jit_weights == "literal")
     before = np.array(mi.render(scene, seed=1))
     weights = np.array(params[key])
     weights[-3:] -= 30.0  # output biases: exp(-30) - 1 ~ -1, clamped to 0 -> black plate
@@ -109,3 +111,15 @@ def test_weights_are_scene_parameters(llvm_variant, network_file):
     params.update()
     after = np.array(mi.render(scene, seed=1))
     assert before.max() > 0 and after.max() == 0
+
+
+def test_opaque_weights_carry_gradients(llvm_variant, network_file):
+    scene = mi.load_dict(veach_like({"type": "nbrdf", "filename": str(network_file), "jit_weights": "opaque"}, spp=2))
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("weights"))
+    dr.enable_grad(params[key])
+    params.update()
+    image = mi.render(scene, params, seed=1)
+    dr.backward(dr.mean(image, axis=None))
+    grad = np.array(dr.grad(params[key]))
+    assert np.all(np.isfinite(grad)) and np.abs(grad[-3:]).max() > 0  # output biases matter

@@ -28,6 +28,10 @@ from . import _llvm, _native, jit
 
 SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
 BACKENDS = ("auto", "jit", "rust")
+# How the traced backend puts the weights into kernels: "literal" constants (fastest renders;
+# one compile per scene, an update recompiles) or "opaque" kernel parameters (updates without
+# recompiling, gradients flow to the weights; a few to 15 % slower).
+JIT_WEIGHT_MODES = ("literal", "opaque")
 _default_backend = "auto"
 
 
@@ -391,6 +395,7 @@ class NbrdfMixin(_NativeBSDFMixin):
     PLUGIN = "nbrdf"
 
     def __init__(self, props):
+        self._props_jit_weights = _get(props, "jit_weights", "literal")
         self._init_native(props)
 
     def _load(self, path):
@@ -400,15 +405,22 @@ class NbrdfMixin(_NativeBSDFMixin):
         # The library has validated the file; its layers are plain JSON.
         with open(path, encoding="utf-8") as file:
             layers = json.load(file)["layers"]
+        mode = str(self._props_jit_weights).strip().lower()
+        if mode not in JIT_WEIGHT_MODES:
+            raise ValueError(f'{self._type_name()} "{self._filename}": unknown jit_weights "{mode}" '
+                             f"(expected one of: {', '.join(JIT_WEIGHT_MODES)})")
         return jit.TracedNetwork([
             (np.asarray(layer["weights"], dtype=np.float32).reshape(layer["inputs"], layer["outputs"]),
              np.asarray(layer["bias"], dtype=np.float32)) for layer in layers
-        ])
+        ], weights=mode)
 
     def _traverse_traced(self, put):
-        # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3: differentiable, so that
-        # an optimiser can fit them through renders, and updatable (call scene params.update()).
-        put("weights", self._traced.flat, mi.ParamFlags.Differentiable)
+        # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3, updatable through
+        # params.update(). Only kernel parameters ("opaque") carry gradients; literals are
+        # constants of the kernel, and an update recompiles it.
+        differentiable = self._traced.mode == "opaque"
+        put("weights", self._traced.flat,
+            mi.ParamFlags.Differentiable if differentiable else mi.ParamFlags.NonDifferentiable)
 
     def _traced_changed(self, keys):
         if keys is None or any(str(key).endswith("weights") for key in keys):
@@ -430,8 +442,11 @@ class NbrdfMixin(_NativeBSDFMixin):
 
     def _describe(self) -> list[str]:
         net = self._native
-        return [f'name = "{net.name}"', f"hidden_width = {net.hidden_width}",
-                f"parameter_count = {net.parameter_count}"]
+        lines = [f'name = "{net.name}"', f"hidden_width = {net.hidden_width}",
+                 f"parameter_count = {net.parameter_count}"]
+        if self._backend == "jit":
+            lines.append(f"jit_weights = {self._traced.mode}")
+        return lines
 
 
 class MerlMixin(_NativeBSDFMixin):

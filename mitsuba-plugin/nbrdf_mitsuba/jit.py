@@ -68,7 +68,7 @@ class TracedNetwork:
     update call ``refresh()`` so the traced kernels see the new values.
     """
 
-    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "opaque"):
+    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "literal"):
         if weights not in ("opaque", "literal"):
             raise ValueError(f"weights must be 'opaque' or 'literal', got '{weights}'")
         self.mode = weights
