@@ -20,6 +20,7 @@ pub mod error;
 pub mod merl;
 pub mod network;
 pub mod sampling;
+pub mod train;
 
 pub use brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 pub use error::{NbrdfError, Result};

@@ -1,0 +1,699 @@
+//! Batched forward and backward passes of the NBRDF network for training.
+//!
+//! The network is `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1` (DESIGN.md section 4),
+//! trained on `|ln(1 + f_true cos) - ln(1 + y cos)|` averaged over samples and channels.
+//!
+//! Work is done on chunks of [`LANES`] samples, sample-major (`[lane][feature]`), with the
+//! hidden width padded to a multiple of 8 by zero weights so that every product is a
+//! register-blocked [`gemm`]. Padding is exact: padded units have zero weights and bias, so they
+//! are 0 forward and get 0 gradient backward, and Adam leaves zero-gradient parameters at 0.
+//! A chunk's gradient depends only on its samples, which is what makes training independent of
+//! the thread count (see [`crate::train`]).
+
+use super::dataset::Sample;
+use super::fastmath::{self, Fused, MulAdd, Unfused};
+use super::gemm::{gemm, Init, Strided, VEC};
+use crate::network::{Layer, INPUTS, OUTPUTS};
+
+/// Samples per chunk, the unit of parallel work and of deterministic gradient summation.
+pub const LANES: usize = 64;
+/// Padded width of the input rows (6 used).
+const XW: usize = VEC;
+/// Padded width of the output rows (3 used).
+const YW: usize = VEC;
+
+/// Offsets of the padded parameters `W1 [6][hp], b1 [hp], W2 [hp][hp], b2 [hp], W3 [hp][8],
+/// b3 [8]` in one flat vector (the order of DESIGN.md section 7).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Layout {
+    pub hidden: usize,
+    pub hp: usize,
+    pub w1: usize,
+    pub b1: usize,
+    pub w2: usize,
+    pub b2: usize,
+    pub w3: usize,
+    pub b3: usize,
+    pub len: usize,
+}
+
+impl Layout {
+    pub fn new(hidden: usize) -> Self {
+        let hp = hidden.div_ceil(VEC) * VEC;
+        let w1 = 0;
+        let b1 = w1 + INPUTS * hp;
+        let w2 = b1 + hp;
+        let b2 = w2 + hp * hp;
+        let w3 = b2 + hp;
+        let b3 = w3 + hp * YW;
+        Layout {
+            hidden,
+            hp,
+            w1,
+            b1,
+            w2,
+            b2,
+            w3,
+            b3,
+            len: b3 + YW,
+        }
+    }
+
+    /// Padded parameters of three layers `6 -> hidden -> hidden -> 3` (shapes checked by caller).
+    pub fn pad(&self, layers: &[Layer; 3]) -> Vec<f32> {
+        let mut p = vec![0.0; self.len];
+        let spec = self.blocks();
+        for (layer, (w_at, b_at, ld)) in layers.iter().zip(spec) {
+            for i in 0..layer.inputs {
+                for o in 0..layer.outputs {
+                    p[w_at + i * ld + o] = layer.weights[i * layer.outputs + o];
+                }
+            }
+            p[b_at..b_at + layer.outputs].copy_from_slice(&layer.bias);
+        }
+        p
+    }
+
+    /// The three dense layers of padded parameters `p`, in the network file's layout.
+    pub fn unpad(&self, p: &[f32]) -> [Layer; 3] {
+        let dims = [
+            (INPUTS, self.hidden),
+            (self.hidden, self.hidden),
+            (self.hidden, OUTPUTS),
+        ];
+        let spec = self.blocks();
+        std::array::from_fn(|k| {
+            let (inputs, outputs) = dims[k];
+            let (w_at, b_at, ld) = spec[k];
+            let mut weights = Vec::with_capacity(inputs * outputs);
+            for i in 0..inputs {
+                weights.extend_from_slice(&p[w_at + i * ld..w_at + i * ld + outputs]);
+            }
+            Layer {
+                inputs,
+                outputs,
+                weights,
+                bias: p[b_at..b_at + outputs].to_vec(),
+            }
+        })
+    }
+
+    /// `(weights offset, bias offset, row stride)` of each layer.
+    fn blocks(&self) -> [(usize, usize, usize); 3] {
+        [
+            (self.w1, self.b1, self.hp),
+            (self.w2, self.b2, self.hp),
+            (self.w3, self.b3, YW),
+        ]
+    }
+}
+
+/// Parameters plus the transposed weight copies the backward pass multiplies with.
+#[derive(Clone, Debug)]
+pub struct Weights {
+    pub layout: Layout,
+    pub p: Vec<f32>,
+    /// `W2^T`, `[hp][hp]`.
+    w2t: Vec<f32>,
+    /// `W3^T`, `[8][hp]`.
+    w3t: Vec<f32>,
+}
+
+impl Weights {
+    pub fn new(layout: Layout, p: Vec<f32>) -> Self {
+        assert_eq!(p.len(), layout.len);
+        let hp = layout.hp;
+        let mut w = Weights {
+            layout,
+            p,
+            w2t: vec![0.0; hp * hp],
+            w3t: vec![0.0; YW * hp],
+        };
+        w.refresh_transposes();
+        w
+    }
+
+    /// Call after every change of `p`.
+    pub fn refresh_transposes(&mut self) {
+        let l = &self.layout;
+        let hp = l.hp;
+        for i in 0..hp {
+            for j in 0..hp {
+                self.w2t[j * hp + i] = self.p[l.w2 + i * hp + j];
+            }
+            for k in 0..YW {
+                self.w3t[k * hp + i] = self.p[l.w3 + i * YW + k];
+            }
+        }
+    }
+}
+
+/// Per-chunk working memory, allocated once and reused for every batch.
+pub struct ChunkScratch {
+    x: Vec<f32>,
+    target: Vec<f32>,
+    cos: Vec<f32>,
+    a1: Vec<f32>,
+    a2: Vec<f32>,
+    z3: Vec<f32>,
+    g3: Vec<f32>,
+    g2: Vec<f32>,
+    g1: Vec<f32>,
+}
+
+impl ChunkScratch {
+    pub fn new(layout: &Layout) -> Self {
+        let h = LANES * layout.hp;
+        let v = LANES * VEC;
+        ChunkScratch {
+            x: vec![0.0; v],
+            target: vec![0.0; v],
+            cos: vec![0.0; v],
+            a1: vec![0.0; h],
+            a2: vec![0.0; h],
+            z3: vec![0.0; v],
+            g3: vec![0.0; v],
+            g2: vec![0.0; h],
+            g1: vec![0.0; h],
+        }
+    }
+
+    /// Loads the samples `indices` of `samples` (at most [`LANES`]); unused lanes get zero
+    /// inputs and a zero cosine, which makes their loss and gradient exactly 0.
+    pub fn load_indexed(&mut self, samples: &[Sample], indices: &[u32]) {
+        debug_assert!(indices.len() <= LANES);
+        for lane in 0..LANES {
+            let s = indices.get(lane).map(|&i| &samples[i as usize]);
+            self.load_lane(lane, s);
+        }
+    }
+
+    /// Loads consecutive samples (at most [`LANES`]).
+    pub fn load_slice(&mut self, samples: &[Sample]) {
+        debug_assert!(samples.len() <= LANES);
+        for lane in 0..LANES {
+            self.load_lane(lane, samples.get(lane));
+        }
+    }
+
+    fn load_lane(&mut self, lane: usize, sample: Option<&Sample>) {
+        let at = lane * VEC;
+        let (x, target, cos) = (
+            &mut self.x[at..at + VEC],
+            &mut self.target[at..at + VEC],
+            &mut self.cos[at..at + VEC],
+        );
+        x.fill(0.0);
+        target.fill(0.0);
+        cos.fill(0.0);
+        if let Some(s) = sample {
+            x[..INPUTS].copy_from_slice(&s.x);
+            target[..OUTPUTS].copy_from_slice(&s.log_target);
+            cos[..OUTPUTS].fill(s.cos_light);
+        }
+    }
+}
+
+/// Which compiled copy of the kernels runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    Portable,
+    #[cfg(target_arch = "x86_64")]
+    Avx2Fma,
+}
+
+impl Kernel {
+    /// The fastest copy this CPU supports.
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+            return Kernel::Avx2Fma;
+        }
+        Kernel::Portable
+    }
+
+    /// Forward, loss and backward on the loaded chunk: writes the gradient of
+    /// `scale * sum |ln(1 + f cos) - ln(1 + y cos)|` into `grad` (padded layout; entries that
+    /// are always zero are left untouched) and returns the unscaled loss sum.
+    pub fn gradient(self, w: &Weights, s: &mut ChunkScratch, scale: f32, grad: &mut [f32]) -> f64 {
+        match self {
+            Kernel::Portable => gradient_impl::<Unfused>(w, s, scale, grad),
+            // SAFETY: `detect` chose this variant only where the CPU has AVX2 and FMA.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2Fma => unsafe { gradient_avx2(w, s, scale, grad) },
+        }
+    }
+
+    /// Loss sum of the loaded chunk for the network as evaluated (output clamped at 0).
+    pub fn loss(self, w: &Weights, s: &mut ChunkScratch) -> f64 {
+        match self {
+            Kernel::Portable => loss_impl::<Unfused>(w, s),
+            // SAFETY: as in `gradient`.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2Fma => unsafe { loss_avx2(w, s) },
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn gradient_avx2(w: &Weights, s: &mut ChunkScratch, scale: f32, grad: &mut [f32]) -> f64 {
+    gradient_impl::<Fused>(w, s, scale, grad)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn loss_avx2(w: &Weights, s: &mut ChunkScratch) -> f64 {
+    loss_impl::<Fused>(w, s)
+}
+
+#[inline(always)]
+fn gradient_impl<M: MulAdd>(
+    w: &Weights,
+    s: &mut ChunkScratch,
+    scale: f32,
+    grad: &mut [f32],
+) -> f64 {
+    forward::<M>(w, s);
+    let loss = loss_and_output_gradient(s, scale, false, true);
+    backward::<M>(w, s, grad);
+    loss
+}
+
+#[inline(always)]
+fn loss_impl<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) -> f64 {
+    forward::<M>(w, s);
+    loss_and_output_gradient(s, 0.0, true, false)
+}
+
+/// `a1`, `a2` (after relu) and the pre-activation `z3` of the output.
+#[inline(always)]
+fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
+    let l = &w.layout;
+    let (h, hp, p) = (l.hidden, l.hp, &w.p[..]);
+    let x = Strided {
+        data: &s.x,
+        row_stride: XW,
+        col_stride: 1,
+    };
+    gemm::<M>(
+        LANES,
+        hp,
+        INPUTS,
+        x,
+        &p[l.w1..],
+        hp,
+        &mut s.a1,
+        hp,
+        Init::Row(&p[l.b1..l.b1 + hp]),
+    );
+    relu(&mut s.a1);
+    let a1 = Strided {
+        data: &s.a1,
+        row_stride: hp,
+        col_stride: 1,
+    };
+    gemm::<M>(
+        LANES,
+        hp,
+        h,
+        a1,
+        &p[l.w2..],
+        hp,
+        &mut s.a2,
+        hp,
+        Init::Row(&p[l.b2..l.b2 + hp]),
+    );
+    relu(&mut s.a2);
+    let a2 = Strided {
+        data: &s.a2,
+        row_stride: hp,
+        col_stride: 1,
+    };
+    gemm::<M>(
+        LANES,
+        YW,
+        h,
+        a2,
+        &p[l.w3..],
+        YW,
+        &mut s.z3,
+        YW,
+        Init::Row(&p[l.b3..l.b3 + YW]),
+    );
+}
+
+/// The loss sum, and (if `with_gradient`) `g3 = scale * d loss / d z3`.
+///
+/// `p = ln(1 + y cos)` with `y = e^z - 1`, so `dp/dz = cos e^z / (1 + y cos)`, which lies in
+/// `[0, 1]`: the gradient stays bounded however large the target (mirror-like materials). Where
+/// `e^z` saturates (`z` above [`fastmath::EXP_MAX_ARG`]) the gradient is 0, as for the clamp.
+/// Training uses the unclamped `y` (it can dip below 0, as in the authors' Keras model, which
+/// keeps the gradient alive for dark channels); the evaluator clamps `y` at 0, which can only
+/// lower the loss against a non-negative target, and `clamp_output` measures exactly that.
+#[inline(always)]
+fn loss_and_output_gradient(
+    s: &mut ChunkScratch,
+    scale: f32,
+    clamp_output: bool,
+    with_gradient: bool,
+) -> f64 {
+    let mut sums = [0.0f32; VEC];
+    for ((z_v, (t_v, c_v)), g_v) in
+        s.z3.chunks_exact(VEC)
+            .zip(s.target.chunks_exact(VEC).zip(s.cos.chunks_exact(VEC)))
+            .zip(s.g3.chunks_exact_mut(VEC))
+    {
+        for q in 0..VEC {
+            let (z, t, c) = (z_v[q], t_v[q], c_v[q]);
+            let ez = fastmath::exp(z);
+            let y = if clamp_output {
+                (ez - 1.0).max(0.0)
+            } else {
+                ez - 1.0
+            };
+            let u = y * c;
+            let d = fastmath::ln_1p(u) - t;
+            sums[q] += d.abs();
+            if with_gradient {
+                let sign = (d > 0.0) as i32 as f32 - (d < 0.0) as i32 as f32;
+                let slope = (c * ez / (1.0 + u).max(1e-30)).min(1.0);
+                let live = z <= fastmath::EXP_MAX_ARG;
+                g_v[q] = if live { sign * slope * scale } else { 0.0 };
+            }
+        }
+    }
+    sums.iter().map(|&v| v as f64).sum()
+}
+
+#[inline(always)]
+fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
+    let l = &w.layout;
+    let (h, hp) = (l.hidden, l.hp);
+    let ones = [1.0f32];
+    // A row of ones turns a column sum (a bias gradient) into a product.
+    let sum_rows = Strided {
+        data: &ones,
+        row_stride: 0,
+        col_stride: 0,
+    };
+
+    // Output layer.
+    gemm::<M>(
+        h,
+        YW,
+        LANES,
+        transposed(&s.a2, hp),
+        &s.g3,
+        YW,
+        &mut grad[l.w3..],
+        YW,
+        Init::Zero,
+    );
+    gemm::<M>(
+        1,
+        YW,
+        LANES,
+        sum_rows,
+        &s.g3,
+        YW,
+        &mut grad[l.b3..],
+        YW,
+        Init::Zero,
+    );
+    let g3 = Strided {
+        data: &s.g3,
+        row_stride: YW,
+        col_stride: 1,
+    };
+    gemm::<M>(
+        LANES,
+        hp,
+        OUTPUTS,
+        g3,
+        &w.w3t,
+        hp,
+        &mut s.g2,
+        hp,
+        Init::Zero,
+    );
+    mask_inactive(&mut s.g2, &s.a2);
+
+    // Second hidden layer.
+    gemm::<M>(
+        h,
+        hp,
+        LANES,
+        transposed(&s.a1, hp),
+        &s.g2,
+        hp,
+        &mut grad[l.w2..],
+        hp,
+        Init::Zero,
+    );
+    gemm::<M>(
+        1,
+        hp,
+        LANES,
+        sum_rows,
+        &s.g2,
+        hp,
+        &mut grad[l.b2..],
+        hp,
+        Init::Zero,
+    );
+    let g2 = Strided {
+        data: &s.g2,
+        row_stride: hp,
+        col_stride: 1,
+    };
+    gemm::<M>(LANES, hp, h, g2, &w.w2t, hp, &mut s.g1, hp, Init::Zero);
+    mask_inactive(&mut s.g1, &s.a1);
+
+    // First hidden layer.
+    gemm::<M>(
+        INPUTS,
+        hp,
+        LANES,
+        transposed(&s.x, XW),
+        &s.g1,
+        hp,
+        &mut grad[l.w1..],
+        hp,
+        Init::Zero,
+    );
+    gemm::<M>(
+        1,
+        hp,
+        LANES,
+        sum_rows,
+        &s.g1,
+        hp,
+        &mut grad[l.b1..],
+        hp,
+        Init::Zero,
+    );
+}
+
+/// The transpose of a sample-major matrix with row stride `ld`: `A(feature, lane)`.
+#[inline(always)]
+fn transposed(m: &[f32], ld: usize) -> Strided<'_> {
+    Strided {
+        data: m,
+        row_stride: 1,
+        col_stride: ld,
+    }
+}
+
+#[inline(always)]
+fn relu(a: &mut [f32]) {
+    for v in a.iter_mut() {
+        *v = v.max(0.0);
+    }
+}
+
+/// Zeroes the gradient of units whose relu was inactive (output 0).
+#[inline(always)]
+fn mask_inactive(g: &mut [f32], a: &[f32]) {
+    for (g, &a) in g.iter_mut().zip(a) {
+        *g = if a > 0.0 { *g } else { 0.0 };
+    }
+}
+
+/// Network outputs `f_r` (clamped at 0, as evaluated) of the loaded chunk, `[lane][channel]`.
+/// For diagnostics and tests: the portable kernel copy, no dispatch.
+pub fn outputs(w: &Weights, s: &mut ChunkScratch) -> [[f32; OUTPUTS]; LANES] {
+    forward::<Unfused>(w, s);
+    std::array::from_fn(|lane| {
+        std::array::from_fn(|k| (fastmath::exp(s.z3[lane * YW + k]) - 1.0).max(0.0))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::adam::AdamConfig;
+    use super::super::rng::{SplitMix64, Stream};
+    use super::super::Trainer;
+    use super::*;
+
+    fn random_layers(hidden: usize, seed: u64) -> [Layer; 3] {
+        let mut rng = SplitMix64::new(seed, Stream::Init, 0);
+        let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, OUTPUTS)];
+        dims.map(|(inputs, outputs)| Layer {
+            inputs,
+            outputs,
+            weights: (0..inputs * outputs)
+                .map(|_| rng.next_f64() as f32 - 0.5)
+                .collect(),
+            bias: (0..outputs)
+                .map(|_| 0.2 * rng.next_f64() as f32 - 0.1)
+                .collect(),
+        })
+    }
+
+    fn random_samples(n: usize, seed: u64) -> Vec<Sample> {
+        let mut rng = SplitMix64::new(seed, Stream::TrainSamples, 0);
+        (0..n)
+            .map(|_| {
+                let mut x = [0.0f32; INPUTS];
+                for v in x.iter_mut() {
+                    *v = 2.0 * rng.next_f64() as f32 - 1.0;
+                }
+                x[1] = 0.0;
+                let log_target = std::array::from_fn(|_| 2.0 * rng.next_f64() as f32);
+                Sample {
+                    x,
+                    log_target,
+                    cos_light: 0.05 + 0.95 * rng.next_f64() as f32,
+                }
+            })
+            .collect()
+    }
+
+    /// The mean loss in float64, straight from the definition.
+    fn reference_loss(layers: &[Layer; 3], samples: &[Sample]) -> f64 {
+        let dense = |layer: &Layer, x: &[f64], relu: bool| -> Vec<f64> {
+            (0..layer.outputs)
+                .map(|o| {
+                    let z = layer.bias[o] as f64
+                        + (0..layer.inputs)
+                            .map(|i| x[i] * layer.weights[i * layer.outputs + o] as f64)
+                            .sum::<f64>();
+                    if relu {
+                        z.max(0.0)
+                    } else {
+                        z
+                    }
+                })
+                .collect()
+        };
+        let mut sum = 0.0;
+        for s in samples {
+            let x: Vec<f64> = s.x.iter().map(|&v| v as f64).collect();
+            let a1 = dense(&layers[0], &x, true);
+            let a2 = dense(&layers[1], &a1, true);
+            let z3 = dense(&layers[2], &a2, false);
+            for k in 0..OUTPUTS {
+                let y = z3[k].exp() - 1.0;
+                sum += ((y * s.cos_light as f64).ln_1p() - s.log_target[k] as f64).abs();
+            }
+        }
+        sum / (OUTPUTS * samples.len()) as f64
+    }
+
+    fn check_gradient(kernel: Kernel) {
+        let hidden = 5;
+        let layers = random_layers(hidden, 11);
+        let samples = random_samples(100, 12);
+        let indices: Vec<u32> = (0..samples.len() as u32).collect();
+        let mut trainer =
+            Trainer::from_layers(&layers, 128, AdamConfig::default()).with_kernel(kernel);
+        let loss_sum = trainer.compute_gradient(&samples, &indices);
+        let reference = reference_loss(&layers, &samples);
+        assert!(
+            (loss_sum / 300.0 - reference).abs() < 1e-5 * reference.max(1.0),
+            "{loss_sum} vs {reference}"
+        );
+        let layout = Layout::new(hidden);
+        let analytic = layout.unpad(trainer.gradient());
+        let h = 1e-3;
+        let mut worst: f64 = 0.0;
+        for k in 0..3 {
+            let n_w = layers[k].weights.len();
+            for idx in 0..n_w + layers[k].bias.len() {
+                let nudge = |delta: f32| {
+                    let mut l = layers.clone();
+                    if idx < n_w {
+                        l[k].weights[idx] += delta
+                    } else {
+                        l[k].bias[idx - n_w] += delta
+                    }
+                    reference_loss(&l, &samples)
+                };
+                let numeric = (nudge(h) - nudge(-h)) / (2.0 * h as f64);
+                let a = if idx < n_w {
+                    analytic[k].weights[idx]
+                } else {
+                    analytic[k].bias[idx - n_w]
+                } as f64;
+                worst = worst.max((a - numeric).abs());
+                assert!(
+                    (a - numeric).abs() < 2e-4,
+                    "layer {k} parameter {idx}: analytic {a} numeric {numeric}"
+                );
+            }
+        }
+        assert!(worst < 2e-4);
+    }
+
+    #[test]
+    fn gradient_matches_central_differences_portable() {
+        check_gradient(Kernel::Portable);
+    }
+
+    #[test]
+    fn gradient_matches_central_differences_detected_kernel() {
+        check_gradient(Kernel::detect());
+    }
+
+    #[test]
+    fn padding_round_trips_and_outputs_match_the_definition() {
+        let layers = random_layers(21, 5);
+        let layout = Layout::new(21);
+        assert_eq!(layout.hp, 24);
+        assert_eq!(layout.unpad(&layout.pad(&layers)), layers);
+        let weights = Weights::new(layout, Layout::new(21).pad(&layers));
+        let samples = random_samples(10, 6);
+        let mut scratch = ChunkScratch::new(&weights.layout);
+        scratch.load_slice(&samples);
+        let out = outputs(&weights, &mut scratch);
+        for (s, o) in samples.iter().zip(out) {
+            let a1: Vec<f32> = (0..21)
+                .map(|j| {
+                    (layers[0].bias[j]
+                        + (0..6)
+                            .map(|i| s.x[i] * layers[0].weights[i * 21 + j])
+                            .sum::<f32>())
+                    .max(0.0)
+                })
+                .collect();
+            let a2: Vec<f32> = (0..21)
+                .map(|j| {
+                    (layers[1].bias[j]
+                        + (0..21)
+                            .map(|i| a1[i] * layers[1].weights[i * 21 + j])
+                            .sum::<f32>())
+                    .max(0.0)
+                })
+                .collect();
+            for k in 0..3 {
+                let z = layers[2].bias[k]
+                    + (0..21)
+                        .map(|i| a2[i] * layers[2].weights[i * 3 + k])
+                        .sum::<f32>();
+                let y = (z.exp() - 1.0).max(0.0);
+                assert!((o[k] - y).abs() <= 1e-5 * y.max(1.0), "{o:?} vs {y}");
+            }
+        }
+    }
+}
