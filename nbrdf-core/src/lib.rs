@@ -19,6 +19,7 @@ pub mod coords;
 pub mod error;
 pub mod merl;
 pub mod network;
+pub mod phong_fit;
 pub mod sampling;
 pub mod train;
 

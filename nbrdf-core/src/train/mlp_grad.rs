@@ -593,9 +593,9 @@ mod tests {
             let a1 = dense(&layers[0], &x, true);
             let a2 = dense(&layers[1], &a1, true);
             let z3 = dense(&layers[2], &a2, false);
-            for k in 0..OUTPUTS {
-                let y = z3[k].exp() - 1.0;
-                sum += ((y * s.cos_light as f64).ln_1p() - s.log_target[k] as f64).abs();
+            for (z, &t) in z3.iter().zip(&s.log_target) {
+                let y = z.exp() - 1.0;
+                sum += ((y * s.cos_light as f64).ln_1p() - t as f64).abs();
             }
         }
         sum / (OUTPUTS * samples.len()) as f64

@@ -16,7 +16,9 @@ pub mod gemm;
 pub mod mlp_grad;
 pub mod rng;
 
+use crate::coords::RusinkiewiczAngles;
 use crate::error::{NbrdfError, Result};
+use crate::merl::MerlTable;
 use crate::network::{Layer, Nbrdf, INPUTS, OUTPUTS};
 use adam::{Adam, AdamConfig};
 use dataset::{AngularSampling, DataSet, Sample, TargetFn};
@@ -214,6 +216,15 @@ pub fn train(
     Ok(TrainOutcome { network, report })
 }
 
+/// The training target of a MERL table: its trilinear lookup, where at least one neighbour cell
+/// with a positive weight is valid in all channels ([`MerlTable::lookup_valid`]); elsewhere the
+/// table has no data and no sample is drawn.
+pub fn table_target(
+    table: &MerlTable,
+) -> impl Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> + Sync + '_ {
+    move |angles| table.lookup_valid(angles)
+}
+
 /// Free-form provenance for the network file.
 pub fn provenance(config: &TrainConfig, report: &TrainReport, source: &str) -> serde_json::Value {
     serde_json::json!({
@@ -393,4 +404,180 @@ pub fn draw_sets(target: &TargetFn<'_>, config: &TrainConfig) -> Result<(DataSet
         Stream::ValidationSamples,
     )?;
     Ok((train, validation))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::merl::{self, cell_coordinates, CELLS, SCALE};
+    use crate::phong_fit::PhongParams;
+
+    /// A glossy Blinn-Phong material (smooth enough for a short test run).
+    fn glossy(a: &RusinkiewiczAngles) -> Option<[f64; 3]> {
+        let p = PhongParams {
+            kd: [0.5, 0.3, 0.2],
+            ks: [0.3, 0.3, 0.3],
+            exponent: 8.0,
+        };
+        Some(p.eval(a.theta_h.cos()))
+    }
+
+    fn small_config() -> TrainConfig {
+        TrainConfig {
+            samples: 4000,
+            max_epochs: 25,
+            hidden: 12,
+            batch: 64,
+            patience: 25,
+            seed: 3,
+            ..TrainConfig::default()
+        }
+    }
+
+    #[test]
+    fn training_lowers_the_loss_and_fits_the_target() {
+        let config = small_config();
+        let mut epochs = Vec::new();
+        let outcome = train(&glossy, &config, "glossy", &mut |e| epochs.push(*e)).unwrap();
+        let report = &outcome.report;
+        assert_eq!(epochs.len(), report.epochs_run);
+        let first = report.history[0].1;
+        assert!(
+            report.best_validation_loss < 0.25 * first,
+            "{:?}",
+            report.history
+        );
+        // Log-space error of the saved network against the target on fresh directions.
+        let test = dataset::draw(
+            &glossy,
+            AngularSampling::Uniform,
+            2000,
+            99,
+            Stream::ValidationSamples,
+        )
+        .unwrap();
+        let trainer = Trainer::from_layers(&outcome.network.layers, 64, AdamConfig::default());
+        let error = trainer.validation_loss(&test.samples);
+        assert!(
+            error < 0.01,
+            "log-space error {error}, history {:?}",
+            report.history
+        );
+        assert!(
+            (report.best_validation_loss - report.history[report.best_epoch - 1].1).abs() < 1e-12
+        );
+    }
+
+    fn weights_bits(outcome: &TrainOutcome) -> Vec<u32> {
+        outcome
+            .network
+            .layers
+            .iter()
+            .flat_map(|l| l.weights.iter().chain(&l.bias))
+            .map(|w| w.to_bits())
+            .collect()
+    }
+
+    #[test]
+    fn training_is_deterministic_for_a_seed_and_any_thread_count() {
+        let config = TrainConfig {
+            samples: 1500,
+            max_epochs: 2,
+            batch: 200,
+            ..small_config()
+        };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| train(&glossy, &config, "g", &mut |_| {}).unwrap())
+        };
+        let a = run(1);
+        let b = run(2);
+        let c = run(2);
+        assert_eq!(weights_bits(&a), weights_bits(&b));
+        assert_eq!(weights_bits(&b), weights_bits(&c));
+        assert_eq!(a.report.history, c.report.history);
+        let other = TrainConfig {
+            seed: 4,
+            ..config.clone()
+        };
+        let d = train(&glossy, &other, "g", &mut |_| {}).unwrap();
+        assert_ne!(weights_bits(&a), weights_bits(&d));
+    }
+
+    #[test]
+    fn invalid_cells_never_become_samples() {
+        // Reflectance 0.25 everywhere, except: no data at all for theta_d index >= 60, and the
+        // red channel alone unmeasured for theta_h index 30..40 (any channel invalidates a cell).
+        let mut stored = vec![0.0; 3 * CELLS];
+        for cell in 0..CELLS {
+            let (h, d, _) = cell_coordinates(cell);
+            for c in 0..3 {
+                let unmeasured = d >= 60 || (c == 0 && (30..40).contains(&h));
+                stored[c * CELLS + cell] = if unmeasured {
+                    merl::NOT_MEASURED
+                } else {
+                    0.25 / SCALE[c]
+                };
+            }
+        }
+        let table = MerlTable::from_stored(stored).unwrap();
+        let target = table_target(&table);
+        let set = dataset::draw(
+            &target,
+            AngularSampling::Adaptive,
+            20_000,
+            1,
+            Stream::TrainSamples,
+        )
+        .unwrap();
+        assert!(set.invalid > 1000, "{}", set.invalid);
+        for s in &set.samples {
+            // Every target is the valid value: an unmeasured neighbour never leaks in.
+            let expect = (0.25 * s.cos_light as f64).ln_1p() as f32;
+            assert!(
+                (s.log_target[0] - expect).abs() <= 1e-6 * expect.max(1.0),
+                "{s:?}"
+            );
+            // And no sample lies where all neighbours are unmeasured.
+            let theta_d_index =
+                90.0 * (s.x[5] as f64).clamp(-1.0, 1.0).acos() / std::f64::consts::FRAC_PI_2;
+            assert!(theta_d_index < 60.5 + 1e-3, "{s:?}");
+            let theta_h_index = 90.0
+                * ((s.x[2] as f64).clamp(-1.0, 1.0).acos() / std::f64::consts::FRAC_PI_2).sqrt();
+            assert!(
+                !(30.5 + 1e-3..39.5 - 1e-3).contains(&theta_h_index),
+                "{s:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_configs_are_errors() {
+        for config in [
+            TrainConfig {
+                samples: 0,
+                ..TrainConfig::default()
+            },
+            TrainConfig {
+                batch: 0,
+                ..TrainConfig::default()
+            },
+            TrainConfig {
+                adam: AdamConfig {
+                    learning_rate: f32::NAN,
+                    ..AdamConfig::default()
+                },
+                ..TrainConfig::default()
+            },
+            TrainConfig {
+                validation_fraction: 0.0,
+                ..TrainConfig::default()
+            },
+        ] {
+            assert!(train(&glossy, &config, "x", &mut |_| {}).is_err());
+        }
+    }
 }
