@@ -5,10 +5,18 @@
 //! Every strategy takes three uniforms in `[0, 1]` (inclusive) and the view direction; the
 //! pdf is per unit solid angle of the light direction. Internally float64, so that exponents up to
 //! 1e6 and uniforms at the interval ends stay finite.
+//!
+//! The pdf a sample reports is computed from the float32 direction it returns, by the same
+//! function as [`SamplingStrategy::pdf`], so the two agree exactly (what MIS needs).
 
 use crate::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
-use crate::error::Result;
-use glam::Vec3;
+use crate::error::{NbrdfError, Result};
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use std::f64::consts::{FRAC_1_PI, TAU};
+
+/// Lanes per rayon task in the batched functions.
+const TASK_LANES: usize = 4096;
 
 /// A sampling strategy for the light direction given the view direction.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -16,7 +24,10 @@ pub enum SamplingStrategy {
     Uniform,
     Cosine,
     /// Mixture of a Blinn-Phong lobe (exponent `n >= 0`) with weight `w` in `[0, 1]` and a cosine lobe.
-    BlinnPhong { exponent: f64, specular_weight: f64 },
+    BlinnPhong {
+        exponent: f64,
+        specular_weight: f64,
+    },
 }
 
 /// One sampled light direction; `pdf == 0` marks an invalid sample (below the horizon).
@@ -29,22 +40,220 @@ pub struct DirectionSample {
 impl SamplingStrategy {
     /// Checks the parameters (finite exponent >= 0, weight in [0, 1]).
     pub fn validated(self) -> Result<Self> {
-        todo!()
+        if let SamplingStrategy::BlinnPhong {
+            exponent,
+            specular_weight,
+        } = self
+        {
+            if !(exponent.is_finite() && exponent >= 0.0) {
+                return Err(NbrdfError::InvalidArgument(format!(
+                    "Blinn-Phong exponent {exponent} must be finite and >= 0"
+                )));
+            }
+            if !(0.0..=1.0).contains(&specular_weight) {
+                return Err(NbrdfError::InvalidArgument(format!(
+                    "Blinn-Phong specular weight {specular_weight} must be in [0, 1]"
+                )));
+            }
+        }
+        Ok(self)
+    }
+
+    /// Whether the parameters are usable; unusable ones give pdf 0 everywhere instead of NaN.
+    fn params_ok(&self) -> bool {
+        match *self {
+            SamplingStrategy::BlinnPhong {
+                exponent,
+                specular_weight,
+            } => exponent.is_finite() && exponent >= 0.0 && (0.0..=1.0).contains(&specular_weight),
+            _ => true,
+        }
     }
 
     /// Draws a light direction for `view` from uniforms `u = [u0 (lobe choice), u1, u2]`.
+    /// Uniforms outside `[0, 1]` are clamped (NaN counts as 0). The pdf is 0 when the view is at
+    /// or below the horizon, when the specular lobe reflects below the horizon, and for invalid
+    /// parameters.
     pub fn sample(&self, view: Vec3, u: [f32; 3]) -> DirectionSample {
-        todo!()
+        let u = u.map(unit_interval);
+        let light = normalized(view.as_dvec3())
+            .filter(|_| self.params_ok())
+            .map(|v| self.sample_direction(v, u))
+            .and_then(normalized)
+            .map_or(Vec3::Z, |l| l.as_vec3());
+        DirectionSample {
+            light,
+            pdf: self.pdf(view, light),
+        }
+    }
+
+    /// The direction before rounding to float32; `v` is unit length.
+    fn sample_direction(&self, v: DVec3, [u0, u1, u2]: [f64; 3]) -> DVec3 {
+        match *self {
+            SamplingStrategy::Uniform => uniform_hemisphere(u1, u2),
+            SamplingStrategy::Cosine => cosine_hemisphere(u1, u2),
+            SamplingStrategy::BlinnPhong {
+                exponent,
+                specular_weight,
+            } => {
+                if u0 < specular_weight || specular_weight >= 1.0 {
+                    let h = blinn_phong_half_vector(exponent, u1, u2);
+                    2.0 * v.dot(h) * h - v
+                } else {
+                    cosine_hemisphere(u1, u2)
+                }
+            }
+        }
     }
 
     /// Density of `light` given `view`, per unit solid angle (0 at or below the horizon).
     pub fn pdf(&self, view: Vec3, light: Vec3) -> f32 {
-        todo!()
+        to_f32_saturating(self.pdf_f64(view.as_dvec3(), light.as_dvec3()))
+    }
+
+    /// [`SamplingStrategy::pdf`] in float64 (inputs need not be unit length).
+    pub fn pdf_f64(&self, view: DVec3, light: DVec3) -> f64 {
+        if !self.params_ok() {
+            return 0.0;
+        }
+        let (Some(v), Some(l)) = (normalized(view), normalized(light)) else {
+            return 0.0;
+        };
+        if v.z <= 0.0 || l.z <= 0.0 {
+            return 0.0;
+        }
+        match *self {
+            SamplingStrategy::Uniform => 0.5 * FRAC_1_PI,
+            SamplingStrategy::Cosine => l.z * FRAC_1_PI,
+            SamplingStrategy::BlinnPhong {
+                exponent,
+                specular_weight,
+            } => mixture_density(v, l, exponent, specular_weight),
+        }
     }
 }
 
+/// Clamps a uniform into `[0, 1]`; NaN becomes 0.
+fn unit_interval(u: f32) -> f64 {
+    if u >= 0.0 {
+        f64::from(u.min(1.0))
+    } else {
+        0.0
+    }
+}
+
+/// Unit vector of a finite, non-zero vector.
+fn normalized(v: DVec3) -> Option<DVec3> {
+    let len = v.length();
+    (v.is_finite() && len > 0.0 && len.is_finite()).then(|| v / len)
+}
+
+fn to_f32_saturating(p: f64) -> f32 {
+    // `as` would turn densities beyond float32 into infinity.
+    p.min(f64::from(f32::MAX)) as f32
+}
+
+/// Direction with polar cosine `cos_theta` and azimuth `2 pi u` (z = normal).
+fn spherical(cos_theta: f64, sin_theta: f64, u: f64) -> DVec3 {
+    let (sin_phi, cos_phi) = (TAU * u).sin_cos();
+    DVec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
+}
+
+/// Uniform on the upper hemisphere, `pdf = 1 / (2 pi)`.
+pub fn uniform_hemisphere(u1: f64, u2: f64) -> DVec3 {
+    let z = u1.clamp(0.0, 1.0);
+    spherical(z, ((1.0 - z) * (1.0 + z)).max(0.0).sqrt(), u2)
+}
+
+/// Cosine-weighted on the upper hemisphere, `pdf = cos(theta) / pi`.
+pub fn cosine_hemisphere(u1: f64, u2: f64) -> DVec3 {
+    let u1 = u1.clamp(0.0, 1.0);
+    spherical((1.0 - u1).sqrt(), u1.sqrt(), u2)
+}
+
+/// Half vector with `cos(theta_h) = u1^(1/(n+1))`. `1 - cos` comes from `expm1` so that sharp
+/// lobes (n up to 1e6), where `cos` rounds to 1, keep their angular spread.
+pub fn blinn_phong_half_vector(exponent: f64, u1: f64, u2: f64) -> DVec3 {
+    let one_minus_cos = (-(u1.clamp(0.0, 1.0).ln() / (exponent + 1.0)).exp_m1()).clamp(0.0, 1.0);
+    let cos = 1.0 - one_minus_cos;
+    let sin = (one_minus_cos * (1.0 + cos)).sqrt();
+    spherical(cos, sin, u2)
+}
+
+/// `c^n` for `c` in `[0, 1]`, with `c^0 = 1` (also for `c = 0`) and no NaN for any `n >= 0`.
+fn cos_power(c: f64, n: f64) -> f64 {
+    if n == 0.0 {
+        1.0
+    } else if c <= 0.0 {
+        0.0
+    } else {
+        (n * c.min(1.0).ln()).exp()
+    }
+}
+
+/// Density of the reflected direction when the half vector has density
+/// `(n + 1)/(2 pi) cos(theta_h)^n` on the upper hemisphere, over the whole sphere of `l`
+/// (`v`, `l` unit). A half vector below the horizon is the mirror image of one above, so
+/// `|h.z|` is used; 0 where `l = -v` (a single direction, no mass).
+fn specular_density(v: DVec3, l: DVec3, n: f64) -> f64 {
+    let Some(h) = normalized(l + v) else {
+        return 0.0;
+    };
+    let v_dot_h = v.dot(h).abs();
+    if v_dot_h <= 0.0 {
+        return 0.0;
+    }
+    (n + 1.0) * 0.5 * FRAC_1_PI * cos_power(h.z.abs(), n) / (4.0 * v_dot_h)
+}
+
+fn mixture_density(v: DVec3, l: DVec3, n: f64, w: f64) -> f64 {
+    let specular = if w > 0.0 {
+        w * specular_density(v, l, n)
+    } else {
+        0.0
+    };
+    specular + (1.0 - w) * l.z.max(0.0) * FRAC_1_PI
+}
+
+/// The Blinn-Phong mixture's density over the whole sphere of light directions: the specular
+/// term for any `l` (also below the horizon, where the sampler rejects it), the cosine term on
+/// the upper hemisphere. It integrates to 1 for every view; [`SamplingStrategy::pdf`] is this
+/// restricted to both directions above the horizon. Inputs need not be unit length; invalid
+/// parameters or directions give 0.
+pub fn blinn_phong_lobe_density(
+    view: DVec3,
+    light: DVec3,
+    exponent: f64,
+    specular_weight: f64,
+) -> f64 {
+    let strategy = SamplingStrategy::BlinnPhong {
+        exponent,
+        specular_weight,
+    };
+    match (strategy.params_ok(), normalized(view), normalized(light)) {
+        (true, Some(v), Some(l)) => mixture_density(v, l, exponent, specular_weight),
+        _ => 0.0,
+    }
+}
+
+/// Splits equally long slices into aligned chunks of `chunk` lanes, for parallel iteration over
+/// several outputs at once.
+fn split_chunks<const K: usize>(mut rest: [&mut [f32]; K], chunk: usize) -> Vec<[&mut [f32]; K]> {
+    let mut chunks = Vec::new();
+    while !rest[0].is_empty() {
+        let m = chunk.min(rest[0].len());
+        chunks.push(std::array::from_fn(|k| {
+            let (head, tail) = std::mem::take(&mut rest[k]).split_at_mut(m);
+            rest[k] = tail;
+            head
+        }));
+    }
+    chunks
+}
+
 /// Batched sampling: for each lane draws a light direction, its pdf, and the weight
-/// `f_r cos / pdf` of `brdf` (0 for invalid samples). All slices have the same length.
+/// `f_r cos / pdf` of `brdf` (0 for invalid samples). All slices have the same length; if they
+/// do not, only the common prefix is processed.
 pub fn sample_batch(
     strategy: &SamplingStrategy,
     brdf: &dyn Brdf,
@@ -54,10 +263,474 @@ pub fn sample_batch(
     weight: RgbMut<'_>,
     pdf: &mut [f32],
 ) {
-    todo!()
+    let n = [
+        view.len(),
+        view.y.len(),
+        view.z.len(),
+        u.len(),
+        u.y.len(),
+        u.z.len(),
+    ]
+    .into_iter()
+    .chain([light.x.len(), light.y.len(), light.z.len()])
+    .chain([weight.r.len(), weight.g.len(), weight.b.len(), pdf.len()])
+    .min()
+    .unwrap_or(0);
+    let outputs = [
+        &mut light.x[..n],
+        &mut light.y[..n],
+        &mut light.z[..n],
+        &mut weight.r[..n],
+        &mut weight.g[..n],
+        &mut weight.b[..n],
+        &mut pdf[..n],
+    ];
+    split_chunks(outputs, TASK_LANES)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(k, [lx, ly, lz, r, g, b, p])| {
+            let start = k * TASK_LANES;
+            let end = start + lx.len();
+            for i in 0..lx.len() {
+                let j = start + i;
+                let s = strategy.sample(view.get(j), [u.x[j], u.y[j], u.z[j]]);
+                (lx[i], ly[i], lz[i], p[i]) = (s.light.x, s.light.y, s.light.z, s.pdf);
+            }
+            // One batched BRDF call per task keeps the network on its vectorised path.
+            let sampled = Directions {
+                x: lx,
+                y: ly,
+                z: lz,
+            };
+            brdf.eval_cos_batch(
+                view.slice(start, end),
+                sampled,
+                RgbMut {
+                    r: &mut *r,
+                    g: &mut *g,
+                    b: &mut *b,
+                },
+            );
+            for (i, &pdf) in p.iter().enumerate() {
+                for c in [&mut r[i], &mut g[i], &mut b[i]] {
+                    *c = sample_weight(*c, pdf);
+                }
+            }
+        });
+}
+
+/// `f cos / pdf`, 0 for invalid samples and where a tiny pdf would overflow the quotient.
+fn sample_weight(f_cos: f32, pdf: f32) -> f32 {
+    if pdf > 0.0 {
+        let w = f_cos / pdf;
+        if w.is_finite() {
+            return w;
+        }
+    }
+    0.0
 }
 
 /// Batched pdf of `light` given `view`.
-pub fn pdf_batch(strategy: &SamplingStrategy, view: Directions<'_>, light: Directions<'_>, pdf: &mut [f32]) {
-    todo!()
+pub fn pdf_batch(
+    strategy: &SamplingStrategy,
+    view: Directions<'_>,
+    light: Directions<'_>,
+    pdf: &mut [f32],
+) {
+    let n = [
+        view.len(),
+        view.y.len(),
+        view.z.len(),
+        light.len(),
+        light.y.len(),
+        light.z.len(),
+        pdf.len(),
+    ]
+    .into_iter()
+    .min()
+    .unwrap_or(0);
+    pdf[..n]
+        .par_chunks_mut(TASK_LANES)
+        .enumerate()
+        .for_each(|(k, p)| {
+            let start = k * TASK_LANES;
+            for (i, out) in p.iter_mut().enumerate() {
+                *out = strategy.pdf(view.get(start + i), light.get(start + i));
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::network::{Nbrdf, SplitMix64};
+    use std::f64::consts::PI;
+
+    const EXPONENTS: [f64; 7] = [0.0, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5];
+
+    fn dir(theta_deg: f64, phi: f64) -> DVec3 {
+        let t = theta_deg.to_radians();
+        DVec3::new(t.sin() * phi.cos(), t.sin() * phi.sin(), t.cos())
+    }
+
+    fn mirror(v: DVec3) -> DVec3 {
+        DVec3::new(-v.x, -v.y, v.z)
+    }
+
+    /// Integral of `f` over the spherical cap of angular radius `alpha_max` around `centre`, in
+    /// spherical coordinates centred there with `alpha = alpha_max s^2` (s uniform): the grid is
+    /// dense near the centre, where sharp lobes live. Midpoint rule in `s` and in the periodic
+    /// azimuth.
+    fn cap_integral(
+        centre: DVec3,
+        alpha_max: f64,
+        ns: usize,
+        nb: usize,
+        f: impl Fn(DVec3) -> f64 + Sync,
+    ) -> f64 {
+        let c = centre.normalize();
+        let (t1, t2) = c.any_orthonormal_pair();
+        (0..ns)
+            .into_par_iter()
+            .map(|i| {
+                let s = (i as f64 + 0.5) / ns as f64;
+                let alpha = alpha_max * s * s;
+                let d_alpha = 2.0 * alpha_max * s / ns as f64;
+                let (sin_a, cos_a) = alpha.sin_cos();
+                let ring: f64 = (0..nb)
+                    .map(|j| {
+                        let (sin_b, cos_b) = (TAU * (j as f64 + 0.5) / nb as f64).sin_cos();
+                        f(cos_a * c + sin_a * (cos_b * t1 + sin_b * t2))
+                    })
+                    .sum();
+                ring * sin_a * d_alpha * TAU / nb as f64
+            })
+            .sum()
+    }
+
+    fn sphere_integral(
+        centre: DVec3,
+        ns: usize,
+        nb: usize,
+        f: impl Fn(DVec3) -> f64 + Sync,
+    ) -> f64 {
+        cap_integral(centre, PI, ns, nb, f)
+    }
+
+    /// Smooth (C1) weight, 1 within `radius / 2` of `centre`, 0 beyond `radius`.
+    fn bump(centre: DVec3, radius: f64, l: DVec3) -> f64 {
+        let t = (l.dot(centre).clamp(-1.0, 1.0).acos() / radius - 0.5) * 2.0;
+        let t = t.clamp(0.0, 1.0);
+        1.0 - t * t * (3.0 - 2.0 * t)
+    }
+
+    /// Integral over the sphere of the Blinn-Phong density: the specular term has an integrable
+    /// `1 / |l + v|` singularity at `l = -v`, so a partition of unity integrates a neighbourhood
+    /// of `-v` on a grid centred there (where the singularity is harmless in polar coordinates)
+    /// and the rest on a grid centred on the mirror direction, where sharp lobes are.
+    fn lobe_integral(v: DVec3, n: f64, w: f64) -> f64 {
+        let density = |l: DVec3| blinn_phong_lobe_density(v, l, n, w);
+        let radius = 0.08;
+        let near = cap_integral(-v, radius, 400, 128, |l| density(l) * bump(-v, radius, l));
+        let far = sphere_integral(mirror(v), 1500, 256, |l| {
+            density(l) * (1.0 - bump(-v, radius, l))
+        });
+        near + far
+    }
+
+    #[test]
+    fn validated_rejects_bad_parameters() {
+        let bp = |exponent, specular_weight| SamplingStrategy::BlinnPhong {
+            exponent,
+            specular_weight,
+        };
+        assert!(bp(10.0, 0.5).validated().is_ok());
+        assert!(bp(0.0, 0.0).validated().is_ok() && bp(1e6, 1.0).validated().is_ok());
+        for bad in [
+            bp(-1.0, 0.5),
+            bp(f64::NAN, 0.5),
+            bp(f64::INFINITY, 0.5),
+            bp(1.0, -0.1),
+            bp(1.0, 1.5),
+            bp(1.0, f64::NAN),
+        ] {
+            assert!(
+                matches!(bad.validated(), Err(NbrdfError::InvalidArgument(_))),
+                "{bad:?}"
+            );
+            // Unvalidated bad parameters still give finite output.
+            let s = bad.sample(Vec3::Z, [0.5; 3]);
+            assert_eq!(s.pdf, 0.0);
+            assert!(s.light.is_finite());
+            assert_eq!(bad.pdf(Vec3::Z, Vec3::Z), 0.0);
+        }
+        assert!(
+            SamplingStrategy::Cosine.validated().is_ok()
+                && SamplingStrategy::Uniform.validated().is_ok()
+        );
+    }
+
+    #[test]
+    fn hemisphere_pdfs_integrate_to_one() {
+        let v = Vec3::new(0.3, -0.2, 0.9);
+        for strategy in [SamplingStrategy::Uniform, SamplingStrategy::Cosine] {
+            let total = cap_integral(DVec3::Z, 0.5 * PI, 800, 64, |l| {
+                f64::from(strategy.pdf(v, l.as_vec3()))
+            });
+            assert!((total - 1.0).abs() < 1e-5, "{strategy:?}: {total}");
+        }
+    }
+
+    #[test]
+    fn blinn_phong_density_integrates_to_one_over_the_sphere() {
+        let views = [dir(0.0, 0.0), dir(60.0, 0.4), dir(85.0, 2.0)];
+        for n in EXPONENTS {
+            for w in [0.25, 1.0] {
+                for v in views {
+                    let total = lobe_integral(v, n, w);
+                    assert!((total - 1.0).abs() < 1e-4, "n {n} w {w} v {v}: {total}");
+                }
+            }
+        }
+        let total = cap_integral(DVec3::Z, 0.5 * PI, 800, 64, |l| {
+            blinn_phong_lobe_density(DVec3::Z, l, 50.0, 0.0)
+        });
+        assert!((total - 1.0).abs() < 1e-5, "{total}");
+    }
+
+    #[test]
+    fn pdf_is_the_lobe_density_above_the_horizon_and_zero_below() {
+        let mut rng = SplitMix64::new(5);
+        let strategy = SamplingStrategy::BlinnPhong {
+            exponent: 30.0,
+            specular_weight: 0.6,
+        };
+        for _ in 0..1000 {
+            let v = uniform_hemisphere(rng.next_f64(), rng.next_f64());
+            let l = DVec3::new(
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+            );
+            let p = strategy.pdf_f64(v, l);
+            if l.z <= 0.0 {
+                assert_eq!(p, 0.0);
+                assert_eq!(strategy.pdf_f64(-v, -l), 0.0);
+            } else {
+                let want = blinn_phong_lobe_density(v, l, 30.0, 0.6);
+                assert!((p - want).abs() <= 1e-12 * want, "{p} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn sampled_pdf_equals_pdf() {
+        let mut rng = SplitMix64::new(1);
+        let strategies = [
+            SamplingStrategy::Uniform,
+            SamplingStrategy::Cosine,
+            SamplingStrategy::BlinnPhong {
+                exponent: 20.0,
+                specular_weight: 0.5,
+            },
+            SamplingStrategy::BlinnPhong {
+                exponent: 1e6,
+                specular_weight: 0.9,
+            },
+        ];
+        for strategy in strategies {
+            let mut valid = 0;
+            for _ in 0..2000 {
+                let v = uniform_hemisphere(rng.next_f64(), rng.next_f64()).as_vec3() * 2.0;
+                let u = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+                let s = strategy.sample(v, u);
+                assert_eq!(s.pdf, strategy.pdf(v, s.light), "{strategy:?} {v} {u:?}");
+                assert!((s.light.length() - 1.0).abs() < 1e-6);
+                valid += usize::from(s.pdf > 0.0);
+            }
+            assert!(valid > 1000, "{strategy:?}: only {valid} valid samples");
+        }
+    }
+
+    /// Monte Carlo means under the sampler against quadrature of the same function times the pdf:
+    /// checks that the sampler draws from the density that `pdf` reports.
+    #[test]
+    fn sample_histogram_matches_pdf() {
+        let cases = [
+            (SamplingStrategy::Uniform, dir(30.0, 0.0)),
+            (SamplingStrategy::Cosine, dir(30.0, 0.0)),
+            (
+                SamplingStrategy::BlinnPhong {
+                    exponent: 10.0,
+                    specular_weight: 0.5,
+                },
+                dir(45.0, 1.0),
+            ),
+            (
+                SamplingStrategy::BlinnPhong {
+                    exponent: 1000.0,
+                    specular_weight: 0.8,
+                },
+                dir(70.0, -2.0),
+            ),
+        ];
+        let samples = 200_000;
+        for (strategy, v) in cases {
+            let r = mirror(v);
+            // A smooth function and a histogram bin (a cone around the mirror direction).
+            let tests: [&(dyn Fn(DVec3) -> f64 + Sync); 2] =
+                [&|l: DVec3| l.z + 0.5 * l.x * l.x, &|l: DVec3| {
+                    f64::from(u8::from(l.dot(r) > 0.995))
+                }];
+            for (t, g) in tests.into_iter().enumerate() {
+                let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
+                let mut rng = SplitMix64::new(17 + t as u64);
+                let mut sum = 0.0;
+                let mut sum2 = 0.0;
+                for _ in 0..samples {
+                    let s = strategy.sample(
+                        v.as_vec3(),
+                        [rng.next_f32(), rng.next_f32(), rng.next_f32()],
+                    );
+                    let x = if s.pdf > 0.0 {
+                        g(s.light.as_dvec3())
+                    } else {
+                        0.0
+                    };
+                    sum += x;
+                    sum2 += x * x;
+                }
+                let mean = sum / samples as f64;
+                let sigma = ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt();
+                assert!(
+                    (mean - exact).abs() < 5.0 * sigma + 1e-4,
+                    "{strategy:?} test {t}: MC {mean} +- {sigma} vs quadrature {exact}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn extreme_inputs_stay_finite() {
+        let views = [
+            Vec3::Z,
+            dir(89.9999, 0.3).as_vec3(),
+            Vec3::new(1.0, 0.0, 1e-6),
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(0.5, 0.5, -1e-7),
+            Vec3::ZERO,
+            Vec3::new(f32::NAN, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, f32::INFINITY),
+            Vec3::new(3e-30, 0.0, 4e-30),
+            Vec3::new(3e30, 0.0, 4e30),
+        ];
+        let us = [0.0, 1e-30, 1e-7, 0.5, 1.0 - 1e-7, 1.0, -1.0, 2.0, f32::NAN];
+        let mut strategies = vec![SamplingStrategy::Uniform, SamplingStrategy::Cosine];
+        for exponent in [0.0, 1e-3, 1.0, 1e6] {
+            for specular_weight in [0.0, 0.5, 1.0] {
+                strategies.push(SamplingStrategy::BlinnPhong {
+                    exponent,
+                    specular_weight,
+                });
+            }
+        }
+        for strategy in strategies {
+            for v in views {
+                for u0 in us {
+                    for u1 in us {
+                        for u2 in [0.0, 0.3, 1.0] {
+                            let s = strategy.sample(v, [u0, u1, u2]);
+                            assert!(
+                                s.light.is_finite() && s.pdf.is_finite() && s.pdf >= 0.0,
+                                "{strategy:?} {v} {s:?}"
+                            );
+                            assert_eq!(s.pdf, strategy.pdf(v, s.light));
+                            if !(v.z > 0.0 && v.is_finite()) {
+                                assert_eq!(s.pdf, 0.0);
+                            }
+                        }
+                    }
+                }
+                for l in views {
+                    let p = strategy.pdf(v, l);
+                    assert!(p.is_finite() && p >= 0.0);
+                }
+            }
+        }
+        // The sharpest lobe with the extreme uniforms lands on the mirror direction.
+        let bp = SamplingStrategy::BlinnPhong {
+            exponent: 1e6,
+            specular_weight: 1.0,
+        };
+        let v = dir(40.0, 0.0).as_vec3();
+        let s = bp.sample(v, [0.0, 1.0, 0.0]);
+        assert!(
+            (s.light - Vec3::new(-v.x, -v.y, v.z)).length() < 1e-6 && s.pdf > 1e4,
+            "{s:?}"
+        );
+        assert_eq!(bp.sample(v, [0.0, 0.0, 0.0]).pdf, 0.0); // half vector on the horizon
+    }
+
+    #[test]
+    fn batches_match_single_lanes() {
+        let net = Nbrdf::random("n", 21, 3);
+        let strategy = SamplingStrategy::BlinnPhong {
+            exponent: 40.0,
+            specular_weight: 0.7,
+        };
+        let n = 3 * TASK_LANES + 17;
+        let mut rng = SplitMix64::new(9);
+        let mut view = vec![0.0f32; 3 * n];
+        let mut u = vec![0.0f32; 3 * n];
+        for i in 0..n {
+            let v = uniform_hemisphere(rng.next_f64(), rng.next_f64()).as_vec3();
+            for k in 0..3 {
+                view[k * n + i] = v[k];
+                u[k * n + i] = rng.next_f32();
+            }
+        }
+        view[5] = -0.5; // one view below the horizon (x of lane 5 is fine; make z negative)
+        view[2 * n + 5] = -0.5;
+        let (mut light, mut weight, mut pdf) =
+            (vec![0.0f32; 3 * n], vec![0.0f32; 3 * n], vec![0.0f32; n]);
+        let view_d = Directions::from_planar(&view).unwrap();
+        let u_d = Directions::from_planar(&u).unwrap();
+        sample_batch(
+            &strategy,
+            &net,
+            view_d,
+            u_d,
+            DirectionsMut::from_planar(&mut light).unwrap(),
+            RgbMut::from_planar(&mut weight).unwrap(),
+            &mut pdf,
+        );
+        let mut pdf2 = vec![0.0f32; n];
+        pdf_batch(
+            &strategy,
+            view_d,
+            Directions::from_planar(&light).unwrap(),
+            &mut pdf2,
+        );
+        assert_eq!(pdf, pdf2);
+        let mut invalid = 0;
+        for i in 0..n {
+            let v = view_d.get(i);
+            let s = strategy.sample(v, [u[i], u[n + i], u[2 * n + i]]);
+            assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
+            assert_eq!(s.pdf, pdf[i]);
+            let f = net.eval(s.light, v);
+            let cos = crate::brdf::cos_theta_light(s.light);
+            for c in 0..3 {
+                let want = if s.pdf > 0.0 { f[c] * cos / s.pdf } else { 0.0 };
+                let got = weight[c * n + i];
+                assert!(
+                    (got - want).abs() <= 1e-4 * want.abs() + 1e-9,
+                    "lane {i}: {got} vs {want}"
+                );
+            }
+            invalid += usize::from(s.pdf == 0.0);
+        }
+        assert!(pdf[5] == 0.0 && weight[5] == 0.0);
+        assert!(invalid > 0 && invalid < n / 4);
+    }
 }
