@@ -1,9 +1,9 @@
 //! Branch-free `f32` arithmetic for the training kernels.
 //!
-//! `std`'s `exp` and `ln` are library calls that stop the loops over a batch from vectorising, and
-//! the loss needs one of each per output channel. The Cephes single-precision polynomials below
-//! are built from arithmetic, bit casts and selects only, so they vectorise, and they are within
-//! a few ulp of `std` (the tests check), far below the noise of stochastic gradient descent.
+//! `std`'s `ln` is a library call that stops the loops over a batch from vectorising, and the
+//! loss needs one per output channel. The Cephes single-precision polynomial below is built from
+//! arithmetic, bit casts and selects only, so it vectorises, and it is within a few ulp of `std`
+//! (the tests check). The exponential is the evaluator's own ([`crate::network::fast_expm1`]).
 //!
 //! [`MulAdd`] lets the same kernel source compile to fused multiply-adds in the AVX2+FMA copy and
 //! to separate multiplies and adds in the portable copy (where `f32::mul_add` would be a slow
@@ -31,34 +31,6 @@ impl MulAdd for Unfused {
     fn mul_add(a: f32, b: f32, c: f32) -> f32 {
         a * b + c
     }
-}
-
-/// Largest argument of [`exp`]: `2^127` is the largest power of two the bit construction can
-/// build, so larger arguments are clamped (the network output then saturates, see
-/// [`crate::train::mlp_grad`]).
-pub const EXP_MAX_ARG: f32 = 88.0;
-const EXP_MIN_ARG: f32 = -87.0;
-/// `1.5 * 2^23`: adding it rounds to the nearest integer, which also lands in the low mantissa bits.
-const ROUND_MAGIC: f32 = 12_582_912.0;
-
-/// `e^x`, `x` clamped to `[-87, 88]`.
-#[inline(always)]
-pub fn exp(x: f32) -> f32 {
-    let x = x.clamp(EXP_MIN_ARG, EXP_MAX_ARG);
-    let t = x * std::f32::consts::LOG2_E + ROUND_MAGIC;
-    let n_bits = t.to_bits().wrapping_sub(ROUND_MAGIC.to_bits()) as i32;
-    let n = t - ROUND_MAGIC;
-    // x - n ln 2 in two parts (Cody-Waite) keeps the reduced argument exact to f32 precision.
-    let r = x - n * 0.693_359_4 + n * 2.121_944_4e-4;
-    let mut p = 1.987_569_1e-4_f32;
-    p = p * r + 1.398_199_9e-3;
-    p = p * r + 8.333_452e-3;
-    p = p * r + 4.166_579_6e-2;
-    p = p * r + 1.666_666_5e-1;
-    p = p * r + 0.5;
-    let e_r = p * r * r + r + 1.0;
-    let scale = f32::from_bits(((n_bits + 127) as u32) << 23);
-    e_r * scale
 }
 
 const SQRT_HALF: f32 = std::f32::consts::FRAC_1_SQRT_2;
@@ -93,42 +65,19 @@ pub fn ln(x: f32) -> f32 {
     m + y + ef * 0.693_359_4
 }
 
-/// `ln(1 + u)` for `u > -1`, accurate also for tiny `u` (Goldberg's trick: the rounding of
-/// `1 + u` cancels in `u / ((1 + u) - 1)`), so that the log-loss of nearly black materials is not
-/// swamped by the rounding of `1 + f cos`.
+/// `ln(1 + u)` for `u > -1`, accurate also for tiny `u`: with `q = 1 + u` rounded,
+/// `ln(1 + u) = ln(q) + (u - (q - 1)) / q` to first order, the correction restoring what the
+/// rounding of `q` lost (fdlibm's trick). Unlike the usual `u / (q - 1)` rescaling it needs no
+/// branch, which keeps the loss loop vectorised.
 #[inline(always)]
 pub fn ln_1p(u: f32) -> f32 {
     let q = 1.0 + u;
-    let d = q - 1.0;
-    if d == 0.0 {
-        u
-    } else {
-        ln(q) * (u / d)
-    }
+    ln(q) + (u - (q - 1.0)) / q
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn rel(a: f32, b: f32) -> f32 {
-        ((a - b) / b.abs().max(f32::MIN_POSITIVE)).abs()
-    }
-
-    #[test]
-    fn exp_matches_std() {
-        let mut x = -87.0f32;
-        while x <= 88.0 {
-            assert!(
-                rel(exp(x), x.exp()) < 4e-7,
-                "exp({x}) = {} vs {}",
-                exp(x),
-                x.exp()
-            );
-            x += 0.0137;
-        }
-        assert!(exp(1000.0).is_finite() && exp(-1000.0) >= 0.0);
-    }
 
     #[test]
     fn ln_matches_std() {

@@ -28,8 +28,19 @@ pub enum Init<'a> {
     Row(&'a [f32]),
 }
 
-/// `C[i][j] = init + sum_{k < depth} A(i, k) B[k][j]` for `i < rows` and `j < cols`, where `cols`
-/// is a multiple of [`VEC`], `B` has row stride `ldb` and `C` row stride `ldc`.
+/// What is applied to a block of `C` before it is stored.
+#[derive(Clone, Copy)]
+pub enum Post<'a> {
+    None,
+    /// `max(c, 0)`.
+    Relu,
+    /// `c` where the same element of this matrix (same shape and stride as `C`) is positive,
+    /// else 0: the relu derivative applied to a back-propagated gradient.
+    MaskPositive(&'a [f32]),
+}
+
+/// `C[i][j] = post(init + sum_{k < depth} A(i, k) B[k][j])` for `i < rows` and `j < cols`, where
+/// `cols` is a multiple of [`VEC`], `B` has row stride `ldb` and `C` row stride `ldc`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn gemm<M: MulAdd>(
@@ -42,15 +53,16 @@ pub fn gemm<M: MulAdd>(
     c: &mut [f32],
     ldc: usize,
     init: Init<'_>,
+    post: Post<'_>,
 ) {
     debug_assert!(cols % VEC == 0);
     let mut j0 = 0;
     while j0 < cols {
         let left = (cols - j0) / VEC;
         let step = match left {
-            1 => block_rows::<M, 1>(rows, depth, a, b, ldb, c, ldc, init, j0),
-            2 => block_rows::<M, 2>(rows, depth, a, b, ldb, c, ldc, init, j0),
-            _ => block_rows::<M, 3>(rows, depth, a, b, ldb, c, ldc, init, j0),
+            1 => block_rows::<M, 1>(rows, depth, a, b, ldb, c, ldc, init, post, j0),
+            2 => block_rows::<M, 2>(rows, depth, a, b, ldb, c, ldc, init, post, j0),
+            _ => block_rows::<M, 3>(rows, depth, a, b, ldb, c, ldc, init, post, j0),
         };
         j0 += step;
     }
@@ -68,15 +80,16 @@ fn block_rows<M: MulAdd, const NB: usize>(
     c: &mut [f32],
     ldc: usize,
     init: Init<'_>,
+    post: Post<'_>,
     j0: usize,
 ) -> usize {
     let mut i0 = 0;
     while i0 + 4 <= rows {
-        block::<M, 4, NB>(i0, j0, depth, a, b, ldb, c, ldc, init);
+        block::<M, 4, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
         i0 += 4;
     }
     while i0 < rows {
-        block::<M, 1, NB>(i0, j0, depth, a, b, ldb, c, ldc, init);
+        block::<M, 1, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
         i0 += 1;
     }
     NB * VEC
@@ -95,6 +108,7 @@ fn block<M: MulAdd, const MR: usize, const NB: usize>(
     c: &mut [f32],
     ldc: usize,
     init: Init<'_>,
+    post: Post<'_>,
 ) {
     let mut acc = [[[0.0f32; VEC]; NB]; MR];
     if let Init::Row(row) = init {
@@ -117,8 +131,19 @@ fn block<M: MulAdd, const MR: usize, const NB: usize>(
             }
         }
     }
-    for (r, acc_r) in acc.iter().enumerate() {
-        let c_row = &mut c[(i0 + r) * ldc + j0..(i0 + r) * ldc + j0 + NB * VEC];
+    for (r, acc_r) in acc.iter_mut().enumerate() {
+        let at = (i0 + r) * ldc + j0;
+        match post {
+            Post::None => {}
+            Post::Relu => acc_r.iter_mut().flatten().for_each(|v| *v = v.max(0.0)),
+            Post::MaskPositive(m) => {
+                let m_row = &m[at..at + NB * VEC];
+                for (v, &m) in acc_r.iter_mut().flatten().zip(m_row) {
+                    *v = if m > 0.0 { *v } else { 0.0 };
+                }
+            }
+        }
+        let c_row = &mut c[at..at + NB * VEC];
         for (nb, acc_v) in acc_r.iter().enumerate() {
             c_row[nb * VEC..(nb + 1) * VEC].copy_from_slice(acc_v);
         }
@@ -153,6 +178,7 @@ mod tests {
             &mut c,
             cols,
             Init::Row(&bias),
+            Post::Relu,
         );
         for i in 0..rows {
             for j in 0..cols {
@@ -160,7 +186,10 @@ mod tests {
                     + (0..depth)
                         .map(|k| at[k * rows + i] * b[k * cols + j])
                         .sum::<f32>();
-                assert!((c[i * cols + j] - expect).abs() < 1e-5, "({i}, {j})");
+                assert!(
+                    (c[i * cols + j] - expect.max(0.0)).abs() < 1e-5,
+                    "({i}, {j})"
+                );
             }
         }
     }

@@ -12,8 +12,8 @@
 
 use super::dataset::Sample;
 use super::fastmath::{self, Fused, MulAdd, Unfused};
-use super::gemm::{gemm, Init, Strided, VEC};
-use crate::network::{Layer, INPUTS, OUTPUTS};
+use super::gemm::{gemm, Init, Post, Strided, VEC};
+use crate::network::{self, Layer, INPUTS, OUTPUTS};
 
 /// Samples per chunk, the unit of parallel work and of deterministic gradient summation.
 pub const LANES: usize = 64;
@@ -151,7 +151,9 @@ impl Weights {
 /// Per-chunk working memory, allocated once and reused for every batch.
 pub struct ChunkScratch {
     x: Vec<f32>,
+    /// `ln(1 + f cos)`, `[channel][lane]`.
     target: Vec<f32>,
+    /// `cos(theta_light)` per lane, 0 for unused lanes.
     cos: Vec<f32>,
     a1: Vec<f32>,
     a2: Vec<f32>,
@@ -159,6 +161,10 @@ pub struct ChunkScratch {
     g3: Vec<f32>,
     g2: Vec<f32>,
     g1: Vec<f32>,
+    /// Output pre-activations, their loss gradients and absolute errors, `[channel][lane]`.
+    z_out: Vec<f32>,
+    g_out: Vec<f32>,
+    err: Vec<f32>,
 }
 
 impl ChunkScratch {
@@ -167,14 +173,17 @@ impl ChunkScratch {
         let v = LANES * VEC;
         ChunkScratch {
             x: vec![0.0; v],
-            target: vec![0.0; v],
-            cos: vec![0.0; v],
+            target: vec![0.0; OUTPUTS * LANES],
+            cos: vec![0.0; LANES],
             a1: vec![0.0; h],
             a2: vec![0.0; h],
             z3: vec![0.0; v],
             g3: vec![0.0; v],
             g2: vec![0.0; h],
             g1: vec![0.0; h],
+            z_out: vec![0.0; OUTPUTS * LANES],
+            g_out: vec![0.0; OUTPUTS * LANES],
+            err: vec![0.0; OUTPUTS * LANES],
         }
     }
 
@@ -197,19 +206,22 @@ impl ChunkScratch {
     }
 
     fn load_lane(&mut self, lane: usize, sample: Option<&Sample>) {
-        let at = lane * VEC;
-        let (x, target, cos) = (
-            &mut self.x[at..at + VEC],
-            &mut self.target[at..at + VEC],
-            &mut self.cos[at..at + VEC],
-        );
+        let x = &mut self.x[lane * XW..(lane + 1) * XW];
         x.fill(0.0);
-        target.fill(0.0);
-        cos.fill(0.0);
-        if let Some(s) = sample {
-            x[..INPUTS].copy_from_slice(&s.x);
-            target[..OUTPUTS].copy_from_slice(&s.log_target);
-            cos[..OUTPUTS].fill(s.cos_light);
+        match sample {
+            Some(s) => {
+                x[..INPUTS].copy_from_slice(&s.x);
+                for (k, &t) in s.log_target.iter().enumerate() {
+                    self.target[k * LANES + lane] = t;
+                }
+                self.cos[lane] = s.cos_light;
+            }
+            None => {
+                for k in 0..OUTPUTS {
+                    self.target[k * LANES + lane] = 0.0;
+                }
+                self.cos[lane] = 0.0;
+            }
         }
     }
 }
@@ -296,6 +308,7 @@ fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
         row_stride: XW,
         col_stride: 1,
     };
+    let b1 = Init::Row(&p[l.b1..l.b1 + hp]);
     gemm::<M>(
         LANES,
         hp,
@@ -305,14 +318,15 @@ fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
         hp,
         &mut s.a1,
         hp,
-        Init::Row(&p[l.b1..l.b1 + hp]),
+        b1,
+        Post::Relu,
     );
-    relu(&mut s.a1);
     let a1 = Strided {
         data: &s.a1,
         row_stride: hp,
         col_stride: 1,
     };
+    let b2 = Init::Row(&p[l.b2..l.b2 + hp]);
     gemm::<M>(
         LANES,
         hp,
@@ -322,14 +336,15 @@ fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
         hp,
         &mut s.a2,
         hp,
-        Init::Row(&p[l.b2..l.b2 + hp]),
+        b2,
+        Post::Relu,
     );
-    relu(&mut s.a2);
     let a2 = Strided {
         data: &s.a2,
         row_stride: hp,
         col_stride: 1,
     };
+    let b3 = Init::Row(&p[l.b3..l.b3 + YW]);
     gemm::<M>(
         LANES,
         YW,
@@ -339,7 +354,8 @@ fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
         YW,
         &mut s.z3,
         YW,
-        Init::Row(&p[l.b3..l.b3 + YW]),
+        b3,
+        Post::None,
     );
 }
 
@@ -347,7 +363,8 @@ fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
 ///
 /// `p = ln(1 + y cos)` with `y = e^z - 1`, so `dp/dz = cos e^z / (1 + y cos)`, which lies in
 /// `[0, 1]`: the gradient stays bounded however large the target (mirror-like materials). Where
-/// `e^z` saturates (`z` above [`fastmath::EXP_MAX_ARG`]) the gradient is 0, as for the clamp.
+/// the evaluator clamps `z` (outside `[EXP_ARG_MIN, EXP_ARG_MAX]` of [`network`]) the gradient
+/// is 0, as the derivative of the clamp is.
 /// Training uses the unclamped `y` (it can dip below 0, as in the authors' Keras model, which
 /// keeps the gradient alive for dark channels); the evaluator clamps `y` at 0, which can only
 /// lower the loss against a non-negative target, and `clamp_output` measures exactly that.
@@ -358,29 +375,48 @@ fn loss_and_output_gradient(
     clamp_output: bool,
     with_gradient: bool,
 ) -> f64 {
-    let mut sums = [0.0f32; VEC];
-    for ((z_v, (t_v, c_v)), g_v) in
-        s.z3.chunks_exact(VEC)
-            .zip(s.target.chunks_exact(VEC).zip(s.cos.chunks_exact(VEC)))
-            .zip(s.g3.chunks_exact_mut(VEC))
-    {
-        for q in 0..VEC {
-            let (z, t, c) = (z_v[q], t_v[q], c_v[q]);
-            let ez = fastmath::exp(z);
-            let y = if clamp_output {
-                (ez - 1.0).max(0.0)
-            } else {
-                ez - 1.0
-            };
+    // Channel-major copies of the 3 used output columns, so that the transcendental work runs
+    // on full vectors of lanes instead of 3-of-8-used rows.
+    for k in 0..OUTPUTS {
+        for (lane, z) in s.z_out[k * LANES..(k + 1) * LANES].iter_mut().enumerate() {
+            *z = s.z3[lane * YW + k];
+        }
+    }
+    for k in 0..OUTPUTS {
+        let range = k * LANES..(k + 1) * LANES;
+        let (z, t, c) = (
+            &s.z_out[range.clone()],
+            &s.target[range.clone()],
+            &s.cos[..LANES],
+        );
+        let (err, g) = (&mut s.err[range.clone()], &mut s.g_out[range]);
+        for lane in 0..LANES {
+            let (z, t, c) = (z[lane], t[lane], c[lane]);
+            // The evaluator's activation, so that the loss measures the network as saved.
+            let y_raw = network::fast_expm1(z);
+            let y = if clamp_output { y_raw.max(0.0) } else { y_raw };
             let u = y * c;
             let d = fastmath::ln_1p(u) - t;
-            sums[q] += d.abs();
+            err[lane] = d.abs();
             if with_gradient {
                 let sign = (d > 0.0) as i32 as f32 - (d < 0.0) as i32 as f32;
-                let slope = (c * ez / (1.0 + u).max(1e-30)).min(1.0);
-                let live = z <= fastmath::EXP_MAX_ARG;
-                g_v[q] = if live { sign * slope * scale } else { 0.0 };
+                let slope = (c * (y_raw + 1.0) / (1.0 + u).max(1e-30)).min(1.0);
+                let live = z > network::EXP_ARG_MIN && z < network::EXP_ARG_MAX;
+                g[lane] = if live { sign * slope * scale } else { 0.0 };
             }
+        }
+    }
+    if with_gradient {
+        for k in 0..OUTPUTS {
+            for (lane, &g) in s.g_out[k * LANES..(k + 1) * LANES].iter().enumerate() {
+                s.g3[lane * YW + k] = g;
+            }
+        }
+    }
+    let mut sums = [0.0f32; VEC];
+    for group in s.err.chunks_exact(VEC) {
+        for q in 0..VEC {
+            sums[q] += group[q];
         }
     }
     sums.iter().map(|&v| v as f64).sum()
@@ -397,6 +433,7 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         row_stride: 0,
         col_stride: 0,
     };
+    let (zero, none) = (Init::Zero, Post::None);
 
     // Output layer.
     gemm::<M>(
@@ -408,7 +445,8 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         YW,
         &mut grad[l.w3..],
         YW,
-        Init::Zero,
+        zero,
+        none,
     );
     gemm::<M>(
         1,
@@ -419,25 +457,18 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         YW,
         &mut grad[l.b3..],
         YW,
-        Init::Zero,
+        zero,
+        none,
     );
     let g3 = Strided {
         data: &s.g3,
         row_stride: YW,
         col_stride: 1,
     };
+    let active2 = Post::MaskPositive(&s.a2);
     gemm::<M>(
-        LANES,
-        hp,
-        OUTPUTS,
-        g3,
-        &w.w3t,
-        hp,
-        &mut s.g2,
-        hp,
-        Init::Zero,
+        LANES, hp, OUTPUTS, g3, &w.w3t, hp, &mut s.g2, hp, zero, active2,
     );
-    mask_inactive(&mut s.g2, &s.a2);
 
     // Second hidden layer.
     gemm::<M>(
@@ -449,7 +480,8 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         hp,
         &mut grad[l.w2..],
         hp,
-        Init::Zero,
+        zero,
+        none,
     );
     gemm::<M>(
         1,
@@ -460,15 +492,16 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         hp,
         &mut grad[l.b2..],
         hp,
-        Init::Zero,
+        zero,
+        none,
     );
     let g2 = Strided {
         data: &s.g2,
         row_stride: hp,
         col_stride: 1,
     };
-    gemm::<M>(LANES, hp, h, g2, &w.w2t, hp, &mut s.g1, hp, Init::Zero);
-    mask_inactive(&mut s.g1, &s.a1);
+    let active1 = Post::MaskPositive(&s.a1);
+    gemm::<M>(LANES, hp, h, g2, &w.w2t, hp, &mut s.g1, hp, zero, active1);
 
     // First hidden layer.
     gemm::<M>(
@@ -480,7 +513,8 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         hp,
         &mut grad[l.w1..],
         hp,
-        Init::Zero,
+        zero,
+        none,
     );
     gemm::<M>(
         1,
@@ -491,7 +525,8 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         hp,
         &mut grad[l.b1..],
         hp,
-        Init::Zero,
+        zero,
+        none,
     );
 }
 
@@ -505,27 +540,12 @@ fn transposed(m: &[f32], ld: usize) -> Strided<'_> {
     }
 }
 
-#[inline(always)]
-fn relu(a: &mut [f32]) {
-    for v in a.iter_mut() {
-        *v = v.max(0.0);
-    }
-}
-
-/// Zeroes the gradient of units whose relu was inactive (output 0).
-#[inline(always)]
-fn mask_inactive(g: &mut [f32], a: &[f32]) {
-    for (g, &a) in g.iter_mut().zip(a) {
-        *g = if a > 0.0 { *g } else { 0.0 };
-    }
-}
-
 /// Network outputs `f_r` (clamped at 0, as evaluated) of the loaded chunk, `[lane][channel]`.
 /// For diagnostics and tests: the portable kernel copy, no dispatch.
 pub fn outputs(w: &Weights, s: &mut ChunkScratch) -> [[f32; OUTPUTS]; LANES] {
     forward::<Unfused>(w, s);
     std::array::from_fn(|lane| {
-        std::array::from_fn(|k| (fastmath::exp(s.z3[lane * YW + k]) - 1.0).max(0.0))
+        std::array::from_fn(|k| network::fast_expm1(s.z3[lane * YW + k]).max(0.0))
     })
 }
 
@@ -693,6 +713,31 @@ mod tests {
                         .sum::<f32>();
                 let y = (z.exp() - 1.0).max(0.0);
                 assert!((o[k] - y).abs() <= 1e-5 * y.max(1.0), "{o:?} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn outputs_match_the_network_evaluator() {
+        let layers = random_layers(21, 8);
+        let net = crate::network::Nbrdf {
+            name: "t".into(),
+            layers: layers.clone(),
+            sampling: None,
+            provenance: serde_json::Value::Null,
+        };
+        let layout = Layout::new(21);
+        let weights = Weights::new(layout.clone(), layout.pad(&layers));
+        let samples = random_samples(LANES, 9);
+        let mut scratch = ChunkScratch::new(&layout);
+        scratch.load_slice(&samples);
+        for (s, o) in samples.iter().zip(outputs(&weights, &mut scratch)) {
+            let e = net.eval_input(s.x);
+            for k in 0..3 {
+                assert!(
+                    (o[k] - e[k]).abs() <= 2e-6 * e[k].max(1.0),
+                    "{o:?} vs {e:?}"
+                );
             }
         }
     }
