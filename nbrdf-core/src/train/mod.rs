@@ -237,7 +237,8 @@ pub fn provenance(config: &TrainConfig, report: &TrainReport, source: &str) -> s
         "dropped_invalid": report.dropped_invalid,
         "hidden": config.hidden,
         "batch": config.batch,
-        "learning_rate": config.adam.learning_rate,
+        // Through its shortest decimal form: 5e-4 as f32 widened to f64 would print 0.000500000024.
+        "learning_rate": config.adam.learning_rate.to_string().parse::<f64>().unwrap_or(f64::NAN),
         "max_epochs": config.max_epochs,
         "patience": config.patience,
         "epochs": report.epochs_run,
@@ -254,6 +255,7 @@ pub struct Trainer {
     kernel: Kernel,
     pub weights: Weights,
     adam: Adam,
+    learning_rate: f32,
     batch: usize,
     scratches: Vec<ChunkScratch>,
     /// One padded gradient per chunk of a batch, reduced in chunk order.
@@ -287,6 +289,7 @@ impl Trainer {
         Trainer {
             kernel: Kernel::detect(),
             adam: Adam::new(adam, len),
+            learning_rate: adam.learning_rate,
             batch,
             scratches: (0..chunks).map(|_| ChunkScratch::new(&layout)).collect(),
             chunk_grads: vec![0.0; chunks * len],
@@ -337,10 +340,19 @@ impl Trainer {
         &self.grad
     }
 
+    pub fn learning_rate(&self) -> f32 {
+        self.learning_rate
+    }
+
+    /// Changes the step size of the following steps (Adam's moments are kept).
+    pub fn set_learning_rate(&mut self, lr: f32) {
+        self.learning_rate = lr;
+    }
+
     /// One Adam step on the samples `indices`; returns the loss sum before the step.
     pub fn step(&mut self, samples: &[Sample], indices: &[u32]) -> f64 {
         let loss = self.compute_gradient(samples, indices);
-        let lr = self.adam.config.learning_rate;
+        let lr = self.learning_rate;
         self.adam.step(&mut self.weights.p, &self.grad, lr);
         self.weights.refresh_transposes();
         loss
