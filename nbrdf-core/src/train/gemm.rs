@@ -69,8 +69,11 @@ pub fn gemm<M: MulAdd>(
 }
 
 /// All rows for the column block starting at `j0` of `NB` vectors; returns the block width.
+/// Rows go in blocks of 12 / `NB` (12 accumulators of the 16 vector registers), the rest in
+/// blocks of 4, 2 and 1, so that every block has enough independent accumulators to hide the
+/// latency of the multiply-adds.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments, clippy::int_plus_one)] // `i0 + 1 <= rows` is the macro's `i0 + MR <= rows`
 fn block_rows<M: MulAdd, const NB: usize>(
     rows: usize,
     depth: usize,
@@ -84,15 +87,52 @@ fn block_rows<M: MulAdd, const NB: usize>(
     j0: usize,
 ) -> usize {
     let mut i0 = 0;
-    while i0 + 4 <= rows {
-        block::<M, 4, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
-        i0 += 4;
+    macro_rules! blocks_of {
+        ($mr:literal) => {
+            while i0 + $mr <= rows {
+                block::<M, $mr, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
+                i0 += $mr;
+            }
+        };
     }
-    while i0 < rows {
-        block::<M, 1, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
-        i0 += 1;
+    match NB {
+        1 => blocks_of!(8),
+        2 => blocks_of!(6),
+        _ => {}
     }
+    blocks_of!(4);
+    blocks_of!(2);
+    blocks_of!(1);
     NB * VEC
+}
+
+/// `out[j] = sum_k b[k][j]` for `j < cols` (a multiple of [`VEC`]), summing rows in four
+/// interleaved partial sums (fixed order, so deterministic) to hide the add latency.
+#[inline(always)]
+pub fn column_sums(depth: usize, cols: usize, b: &[f32], ldb: usize, out: &mut [f32]) {
+    for j0 in (0..cols).step_by(VEC) {
+        let mut acc = [[0.0f32; VEC]; 4];
+        let mut k = 0;
+        while k + 4 <= depth {
+            for (p, acc_p) in acc.iter_mut().enumerate() {
+                let row = &b[(k + p) * ldb + j0..(k + p) * ldb + j0 + VEC];
+                for q in 0..VEC {
+                    acc_p[q] += row[q];
+                }
+            }
+            k += 4;
+        }
+        while k < depth {
+            let row = &b[k * ldb + j0..k * ldb + j0 + VEC];
+            for q in 0..VEC {
+                acc[0][q] += row[q];
+            }
+            k += 1;
+        }
+        for q in 0..VEC {
+            out[j0 + q] = (acc[0][q] + acc[1][q]) + (acc[2][q] + acc[3][q]);
+        }
+    }
 }
 
 /// One `MR x (NB * 8)` block of `C` held in registers.
@@ -191,6 +231,17 @@ mod tests {
                     "({i}, {j})"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn column_sums_add_rows() {
+        let (depth, cols) = (7, 16);
+        let b: Vec<f32> = (0..depth * cols).map(|v| v as f32).collect();
+        let mut out = vec![0.0; cols];
+        column_sums(depth, cols, &b, cols, &mut out);
+        for j in 0..cols {
+            assert_eq!(out[j], (0..depth).map(|k| b[k * cols + j]).sum::<f32>());
         }
     }
 }

@@ -12,7 +12,7 @@
 
 use super::dataset::Sample;
 use super::fastmath::{self, Fused, MulAdd, Unfused};
-use super::gemm::{gemm, Init, Post, Strided, VEC};
+use super::gemm::{column_sums, gemm, Init, Post, Strided, VEC};
 use crate::network::{self, Layer, INPUTS, OUTPUTS};
 
 /// Samples per chunk, the unit of parallel work and of deterministic gradient summation.
@@ -377,9 +377,11 @@ fn loss_and_output_gradient(
 ) -> f64 {
     // Channel-major copies of the 3 used output columns, so that the transcendental work runs
     // on full vectors of lanes instead of 3-of-8-used rows.
-    for k in 0..OUTPUTS {
-        for (lane, z) in s.z_out[k * LANES..(k + 1) * LANES].iter_mut().enumerate() {
-            *z = s.z3[lane * YW + k];
+    {
+        let (z0, rest) = s.z_out.split_at_mut(LANES);
+        let (z1, z2) = rest.split_at_mut(LANES);
+        for (((row, z0), z1), z2) in s.z3.chunks_exact(YW).zip(z0).zip(z1).zip(z2) {
+            (*z0, *z1, *z2) = (row[0], row[1], row[2]);
         }
     }
     for k in 0..OUTPUTS {
@@ -407,10 +409,10 @@ fn loss_and_output_gradient(
         }
     }
     if with_gradient {
-        for k in 0..OUTPUTS {
-            for (lane, &g) in s.g_out[k * LANES..(k + 1) * LANES].iter().enumerate() {
-                s.g3[lane * YW + k] = g;
-            }
+        let (g0, rest) = s.g_out.split_at(LANES);
+        let (g1, g2) = rest.split_at(LANES);
+        for (((row, g0), g1), g2) in s.g3.chunks_exact_mut(YW).zip(g0).zip(g1).zip(g2) {
+            (row[0], row[1], row[2]) = (*g0, *g1, *g2);
         }
     }
     let mut sums = [0.0f32; VEC];
@@ -426,13 +428,6 @@ fn loss_and_output_gradient(
 fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
     let l = &w.layout;
     let (h, hp) = (l.hidden, l.hp);
-    let ones = [1.0f32];
-    // A row of ones turns a column sum (a bias gradient) into a product.
-    let sum_rows = Strided {
-        data: &ones,
-        row_stride: 0,
-        col_stride: 0,
-    };
     let (zero, none) = (Init::Zero, Post::None);
 
     // Output layer.
@@ -448,18 +443,7 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         zero,
         none,
     );
-    gemm::<M>(
-        1,
-        YW,
-        LANES,
-        sum_rows,
-        &s.g3,
-        YW,
-        &mut grad[l.b3..],
-        YW,
-        zero,
-        none,
-    );
+    column_sums(LANES, YW, &s.g3, YW, &mut grad[l.b3..]);
     let g3 = Strided {
         data: &s.g3,
         row_stride: YW,
@@ -483,18 +467,7 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         zero,
         none,
     );
-    gemm::<M>(
-        1,
-        hp,
-        LANES,
-        sum_rows,
-        &s.g2,
-        hp,
-        &mut grad[l.b2..],
-        hp,
-        zero,
-        none,
-    );
+    column_sums(LANES, hp, &s.g2, hp, &mut grad[l.b2..]);
     let g2 = Strided {
         data: &s.g2,
         row_stride: hp,
@@ -516,18 +489,7 @@ fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
         zero,
         none,
     );
-    gemm::<M>(
-        1,
-        hp,
-        LANES,
-        sum_rows,
-        &s.g1,
-        hp,
-        &mut grad[l.b1..],
-        hp,
-        zero,
-        none,
-    );
+    column_sums(LANES, hp, &s.g1, hp, &mut grad[l.b1..]);
 }
 
 /// The transpose of a sample-major matrix with row stride `ld`: `A(feature, lane)`.
