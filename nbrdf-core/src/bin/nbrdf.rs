@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::analytic::{catalogue, AnalyticBrdf, ModelKind};
 use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
 use nbrdf_core::merl::{self, MerlTable};
+use nbrdf_core::metrics;
 use nbrdf_core::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
 use nbrdf_core::phong_fit::{self, FitConfig, PhongFit};
 use nbrdf_core::train::adam::AdamConfig;
@@ -43,6 +44,8 @@ enum Command {
     Train(TrainArgs),
     /// Fit the Blinn-Phong sampling lobe (exponent, specular weight) to a table or a network.
     FitPhong(FitPhongArgs),
+    /// Compare two materials (tables or networks): sphere images and log-space BRDF error.
+    Compare(CompareArgs),
 }
 
 #[derive(Args)]
@@ -174,6 +177,28 @@ struct FitPhongArgs {
     threads: Option<usize>,
 }
 
+#[derive(Args)]
+struct CompareArgs {
+    /// The reference: a MERL-format table (.binary) or a network (.nbrdf.json).
+    #[arg(value_name = "A")]
+    reference: PathBuf,
+    /// The material compared against A, table or network.
+    #[arg(value_name = "B")]
+    test: PathBuf,
+    /// Width and height of the sphere images, pixels.
+    #[arg(long, default_value_t = 128)]
+    resolution: usize,
+    /// Directions sampled for the log-space error (each of adaptive and uniform sampling).
+    #[arg(long, default_value_t = 100_000)]
+    samples: usize,
+    /// Print the comparison as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -203,7 +228,53 @@ fn run(command: Command) -> Result<()> {
         Command::Info(args) => run_info(&args),
         Command::Train(args) => run_train(&args),
         Command::FitPhong(args) => run_fit_phong(&args),
+        Command::Compare(args) => run_compare(&args),
     }
+}
+
+fn run_compare(args: &CompareArgs) -> Result<()> {
+    let reference = metrics::Material::read(&args.reference)?;
+    let test = metrics::Material::read(&args.test)?;
+    let c = with_threads(args.threads, || {
+        metrics::compare(&reference, &test, args.resolution, args.samples)
+    })??;
+    if args.json {
+        let value = serde_json::json!({
+            "reference": args.reference.display().to_string(),
+            "test": args.test.display().to_string(),
+            "comparison": c,
+        });
+        let text = serde_json::to_string_pretty(&value)
+            .map_err(|e| NbrdfError::InvalidArgument(format!("cannot format JSON: {e}")))?;
+        return emit(&format!("{text}\n"));
+    }
+    let mut out = format!(
+        "{} vs {} (reference first), {}x{} spheres:\n  {:>9}{:>12}{:>12}{:>9}{:>8}\n",
+        args.reference.display(),
+        args.test.display(),
+        c.resolution,
+        c.resolution,
+        "theta_l",
+        "MAE",
+        "RMSE",
+        "PSNR",
+        "SSIM"
+    );
+    let row = |label: String, e: &metrics::ImageErrors| {
+        format!(
+            "  {label:>9}{:>12.4e}{:>12.4e}{:>9.2}{:>8.4}\n",
+            e.mae, e.rmse, e.psnr, e.ssim
+        )
+    };
+    for (deg, e) in &c.per_light {
+        out += &row(format!("{deg:.0} deg"), e);
+    }
+    out += &row("mean".to_string(), &c.mean);
+    out += &format!(
+        "log-space BRDF error |ln(1+fA cos) - ln(1+fB cos)|: adaptive {:.4e}, uniform {:.4e}\n",
+        c.log_error_adaptive, c.log_error_uniform
+    );
+    emit(&out)
 }
 
 /// Runs `f` on a pool of `threads` workers, or on the global pool (one per core).
@@ -581,6 +652,29 @@ mod tests {
             panic!("fit-phong must parse")
         };
         assert!(args.json && args.output.is_none());
+    }
+
+    #[test]
+    fn compare_arguments_parse() {
+        let Ok(Cli {
+            command: Command::Compare(args),
+        }) = Cli::try_parse_from([
+            "nbrdf",
+            "compare",
+            "a.binary",
+            "b.nbrdf.json",
+            "--resolution",
+            "32",
+            "--json",
+        ])
+        else {
+            panic!("compare must parse")
+        };
+        assert_eq!(
+            (args.resolution, args.samples, args.json),
+            (32, 100_000, true)
+        );
+        assert!(Cli::try_parse_from(["nbrdf", "compare", "a.binary"]).is_err());
     }
 
     #[test]

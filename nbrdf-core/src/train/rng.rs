@@ -23,6 +23,7 @@ pub enum Stream {
     Init = 3,
     Shuffle = 4,
     FitSamples = 5,
+    Metrics = 6,
 }
 
 /// A sequential SplitMix64 generator.
