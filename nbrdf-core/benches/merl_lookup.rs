@@ -1,1 +1,98 @@
-fn main() {}
+//! MERL trilinear lookups per second on a synthesised table (SGD fit of gold-metallic-paint),
+//! for random light/view pairs over the upper hemisphere: one at a time on one thread
+//! (`Brdf::eval`), and batched (`Brdf::eval_cos_batch`) on one rayon thread and on all of them.
+
+use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use nbrdf_core::analytic::{AnalyticBrdf, ModelKind};
+use nbrdf_core::{Brdf, Directions, MerlTable, RgbMut};
+
+const PAIRS: usize = 1 << 16;
+
+/// SplitMix64: a fixed, dependency-free stream so every run looks up the same directions.
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_f32(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform over the hemisphere (z uniform in [0, 1) by Archimedes).
+    fn hemisphere(&mut self) -> [f32; 3] {
+        let z = self.next_f32();
+        let phi = std::f32::consts::TAU * self.next_f32();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        [r * phi.cos(), r * phi.sin(), z]
+    }
+}
+
+/// `n` directions, planar `[x.., y.., z..]`.
+fn planar_directions(rng: &mut SplitMix, n: usize) -> Vec<f32> {
+    let mut out = vec![0.0; 3 * n];
+    for i in 0..n {
+        let d = rng.hemisphere();
+        for k in 0..3 {
+            out[k * n + i] = d[k];
+        }
+    }
+    out
+}
+
+fn table() -> MerlTable {
+    AnalyticBrdf::from_catalogue(ModelKind::Sgd, "gold-metallic-paint")
+        .expect("catalogue material")
+        .tabulate()
+}
+
+fn bench_lookup(c: &mut Criterion) {
+    let table = table();
+    let mut rng = SplitMix(7);
+    let light = planar_directions(&mut rng, PAIRS);
+    let view = planar_directions(&mut rng, PAIRS);
+    let (l, v) = (
+        Directions::from_planar(&light).expect("planar"),
+        Directions::from_planar(&view).expect("planar"),
+    );
+    let mut out = vec![0.0f32; 3 * PAIRS];
+
+    let mut group = c.benchmark_group("merl_trilinear_lookup");
+    group.throughput(Throughput::Elements(PAIRS as u64));
+
+    group.bench_function("eval/1-thread", |b| {
+        b.iter(|| {
+            let mut acc = 0.0f32;
+            for i in 0..PAIRS {
+                acc += black_box(&table).eval(l.get(i), v.get(i))[1];
+            }
+            acc
+        })
+    });
+
+    let all = rayon::current_num_threads();
+    let thread_counts = if all > 1 { vec![1, all] } else { vec![1] };
+    for threads in thread_counts {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("rayon pool");
+        group.bench_with_input(
+            BenchmarkId::new("eval_cos_batch/threads", threads),
+            &threads,
+            |b, _| {
+                b.iter(|| {
+                    pool.install(|| {
+                        let out = RgbMut::from_planar(&mut out).expect("planar");
+                        black_box(&table).eval_cos_batch(v, l, out);
+                    })
+                })
+            },
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_lookup);
+criterion_main!(benches);

@@ -18,7 +18,11 @@ impl<'a> Directions<'a> {
             return None;
         }
         let n = buffer.len() / 3;
-        Some(Directions { x: &buffer[..n], y: &buffer[n..2 * n], z: &buffer[2 * n..] })
+        Some(Directions {
+            x: &buffer[..n],
+            y: &buffer[n..2 * n],
+            z: &buffer[2 * n..],
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -35,7 +39,11 @@ impl<'a> Directions<'a> {
 
     /// The sub-batch `range`, for splitting work across threads.
     pub fn slice(&self, start: usize, end: usize) -> Directions<'a> {
-        Directions { x: &self.x[start..end], y: &self.y[start..end], z: &self.z[start..end] }
+        Directions {
+            x: &self.x[start..end],
+            y: &self.y[start..end],
+            z: &self.z[start..end],
+        }
     }
 }
 

@@ -67,7 +67,11 @@ pub fn half_diff(light: DVec3, view: DVec3) -> HalfDiff {
 pub fn to_rusinkiewicz(light: DVec3, view: DVec3) -> RusinkiewiczAngles {
     let HalfDiff { half, diff } = half_diff(light, view);
     let sin_theta_h = (half.x * half.x + half.y * half.y).sqrt();
-    let phi_h = if sin_theta_h > SIN_THETA_H_EPS { half.y.atan2(half.x) } else { 0.0 };
+    let phi_h = if sin_theta_h > SIN_THETA_H_EPS {
+        half.y.atan2(half.x)
+    } else {
+        0.0
+    };
     RusinkiewiczAngles {
         theta_h: half.z.clamp(-1.0, 1.0).acos(),
         phi_h,
@@ -85,9 +89,17 @@ pub fn from_rusinkiewicz(angles: &RusinkiewiczAngles) -> (DVec3, DVec3) {
     let (sin_ph, cos_ph) = angles.phi_h.sin_cos();
     let d = DVec3::new(sin_td * cos_pd, sin_td * sin_pd, cos_td);
     // R_y(theta_h) d
-    let t = DVec3::new(cos_th * d.x + sin_th * d.z, d.y, -sin_th * d.x + cos_th * d.z);
+    let t = DVec3::new(
+        cos_th * d.x + sin_th * d.z,
+        d.y,
+        -sin_th * d.x + cos_th * d.z,
+    );
     // R_z(phi_h) t
-    let light = DVec3::new(cos_ph * t.x - sin_ph * t.y, sin_ph * t.x + cos_ph * t.y, t.z);
+    let light = DVec3::new(
+        cos_ph * t.x - sin_ph * t.y,
+        sin_ph * t.x + cos_ph * t.y,
+        t.z,
+    );
     let half = DVec3::new(sin_th * cos_ph, sin_th * sin_ph, cos_th);
     let view = 2.0 * light.dot(half) * half - light;
     (light, view)
@@ -104,12 +116,8 @@ pub fn cos_theta_light(angles: &RusinkiewiczAngles) -> f64 {
 /// and selects only, no trigonometry, no branches the compiler cannot turn into blends).
 #[inline(always)]
 pub fn network_input_components(lx: f32, ly: f32, lz: f32, vx: f32, vy: f32, vz: f32) -> [f32; 6] {
-    let l_len2 = lx * lx + ly * ly + lz * lz;
-    let v_len2 = vx * vx + vy * vy + vz * vz;
-    let l_inv = if l_len2 > 0.0 { 1.0 / l_len2.sqrt() } else { 0.0 };
-    let v_inv = if v_len2 > 0.0 { 1.0 / v_len2.sqrt() } else { 0.0 };
-    let (lx, ly, lz) = (lx * l_inv, ly * l_inv, lz * l_inv);
-    let (vx, vy, vz) = (vx * v_inv, vy * v_inv, vz * v_inv);
+    let (lx, ly, lz) = normalize_or_normal_f32(lx, ly, lz);
+    let (vx, vy, vz) = normalize_or_normal_f32(vx, vy, vz);
     let (hx, hy, hz) = (lx + vx, ly + vy, lz + vz);
     let h_len2 = hx * hx + hy * hy + hz * hz;
     let degenerate = h_len2 <= 0.0;
@@ -128,6 +136,20 @@ pub fn network_input_components(lx: f32, ly: f32, lz: f32, vx: f32, vy: f32, vz:
     [sin_th, 0.0, hz, dx, ty, dz]
 }
 
+/// Unit vector, or the normal `+z` for zero-length, infinite or NaN input (selects only).
+#[inline(always)]
+fn normalize_or_normal_f32(x: f32, y: f32, z: f32) -> (f32, f32, f32) {
+    let len2 = x * x + y * y + z * z;
+    // False for NaN as well as for 0 and infinity.
+    let usable = len2 > 0.0 && len2 < f32::INFINITY;
+    let inv = if usable { 1.0 / len2.sqrt() } else { 0.0 };
+    if usable {
+        (x * inv, y * inv, z * inv)
+    } else {
+        (0.0, 0.0, 1.0)
+    }
+}
+
 /// [`network_input_components`] for `glam` vectors.
 #[inline]
 pub fn network_input(light: Vec3, view: Vec3) -> [f32; 6] {
@@ -141,7 +163,11 @@ mod tests {
     use std::f64::consts::{FRAC_PI_2, PI};
 
     fn hemisphere(theta: f64, phi: f64) -> DVec3 {
-        DVec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+        DVec3::new(
+            theta.sin() * phi.cos(),
+            theta.sin() * phi.sin(),
+            theta.cos(),
+        )
     }
 
     proptest! {
@@ -186,17 +212,19 @@ mod tests {
     #[test]
     fn degenerate_cases_are_finite() {
         let cases = [
-            (DVec3::Z, DVec3::Z),                           // l = v = n: theta_h = theta_d = 0
-            (hemisphere(0.3, 0.2), hemisphere(0.3, 0.2)),   // l = v
-            (DVec3::X, -DVec3::X),                          // l + v = 0
-            (DVec3::ZERO, DVec3::Z),                        // zero vector
+            (DVec3::Z, DVec3::Z),                         // l = v = n: theta_h = theta_d = 0
+            (hemisphere(0.3, 0.2), hemisphere(0.3, 0.2)), // l = v
+            (DVec3::X, -DVec3::X),                        // l + v = 0
+            (DVec3::ZERO, DVec3::Z),                      // zero vector
             (DVec3::new(0.0, 0.0, 3.0), DVec3::new(1.0, 0.0, 1.0)), // not unit length
             (DVec3::new(f64::NAN, 0.0, 1.0), DVec3::Z),
         ];
         for (l, v) in cases {
             let a = to_rusinkiewicz(l, v);
             assert!(
-                [a.theta_h, a.phi_h, a.theta_d, a.phi_d].iter().all(|x| x.is_finite()),
+                [a.theta_h, a.phi_h, a.theta_d, a.phi_d]
+                    .iter()
+                    .all(|x| x.is_finite()),
                 "{l} {v} -> {a:?}"
             );
             let x = network_input(l.as_vec3(), v.as_vec3());

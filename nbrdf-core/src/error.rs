@@ -26,10 +26,16 @@ pub type Result<T> = std::result::Result<T, NbrdfError>;
 
 impl NbrdfError {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        NbrdfError::Io { path: path.into(), source }
+        NbrdfError::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        NbrdfError::Format { path: path.into(), message: message.into() }
+        NbrdfError::Format {
+            path: path.into(),
+            message: message.into(),
+        }
     }
 }

@@ -108,6 +108,13 @@ impl AnalyticBrdf {
     pub fn tabulate(&self) -> MerlTable {
         MerlTable::tabulate(|angles| {
             let (light, view) = crate::coords::from_rusinkiewicz(angles);
+            // A centre with a direction below the horizon has no reflectance: MerlTable::tabulate
+            // stores non-finite values as not measured (as real MERL files and RGL tabulations
+            // do), so trilinear lookups near grazing angles leave those cells out instead of
+            // blending in zeros.
+            if light.z <= 0.0 || view.z <= 0.0 {
+                return [f64::NAN; 3];
+            }
             self.eval_f64(light, view)
         })
     }
@@ -422,8 +429,18 @@ mod tests {
             let (h, d, p) = crate::merl::cell_coordinates(index);
             let angles = cell_centre_angles(h, d, p);
             let (l, v) = crate::coords::from_rusinkiewicz(&angles);
+            if l.z <= 0.0 || v.z <= 0.0 {
+                assert_eq!(
+                    table.cell(index),
+                    None,
+                    "{h} {d} {p} lies below the horizon"
+                );
+                continue;
+            }
             let expect = brdf.eval_f64(l, v);
-            let cell = table.cell(index).expect("tabulated cells are valid");
+            let cell = table
+                .cell(index)
+                .expect("cells above the horizon are valid");
             for c in 0..3 {
                 assert!(
                     (cell[c] - expect[c]).abs() <= 1e-12 * expect[c],
@@ -443,10 +460,11 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 1000);
-        // Cells whose light direction is below the horizon hold zero reflectance.
+        // Cells whose light direction is below the horizon are not measured.
         let below = cell_index(89, 89, 0);
         let (l, _) = crate::coords::from_rusinkiewicz(&cell_centre_angles(89, 89, 0));
         assert!(l.z < 0.0);
-        assert_eq!(table.cell(below), Some([0.0; 3]));
+        assert_eq!(table.cell(below), None);
+        assert_eq!(table.stored()[below], crate::merl::NOT_MEASURED);
     }
 }

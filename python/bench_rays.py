@@ -1,0 +1,150 @@
+"""Rays per second of our BSDFs against Mitsuba's built-ins, in the same scene, variant and mode.
+
+Every BSDF under test is put on the four plates of the Veach scene (direct illumination with MIS:
+per sample one camera ray, one shadow ray and one BSDF ray), rendered once to compile the kernels,
+then timed over several renders; runs of the different BSDFs alternate within one process so that
+machine load affects them alike. Modes: ``default`` (Dr.Jit's symbolic loops and calls, Mitsuba's
+megakernel) and ``wavefront`` (symbolic loops and calls off, which the Rust backend needs).
+
+    python python/bench_rays.py [--quick] [--json FILE] [--modes default,wavefront]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import nbrdf_mitsuba  # first: finds a libLLVM for Dr.Jit before Mitsuba starts its JIT
+import drjit as dr
+import mitsuba as mi
+from tqdm import tqdm
+
+from veach_scene import veach_scene_dict
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED = REPO.parent / "shared"
+RAYS_PER_SAMPLE = 3  # camera ray, emitter (shadow) ray, BSDF ray of the MIS direct integrator
+DEFAULT_MATERIAL = "gold-metallic-paint"
+
+
+def builtin_bsdfs() -> dict[str, dict]:
+    return {
+        "diffuse": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.4, 0.3]}},
+        "roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.1},
+        "roughplastic": {"type": "roughplastic", "distribution": "ggx", "alpha": 0.1},
+        "principled": {"type": "principled", "base_color": {"type": "rgb", "value": [0.8, 0.5, 0.2]},
+                       "roughness": 0.3, "metallic": 0.5},
+    }
+
+
+def ensure_inputs(material: str, out: Path, cli: Path) -> tuple[Path, Path]:
+    """The NBRDF and the MERL-format table of `material`, made once under `out`."""
+    out.mkdir(parents=True, exist_ok=True)
+    table = out / f"{material}.sgd.binary"
+    if not table.exists():
+        subprocess.run([str(cli), "synth", "--model", "sgd", "--material", material, "-o", str(table)],
+                       check=True, stdout=subprocess.DEVNULL)
+    network = out / f"{material}.nbrdf.json"
+    if not network.exists():
+        keras = SHARED / "data" / "reference-nbrdf" / "merl" / f"{material}.h5"
+        if keras.exists():
+            from nbrdf_mitsuba import import_keras
+
+            import_keras.main([str(keras), "-o", str(network)])
+        else:
+            subprocess.run([str(cli), "train", str(table), "-o", str(network), "--epochs", "5",
+                            "--samples", "200000", "--quiet"], check=True)
+    return network, table
+
+
+def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
+    """BSDFs to time in `mode`; the Rust-backed ones exist in wavefront mode only."""
+    bsdfs = {}
+    bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit"}
+    if mode == "wavefront":
+        bsdfs["nbrdf-rust"] = {"type": "nbrdf", "filename": str(network), "backend": "rust"}
+        bsdfs["merl"] = {"type": "merl", "filename": str(table)}
+    bsdfs.update(builtin_bsdfs())
+    return bsdfs
+
+
+def set_mode(mode: str) -> None:
+    symbolic = mode == "default"
+    dr.set_flag(dr.JitFlag.SymbolicLoops, symbolic)
+    dr.set_flag(dr.JitFlag.SymbolicCalls, symbolic)
+
+
+def time_render(scene, spp: int) -> float:
+    start = time.perf_counter()
+    image = mi.render(scene, spp=spp)
+    dr.eval(image)
+    dr.sync_thread()
+    return time.perf_counter() - start
+
+
+def bench_mode(mode: str, bsdfs: dict[str, dict], resolution, spp: int, repeats: int) -> dict:
+    set_mode(mode)
+    scenes = {}
+    for name, bsdf in bsdfs.items():
+        scenes[name] = mi.load_dict(veach_scene_dict(bsdf, integrator="mis", resolution=resolution, spp=spp))
+        time_render(scenes[name], spp)  # compiles and caches the kernels
+    seconds = {name: [] for name in bsdfs}
+    for _ in tqdm(range(repeats), desc=f"{mode} mode", unit="round"):
+        for name, scene in scenes.items():
+            seconds[name].append(time_render(scene, spp))
+    rays = resolution[0] * resolution[1] * spp * RAYS_PER_SAMPLE
+    return {name: {"mrays_per_s": rays / statistics.median(t) / 1e6, "seconds": statistics.median(t)}
+            for name, t in seconds.items()}
+
+
+def print_table(results: list[dict]) -> None:
+    for result in results:
+        bsdfs = result["bsdfs"]
+        reference = bsdfs["roughconductor"]["mrays_per_s"]
+        print(f"\n{result['scene']} scene, {result['variant']}, {result['mode']} mode")
+        print(f"{'BSDF':<16}{'Mrays/s':>10}{'vs roughconductor':>20}")
+        for name, figures in bsdfs.items():
+            print(f"{name:<16}{figures['mrays_per_s']:>10.2f}{figures['mrays_per_s'] / reference:>19.2f}x")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--variant", default="llvm_ad_rgb")
+    parser.add_argument("--modes", default="default,wavefront", help="comma-separated: default, wavefront")
+    parser.add_argument("--material", default=DEFAULT_MATERIAL)
+    parser.add_argument("--width", type=int, default=768)
+    parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="small image and few repeats (CI)")
+    parser.add_argument("--json", type=Path, help="write the figures as JSON")
+    parser.add_argument("--out", type=Path, default=REPO / "out" / "bench")
+    parser.add_argument("--cli", type=Path, default=REPO / "target" / "release" / "nbrdf")
+    args = parser.parse_args()
+    if args.quick:
+        args.width, args.spp, args.repeats = 192, 4, 2
+
+    mi.set_variant(args.variant)
+    nbrdf_mitsuba.register()
+    network, table = ensure_inputs(args.material, args.out, args.cli)
+    resolution = (args.width, args.width * 2 // 3)
+    results = []
+    for mode in args.modes.split(","):
+        if mode not in ("default", "wavefront"):
+            parser.error(f"unknown mode '{mode}'")
+        bsdfs = bench_mode(mode, candidates(network, table, mode), resolution, args.spp, args.repeats)
+        results.append({"scene": "veach", "variant": args.variant, "mode": mode, "bsdfs": bsdfs})
+    print_table(results)
+    if args.json:
+        payload = results[0] if len(results) == 1 else {"runs": results, **results[0]}
+        args.json.write_text(json.dumps(payload, indent=2))
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
