@@ -455,7 +455,7 @@ mod tests {
         assert_eq!(epochs.len(), report.epochs_run);
         let first = report.history[0].1;
         assert!(
-            report.best_validation_loss < 0.25 * first,
+            report.best_validation_loss < 0.05 * first,
             "{:?}",
             report.history
         );
