@@ -141,6 +141,12 @@ struct TrainArgs {
     /// weights are kept).
     #[arg(long, default_value_t = TrainConfig::default().patience)]
     patience: usize,
+    /// Never stop early before this many epochs (stiff materials can plateau for a while first).
+    #[arg(long, default_value_t = TrainConfig::default().min_epochs)]
+    min_epochs: usize,
+    /// Relative validation improvement that resets the patience.
+    #[arg(long, default_value_t = TrainConfig::default().min_improvement)]
+    min_improvement: f64,
     /// Random seed; a seed gives the same network whatever the thread count.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -328,6 +334,8 @@ fn run_train(args: &TrainArgs) -> Result<()> {
             ..AdamConfig::default()
         },
         patience: args.patience,
+        min_epochs: args.min_epochs,
+        min_improvement: args.min_improvement,
         seed: args.seed,
         ..TrainConfig::default()
     };

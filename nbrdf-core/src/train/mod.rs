@@ -46,9 +46,12 @@ pub struct TrainConfig {
     pub batch: usize,
     pub adam: AdamConfig,
     /// Stop after this many epochs without a relative validation improvement of
-    /// `min_improvement` over the best so far.
+    /// `min_improvement` over the best so far, but not before `min_epochs` epochs: stiff
+    /// materials can sit on a plateau for 10-15 epochs before the network finds the specular
+    /// peak (alumina-oxide does), which a bare patience would take for convergence.
     pub patience: usize,
     pub min_improvement: f64,
+    pub min_epochs: usize,
     pub seed: u64,
 }
 
@@ -64,6 +67,7 @@ impl Default for TrainConfig {
             adam: AdamConfig::default(),
             patience: 10,
             min_improvement: 1e-3,
+            min_epochs: 30,
             seed: 0,
         }
     }
@@ -189,7 +193,7 @@ pub fn train(
             best_epoch: best.1,
             seconds: start.elapsed().as_secs_f64(),
         });
-        if since_improvement >= config.patience {
+        if since_improvement >= config.patience && epoch >= config.min_epochs {
             break;
         }
     }
@@ -241,6 +245,8 @@ pub fn provenance(config: &TrainConfig, report: &TrainReport, source: &str) -> s
         "learning_rate": config.adam.learning_rate.to_string().parse::<f64>().unwrap_or(f64::NAN),
         "max_epochs": config.max_epochs,
         "patience": config.patience,
+        "min_epochs": config.min_epochs,
+        "min_improvement": config.min_improvement,
         "epochs": report.epochs_run,
         "best_epoch": report.best_epoch,
         "best_validation_loss": report.best_validation_loss,
