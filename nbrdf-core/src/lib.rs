@@ -6,6 +6,9 @@
 //! * [`analytic`] – the published SGD and ABC fits of the 100 MERL materials, tabulated to tables.
 //! * [`network`]  – the NBRDF multilayer perceptron, its JSON file format and batched evaluation.
 //! * [`sampling`] – cosine, uniform and Blinn-Phong-mixture importance sampling with pdfs.
+//! * [`train`]    – training an NBRDF on a table: samples, batched gradients, Adam, early stopping.
+//! * [`phong_fit`] – fitting the Blinn-Phong lobe that importance-samples a material.
+//! * [`metrics`]  – image-space and log-space comparison of two materials.
 //! * [`brdf`]     – the [`brdf::Brdf`] trait shared by tables and networks, SoA batch types.
 //! * [`error`]    – the crate's error type.
 //!
@@ -18,8 +21,11 @@ pub mod brdf;
 pub mod coords;
 pub mod error;
 pub mod merl;
+pub mod metrics;
 pub mod network;
+pub mod phong_fit;
 pub mod sampling;
+pub mod train;
 
 pub use brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 pub use error::{NbrdfError, Result};

@@ -451,6 +451,28 @@ impl MerlTable {
         }
     }
 
+    /// Trilinear [`MerlTable::lookup`] that tells unmeasured data apart: `None` where no
+    /// neighbour cell with a positive interpolation weight is valid (a cell is invalid when any
+    /// of its channels is not measured), where `lookup` would return 0. Training uses it so that
+    /// unmeasured regions never become targets.
+    pub fn lookup_valid(&self, angles: &RusinkiewiczAngles) -> Option<[f64; 3]> {
+        let index = continuous_index(angles);
+        if index.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
+        let (h0, h1, wh) = lerp_clamped(index[0] - 0.5, N_THETA_H);
+        let (d0, d1, wd) = lerp_clamped(index[1] - 0.5, N_THETA_D);
+        let (p0, p1, wp) = lerp_wrapped(index[2] - 0.5, N_PHI_D);
+        let any_valid = [(h0, 1.0 - wh), (h1, wh)].iter().any(|&(ih, w_h)| {
+            [(d0, 1.0 - wd), (d1, wd)].iter().any(|&(id, w_d)| {
+                [(p0, 1.0 - wp), (p1, wp)].iter().any(|&(ip, w_p)| {
+                    w_h * w_d * w_p > 0.0 && self.cell(cell_index(ih, id, ip)).is_some()
+                })
+            })
+        });
+        any_valid.then(|| self.trilinear(index))
+    }
+
     /// `f_r(light, view)`, zero at or below the horizon.
     pub fn eval_f64(
         &self,

@@ -5,9 +5,17 @@
 //! and exit status 1. New commands (train, fit-phong, compare, ...) slot in the same way.
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::analytic::{catalogue, AnalyticBrdf, ModelKind};
+use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
 use nbrdf_core::merl::{self, MerlTable};
-use nbrdf_core::{NbrdfError, Result};
+use nbrdf_core::metrics;
+use nbrdf_core::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
+use nbrdf_core::phong_fit::{self, FitConfig, PhongFit};
+use nbrdf_core::train::adam::AdamConfig;
+use nbrdf_core::train::dataset::AngularSampling;
+use nbrdf_core::train::{self, EpochStats, TrainConfig};
+use nbrdf_core::{Nbrdf, NbrdfError, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -32,6 +40,12 @@ enum Command {
     Synth(SynthArgs),
     /// Validate a MERL-format table and print per-channel reflectance statistics.
     Info(InfoArgs),
+    /// Train a neural BRDF on a MERL-format table and write it as NAME.nbrdf.json.
+    Train(TrainArgs),
+    /// Fit the Blinn-Phong sampling lobe (exponent, specular weight) to a table or a network.
+    FitPhong(FitPhongArgs),
+    /// Compare two materials (tables or networks): sphere images and log-space BRDF error.
+    Compare(CompareArgs),
 }
 
 #[derive(Args)]
@@ -78,6 +92,119 @@ struct InfoArgs {
     file: PathBuf,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum SamplingArg {
+    /// theta_h, theta_d, phi_d uniform in the angles: dense near the specular peak (the paper's).
+    Adaptive,
+    /// Light and view uniform over the hemisphere (the paper's baseline).
+    Uniform,
+}
+
+impl From<SamplingArg> for AngularSampling {
+    fn from(s: SamplingArg) -> Self {
+        match s {
+            SamplingArg::Adaptive => AngularSampling::Adaptive,
+            SamplingArg::Uniform => AngularSampling::Uniform,
+        }
+    }
+}
+
+#[derive(Args)]
+struct TrainArgs {
+    /// The MERL-format table to learn.
+    #[arg(value_name = "TABLE.binary")]
+    table: PathBuf,
+    /// Where to write the network; defaults to TABLE's name with .nbrdf.json in the current
+    /// directory.
+    #[arg(short, long, value_name = "NAME.nbrdf.json")]
+    output: Option<PathBuf>,
+    /// How training directions are drawn.
+    #[arg(long, value_enum, default_value_t = SamplingArg::Adaptive)]
+    sampling: SamplingArg,
+    /// Training samples (invalid cells and directions below the horizon are not counted);
+    /// 10% more are drawn for validation.
+    #[arg(long, default_value_t = TrainConfig::default().samples)]
+    samples: usize,
+    /// Maximum number of epochs.
+    #[arg(long, default_value_t = TrainConfig::default().max_epochs)]
+    epochs: usize,
+    /// Width of the two hidden layers.
+    #[arg(long, default_value_t = TrainConfig::default().hidden)]
+    hidden: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = AdamConfig::default().learning_rate)]
+    lr: f32,
+    /// Mini-batch size.
+    #[arg(long, default_value_t = TrainConfig::default().batch)]
+    batch: usize,
+    /// Stop after this many epochs without a 0.1% improvement of the validation loss (the best
+    /// weights are kept).
+    #[arg(long, default_value_t = TrainConfig::default().patience)]
+    patience: usize,
+    /// Never stop early before this many epochs (stiff materials can plateau for a while first).
+    #[arg(long, default_value_t = TrainConfig::default().min_epochs)]
+    min_epochs: usize,
+    /// Relative validation improvement that resets the patience.
+    #[arg(long, default_value_t = TrainConfig::default().min_improvement)]
+    min_improvement: f64,
+    /// Random seed; a seed gives the same network whatever the thread count.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Name stored in the network file (default: TABLE's file name without extension).
+    #[arg(long)]
+    name: Option<String>,
+    /// No progress bar (it is also hidden when stderr is not a terminal).
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct FitPhongArgs {
+    /// A MERL-format table (.binary) or a network (.nbrdf.json, updated with the fit).
+    #[arg(value_name = "TABLE.binary|NAME.nbrdf.json")]
+    input: PathBuf,
+    /// For a network: write the updated network here instead of in place.
+    #[arg(short, long, value_name = "OUT.nbrdf.json")]
+    output: Option<PathBuf>,
+    /// Print the fit as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Directions sampled (adaptively) for the fit.
+    #[arg(long, default_value_t = FitConfig::default().samples)]
+    samples: usize,
+    /// Random seed of the sampled directions.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// The reference: a MERL-format table (.binary) or a network (.nbrdf.json).
+    #[arg(value_name = "A")]
+    reference: PathBuf,
+    /// The material compared against A, table or network.
+    #[arg(value_name = "B")]
+    test: PathBuf,
+    /// Width and height of the sphere images, pixels.
+    #[arg(long, default_value_t = 128)]
+    resolution: usize,
+    /// Directions sampled for the log-space error (each of adaptive and uniform sampling).
+    #[arg(long, default_value_t = 100_000)]
+    samples: usize,
+    /// Print the comparison as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -105,7 +232,248 @@ fn run(command: Command) -> Result<()> {
         Command::ListMaterials(args) => run_list_materials(&args),
         Command::Synth(args) => run_synth(&args),
         Command::Info(args) => run_info(&args),
+        Command::Train(args) => run_train(&args),
+        Command::FitPhong(args) => run_fit_phong(&args),
+        Command::Compare(args) => run_compare(&args),
     }
+}
+
+fn run_compare(args: &CompareArgs) -> Result<()> {
+    let reference = metrics::Material::read(&args.reference)?;
+    let test = metrics::Material::read(&args.test)?;
+    let c = with_threads(args.threads, || {
+        metrics::compare(&reference, &test, args.resolution, args.samples)
+    })??;
+    if args.json {
+        let value = serde_json::json!({
+            "reference": args.reference.display().to_string(),
+            "test": args.test.display().to_string(),
+            "comparison": c,
+        });
+        let text = serde_json::to_string_pretty(&value)
+            .map_err(|e| NbrdfError::InvalidArgument(format!("cannot format JSON: {e}")))?;
+        return emit(&format!("{text}\n"));
+    }
+    let mut out = format!(
+        "{} vs {} (reference first), {}x{} spheres:\n  {:>9}{:>12}{:>12}{:>9}{:>8}\n",
+        args.reference.display(),
+        args.test.display(),
+        c.resolution,
+        c.resolution,
+        "theta_l",
+        "MAE",
+        "RMSE",
+        "PSNR",
+        "SSIM"
+    );
+    let row = |label: String, e: &metrics::ImageErrors| {
+        format!(
+            "  {label:>9}{:>12.4e}{:>12.4e}{:>9.2}{:>8.4}\n",
+            e.mae, e.rmse, e.psnr, e.ssim
+        )
+    };
+    for (deg, e) in &c.per_light {
+        out += &row(format!("{deg:.0} deg"), e);
+    }
+    out += &row("mean".to_string(), &c.mean);
+    out += &format!(
+        "log-space BRDF error |ln(1+fA cos) - ln(1+fB cos)|: adaptive {:.4e}, uniform {:.4e}\n",
+        c.log_error_adaptive, c.log_error_uniform
+    );
+    emit(&out)
+}
+
+/// Runs `f` on a pool of `threads` workers, or on the global pool (one per core).
+fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
+    match threads {
+        None => Ok(f()),
+        Some(0) => Err(NbrdfError::InvalidArgument(
+            "--threads must be at least 1".into(),
+        )),
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| {
+                    NbrdfError::InvalidArgument(format!("cannot start {n} threads: {e}"))
+                })?;
+            Ok(pool.install(f))
+        }
+    }
+}
+
+/// The file name without its extensions: `gold.binary` and `gold.nbrdf.json` give `gold`.
+fn file_stem(path: &Path) -> String {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let stem = name.split('.').next().unwrap_or_default();
+    if stem.is_empty() {
+        "nbrdf".to_string()
+    } else {
+        stem.to_string()
+    }
+}
+
+fn run_train(args: &TrainArgs) -> Result<()> {
+    let table = MerlTable::read(&args.table)?;
+    let name = args.name.clone().unwrap_or_else(|| file_stem(&args.table));
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{name}.nbrdf.json")));
+    let config = TrainConfig {
+        sampling: args.sampling.into(),
+        samples: args.samples,
+        max_epochs: args.epochs,
+        hidden: args.hidden,
+        batch: args.batch,
+        adam: AdamConfig {
+            learning_rate: args.lr,
+            ..AdamConfig::default()
+        },
+        patience: args.patience,
+        min_epochs: args.min_epochs,
+        min_improvement: args.min_improvement,
+        seed: args.seed,
+        ..TrainConfig::default()
+    };
+    let bar = epoch_bar(config.max_epochs, args.quiet)?;
+    let target = train::table_target(&table);
+    let outcome = with_threads(args.threads, || {
+        train::train(&target, &config, &name, &mut |e: &EpochStats| {
+            bar.set_position(e.epoch as u64);
+            bar.set_message(format!(
+                "train {:.3e}  val {:.3e}  best {:.3e} @ {}",
+                e.train_loss, e.validation_loss, e.best_validation_loss, e.best_epoch
+            ));
+        })
+    })??;
+    bar.finish_and_clear();
+    let report = &outcome.report;
+    let mut network = outcome.network;
+    network.provenance = train::provenance(&config, report, &args.table.display().to_string());
+    network.validate()?;
+    network.save(&output)?;
+    emit(&format!(
+        "wrote {}: {} epochs ({}), best validation loss {:.4e} at epoch {}, {:.1} s\n",
+        output.display(),
+        report.epochs_run,
+        if report.stopped_early {
+            "stopped early"
+        } else {
+            "epoch limit"
+        },
+        report.best_validation_loss,
+        report.best_epoch,
+        report.seconds,
+    ))
+}
+
+/// The progress bar of `nbrdf train`: epochs, losses and an ETA against the epoch limit.
+fn epoch_bar(max_epochs: usize, quiet: bool) -> Result<ProgressBar> {
+    // indicatif's stderr target draws nothing when stderr is not a terminal.
+    let target = if quiet {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    };
+    let style = ProgressStyle::with_template("epoch {pos:>3}/{len} [{bar:24}] {msg}  ETA {eta}")
+        .map_err(|e| NbrdfError::InvalidArgument(format!("progress bar template: {e}")))?
+        .progress_chars("=> ");
+    let bar = ProgressBar::with_draw_target(Some(max_epochs as u64), target).with_style(style);
+    bar.set_message("drawing samples");
+    Ok(bar)
+}
+
+/// What `fit-phong` reads.
+enum FitSource {
+    Table(MerlTable),
+    Network(Box<Nbrdf>),
+}
+
+impl FitSource {
+    /// A network when the file name ends in `.json`, a MERL table otherwise.
+    fn read(path: &Path) -> Result<Self> {
+        let is_json = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+        if is_json {
+            Ok(FitSource::Network(Box::new(Nbrdf::load(path)?)))
+        } else {
+            Ok(FitSource::Table(MerlTable::read(path)?))
+        }
+    }
+
+    fn fit(&self, config: &FitConfig) -> Result<PhongFit> {
+        match self {
+            FitSource::Table(table) => phong_fit::fit(&train::table_target(table), config),
+            FitSource::Network(net) => {
+                let target = |a: &RusinkiewiczAngles| {
+                    let (l, v) = from_rusinkiewicz(a);
+                    Some(
+                        net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                            .map(f64::from),
+                    )
+                };
+                phong_fit::fit(&target, config)
+            }
+        }
+    }
+}
+
+fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
+    let source = FitSource::read(&args.input)?;
+    if args.output.is_some() && matches!(source, FitSource::Table(_)) {
+        return Err(NbrdfError::InvalidArgument(
+            "-o/--output applies to networks; for a table the fit is printed".into(),
+        ));
+    }
+    let config = FitConfig {
+        samples: args.samples,
+        seed: args.seed,
+        ..FitConfig::default()
+    };
+    let fit = with_threads(args.threads, || source.fit(&config))??;
+    let p = &fit.params;
+    let sampling = SamplingParams {
+        model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
+        exponent: p.exponent as f32,
+        specular_weight: p.specular_weight() as f32,
+        source: "fit".to_string(),
+    };
+    let mut written = None;
+    if let FitSource::Network(mut net) = source {
+        net.sampling = Some(sampling.clone());
+        net.validate()?;
+        let out = args.output.clone().unwrap_or_else(|| args.input.clone());
+        net.save(&out)?;
+        written = Some(out);
+    }
+    if args.json {
+        let value = serde_json::json!({
+            "model": sampling.model,
+            "exponent": sampling.exponent,
+            "specular_weight": sampling.specular_weight,
+            "source": sampling.source,
+            "kd": p.kd,
+            "ks": p.ks,
+            "loss": fit.loss,
+            "written": written.as_ref().map(|w| w.display().to_string()),
+        });
+        let text = serde_json::to_string_pretty(&value)
+            .map_err(|e| NbrdfError::InvalidArgument(format!("cannot format JSON: {e}")))?;
+        return emit(&format!("{text}\n"));
+    }
+    let mut text = format!(
+        "blinn-phong: exponent {:.4}, specular weight {:.4}\n  kd {:.4e} {:.4e} {:.4e}\n  ks {:.4e} {:.4e} {:.4e}\n  log loss {:.4e}\n",
+        sampling.exponent, sampling.specular_weight, p.kd[0], p.kd[1], p.kd[2], p.ks[0], p.ks[1], p.ks[2], fit.loss
+    );
+    if let Some(out) = written {
+        text += &format!("updated the sampling of {}\n", out.display());
+    }
+    emit(&text)
 }
 
 fn run_list_materials(args: &ListMaterialsArgs) -> Result<()> {
@@ -247,6 +615,90 @@ mod tests {
             Cli::try_parse_from(["nbrdf", "synth", "--model", "ggx", "--material", "x"]).is_err()
         );
         assert!(Cli::try_parse_from(["nbrdf", "info"]).is_err());
+    }
+
+    #[test]
+    fn train_and_fit_phong_arguments_parse() {
+        let Ok(Cli {
+            command: Command::Train(args),
+        }) = Cli::try_parse_from([
+            "nbrdf",
+            "train",
+            "t.binary",
+            "-o",
+            "n.nbrdf.json",
+            "--sampling",
+            "uniform",
+            "--samples",
+            "1000",
+            "--epochs",
+            "3",
+            "--threads",
+            "2",
+            "--seed",
+            "9",
+            "--quiet",
+        ])
+        else {
+            panic!("train must parse")
+        };
+        assert!(matches!(args.sampling, SamplingArg::Uniform));
+        assert_eq!(
+            (args.samples, args.epochs, args.threads, args.seed),
+            (1000, 3, Some(2), 9)
+        );
+        assert_eq!((args.hidden, args.batch), (21, 512));
+        assert!((args.lr - 5e-4).abs() < 1e-9);
+        assert!(
+            Cli::try_parse_from(["nbrdf", "train", "t.binary", "--sampling", "random"]).is_err()
+        );
+        assert!(Cli::try_parse_from(["nbrdf", "train", "t.binary", "--samples", "-5"]).is_err());
+        let Ok(Cli {
+            command: Command::FitPhong(args),
+        }) = Cli::try_parse_from(["nbrdf", "fit-phong", "n.nbrdf.json", "--json"])
+        else {
+            panic!("fit-phong must parse")
+        };
+        assert!(args.json && args.output.is_none());
+    }
+
+    #[test]
+    fn compare_arguments_parse() {
+        let Ok(Cli {
+            command: Command::Compare(args),
+        }) = Cli::try_parse_from([
+            "nbrdf",
+            "compare",
+            "a.binary",
+            "b.nbrdf.json",
+            "--resolution",
+            "32",
+            "--json",
+        ])
+        else {
+            panic!("compare must parse")
+        };
+        assert_eq!(
+            (args.resolution, args.samples, args.json),
+            (32, 100_000, true)
+        );
+        assert!(Cli::try_parse_from(["nbrdf", "compare", "a.binary"]).is_err());
+    }
+
+    #[test]
+    fn default_names_drop_every_extension() {
+        assert_eq!(file_stem(Path::new("/x/gold-paint.binary")), "gold-paint");
+        assert_eq!(file_stem(Path::new("net.nbrdf.json")), "net");
+        assert_eq!(file_stem(Path::new("/")), "nbrdf");
+    }
+
+    #[test]
+    fn zero_threads_is_an_error() {
+        assert!(with_threads(Some(0), || ()).is_err());
+        assert_eq!(
+            with_threads(Some(1), rayon::current_num_threads).unwrap(),
+            1
+        );
     }
 
     #[test]

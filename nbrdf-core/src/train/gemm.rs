@@ -1,0 +1,247 @@
+//! A register-blocked micro matrix product for the tiny matrices of NBRDF training.
+//!
+//! Every product of the forward and backward passes has the form
+//! `C[i][j] = init + sum_k A(i, k) B[k][j]` with `B` and `C` row-major and `A` read through
+//! arbitrary strides (so `A` or its transpose can be used without copying). Rows of `C` are
+//! computed in blocks of 4, columns in blocks of up to 24 (3 vectors of 8): 12 accumulators stay
+//! in registers while each step of `k` loads one row of `B` and broadcasts 4 elements of `A`.
+//! The sum over `k` runs in order, so results do not depend on how rows are grouped.
+
+use super::fastmath::MulAdd;
+
+/// Width of one column block: the `f32` lanes of an AVX register.
+pub const VEC: usize = 8;
+
+/// A read-only strided view `A(i, k) = data[i * row_stride + k * col_stride]`.
+#[derive(Clone, Copy)]
+pub struct Strided<'a> {
+    pub data: &'a [f32],
+    pub row_stride: usize,
+    pub col_stride: usize,
+}
+
+/// What `C` starts from before the products are added.
+#[derive(Clone, Copy)]
+pub enum Init<'a> {
+    Zero,
+    /// Every row starts as this row (a bias).
+    Row(&'a [f32]),
+}
+
+/// What is applied to a block of `C` before it is stored.
+#[derive(Clone, Copy)]
+pub enum Post<'a> {
+    None,
+    /// `max(c, 0)`.
+    Relu,
+    /// `c` where the same element of this matrix (same shape and stride as `C`) is positive,
+    /// else 0: the relu derivative applied to a back-propagated gradient.
+    MaskPositive(&'a [f32]),
+}
+
+/// `C[i][j] = post(init + sum_{k < depth} A(i, k) B[k][j])` for `i < rows` and `j < cols`, where
+/// `cols` is a multiple of [`VEC`], `B` has row stride `ldb` and `C` row stride `ldc`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn gemm<M: MulAdd>(
+    rows: usize,
+    cols: usize,
+    depth: usize,
+    a: Strided<'_>,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    ldc: usize,
+    init: Init<'_>,
+    post: Post<'_>,
+) {
+    debug_assert!(cols % VEC == 0);
+    let mut j0 = 0;
+    while j0 < cols {
+        let left = (cols - j0) / VEC;
+        let step = match left {
+            1 => block_rows::<M, 1>(rows, depth, a, b, ldb, c, ldc, init, post, j0),
+            2 => block_rows::<M, 2>(rows, depth, a, b, ldb, c, ldc, init, post, j0),
+            _ => block_rows::<M, 3>(rows, depth, a, b, ldb, c, ldc, init, post, j0),
+        };
+        j0 += step;
+    }
+}
+
+/// All rows for the column block starting at `j0` of `NB` vectors; returns the block width.
+/// Rows go in blocks of 12 / `NB` (12 accumulators of the 16 vector registers), the rest in
+/// blocks of 4, 2 and 1, so that every block has enough independent accumulators to hide the
+/// latency of the multiply-adds.
+#[inline(always)]
+#[allow(clippy::too_many_arguments, clippy::int_plus_one)] // `i0 + 1 <= rows` is the macro's `i0 + MR <= rows`
+fn block_rows<M: MulAdd, const NB: usize>(
+    rows: usize,
+    depth: usize,
+    a: Strided<'_>,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    ldc: usize,
+    init: Init<'_>,
+    post: Post<'_>,
+    j0: usize,
+) -> usize {
+    let mut i0 = 0;
+    macro_rules! blocks_of {
+        ($mr:literal) => {
+            while i0 + $mr <= rows {
+                block::<M, $mr, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
+                i0 += $mr;
+            }
+        };
+    }
+    match NB {
+        1 => blocks_of!(8),
+        2 => blocks_of!(6),
+        _ => {}
+    }
+    blocks_of!(4);
+    blocks_of!(2);
+    blocks_of!(1);
+    NB * VEC
+}
+
+/// `out[j] = sum_k b[k][j]` for `j < cols` (a multiple of [`VEC`]), summing rows in four
+/// interleaved partial sums (fixed order, so deterministic) to hide the add latency.
+#[inline(always)]
+pub fn column_sums(depth: usize, cols: usize, b: &[f32], ldb: usize, out: &mut [f32]) {
+    for j0 in (0..cols).step_by(VEC) {
+        let mut acc = [[0.0f32; VEC]; 4];
+        let mut k = 0;
+        while k + 4 <= depth {
+            for (p, acc_p) in acc.iter_mut().enumerate() {
+                let row = &b[(k + p) * ldb + j0..(k + p) * ldb + j0 + VEC];
+                for q in 0..VEC {
+                    acc_p[q] += row[q];
+                }
+            }
+            k += 4;
+        }
+        while k < depth {
+            let row = &b[k * ldb + j0..k * ldb + j0 + VEC];
+            for q in 0..VEC {
+                acc[0][q] += row[q];
+            }
+            k += 1;
+        }
+        for q in 0..VEC {
+            out[j0 + q] = (acc[0][q] + acc[1][q]) + (acc[2][q] + acc[3][q]);
+        }
+    }
+}
+
+/// One `MR x (NB * 8)` block of `C` held in registers.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn block<M: MulAdd, const MR: usize, const NB: usize>(
+    i0: usize,
+    j0: usize,
+    depth: usize,
+    a: Strided<'_>,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    ldc: usize,
+    init: Init<'_>,
+    post: Post<'_>,
+) {
+    let mut acc = [[[0.0f32; VEC]; NB]; MR];
+    if let Init::Row(row) = init {
+        let row = &row[j0..j0 + NB * VEC];
+        for acc_r in acc.iter_mut() {
+            for (nb, acc_v) in acc_r.iter_mut().enumerate() {
+                acc_v.copy_from_slice(&row[nb * VEC..(nb + 1) * VEC]);
+            }
+        }
+    }
+    for k in 0..depth {
+        let b_row = &b[k * ldb + j0..k * ldb + j0 + NB * VEC];
+        for (r, acc_r) in acc.iter_mut().enumerate() {
+            let a_ik = a.data[(i0 + r) * a.row_stride + k * a.col_stride];
+            for (nb, acc_v) in acc_r.iter_mut().enumerate() {
+                let b_v = &b_row[nb * VEC..(nb + 1) * VEC];
+                for q in 0..VEC {
+                    acc_v[q] = M::mul_add(a_ik, b_v[q], acc_v[q]);
+                }
+            }
+        }
+    }
+    for (r, acc_r) in acc.iter_mut().enumerate() {
+        let at = (i0 + r) * ldc + j0;
+        match post {
+            Post::None => {}
+            Post::Relu => acc_r.iter_mut().flatten().for_each(|v| *v = v.max(0.0)),
+            Post::MaskPositive(m) => {
+                let m_row = &m[at..at + NB * VEC];
+                for (v, &m) in acc_r.iter_mut().flatten().zip(m_row) {
+                    *v = if m > 0.0 { *v } else { 0.0 };
+                }
+            }
+        }
+        let c_row = &mut c[at..at + NB * VEC];
+        for (nb, acc_v) in acc_r.iter().enumerate() {
+            c_row[nb * VEC..(nb + 1) * VEC].copy_from_slice(acc_v);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::fastmath::Unfused;
+    use super::*;
+
+    #[test]
+    fn matches_naive_product_with_strides_and_bias() {
+        let (rows, cols, depth) = (7, 40, 5);
+        // A stored transposed: A(i, k) = at[k * rows + i].
+        let at: Vec<f32> = (0..rows * depth).map(|v| (v as f32 * 0.37).sin()).collect();
+        let b: Vec<f32> = (0..depth * cols).map(|v| (v as f32 * 0.11).cos()).collect();
+        let bias: Vec<f32> = (0..cols).map(|v| v as f32 * 0.01).collect();
+        let mut c = vec![0.0; rows * cols];
+        let a = Strided {
+            data: &at,
+            row_stride: 1,
+            col_stride: rows,
+        };
+        gemm::<Unfused>(
+            rows,
+            cols,
+            depth,
+            a,
+            &b,
+            cols,
+            &mut c,
+            cols,
+            Init::Row(&bias),
+            Post::Relu,
+        );
+        for i in 0..rows {
+            for j in 0..cols {
+                let expect: f32 = bias[j]
+                    + (0..depth)
+                        .map(|k| at[k * rows + i] * b[k * cols + j])
+                        .sum::<f32>();
+                assert!(
+                    (c[i * cols + j] - expect.max(0.0)).abs() < 1e-5,
+                    "({i}, {j})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn column_sums_add_rows() {
+        let (depth, cols) = (7, 16);
+        let b: Vec<f32> = (0..depth * cols).map(|v| v as f32).collect();
+        let mut out = vec![0.0; cols];
+        column_sums(depth, cols, &b, cols, &mut out);
+        for j in 0..cols {
+            assert_eq!(out[j], (0..depth).map(|k| b[k * cols + j]).sum::<f32>());
+        }
+    }
+}
