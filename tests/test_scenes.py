@@ -183,3 +183,98 @@ def test_kitchen_loads_and_renders_with_nbrdf_and_merl(llvm_variant, shared, net
     assert image.shape == (KITCHEN_SIZE[1], KITCHEN_SIZE[0], 3)
     assert np.all(np.isfinite(image)), "NaN or Inf in the kitchen"
     assert image.mean() > 0
+
+
+# ---------------------------------------------------------------------------------------------
+# Metrics and the cache
+
+
+def test_metrics_on_known_images():
+    reference = np.ones((4, 5, 3))
+    image = reference.copy()
+    image[0, 0] = 3.0
+    mask = np.zeros((4, 5), bool)
+    mask[0, :2] = True
+    assert metrics.mae(reference, image) == pytest.approx(2.0 / 20)
+    assert metrics.rmse(reference, image) == pytest.approx(np.sqrt(4.0 / 20))
+    assert metrics.rmse(reference, image, mask) == pytest.approx(np.sqrt(2.0))
+    assert metrics.mape(reference, image, mask) == pytest.approx(0.5 * 2.0 / 1.01)
+    assert metrics.psnr(reference, reference) == np.inf
+    assert metrics.psnr(reference, image) == pytest.approx(20 * np.log10(1 / np.sqrt(0.2)))
+    assert metrics.firefly_count(reference, image * 20) == 20
+    with pytest.raises(ValueError):
+        metrics.rmse(reference, image[:2])
+
+
+def test_ground_truth_cache_rerenders_when_inputs_change(llvm_variant, tmp_path):
+    from ground_truth import RenderCache
+
+    table = tmp_path / "table.binary"
+    table.write_bytes(b"one")
+    calls = []
+
+    def make():
+        calls.append(1)
+        return np.full((3, 4, 3), float(len(calls)))
+
+    cache = RenderCache(tmp_path / "cache")
+    settings = {"spp": 64, "resolution": [4, 3], "integrator": "mis"}
+    first = cache.get("gt", {"scene": "x"}, [table], settings, make)
+    again = cache.get("gt", {"scene": "x"}, [table], settings, make)
+    assert len(calls) == 1 and np.array_equal(first, again)
+    sidecar = json.loads((tmp_path / "cache" / "gt.json").read_text())
+    assert sidecar["settings"]["spp"] == 64 and str(table) in sidecar["files"] and "code_version" in sidecar
+    cache.get("gt", {"scene": "x"}, [table], {**settings, "spp": 128}, make)  # settings changed
+    table.write_bytes(b"two")
+    cache.get("gt", {"scene": "x"}, [table], {**settings, "spp": 128}, make)  # table changed
+    cache.get("gt", {"scene": "y"}, [table], {**settings, "spp": 128}, make)  # scene changed
+    assert len(calls) == 4
+
+
+# ---------------------------------------------------------------------------------------------
+# The scripts' --quick runs (CI)
+
+
+def _cli_or_skip():
+    from conftest import _cli
+
+    cli = _cli()
+    if cli is None:
+        pytest.skip("the nbrdf CLI is not built (target/release/nbrdf)")
+    return cli
+
+
+def test_convergence_quick_json(tmp_path):
+    cli = _cli_or_skip()
+    out = tmp_path / "result.json"
+    run = subprocess.run([sys.executable, str(REPO / "python" / "convergence.py"), "--scene", "veach", "--quick",
+                          "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(out.read_text())
+    rows = report["results"]
+    assert rows
+    for row in rows:
+        assert {"scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "mape", "psnr"} <= set(row)
+        assert row["scene"] == "veach"
+        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
+        assert row["seconds"] > 0 and np.isfinite(row["rmse"])
+    assert {r["strategy"] for r in rows} >= {"uniform", "cosine"}
+    assert sorted({r["spp"] for r in rows}) == [1, 2, 4]
+    assert report["representation"] and report["equal_time"]
+    folder = tmp_path / "out" / "veach"
+    assert (folder / "convergence.csv").is_file() and (folder / "plots" / "veach-overview.png").is_file()
+    assert list((folder / "renders").rglob("*.exr"))
+
+
+def test_bench_rays_quick_json(tmp_path):
+    cli = _cli_or_skip()
+    out = tmp_path / "bench.json"
+    run = subprocess.run([sys.executable, str(REPO / "python" / "bench_rays.py"), "--quick", "--modes", "default",
+                          "--json", str(out), "--out", str(tmp_path / "bench"), "--cli", str(cli)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(out.read_text())
+    assert report["scene"] == "veach" and report["mode"] == "default" and report["variant"] == "llvm_ad_rgb"
+    for name in ("nbrdf", "roughconductor", "diffuse"):
+        assert report["bsdfs"][name]["mrays_per_s"] > 0
