@@ -2,4 +2,8 @@
 //! trained with an image loss, a predictor of the Blinn-Phong sampling parameters from the
 //! code, and the PCA baseline of Nielsen et al. 2015.
 
+pub mod autoencoder;
+pub mod mlp;
+pub mod pca;
+pub mod predictor;
 pub mod sphere;

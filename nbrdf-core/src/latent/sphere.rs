@@ -45,6 +45,8 @@ pub struct SphereRenderer {
     /// Padded-layout index of each flat (`W1 b1 W2 b2 W3 b3`) parameter.
     flat_to_padded: Vec<usize>,
     kernel: Kernel,
+    /// 0: the exact gradient. Positive `r0`: the training surrogate of [`SphereRenderer::loss`].
+    pub surrogate_floor: f32,
 }
 
 /// Per-thread working memory of the renderer.
@@ -89,6 +91,7 @@ impl SphereRenderer {
             layout,
             flat_to_padded,
             kernel: Kernel::detect(),
+            surrogate_floor: 0.0,
         }
     }
 
@@ -158,8 +161,12 @@ impl SphereRenderer {
     /// planar, e.g. from [`SphereRenderer::render_toned`]) and, if `grad` is given, its gradient
     /// with respect to the flat parameters, written into `grad`.
     ///
-    /// The gradient is that of the function as evaluated: 0 where `expm1(z)` is clamped at 0 or
-    /// `z` is clamped to the exp range, and 0 below the tone map's floor.
+    /// With `surrogate_floor == 0` the gradient is that of the function as evaluated: 0 where
+    /// `expm1(z)` is clamped at 0 or `z` is clamped to the exp range, and 0 below the tone map's
+    /// floor. Such pixels never recover once a decoded network turns a region black, and the
+    /// slope `r^(1/2.2 - 1)` explodes near 0; training therefore uses a surrogate gradient
+    /// (`surrogate_floor = r0 > 0`): the tone-map slope at `max(r, r0)` and the `max(., 0)` clamp
+    /// passed straight through. The loss value is exact either way.
     pub fn loss(
         &self,
         flat: &[f32],
@@ -207,11 +214,19 @@ impl SphereRenderer {
                     let t = tone(r);
                     let d = t - target[k * n + self.pixels[i]];
                     chunk_loss += (d as f64) * (d as f64);
-                    let live = y_raw > 0.0
-                        && r > FLOOR
-                        && z > network::EXP_ARG_MIN
-                        && z < network::EXP_ARG_MAX;
-                    let g = if live {
+                    let in_range = z > network::EXP_ARG_MIN && z < network::EXP_ARG_MAX;
+                    let g = if self.surrogate_floor > 0.0 {
+                        // Surrogate: the tone map's slope taken at `max(r, r0)` and the
+                        // clamp of `expm1` at 0 passed through, so that pixels decoded too dark
+                        // (or black) still pull their network output up.
+                        let r_eff = r.max(self.surrogate_floor);
+                        let slope = GAMMA_INV * tone(r_eff) / r_eff;
+                        if in_range {
+                            2.0 * d * inv * slope * cos * (y_raw + 1.0)
+                        } else {
+                            0.0
+                        }
+                    } else if y_raw > 0.0 && r > FLOOR && in_range {
                         // d t / d r = t / (2.2 r); d r / d z = cos e^z.
                         2.0 * d * inv * GAMMA_INV * t / r * cos * (y_raw + 1.0)
                     } else {
