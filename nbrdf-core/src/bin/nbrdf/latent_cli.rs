@@ -38,8 +38,10 @@ pub struct AeTrainArgs {
     /// Directory of NAME.nbrdf.json networks (one per material, all of one hidden width).
     #[arg(long, value_name = "DIR")]
     nbrdfs: PathBuf,
+    /// Where to write the result.
     #[arg(short, long, value_name = "AE.json")]
     output: PathBuf,
+    /// Random seed (training is deterministic per seed).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Epoch limit (early stopping usually ends sooner).
@@ -54,6 +56,7 @@ pub struct AeTrainArgs {
     /// Width of the encoder's and decoder's hidden layer.
     #[arg(long, default_value_t = AeConfig::default().hidden)]
     hidden: usize,
+    /// Adam learning rate.
     #[arg(long, default_value_t = AeConfig::default().learning_rate)]
     lr: f32,
     /// Learning rate of the image-loss phase.
@@ -62,16 +65,20 @@ pub struct AeTrainArgs {
     /// Disable the 6 RGB-permutation augmentation.
     #[arg(long)]
     no_augment: bool,
+    /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
+    /// No progress bar.
     #[arg(long)]
     quiet: bool,
 }
 
 #[derive(Args)]
 pub struct AeEncodeArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
     #[arg(long, value_name = "AE.json")]
     ae: PathBuf,
+    /// The neural BRDF to read.
     #[arg(value_name = "NBRDF.json")]
     input: PathBuf,
     /// Print the encoding time to stderr.
@@ -81,10 +88,13 @@ pub struct AeEncodeArgs {
 
 #[derive(Args)]
 pub struct AeDecodeArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
     #[arg(long, value_name = "AE.json")]
     ae: PathBuf,
+    /// The latent code: a JSON array of 32 numbers (from `nbrdf ae encode`).
     #[arg(value_name = "CODE.json")]
     code: PathBuf,
+    /// Where to write the result.
     #[arg(short, long, value_name = "NBRDF.json")]
     output: PathBuf,
     /// Name of the decoded material (default: the output file's stem).
@@ -94,15 +104,19 @@ pub struct AeDecodeArgs {
 
 #[derive(Args)]
 pub struct InterpolateArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
     #[arg(long, value_name = "AE.json")]
     ae: PathBuf,
+    /// The first material (a neural BRDF).
     #[arg(value_name = "A.json")]
     a: PathBuf,
+    /// The second material (a neural BRDF).
     #[arg(value_name = "B.json")]
     b: PathBuf,
     /// Number of networks per path, endpoints included.
     #[arg(long, default_value_t = 7)]
     steps: usize,
+    /// Where to write the result.
     #[arg(short, long, value_name = "DIR")]
     output: PathBuf,
 }
@@ -301,6 +315,7 @@ pub enum PcaTables {
 
 #[derive(Args)]
 pub struct AeEvalArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
     #[arg(long, value_name = "AE.json")]
     ae: PathBuf,
     /// The networks the autoencoder was trained on.
@@ -309,8 +324,10 @@ pub struct AeEvalArgs {
     /// Which tables the PCA-32 baseline decomposes.
     #[arg(long, value_enum, default_value = "sgd")]
     pca_tables: PcaTables,
+    /// Principal components kept.
     #[arg(long, default_value_t = 32)]
     components: usize,
+    /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
 }
@@ -426,32 +443,41 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
 
 #[derive(Args)]
 pub struct PredictorTrainArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
     #[arg(long, value_name = "AE.json")]
     ae: PathBuf,
     /// The networks of the training split (with or without fitted sampling parameters).
     #[arg(long, value_name = "DIR")]
     nbrdfs: PathBuf,
+    /// Where to write the result.
     #[arg(short, long, value_name = "P.json")]
     output: PathBuf,
+    /// Width of the hidden layer.
     #[arg(long, default_value_t = 16)]
     hidden: usize,
+    /// Full-batch Adam iterations.
     #[arg(long, default_value_t = 3000)]
     iterations: usize,
+    /// Random seed (training is deterministic per seed).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Refit the Blinn-Phong labels even where a file has "source": "fit" sampling.
     #[arg(long)]
     refit: bool,
+    /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
 }
 
 #[derive(Args)]
 pub struct PredictPhongArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
     #[arg(long, value_name = "AE.json")]
     ae: PathBuf,
+    /// The trained Phong-parameter predictor (from `nbrdf predictor train`).
     #[arg(long, value_name = "P.json")]
     predictor: PathBuf,
+    /// The neural BRDF to read.
     #[arg(value_name = "NBRDF.json")]
     input: PathBuf,
     /// Where to write the network with the predicted sampling (default: in place).
