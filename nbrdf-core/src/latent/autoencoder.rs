@@ -585,15 +585,15 @@ mod tests {
         };
         let config = AeConfig {
             hidden: 8,
-            max_epochs: 300,
-            warmup_epochs: 150,
+            max_epochs: 250,
+            warmup_epochs: 120,
             patience: 1000,
             batch: 2,
             learning_rate: 3e-3,
             augment: false,
             input_noise: 0.0,
             weight_decay: 0.0,
-            image_size: 24,
+            image_size: 16,
             ..AeConfig::default()
         };
         let (ae, history) = AutoEncoder::train(&mats, 21, split, &config, |_| {}).unwrap();
