@@ -81,6 +81,12 @@ pub struct AutoEncoder {
     pub nbrdf_hidden: usize,
     pub mean: Vec<f32>,
     pub std: Vec<f32>,
+    /// Per-dimension range of the training networks: decoded weights are clamped to it (a
+    /// decoded network far outside it can make `exp` overflow to a white sphere).
+    #[serde(default)]
+    pub min: Vec<f32>,
+    #[serde(default)]
+    pub max: Vec<f32>,
     pub encoder: Mlp,
     pub decoder: Mlp,
     pub split: Split,
@@ -105,6 +111,12 @@ pub struct AeConfig {
     pub augment: bool,
     /// `r0` of the surrogate image gradient (see [`SphereRenderer::loss`]); 0 for the exact one.
     pub surrogate_floor: f32,
+    /// Side of the loss's sphere image (64; smaller only for tests).
+    pub image_size: usize,
+    /// Standard deviation of the Gaussian noise added to the standardised encoder input.
+    pub input_noise: f32,
+    /// L2 penalty gradient `weight_decay * p` added to every parameter's gradient.
+    pub weight_decay: f32,
 }
 
 impl Default for AeConfig {
@@ -121,6 +133,9 @@ impl Default for AeConfig {
             clip_norm: 1.0,
             augment: true,
             surrogate_floor: 1e-3,
+            input_noise: 0.2,
+            weight_decay: 1e-4,
+            image_size: super::sphere::SIZE,
         }
     }
 }
@@ -211,7 +226,14 @@ impl AutoEncoder {
             .eval(code)
             .iter()
             .zip(self.mean.iter().zip(&self.std))
-            .map(|(y, (m, s))| y * s + m)
+            .enumerate()
+            .map(|(j, (y, (m, s)))| {
+                let w = y * s + m;
+                match (self.min.get(j), self.max.get(j)) {
+                    (Some(&lo), Some(&hi)) => w.clamp(lo, hi),
+                    _ => w,
+                }
+            })
             .collect()
     }
 
@@ -251,7 +273,7 @@ impl AutoEncoder {
             &PERMUTATIONS[..1]
         };
         let mut renderer = SphereRenderer::new(
-            super::sphere::SIZE,
+            config.image_size,
             super::sphere::LIGHT_THETA_DEG.to_radians(),
             hidden_nbrdf,
         );
@@ -309,6 +331,22 @@ impl AutoEncoder {
             format: FORMAT_NAME.into(),
             version: FORMAT_VERSION,
             nbrdf_hidden: hidden_nbrdf,
+            min: (0..dims)
+                .map(|d| {
+                    train_flats
+                        .iter()
+                        .map(|f| f[d])
+                        .fold(f32::INFINITY, f32::min)
+                })
+                .collect(),
+            max: (0..dims)
+                .map(|d| {
+                    train_flats
+                        .iter()
+                        .map(|f| f[d])
+                        .fold(f32::NEG_INFINITY, f32::max)
+                })
+                .collect(),
             mean,
             std,
             encoder: Mlp::new(&[dims, config.hidden, CODE_SIZE], config.seed, 0),
@@ -352,7 +390,26 @@ impl AutoEncoder {
                     .map(|&i| {
                         let mut grad = vec![0.0f32; n_all];
                         let x = &standardised[i];
-                        let acts_e = ae.encoder.forward(x);
+                        // Denoising: the encoder sees the input with Gaussian noise (a
+                        // regulariser; 72 materials x 6 permutations for ~130k parameters).
+                        let noisy: Vec<f32> = if config.input_noise > 0.0 {
+                            let mut rng = SplitMix64::new(
+                                config.seed,
+                                Stream::Latent,
+                                (4 << 40) | ((epoch as u64) << 20) | i as u64,
+                            );
+                            x.iter()
+                                .map(|v| {
+                                    let (u1, u2) = (rng.next_f64().max(1e-300), rng.next_f64());
+                                    let g = (-2.0 * u1.ln()).sqrt()
+                                        * (2.0 * std::f64::consts::PI * u2).cos();
+                                    v + config.input_noise * g as f32
+                                })
+                                .collect()
+                        } else {
+                            x.clone()
+                        };
+                        let acts_e = ae.encoder.forward(&noisy);
                         let code = acts_e.last().cloned().unwrap_or_default();
                         let acts_d = ae.decoder.forward(&code);
                         let out = acts_d.last().cloned().unwrap_or_default();
@@ -398,6 +455,11 @@ impl AutoEncoder {
                     epoch_loss += loss;
                     for (a, b) in grad.iter_mut().zip(g) {
                         *a += b * scale;
+                    }
+                }
+                if config.weight_decay > 0.0 {
+                    for (g, p) in grad.iter_mut().zip(&params) {
+                        *g += config.weight_decay * p;
                     }
                 }
                 let norm = grad.iter().map(|g| (g * g) as f64).sum::<f64>().sqrt() as f32;
@@ -453,8 +515,10 @@ impl AutoEncoder {
             "learning_rate": config.learning_rate,
             "image_learning_rate": config.image_learning_rate,
             "surrogate_floor": config.surrogate_floor,
+            "input_noise": config.input_noise,
+            "weight_decay": config.weight_decay,
             "augmentation": if config.augment { "6 RGB permutations" } else { "none" },
-            "loss": "pixel MSE of max(x,1e-12)^(1/2.2), 64x64 sphere, light at 45 degrees",
+            "loss": format!("pixel MSE of max(x,1e-12)^(1/2.2), {s}x{s} sphere, light at 45 degrees", s = config.image_size),
             "seconds": start.elapsed().as_secs_f64(),
             "threads": rayon::current_num_threads(),
         });
@@ -521,12 +585,15 @@ mod tests {
         };
         let config = AeConfig {
             hidden: 8,
-            max_epochs: 300,
-            warmup_epochs: 150,
+            max_epochs: 250,
+            warmup_epochs: 120,
             patience: 1000,
             batch: 2,
             learning_rate: 3e-3,
             augment: false,
+            input_noise: 0.0,
+            weight_decay: 0.0,
+            image_size: 16,
             ..AeConfig::default()
         };
         let (ae, history) = AutoEncoder::train(&mats, 21, split, &config, |_| {}).unwrap();

@@ -62,6 +62,11 @@ pub struct AeTrainArgs {
     /// Learning rate of the image-loss phase.
     #[arg(long, default_value_t = AeConfig::default().image_learning_rate)]
     image_lr: f32,
+    /// Gaussian noise on the standardised encoder input (denoising regulariser).
+    #[arg(long, default_value_t = AeConfig::default().input_noise)]
+    input_noise: f32,
+    #[arg(long, default_value_t = AeConfig::default().weight_decay)]
+    weight_decay: f32,
     /// Disable the 6 RGB-permutation augmentation.
     #[arg(long)]
     no_augment: bool,
@@ -176,6 +181,8 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
         patience: args.patience,
         learning_rate: args.lr,
         image_learning_rate: args.image_lr,
+        input_noise: args.input_noise,
+        weight_decay: args.weight_decay,
         augment: !args.no_augment,
         ..AeConfig::default()
     };
