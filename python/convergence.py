@@ -423,6 +423,7 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
         "max_over_ground_truth": {"nbrdf": float(np.max(nbrdf_image - ground_truth)),
                                   "merl": float(np.max(table_image - ground_truth))},
         "overridden_pixels_percent": float(100 * overridden.mean()),
+        "pixels": int(overridden.size),
     }
     for name, image in (("ground-truth", ground_truth), ("nbrdf-converged", nbrdf_ref),
                         (f"nbrdf-phong-{top}spp", nbrdf_image), (f"merl-phong-{top}spp", table_image)):
@@ -472,9 +473,13 @@ def markdown(report: dict) -> str:
         lines.append("")
     if report.get("kitchen"):
         k = report["kitchen"]
-        lines += [f"Kitchen checks at {k['spp']} spp: non-finite pixels {k['nonfinite_pixels']}; fireflies "
-                  f"({k['fireflies']['rule']}): NBRDF {k['fireflies']['nbrdf']}, table {k['fireflies']['merl']}; "
-                  f"replaced materials cover {k['overridden_pixels_percent']:.1f} % of the pixels.", ""]
+        nonfinite = k["nonfinite_pixels"]
+        lines += [f"Kitchen checks: non-finite values: {nonfinite['all_strategy_renders']} in all strategy renders, "
+                  f"{nonfinite['nbrdf_reference']} in the converged NBRDF, {nonfinite['nbrdf']} (NBRDF) and "
+                  f"{nonfinite['merl']} (table) in the Phong-sampled {k['spp']} spp renders made with the same random "
+                  f"numbers; fireflies there ({k['fireflies']['rule']}): NBRDF {k['fireflies']['nbrdf']}, table "
+                  f"{k['fireflies']['merl']} of {k.get('pixels', 'all')} pixels; the replaced materials cover "
+                  f"{k['overridden_pixels_percent']:.1f} % of the image.", ""]
     for note in report["notes"]:
         lines.append(f"* {note}")
     return "\n".join(lines) + "\n"
