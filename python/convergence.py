@@ -213,13 +213,13 @@ def plot_material(path: Path, title: str, rows: list[dict], representation: floa
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for strategy in STRATEGIES:
+    for i, strategy in enumerate(STRATEGIES):
         points = sorted((r["spp"], r["seconds"], r[metric]) for r in rows if r["strategy"] == strategy)
         if not points:
             continue
         spp, seconds, error = zip(*points)
-        axes[0].plot(spp, error, "o-", label=strategy)
-        axes[1].plot(seconds, error, "o-", label=strategy)
+        axes[0].plot(spp, error, "o-", color=f"C{i}", label=strategy)
+        axes[1].plot(seconds, error, "o-", color=f"C{i}", label=strategy)
     for ax, xlabel in zip(axes, ("samples per pixel", "render time (s)")):
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -246,11 +246,14 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
     cols = min(4, len(names))
     rows_n = math.ceil(len(names) / cols)
     fig, axes = plt.subplots(rows_n, cols, figsize=(3.6 * cols, 3.0 * rows_n), squeeze=False)
+    colours = {s: f"C{i}" for i, s in enumerate(STRATEGIES)}
+    handles = {}
     for ax, name in zip(axes.ravel(), names):
         for strategy in STRATEGIES:
-            points = sorted((r["seconds"], r[metric]) for r in per_material[name] if r["strategy"] == strategy)
+            points = sorted((r["spp"], r["seconds"], r[metric]) for r in per_material[name] if r["strategy"] == strategy)
             if points:
-                ax.plot(*zip(*points), "o-", ms=3, label=strategy)
+                _, seconds, error = zip(*points)
+                (handles[strategy],) = ax.plot(seconds, error, "o-", ms=3, color=colours[strategy], label=strategy)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(name, fontsize=9)
@@ -258,7 +261,7 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
         ax.tick_params(labelsize=7)
     for ax in axes.ravel()[len(names):]:
         ax.axis("off")
-    axes[0, 0].legend(fontsize=7)
+    fig.legend(list(handles.values()), list(handles), loc="lower right", fontsize=8)
     fig.supxlabel("render time (s)")
     fig.supylabel(f"{metric.upper()} (sampling error)")
     fig.suptitle(title)
@@ -284,6 +287,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
     levels = spp_levels(args.max_spp)
     specs = [m for m in args.materials.split(",") if m] + [f"rgl:{m}" for m in args.rgl.split(",") if m]
     results, representation, equal_time, per_material = [], [], [], {}
+    tag = "" if setup.integrator == "bsdf" else f"-{setup.integrator}"  # keeps the two runs apart
     settings = {"spp": args.gt_spp, "resolution": list(setup.resolution), "integrator": "mis",
                 "seed": REFERENCE_SEED, "spp_per_pass": args.spp_per_pass}
     for spec in tqdm(specs, desc="veach: materials", unit="material"):
@@ -312,7 +316,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
             table_ref = reference(cache, f"veach-{label}-table", setup.description(table_bsdf, "mis"),
                                   bsdf_files(table_bsdf), settings, lambda: setup.load(table_bsdf, "mis"),
                                   args.gt_spp, args.spp_per_pass, f"{label}: tabulated")
-            representation.append({**rep, "model": "table", **metrics.all_metrics(ground_truth, table_ref, mask),
+            representation.append({**rep, "model": "table", "network": "-", **metrics.all_metrics(ground_truth, table_ref, mask),
                                    "relative_rmse": metrics.rmse(ground_truth, table_ref, mask)
                                    / float(np.sqrt(np.mean(ground_truth[mask] ** 2)))})
         # Strategies.
@@ -327,7 +331,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
                 bsdf = {"type": "measured", "filename": str(material.measured)}
                 strategies[strategy] = {"scene": setup.load(bsdf), "reference": ground_truth,
                                         "reference_name": "measured"}
-        save_dir = out / "renders" / label
+        save_dir = out / f"renders{tag}" / label
         save_spp = {levels[0], levels[len(levels) // 2], levels[-1]}
         rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp)
         write_exr(save_dir / "ground-truth.exr", ground_truth)
@@ -342,13 +346,13 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
         equal_time.append({"scene": "veach", "material": label, "kind": material.kind,
                            "exponent": material.exponent, "specular_weight": material.specular_weight,
                            **summary})
-        plot_material(out / "plots" / f"veach-{label}.png",
+        plot_material(out / "plots" / f"veach{tag}-{label}.png",
                       f"Veach ({'pure BSDF sampling' if setup.integrator == 'bsdf' else 'MIS'}), {label}: "
                       f"error on the plates", rows, rep["rmse"])
         log(f"{label}: " + ", ".join(f"{s} {v:.4g}" for s, v in summary["rmse"].items())
             + f" RMSE at {summary['seconds']:.2f} s; NBRDF vs ground truth RMSE {rep['rmse']:.4g}")
         del strategies, mask_scene
-    plot_overview(out / "plots" / "veach-overview.png",
+    plot_overview(out / "plots" / f"veach{tag}-overview.png",
                   f"Veach scene, {'pure BSDF sampling' if setup.integrator == 'bsdf' else 'MIS'}: RMSE on the plates "
                   "against render time", per_material)
     return {"results": results, "representation": representation, "equal_time": equal_time}
@@ -419,13 +423,14 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
         "max_over_ground_truth": {"nbrdf": float(np.max(nbrdf_image - ground_truth)),
                                   "merl": float(np.max(table_image - ground_truth))},
         "overridden_pixels_percent": float(100 * overridden.mean()),
+        "pixels": int(overridden.size),
     }
     for name, image in (("ground-truth", ground_truth), ("nbrdf-converged", nbrdf_ref),
                         (f"nbrdf-phong-{top}spp", nbrdf_image), (f"merl-phong-{top}spp", table_image)):
         write_exr(save_dir / f"{name}.exr", image)
         write_png(save_dir / f"{name}.png", image)
     summary = equal_time_summary(rows)
-    plot_material(out / "plots" / "kitchen.png", "Kitchen (path tracing), 14 materials replaced: error on the image",
+    plot_material(out / "plots" / "kitchen.png", "Kitchen (path tracing), 14 overrides replaced: error on the image",
                   rows, rep["rmse"])
     log("kitchen: " + ", ".join(f"{s} {v:.4g}" for s, v in summary["rmse"].items())
         + f" RMSE at {summary['seconds']:.2f} s; NBRDF vs ground truth RMSE {rep['rmse']:.4g}")
@@ -468,12 +473,38 @@ def markdown(report: dict) -> str:
         lines.append("")
     if report.get("kitchen"):
         k = report["kitchen"]
-        lines += [f"Kitchen checks at {k['spp']} spp: non-finite pixels {k['nonfinite_pixels']}; fireflies "
-                  f"({k['fireflies']['rule']}): NBRDF {k['fireflies']['nbrdf']}, table {k['fireflies']['merl']}; "
-                  f"replaced materials cover {k['overridden_pixels_percent']:.1f} % of the pixels.", ""]
+        nonfinite = k["nonfinite_pixels"]
+        lines += [f"Kitchen checks: non-finite values: {nonfinite['all_strategy_renders']} in all strategy renders, "
+                  f"{nonfinite['nbrdf_reference']} in the converged NBRDF, {nonfinite['nbrdf']} (NBRDF) and "
+                  f"{nonfinite['merl']} (table) in the Phong-sampled {k['spp']} spp renders made with the same random "
+                  f"numbers; fireflies there ({k['fireflies']['rule']}): NBRDF {k['fireflies']['nbrdf']}, table "
+                  f"{k['fireflies']['merl']} of {k.get('pixels', 'all')} pixels; the replaced materials cover "
+                  f"{k['overridden_pixels_percent']:.1f} % of the image.", ""]
     for note in report["notes"]:
         lines.append(f"* {note}")
     return "\n".join(lines) + "\n"
+
+
+def replot(report: dict, scene_out: Path) -> None:
+    """The plots of a finished run (from its JSON), e.g. after changing the plotting code."""
+    per_material: dict[str, list[dict]] = {}
+    for row in report["results"]:
+        per_material.setdefault(row["material"], []).append(row)
+    representation = {r["material"]: r["rmse"] for r in report["representation"] if r["model"] == "nbrdf"}
+    scene = report["settings"]["scene"]
+    label = report["settings"]["integrator_label"]
+    if scene == "veach":
+        integrator = report["settings"]["integrator"]
+        tag = "" if integrator == "bsdf" else f"-{integrator}"
+        for name, rows in per_material.items():
+            plot_material(scene_out / "plots" / f"veach{tag}-{name}.png", f"Veach ({label}), {name}: error on the plates",
+                          rows, representation.get(name))
+        plot_overview(scene_out / "plots" / f"veach{tag}-overview.png",
+                      f"Veach scene, {label}: RMSE on the plates against render time", per_material)
+    else:
+        for name, rows in per_material.items():
+            plot_material(scene_out / "plots" / "kitchen.png",
+                          f"Kitchen ({label}), {name} replaced: error on the image", rows, representation.get(name))
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
@@ -514,6 +545,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, help="output folder (default out/convergence, quick: out/convergence-quick)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf command-line tool")
     parser.add_argument("--force", action="store_true", help="re-render cached references")
+    parser.add_argument("--replot", action="store_true",
+                        help="only redraw the plots and the summary of the last run's JSON (same --scene, --out, "
+                             "--integrator)")
     args = parser.parse_args(argv)
 
     train_args = args.train_args.split()
@@ -537,6 +571,13 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or REPO / "out" / ("convergence-quick" if args.quick else "convergence")
     scene_out = out / args.scene
     scene_out.mkdir(parents=True, exist_ok=True)
+    suffix = "" if args.scene == "kitchen" or args.integrator == "bsdf" else "-mis"
+    if args.replot:
+        report = json.loads((scene_out / f"convergence{suffix}.json").read_text())
+        replot(report, scene_out)
+        (scene_out / f"summary{suffix}.md").write_text(markdown(report))
+        print(markdown(report))
+        return 0
 
     mi.set_variant(args.variant)
     nbrdf_mitsuba.register()
@@ -570,7 +611,6 @@ def main(argv: list[str] | None = None) -> int:
                           "train_args": train_args, "seconds": round(time.perf_counter() - start, 1),
                           "metrics": "MAE, RMSE, MAPE (eps 0.01), PSNR (peak 1) on linear RGB",
                           "cache": {"hits": cache.hits, "misses": cache.misses}}
-    suffix = "" if args.scene == "kitchen" or args.integrator == "bsdf" else "-mis"
     write_csv(scene_out / f"convergence{suffix}.csv", report["results"])
     (scene_out / f"convergence{suffix}.json").write_text(json.dumps(report, indent=2) + "\n")
     text = markdown(report)

@@ -45,8 +45,7 @@ MERL_TEST_SET = (
 # plastics, phenolic) and one fabric as a near-diffuse control.
 VEACH_MERL = (
     "aluminium", "black-oxidized-steel", "blue-metallic-paint", "color-changing-paint3", "gray-plastic",
-    "green-metallic-paint", "nickel", "red-specular-plastic", "specular-orange-phenolic",
-    "two-layer-silver", "pink-fabric",
+    "green-metallic-paint", "nickel", "red-specular-plastic", "pink-fabric",
 )
 VEACH_RGL = ("cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb")
 
@@ -199,6 +198,7 @@ class Artefacts:
         else:
             raise RuntimeError(f"{name}: the CLI {self.cli} cannot train (no `train` command) and "
                                f"there is no reference network {keras}")
+        # network_hash is the file as last written (after fit-phong stored its lobe in it).
         if network.is_file() and record.get("network_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return network, inputs["source"]
         if inputs["source"] == "trained":
@@ -210,19 +210,20 @@ class Artefacts:
 
             if import_keras.main([str(keras), "-o", str(network), "-q"]) != 0:
                 raise RuntimeError(f"{name}: importing {keras} failed")
-        record.update(network_inputs=inputs, network_hash=file_hash(network))
+        record.update(network_inputs=inputs, network_hash=file_hash(network), network_trained_hash=file_hash(network))
         record.pop("phong_inputs", None)
         return network, inputs["source"]
 
     def _phong(self, name: str, network: Path, record: dict) -> None:
         if not self.can_fit_phong():
             return
-        inputs = {"command": "nbrdf fit-phong", "network": record.get("network_hash")}
-        if record.get("phong_inputs") == inputs and record.get("network_fitted_hash") == file_hash(network):
+        inputs = {"command": "nbrdf fit-phong", "network": record.get("network_trained_hash")}
+        if record.get("phong_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return
         self.log(f"  {name}: fitting the Blinn-Phong sampling lobe (nbrdf fit-phong)")
         fit = json.loads(_run([self.cli, "fit-phong", network, "--json"]))
-        record.update(phong_inputs=inputs, network_fitted_hash=file_hash(network),
+        # fit-phong rewrites the network file (with the lobe): remember what it now holds.
+        record.update(phong_inputs=inputs, network_hash=file_hash(network),
                       phong_fit={k: fit[k] for k in ("exponent", "specular_weight", "loss") if k in fit})
 
     def _material(self, name: str, kind: str, table: Path, keras: Path, measured: Path | None, record: dict) -> Material:
