@@ -217,14 +217,16 @@ class Artefacts:
     def _phong(self, name: str, network: Path, record: dict) -> None:
         if not self.can_fit_phong():
             return
-        inputs = {"command": "nbrdf fit-phong", "network": record.get("network_trained_hash")}
+        # "lobe" changes the key whenever the choice of lobe changes, so older fits are redone.
+        inputs = {"command": "nbrdf fit-phong", "lobe": "variance", "network": record.get("network_trained_hash")}
         if record.get("phong_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return
         self.log(f"  {name}: fitting the Blinn-Phong sampling lobe (nbrdf fit-phong)")
-        fit = json.loads(_run([self.cli, "fit-phong", network, "--json"]))
+        fit = json.loads(_run([self.cli, "fit-phong", network, "--json", "--lobe", "variance"]))
         # fit-phong rewrites the network file (with the lobe): remember what it now holds.
         record.update(phong_inputs=inputs, network_hash=file_hash(network),
-                      phong_fit={k: fit[k] for k in ("exponent", "specular_weight", "loss") if k in fit})
+                      phong_fit={k: fit[k] for k in ("exponent", "specular_weight", "loss", "model_exponent",
+                                                 "model_specular_weight", "relative_variance") if k in fit})
 
     def _material(self, name: str, kind: str, table: Path, keras: Path, measured: Path | None, record: dict) -> Material:
         network, source = self._network(name, table, keras, record)

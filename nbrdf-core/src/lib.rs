@@ -7,7 +7,8 @@
 //! * [`network`]  – the NBRDF multilayer perceptron, its JSON file format and batched evaluation.
 //! * [`sampling`] – cosine, uniform and Blinn-Phong-mixture importance sampling with pdfs.
 //! * [`train`]    – training an NBRDF on a table: samples, batched gradients, Adam, early stopping.
-//! * [`phong_fit`] – fitting the Blinn-Phong lobe that importance-samples a material.
+//! * [`phong_fit`] – fitting the 7-parameter Blinn-Phong model of a material (log loss).
+//! * [`lobe_fit`] – choosing the Blinn-Phong sampling lobe `(n, w)` for the lowest variance.
 //! * [`metrics`]  – image-space and log-space comparison of two materials.
 //! * [`brdf`]     – the [`brdf::Brdf`] trait shared by tables and networks, SoA batch types.
 //! * [`error`]    – the crate's error type.
@@ -21,6 +22,7 @@ pub mod brdf;
 pub mod coords;
 pub mod error;
 pub mod latent;
+pub mod lobe_fit;
 pub mod merl;
 pub mod metrics;
 pub mod network;

@@ -8,12 +8,14 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::analytic::{catalogue, AnalyticBrdf, ModelKind};
 use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
+use nbrdf_core::lobe_fit::{self, LobeFitConfig};
 use nbrdf_core::merl::{self, MerlTable};
 use nbrdf_core::metrics;
 use nbrdf_core::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
-use nbrdf_core::phong_fit::{self, FitConfig, PhongFit};
+use nbrdf_core::phong_fit::{self, FitConfig};
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
+use nbrdf_core::train::dataset::TargetFn;
 use nbrdf_core::train::{self, EpochStats, TrainConfig};
 use nbrdf_core::{Nbrdf, NbrdfError, Result};
 use std::io::Write;
@@ -174,6 +176,12 @@ struct TrainArgs {
     quiet: bool,
 }
 
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum LobeArg {
+    Variance,
+    Model,
+}
+
 #[derive(Args)]
 struct FitPhongArgs {
     /// A MERL-format table (.binary) or a network (.nbrdf.json, updated with the fit).
@@ -185,6 +193,11 @@ struct FitPhongArgs {
     /// Print the fit as JSON.
     #[arg(long)]
     json: bool,
+    /// Which lobe is stored for sampling: `variance` (default) searches (n, w) for the lowest
+    /// variance of BSDF sampling; `model` takes n and w = mean(ks) / (mean(kd) + mean(ks)) of the
+    /// 7-parameter fit (DESIGN.md section 6), which can be a poor sampler for weak sharp spikes.
+    #[arg(long, value_enum, default_value_t = LobeArg::Variance)]
+    lobe: LobeArg,
     /// Directions sampled (adaptively) for the fit.
     #[arg(long, default_value_t = FitConfig::default().samples)]
     samples: usize,
@@ -423,19 +436,17 @@ impl FitSource {
         }
     }
 
-    fn fit(&self, config: &FitConfig) -> Result<PhongFit> {
+    /// `f_r` by Rusinkiewicz angles, what both fits read.
+    fn target(&self) -> Box<TargetFn<'_>> {
         match self {
-            FitSource::Table(table) => phong_fit::fit(&train::table_target(table), config),
-            FitSource::Network(net) => {
-                let target = |a: &RusinkiewiczAngles| {
-                    let (l, v) = from_rusinkiewicz(a);
-                    Some(
-                        net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
-                            .map(f64::from),
-                    )
-                };
-                phong_fit::fit(&target, config)
-            }
+            FitSource::Table(table) => Box::new(train::table_target(table)),
+            FitSource::Network(net) => Box::new(move |a: &RusinkiewiczAngles| {
+                let (l, v) = from_rusinkiewicz(a);
+                Some(
+                    net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                        .map(f64::from),
+                )
+            }),
         }
     }
 }
@@ -452,12 +463,28 @@ fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
         seed: args.seed,
         ..FitConfig::default()
     };
-    let fit = with_threads(args.threads, || source.fit(&config))??;
+    let lobe_config = LobeFitConfig::default();
+    let (fit, lobe, model_variance) = with_threads(args.threads, || -> Result<_> {
+        let target = source.target();
+        let fit = phong_fit::fit(&*target, &config)?;
+        let lobe = lobe_fit::fit_lobe(&*target, &lobe_config)?;
+        let model_variance = lobe_fit::relative_variance(
+            &*target,
+            fit.params.exponent,
+            fit.params.specular_weight(),
+            &lobe_config,
+        );
+        Ok((fit, lobe, model_variance))
+    })??;
     let p = &fit.params;
+    let (exponent, specular_weight) = match args.lobe {
+        LobeArg::Variance => (lobe.exponent, lobe.specular_weight),
+        LobeArg::Model => (p.exponent, p.specular_weight()),
+    };
     let sampling = SamplingParams {
         model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
-        exponent: p.exponent as f32,
-        specular_weight: p.specular_weight() as f32,
+        exponent: exponent as f32,
+        specular_weight: specular_weight as f32,
         source: "fit".to_string(),
     };
     let mut written = None;
@@ -474,9 +501,17 @@ fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
             "exponent": sampling.exponent,
             "specular_weight": sampling.specular_weight,
             "source": sampling.source,
+            "lobe": match args.lobe { LobeArg::Variance => "variance", LobeArg::Model => "model" },
             "kd": p.kd,
             "ks": p.ks,
+            "model_exponent": p.exponent,
+            "model_specular_weight": p.specular_weight(),
             "loss": fit.loss,
+            "relative_variance": {
+                "variance_lobe": lobe.relative_variance,
+                "model_lobe": model_variance,
+                "cosine": lobe.cosine_relative_variance,
+            },
             "written": written.as_ref().map(|w| w.display().to_string()),
         });
         let text = serde_json::to_string_pretty(&value)
@@ -484,8 +519,13 @@ fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
         return emit(&format!("{text}\n"));
     }
     let mut text = format!(
-        "blinn-phong: exponent {:.4}, specular weight {:.4}\n  kd {:.4e} {:.4e} {:.4e}\n  ks {:.4e} {:.4e} {:.4e}\n  log loss {:.4e}\n",
-        sampling.exponent, sampling.specular_weight, p.kd[0], p.kd[1], p.kd[2], p.ks[0], p.ks[1], p.ks[2], fit.loss
+        "sampling lobe ({}): exponent {:.4}, specular weight {:.4}\n\
+         model fit: exponent {:.4}, specular weight {:.4}, log loss {:.4e}\n  kd {:.4e} {:.4e} {:.4e}\n  ks {:.4e} {:.4e} {:.4e}\n\
+         relative variance of BSDF sampling: variance lobe {:.4e}, model lobe {:.4e}, cosine {:.4e}\n",
+        match args.lobe { LobeArg::Variance => "lowest variance", LobeArg::Model => "model fit" },
+        sampling.exponent, sampling.specular_weight, p.exponent, p.specular_weight(), fit.loss,
+        p.kd[0], p.kd[1], p.kd[2], p.ks[0], p.ks[1], p.ks[2],
+        lobe.relative_variance, model_variance, lobe.cosine_relative_variance,
     );
     if let Some(out) = written {
         text += &format!("updated the sampling of {}\n", out.display());
@@ -677,6 +717,17 @@ mod tests {
             panic!("fit-phong must parse")
         };
         assert!(args.json && args.output.is_none());
+        assert!(args.lobe == LobeArg::Variance);
+        let Ok(Cli {
+            command: Command::FitPhong(args),
+        }) = Cli::try_parse_from(["nbrdf", "fit-phong", "n.nbrdf.json", "--lobe", "model"])
+        else {
+            panic!("fit-phong --lobe model must parse")
+        };
+        assert!(args.lobe == LobeArg::Model);
+        assert!(
+            Cli::try_parse_from(["nbrdf", "fit-phong", "n.nbrdf.json", "--lobe", "x"]).is_err()
+        );
     }
 
     #[test]
