@@ -49,19 +49,26 @@ pub struct Split {
 }
 
 impl Split {
-    /// A fixed 80/20 split of `names` (sorted first; shuffled with a constant seed so that it
-    /// does not change with the training seed), 10 % of the training part for validation.
+    /// The fixed 80/20 split of the project (the same rule as `python/materials.py`, whose
+    /// test set the scenes render): in alphabetical order, every fifth material from the third
+    /// is a test material. Every tenth training material (from the sixth) is held out for
+    /// validation.
     pub fn fixed(names: &[String]) -> Self {
         let mut sorted = names.to_vec();
         sorted.sort();
-        SplitMix64::new(SPLIT_SEED, Stream::Latent, 0).shuffle(&mut sorted);
-        let n_test = (sorted.len() as f64 * 0.2).round() as usize;
-        let mut test = sorted[..n_test].to_vec();
-        let mut train = sorted[n_test..].to_vec();
-        test.sort();
-        let mut validation = train[..(train.len() / 10).max(1).min(train.len())].to_vec();
-        train.sort();
-        validation.sort();
+        sorted.dedup();
+        let (mut train, mut test) = (Vec::new(), Vec::new());
+        for (i, name) in sorted.into_iter().enumerate() {
+            if i % 5 == 2 {
+                test.push(name);
+            } else {
+                train.push(name);
+            }
+        }
+        let mut validation: Vec<String> = train.iter().skip(5).step_by(10).cloned().collect();
+        if validation.is_empty() {
+            validation.extend(train.first().cloned());
+        }
         Split {
             train,
             test,
@@ -69,9 +76,6 @@ impl Split {
         }
     }
 }
-
-/// The split's constant seed.
-const SPLIT_SEED: u64 = 0x5eed_5011;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AutoEncoder {
@@ -625,5 +629,9 @@ mod tests {
         let mut rev = names.clone();
         rev.reverse();
         assert_eq!(Split::fixed(&rev), s);
+        // python/materials.py's rule: sorted(names)[2::5].
+        let expected: Vec<String> = names.iter().skip(2).step_by(5).cloned().collect();
+        assert_eq!(s.test, expected);
+        assert!(s.test.iter().all(|t| !s.train.contains(t)));
     }
 }
