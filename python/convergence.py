@@ -8,8 +8,9 @@ Markdown summary land in the output folder.
 
 Strategies (DESIGN.md section 6): ``uniform``, ``cosine`` and ``phong-fit`` sample our NBRDF
 (the ``nbrdf`` BSDF) by the uniform hemisphere, the cosine lobe and the Blinn-Phong lobe fitted by
-``nbrdf fit-phong``; ``phong-predicted`` needs the predictor of the latent-space work (skipped,
-with a note, while it does not exist); ``measured`` is Mitsuba's own ``measured`` BSDF with its
+``nbrdf fit-phong``; ``phong-predicted`` samples the NBRDF through the lobe that the latent-space
+predictor gives (``--ae AE.json --predictor P.json``, from ``nbrdf ae train`` and ``nbrdf predictor
+train``; skipped with a note without them); ``measured`` is Mitsuba's own ``measured`` BSDF with its
 own sampling (RGL materials only).
 
 References and ground truths (cached under ``OUT/references`` with JSON sidecars, re-rendered when
@@ -40,6 +41,7 @@ import argparse
 import csv
 import json
 import math
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -56,7 +58,7 @@ from render_utils import render_passes, timed_render, warm_up, write_exr, write_
 
 REPO = Path(__file__).resolve().parent.parent
 STRATEGIES = ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
-NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong"}
+NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong", "phong-predicted": "phong"}
 REFERENCE_SEED = 1_000_000  # references use seeds from here on; test renders stay far below
 QUICK_TRAIN_ARGS = ["--samples", "40000", "--epochs", "3", "--min-epochs", "1"]
 
@@ -282,11 +284,24 @@ def reference(cache: RenderCache, name: str, description: dict, files, settings:
     return cache.get(name, description, files, settings, make)
 
 
+def predicted_lobe(args, material: Material, out: Path) -> tuple[float, float] | None:
+    """``(n, w)`` of ``nbrdf predict-phong`` for the material's network, or None without a
+    predictor. The network file itself is left alone (its lobe stays the fitted one)."""
+    if not (args.ae and args.predictor):
+        return None
+    target = out / "predicted" / f"{material.name}.nbrdf.json"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([str(args.cli), "predict-phong", "--ae", str(args.ae), "--predictor", str(args.predictor),
+                    str(material.network), "-o", str(target)], check=True, capture_output=True, text=True)
+    sampling = json.loads(target.read_text())["sampling"]
+    return float(sampling["exponent"]), float(sampling["specular_weight"])
+
+
 def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: list[str]) -> dict:
     setup = VeachSetup(args)
     levels = spp_levels(args.max_spp)
     specs = [m for m in args.materials.split(",") if m] + [f"rgl:{m}" for m in args.rgl.split(",") if m]
-    results, representation, equal_time, per_material = [], [], [], {}
+    results, representation, equal_time, per_material, predicted_lobes = [], [], [], {}, {}
     tag = "" if setup.integrator == "bsdf" else f"-{setup.integrator}"  # keeps the two runs apart
     settings = {"spp": args.gt_spp, "resolution": list(setup.resolution), "integrator": "mis",
                 "seed": REFERENCE_SEED, "spp_per_pass": args.spp_per_pass}
@@ -325,7 +340,14 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
             if strategy in NBRDF_SAMPLING:
                 if strategy == "phong-fit" and not material.has_phong:
                     continue
-                bsdf = material.nbrdf(NBRDF_SAMPLING[strategy])
+                extra = {}
+                if strategy == "phong-predicted":
+                    lobe = predicted_lobe(args, material, out)
+                    if lobe is None:
+                        continue
+                    extra = {"exponent": lobe[0], "specular_weight": lobe[1]}
+                    predicted_lobes[label] = lobe
+                bsdf = material.nbrdf(NBRDF_SAMPLING[strategy], **extra)
                 strategies[strategy] = {"scene": setup.load(bsdf), "reference": nbrdf_ref, "reference_name": "nbrdf"}
             elif strategy == "measured" and material.measured is not None:
                 bsdf = {"type": "measured", "filename": str(material.measured)}
@@ -345,6 +367,9 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
         summary = equal_time_summary(rows)
         equal_time.append({"scene": "veach", "material": label, "kind": material.kind,
                            "exponent": material.exponent, "specular_weight": material.specular_weight,
+                           **({"predicted_exponent": predicted_lobes[label][0],
+                               "predicted_specular_weight": predicted_lobes[label][1]}
+                              if label in predicted_lobes else {}),
                            **summary})
         plot_material(out / "plots" / f"veach{tag}-{label}.png",
                       f"Veach ({'pure BSDF sampling' if setup.integrator == 'bsdf' else 'MIS'}), {label}: "
@@ -451,6 +476,9 @@ def markdown(report: dict) -> str:
                   f"({report['settings']['integrator_label']}, {report['settings']['resolution'][0]}x"
                   f"{report['settings']['resolution'][1]}):", ""]
         header = "| material | Phong n, w | time (s) | " + " | ".join(strategies) + " | phong-fit / cosine | phong-fit / uniform |"
+        predicted = "phong-predicted" in strategies
+        if predicted:
+            header += " predicted n, w | phong-predicted / phong-fit |"
         lines += [header, "|" + "---|" * (header.count("|") - 1)]
         for e in report["equal_time"]:
             r = e["rmse"]
@@ -459,8 +487,15 @@ def markdown(report: dict) -> str:
             cells = [f"{r[s]:.4g}" if s in r else "-" for s in strategies]
             ratio_c = f"{r['phong-fit'] / r['cosine']:.2f}" if "phong-fit" in r and "cosine" in r else "-"
             ratio_u = f"{r['phong-fit'] / r['uniform']:.3f}" if "phong-fit" in r and "uniform" in r else "-"
-            lines.append(f"| {e['material']} | {lobe} | {e['seconds']:.2f} | " + " | ".join(cells)
-                         + f" | {ratio_c} | {ratio_u} |")
+            line = (f"| {e['material']} | {lobe} | {e['seconds']:.2f} | " + " | ".join(cells)
+                    + f" | {ratio_c} | {ratio_u} |")
+            if predicted:
+                pn = e.get("predicted_exponent")
+                plobe = f"{pn:.3g}, {e['predicted_specular_weight']:.2f}" if pn is not None else "-"
+                ratio_p = (f"{r['phong-predicted'] / r['phong-fit']:.2f}"
+                           if "phong-predicted" in r and "phong-fit" in r else "-")
+                line += f" {plobe} | {ratio_p} |"
+            lines.append(line)
         lines.append("")
     if report["representation"]:
         lines += [f"Representation error against the ground truth ({report['settings']['gt_spp']} spp, MIS/path, "
@@ -545,6 +580,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, help="output folder (default out/convergence, quick: out/convergence-quick)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf command-line tool")
     parser.add_argument("--force", action="store_true", help="re-render cached references")
+    parser.add_argument("--ae", type=Path, help="autoencoder (nbrdf ae train) for the phong-predicted strategy")
+    parser.add_argument("--predictor", type=Path,
+                        help="Phong-parameter predictor (nbrdf predictor train) for the phong-predicted strategy")
     parser.add_argument("--replot", action="store_true",
                         help="only redraw the plots and the summary of the last run's JSON (same --scene, --out, "
                              "--integrator)")
@@ -590,10 +628,17 @@ def main(argv: list[str] | None = None) -> int:
         notes.append("NBRDFs imported from the authors' Keras networks (`nbrdf train` is not available)")
     if not artefacts.can_fit_phong():
         notes.append("Blinn-Phong lobes: `nbrdf fit-phong` is not available, phong-fit skipped")
-    if artefacts.predictor() is None:
-        message = "phong-predicted skipped: no Blinn-Phong parameter predictor exists yet (the latent-space issue is not done)"
+    if not (args.ae and args.predictor):
+        message = "phong-predicted skipped: pass --ae AE.json --predictor P.json (nbrdf ae train, nbrdf predictor train)"
         print(f"note: {message}")
         notes.append(message)
+    elif args.scene == "kitchen":
+        notes.append("phong-predicted is measured in the Veach scene only")
+    else:
+        for path in (args.ae, args.predictor):
+            if not path.is_file():
+                print(f"error: {path}: no such file", file=sys.stderr)
+                return 2
 
     start = time.perf_counter()
     if args.scene == "veach":

@@ -18,6 +18,7 @@ sys.path.insert(0, str(REPO / "python"))
 
 import metrics  # noqa: E402
 from render_utils import bsdf_xml, render, render_passes  # noqa: E402
+from nbrdf_testing import random_layers, write_network  # noqa: E402
 
 VEACH_SIZE = (64, 43)
 KITCHEN_SIZE = (48, 27)
@@ -244,6 +245,23 @@ def _cli_or_skip():
     return cli
 
 
+def _tiny_latent_models(cli, tmp_path):
+    """An autoencoder and a predictor trained for a few steps on five random networks with Phong
+    labels: enough to exercise the phong-predicted strategy, not to predict anything well."""
+    folder = tmp_path / "nbrdfs"
+    folder.mkdir()
+    for k, name in enumerate("abcde"):
+        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=k), name=name,
+                      sampling={"model": "blinn-phong", "exponent": 10.0 * (k + 1), "specular_weight": 0.1 * (k + 1),
+                                "source": "fit"})
+    ae, predictor = tmp_path / "ae.json", tmp_path / "predictor.json"
+    for command in (["ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "3", "--warmup", "2", "--quiet"],
+                    ["predictor", "train", "--ae", ae, "--nbrdfs", folder, "-o", predictor, "--iterations", "50"]):
+        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+    return ae, predictor
+
+
 def test_convergence_quick_json(tmp_path):
     cli = _cli_or_skip()
     from conftest import SHARED
@@ -251,9 +269,11 @@ def test_convergence_quick_json(tmp_path):
     help_text = subprocess.run([str(cli), "--help"], capture_output=True, text=True).stdout
     if " train " not in help_text and not SHARED.is_dir():
         pytest.skip("the CLI cannot train NBRDFs and ../shared (the authors' networks) is absent")
+    ae, predictor = _tiny_latent_models(cli, tmp_path)
     out = tmp_path / "result.json"
     run = subprocess.run([sys.executable, str(REPO / "python" / "convergence.py"), "--scene", "veach", "--quick",
-                          "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli)],
+                          "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli),
+                          "--ae", str(ae), "--predictor", str(predictor)],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     report = json.loads(out.read_text())
@@ -264,8 +284,10 @@ def test_convergence_quick_json(tmp_path):
         assert row["scene"] == "veach"
         assert row["strategy"] in ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
         assert row["seconds"] > 0 and np.isfinite(row["rmse"])
-    assert {r["strategy"] for r in rows} >= {"uniform", "cosine"}
+    assert {r["strategy"] for r in rows} >= {"uniform", "cosine", "phong-predicted"}
     assert sorted({r["spp"] for r in rows}) == [1, 2, 4]
+    lobe = report["equal_time"][0]
+    assert lobe["predicted_exponent"] >= 0 and 0 <= lobe["predicted_specular_weight"] <= 1
     assert report["representation"] and report["equal_time"]
     folder = tmp_path / "out" / "veach"
     assert (folder / "convergence.csv").is_file() and (folder / "plots" / "veach-overview.png").is_file()
