@@ -67,9 +67,10 @@ def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
     bsdfs = {}
     bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit"}
     bsdfs["nbrdf-opaque"] = {"type": "nbrdf", "filename": str(network), "backend": "jit", "jit_weights": "opaque"}
+    bsdfs["merl"] = {"type": "merl", "filename": str(table), "backend": "jit"}
     if mode == "wavefront":
         bsdfs["nbrdf-rust"] = {"type": "nbrdf", "filename": str(network), "backend": "rust"}
-        bsdfs["merl"] = {"type": "merl", "filename": str(table)}
+        bsdfs["merl-rust"] = {"type": "merl", "filename": str(table), "backend": "rust"}
     bsdfs.update(builtin_bsdfs())
     return bsdfs
 

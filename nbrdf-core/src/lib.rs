@@ -20,6 +20,7 @@ pub mod analytic;
 pub mod brdf;
 pub mod coords;
 pub mod error;
+pub mod latent;
 pub mod merl;
 pub mod metrics;
 pub mod network;

@@ -21,6 +21,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
+#[path = "nbrdf/latent_cli.rs"]
+mod latent_cli;
+
 #[derive(Parser)]
 #[command(
     name = "nbrdf",
@@ -46,6 +49,16 @@ enum Command {
     FitPhong(FitPhongArgs),
     /// Compare two materials (tables or networks): sphere images and log-space BRDF error.
     Compare(CompareArgs),
+    /// The NBRDF autoencoder: train, encode, decode.
+    #[command(subcommand)]
+    Ae(latent_cli::AeCommand),
+    /// Interpolate two networks in the autoencoder's latent space and in weight space.
+    Interpolate(latent_cli::InterpolateArgs),
+    /// The predictor of Blinn-Phong sampling parameters from autoencoder codes.
+    #[command(subcommand)]
+    Predictor(latent_cli::PredictorCommand),
+    /// Predict a network's Blinn-Phong sampling parameters from its code (source "predicted").
+    PredictPhong(latent_cli::PredictPhongArgs),
 }
 
 #[derive(Args)]
@@ -266,6 +279,10 @@ fn run(command: Command) -> Result<()> {
         Command::Train(args) => run_train(&args),
         Command::FitPhong(args) => run_fit_phong(&args),
         Command::Compare(args) => run_compare(&args),
+        Command::Ae(command) => latent_cli::run_ae(command),
+        Command::Interpolate(args) => latent_cli::run_interpolate(&args),
+        Command::Predictor(command) => latent_cli::run_predictor(command),
+        Command::PredictPhong(args) => latent_cli::run_predict_phong(&args),
     }
 }
 

@@ -226,6 +226,36 @@ impl ChunkScratch {
     }
 }
 
+/// Raw access for losses other than training's (the autoencoder's image loss): load inputs,
+/// run [`Kernel::forward_raw`], read the output pre-activations, set their gradients, run
+/// [`Kernel::backward_raw`].
+impl ChunkScratch {
+    /// Loads raw network inputs (at most [`LANES`]); unused lanes get zero inputs.
+    pub fn load_inputs(&mut self, inputs: &[[f32; INPUTS]]) {
+        debug_assert!(inputs.len() <= LANES);
+        for lane in 0..LANES {
+            let x = &mut self.x[lane * XW..(lane + 1) * XW];
+            x.fill(0.0);
+            if let Some(v) = inputs.get(lane) {
+                x[..INPUTS].copy_from_slice(v);
+            }
+        }
+    }
+
+    /// Output pre-activation `z` (so `f = expm1(z)`) of `lane`, channel `k`, after a forward pass.
+    #[inline]
+    pub fn output_pre_activation(&self, lane: usize, k: usize) -> f32 {
+        self.z3[lane * YW + k]
+    }
+
+    /// Sets `d loss / d z` of `lane`, channel `k` (`k < 3`) for [`Kernel::backward_raw`].
+    #[inline]
+    pub fn set_output_gradient(&mut self, lane: usize, k: usize, g: f32) {
+        debug_assert!(k < OUTPUTS);
+        self.g3[lane * YW + k] = g;
+    }
+}
+
 /// Which compiled copy of the kernels runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kernel {
@@ -256,6 +286,28 @@ impl Kernel {
         }
     }
 
+    /// Forward pass only: fills the output pre-activations of the loaded chunk.
+    pub fn forward_raw(self, w: &Weights, s: &mut ChunkScratch) {
+        match self {
+            Kernel::Portable => forward::<Unfused>(w, s),
+            // SAFETY: `detect` chose this variant only where the CPU has AVX2 and FMA.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2Fma => unsafe { forward_avx2(w, s) },
+        }
+    }
+
+    /// Backward pass from the output gradients set with
+    /// [`ChunkScratch::set_output_gradient`], after [`Kernel::forward_raw`] on the same chunk:
+    /// writes (not adds) the parameter gradient into `grad` (padded layout).
+    pub fn backward_raw(self, w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
+        match self {
+            Kernel::Portable => backward::<Unfused>(w, s, grad),
+            // SAFETY: as in `forward_raw`.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2Fma => unsafe { backward_avx2(w, s, grad) },
+        }
+    }
+
     /// Loss sum of the loaded chunk for the network as evaluated (output clamped at 0).
     pub fn loss(self, w: &Weights, s: &mut ChunkScratch) -> f64 {
         match self {
@@ -277,6 +329,18 @@ unsafe fn gradient_avx2(w: &Weights, s: &mut ChunkScratch, scale: f32, grad: &mu
 #[target_feature(enable = "avx2,fma")]
 unsafe fn loss_avx2(w: &Weights, s: &mut ChunkScratch) -> f64 {
     loss_impl::<Fused>(w, s)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn forward_avx2(w: &Weights, s: &mut ChunkScratch) {
+    forward::<Fused>(w, s)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn backward_avx2(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
+    backward::<Fused>(w, s, grad)
 }
 
 #[inline(always)]

@@ -149,22 +149,8 @@ pub fn train(
     name: &str,
     on_epoch: &mut dyn FnMut(&EpochStats),
 ) -> Result<TrainOutcome> {
-    config.validate()?;
     let start = Instant::now();
-    let train_set = dataset::draw(
-        target,
-        config.sampling,
-        config.samples,
-        config.seed,
-        Stream::TrainSamples,
-    )?;
-    let validation = dataset::draw(
-        target,
-        config.sampling,
-        config.validation_samples(),
-        config.seed,
-        Stream::ValidationSamples,
-    )?;
+    let (train_set, validation) = draw_sets(target, config)?;
     let mut trainer = Trainer::new(config.hidden, config.batch, config.adam, config.seed);
     let mut order: Vec<u32> = Vec::new();
     let mut best = (f64::INFINITY, 0usize, trainer.weights.p.clone());

@@ -24,6 +24,8 @@ pub enum Stream {
     Shuffle = 4,
     FitSamples = 5,
     Metrics = 6,
+    /// The autoencoder and predictor (split, initialisation, shuffling).
+    Latent = 7,
 }
 
 /// A sequential SplitMix64 generator.

@@ -1,0 +1,589 @@
+//! The latent-space subcommands: `ae train|encode|decode`, `interpolate`, `predict-phong`,
+//! `predictor train`, `pca`.
+
+use super::{emit, with_threads};
+use clap::{Args, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use nbrdf_core::latent::autoencoder::{AeConfig, AutoEncoder, Split};
+use nbrdf_core::{Nbrdf, NbrdfError, Result};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Subcommand)]
+pub enum AeCommand {
+    /// Train the autoencoder on a directory of NAME.nbrdf.json files (fixed 80/20 split).
+    Train(AeTrainArgs),
+    /// Print the 32-value code of a network as a JSON array.
+    Encode(AeEncodeArgs),
+    /// Decode a code (a JSON array file) into a network.
+    Decode(AeDecodeArgs),
+    /// Reconstruct the test split with the autoencoder and with PCA-32; image errors as JSON.
+    Eval(AeEvalArgs),
+}
+
+#[derive(Subcommand)]
+pub enum PredictorCommand {
+    /// Train the Phong-parameter predictor on the codes of the training split.
+    Train(PredictorTrainArgs),
+}
+
+pub fn run_predictor(command: PredictorCommand) -> Result<()> {
+    match command {
+        PredictorCommand::Train(a) => run_predictor_train(&a),
+    }
+}
+
+#[derive(Args)]
+pub struct AeTrainArgs {
+    /// Directory of NAME.nbrdf.json networks (one per material, all of one hidden width).
+    #[arg(long, value_name = "DIR")]
+    nbrdfs: PathBuf,
+    /// Where to write the result.
+    #[arg(short, long, value_name = "AE.json")]
+    output: PathBuf,
+    /// Random seed (training is deterministic per seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Epoch limit (early stopping usually ends sooner).
+    #[arg(long, default_value_t = AeConfig::default().max_epochs)]
+    epochs: usize,
+    /// Epochs of weight-space warm start before the image loss.
+    #[arg(long, default_value_t = AeConfig::default().warmup_epochs)]
+    warmup: usize,
+    /// Early-stopping patience in epochs.
+    #[arg(long, default_value_t = AeConfig::default().patience)]
+    patience: usize,
+    /// Width of the encoder's and decoder's hidden layer.
+    #[arg(long, default_value_t = AeConfig::default().hidden)]
+    hidden: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = AeConfig::default().learning_rate)]
+    lr: f32,
+    /// Learning rate of the image-loss phase.
+    #[arg(long, default_value_t = AeConfig::default().image_learning_rate)]
+    image_lr: f32,
+    /// Gaussian noise on the standardised encoder input (denoising regulariser).
+    #[arg(long, default_value_t = AeConfig::default().input_noise)]
+    input_noise: f32,
+    #[arg(long, default_value_t = AeConfig::default().weight_decay)]
+    weight_decay: f32,
+    /// Disable the 6 RGB-permutation augmentation.
+    #[arg(long)]
+    no_augment: bool,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+pub struct AeEncodeArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The neural BRDF to read.
+    #[arg(value_name = "NBRDF.json")]
+    input: PathBuf,
+    /// Print the encoding time to stderr.
+    #[arg(long)]
+    timing: bool,
+}
+
+#[derive(Args)]
+pub struct AeDecodeArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The latent code: a JSON array of 32 numbers (from `nbrdf ae encode`).
+    #[arg(value_name = "CODE.json")]
+    code: PathBuf,
+    /// Where to write the result.
+    #[arg(short, long, value_name = "NBRDF.json")]
+    output: PathBuf,
+    /// Name of the decoded material (default: the output file's stem).
+    #[arg(long)]
+    name: Option<String>,
+}
+
+#[derive(Args)]
+pub struct InterpolateArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The first material (a neural BRDF).
+    #[arg(value_name = "A.json")]
+    a: PathBuf,
+    /// The second material (a neural BRDF).
+    #[arg(value_name = "B.json")]
+    b: PathBuf,
+    /// Number of networks per path, endpoints included.
+    #[arg(long, default_value_t = 7)]
+    steps: usize,
+    /// Where to write the result.
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+}
+
+pub fn run_ae(command: AeCommand) -> Result<()> {
+    match command {
+        AeCommand::Train(a) => run_ae_train(&a),
+        AeCommand::Encode(a) => run_ae_encode(&a),
+        AeCommand::Decode(a) => run_ae_decode(&a),
+        AeCommand::Eval(a) => run_ae_eval(&a),
+    }
+}
+
+fn invalid(msg: String) -> NbrdfError {
+    NbrdfError::InvalidArgument(msg)
+}
+
+/// The `NAME.nbrdf.json` networks of a directory, sorted by name.
+pub fn read_nbrdf_dir(dir: &Path) -> Result<Vec<(String, Nbrdf)>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| invalid(format!("{}: {e}", dir.display())))?;
+    let mut out = Vec::new();
+    for entry in entries {
+        let path = entry
+            .map_err(|e| invalid(format!("{}: {e}", dir.display())))?
+            .path();
+        let Some(file) = path.file_name().and_then(|f| f.to_str()) else {
+            continue;
+        };
+        if let Some(name) = file.strip_suffix(".nbrdf.json") {
+            out.push((name.to_string(), Nbrdf::load(&path)?));
+        }
+    }
+    if out.is_empty() {
+        return Err(invalid(format!("no *.nbrdf.json in {}", dir.display())));
+    }
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    Ok(out)
+}
+
+fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
+    let nets = read_nbrdf_dir(&args.nbrdfs)?;
+    let hidden = nets[0].1.hidden_width();
+    if nets.iter().any(|(_, n)| n.hidden_width() != hidden) {
+        return Err(invalid("the networks differ in hidden width".into()));
+    }
+    let names: Vec<String> = nets.iter().map(|(n, _)| n.clone()).collect();
+    let split = Split::fixed(&names);
+    let materials: Vec<(String, Vec<f32>)> = nets
+        .iter()
+        .map(|(n, net)| (n.clone(), net.to_flat()))
+        .collect();
+    let config = AeConfig {
+        seed: args.seed,
+        hidden: args.hidden,
+        max_epochs: args.epochs,
+        warmup_epochs: args.warmup,
+        patience: args.patience,
+        learning_rate: args.lr,
+        image_learning_rate: args.image_lr,
+        input_noise: args.input_noise,
+        weight_decay: args.weight_decay,
+        augment: !args.no_augment,
+        ..AeConfig::default()
+    };
+    let target = if args.quiet {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    };
+    let style = ProgressStyle::with_template("epoch {pos:>3}/{len} [{bar:24}] {msg}  ETA {eta}")
+        .map_err(|e| invalid(format!("progress bar template: {e}")))?
+        .progress_chars("=> ");
+    let bar =
+        ProgressBar::with_draw_target(Some(config.max_epochs as u64), target).with_style(style);
+    let start = Instant::now();
+    let (ae, history) = with_threads(args.threads, || {
+        AutoEncoder::train(&materials, hidden, split, &config, |e| {
+            bar.set_position(e.epoch as u64 + 1);
+            if !args.quiet && bar.is_hidden() {
+                eprintln!(
+                    "epoch {:>3} {} loss {:.4e} validation image loss {:.4e} ({:.1} s)",
+                    e.epoch, e.phase, e.train_loss, e.validation_image_loss, e.seconds
+                );
+            }
+            bar.set_message(format!(
+                "{} loss {:.3e}, validation image loss {:.3e}",
+                e.phase, e.train_loss, e.validation_image_loss
+            ));
+        })
+    })??;
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    let mut ae = ae;
+    if let Some(obj) = ae.provenance.as_object_mut() {
+        obj.insert(
+            "history".into(),
+            serde_json::to_value(&history).unwrap_or_default(),
+        );
+        obj.insert("nbrdfs".into(), args.nbrdfs.display().to_string().into());
+    }
+    ae.save(&args.output)?;
+    let last = history.last();
+    emit(&format!(
+        "trained the autoencoder on {} materials x {} permutations ({} test) in {:.1} s, {} epochs, best epoch {}, validation image loss {:.4e}\nwrote {}\n",
+        ae.split.train.len(),
+        if config.augment { 6 } else { 1 },
+        ae.split.test.len(),
+        seconds,
+        history.len(),
+        ae.provenance["best_epoch"],
+        last.map_or(f64::NAN, |e| e.validation_image_loss),
+        args.output.display()
+    ))
+}
+
+fn run_ae_encode(args: &AeEncodeArgs) -> Result<()> {
+    let ae = AutoEncoder::load(&args.ae)?;
+    let net = Nbrdf::load(&args.input)?;
+    let t0 = Instant::now();
+    let code = ae.encode(&net)?;
+    let ms = t0.elapsed().as_secs_f64() * 1e3;
+    if args.timing {
+        eprintln!("encoded in {ms:.3} ms");
+    }
+    let text = serde_json::to_string(&code).map_err(|e| invalid(e.to_string()))?;
+    emit(&format!("{text}\n"))
+}
+
+pub fn read_code(path: &Path) -> Result<Vec<f32>> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| invalid(format!("{}: {e}", path.display())))?;
+    serde_json::from_str(&text).map_err(|e| invalid(format!("{}: {e}", path.display())))
+}
+
+fn stem_name(path: &Path) -> String {
+    let file = path
+        .file_name()
+        .and_then(|f| f.to_str())
+        .unwrap_or("decoded");
+    file.strip_suffix(".nbrdf.json")
+        .or_else(|| file.strip_suffix(".json"))
+        .unwrap_or(file)
+        .to_string()
+}
+
+fn run_ae_decode(args: &AeDecodeArgs) -> Result<()> {
+    let ae = AutoEncoder::load(&args.ae)?;
+    let code = read_code(&args.code)?;
+    let name = args.name.clone().unwrap_or_else(|| stem_name(&args.output));
+    let net = ae.decode(&code, &name)?;
+    net.save(&args.output)?;
+    emit(&format!("wrote {}\n", args.output.display()))
+}
+
+pub fn run_interpolate(args: &InterpolateArgs) -> Result<()> {
+    if args.steps < 2 {
+        return Err(invalid("--steps must be at least 2".into()));
+    }
+    let ae = AutoEncoder::load(&args.ae)?;
+    let (a, b) = (Nbrdf::load(&args.a)?, Nbrdf::load(&args.b)?);
+    let (za, zb) = (ae.encode(&a)?, ae.encode(&b)?);
+    let (wa, wb) = (a.to_flat(), b.to_flat());
+    if wa.len() != wb.len() {
+        return Err(invalid("the networks differ in size".into()));
+    }
+    std::fs::create_dir_all(&args.output)
+        .map_err(|e| invalid(format!("{}: {e}", args.output.display())))?;
+    let lerp = |x: &[f32], y: &[f32], t: f32| -> Vec<f32> {
+        x.iter().zip(y).map(|(x, y)| x + t * (y - x)).collect()
+    };
+    for i in 0..args.steps {
+        let t = i as f32 / (args.steps - 1) as f32;
+        let name = format!("latent_{i:02}");
+        let mut net = ae.decode(&lerp(&za, &zb, t), &name)?;
+        net.provenance =
+            serde_json::json!({"interpolation": "latent", "t": t, "a": a.name, "b": b.name});
+        net.save(args.output.join(format!("{name}.nbrdf.json")))?;
+        let name = format!("weights_{i:02}");
+        let mut net = Nbrdf::from_flat(&name, a.hidden_width(), &lerp(&wa, &wb, t))?;
+        net.provenance =
+            serde_json::json!({"interpolation": "weights", "t": t, "a": a.name, "b": b.name});
+        net.save(args.output.join(format!("{name}.nbrdf.json")))?;
+    }
+    emit(&format!(
+        "wrote {} latent_NN and weights_NN networks to {}\n",
+        args.steps,
+        args.output.display()
+    ))
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum PcaTables {
+    /// The SGD fits of the MERL materials tabulated at cell centres (`nbrdf synth --model sgd`).
+    Sgd,
+    /// The input networks themselves tabulated at cell centres (like for like with the AE).
+    Nbrdf,
+}
+
+#[derive(Args)]
+pub struct AeEvalArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The networks the autoencoder was trained on.
+    #[arg(long, value_name = "DIR")]
+    nbrdfs: PathBuf,
+    /// Which tables the PCA-32 baseline decomposes.
+    #[arg(long, value_enum, default_value = "sgd")]
+    pca_tables: PcaTables,
+    /// Principal components kept.
+    #[arg(long, default_value_t = 32)]
+    components: usize,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+fn errors_json(e: &nbrdf_core::metrics::ImageErrors) -> serde_json::Value {
+    serde_json::json!({"mae": e.mae, "rmse": e.rmse, "ssim": e.ssim, "psnr": e.psnr})
+}
+
+/// `nbrdf ae eval`: AE and PCA reconstructions of the test split in image space (64 x 64 sphere,
+/// light at 45 degrees; MAE and RMSE on linear pixels, SSIM tone-mapped), as JSON.
+pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
+    use nbrdf_core::analytic::{AnalyticBrdf, ModelKind};
+    use nbrdf_core::coords::{from_rusinkiewicz, network_input};
+    use nbrdf_core::latent::pca::{CellValues, Pca};
+    use nbrdf_core::latent::sphere::{LIGHT_THETA_DEG, SIZE};
+    use nbrdf_core::merl;
+    use nbrdf_core::metrics::{image_errors, render_sphere};
+    let ae = AutoEncoder::load(&args.ae)?;
+    let nets = read_nbrdf_dir(&args.nbrdfs)?;
+    let get = |name: &String| -> Result<&Nbrdf> {
+        nets.iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, net)| net)
+            .ok_or_else(|| invalid(format!("no network for '{name}'")))
+    };
+    let theta = LIGHT_THETA_DEG.to_radians();
+    with_threads(args.threads, || -> Result<()> {
+        let t0 = Instant::now();
+        let mut rows = Vec::new();
+        for name in &ae.split.test {
+            let net = get(name)?;
+            let t = Instant::now();
+            let code = ae.encode(net)?;
+            let encode_ms = t.elapsed().as_secs_f64() * 1e3;
+            let rec = ae.decode(&code, name)?;
+            let e = image_errors(
+                &render_sphere(net, SIZE, theta),
+                &render_sphere(&rec, SIZE, theta),
+            );
+            rows.push(
+                serde_json::json!({"name": name, "ae": errors_json(&e), "encode_ms": encode_ms}),
+            );
+        }
+        let ae_seconds = t0.elapsed().as_secs_f64();
+        // PCA: cell values of each material.
+        let t0 = Instant::now();
+        let cell_fn = |name: &String| -> Result<Box<CellValues<'_>>> {
+            match args.pca_tables {
+                PcaTables::Sgd => {
+                    let brdf = AnalyticBrdf::from_catalogue(ModelKind::Sgd, name)?;
+                    Ok(Box::new(move |cell: usize| {
+                        let (h, d, p) = merl::cell_coordinates(cell);
+                        let (l, v) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
+                        brdf.eval_f64(l, v)
+                    }))
+                }
+                PcaTables::Nbrdf => {
+                    let net = get(name)?;
+                    Ok(Box::new(move |cell: usize| {
+                        let (h, d, p) = merl::cell_coordinates(cell);
+                        let (l, v) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
+                        net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                            .map(f64::from)
+                    }))
+                }
+            }
+        };
+        let train: Vec<Box<CellValues<'_>>> =
+            ae.split.train.iter().map(cell_fn).collect::<Result<_>>()?;
+        let refs: Vec<&CellValues<'_>> = train.iter().map(|b| b.as_ref()).collect();
+        let pca = Pca::fit(&refs, args.components, SIZE, theta);
+        let fit_seconds = t0.elapsed().as_secs_f64();
+        for (row, name) in rows.iter_mut().zip(&ae.split.test) {
+            let f = cell_fn(name)?;
+            let truth = pca.values(f.as_ref());
+            let rec = pca.reconstruct(f.as_ref());
+            let e = image_errors(&pca.render(&truth), &pca.render(&rec));
+            row["pca"] = errors_json(&e);
+        }
+        let summary = |key: &str, metric: &str| -> serde_json::Value {
+            let v: Vec<f64> = rows
+                .iter()
+                .filter_map(|r| r[key][metric].as_f64())
+                .collect();
+            let n = v.len().max(1) as f64;
+            let mean = v.iter().sum::<f64>() / n;
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+            let mut sorted = v.clone();
+            sorted.sort_by(f64::total_cmp);
+            let median = sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN);
+            serde_json::json!({"mean": mean, "std": sd, "median": median})
+        };
+        let mut table = serde_json::Map::new();
+        for key in ["ae", "pca"] {
+            let mut m = serde_json::Map::new();
+            for metric in ["mae", "rmse", "ssim"] {
+                m.insert(metric.into(), summary(key, metric));
+            }
+            table.insert(key.into(), m.into());
+        }
+        let out = serde_json::json!({
+            "test": rows,
+            "summary": table,
+            "pca": {"tables": match args.pca_tables { PcaTables::Sgd => "sgd", PcaTables::Nbrdf => "nbrdf" },
+                    "components": pca.components(), "cells": pca.cells.len(), "fit_seconds": fit_seconds},
+            "ae_eval_seconds": ae_seconds,
+            "image": {"size": SIZE, "light_theta_deg": LIGHT_THETA_DEG},
+        });
+        let text = serde_json::to_string_pretty(&out).map_err(|e| invalid(e.to_string()))?;
+        emit(&format!("{text}\n"))
+    })?
+}
+
+#[derive(Args)]
+pub struct PredictorTrainArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The networks of the training split (with or without fitted sampling parameters).
+    #[arg(long, value_name = "DIR")]
+    nbrdfs: PathBuf,
+    /// Where to write the result.
+    #[arg(short, long, value_name = "P.json")]
+    output: PathBuf,
+    /// Width of the hidden layer.
+    #[arg(long, default_value_t = 16)]
+    hidden: usize,
+    /// Full-batch Adam iterations.
+    #[arg(long, default_value_t = 3000)]
+    iterations: usize,
+    /// Random seed (training is deterministic per seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Refit the Blinn-Phong labels even where a file has "source": "fit" sampling.
+    #[arg(long)]
+    refit: bool,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+#[derive(Args)]
+pub struct PredictPhongArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The trained Phong-parameter predictor (from `nbrdf predictor train`).
+    #[arg(long, value_name = "P.json")]
+    predictor: PathBuf,
+    /// The neural BRDF to read.
+    #[arg(value_name = "NBRDF.json")]
+    input: PathBuf,
+    /// Where to write the network with the predicted sampling (default: in place).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Print the encode + predict time to stderr.
+    #[arg(long)]
+    timing: bool,
+}
+
+/// The fitted Blinn-Phong `(n, w)` of a network: its own "fit" sampling, or a fresh fit.
+fn phong_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
+    use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
+    use nbrdf_core::phong_fit::{self, FitConfig};
+    if let Some(s) = &net.sampling {
+        if s.source == "fit" && !refit {
+            return Ok((s.exponent as f64, s.specular_weight as f64));
+        }
+    }
+    let target = |a: &RusinkiewiczAngles| {
+        let (l, v) = from_rusinkiewicz(a);
+        Some(
+            net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                .map(f64::from),
+        )
+    };
+    let fit = phong_fit::fit(&target, &FitConfig::default())?;
+    Ok((fit.params.exponent, fit.params.specular_weight()))
+}
+
+pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
+    use nbrdf_core::latent::autoencoder::{permute_outputs, PERMUTATIONS};
+    use nbrdf_core::latent::predictor::PhongPredictor;
+    use rayon::prelude::*;
+    let ae = AutoEncoder::load(&args.ae)?;
+    let nets = read_nbrdf_dir(&args.nbrdfs)?;
+    with_threads(args.threads, || -> Result<()> {
+        let t0 = Instant::now();
+        let train: Vec<&(String, Nbrdf)> = nets
+            .iter()
+            .filter(|(n, _)| ae.split.train.contains(n))
+            .collect();
+        let labels: Vec<(f64, f64)> = train
+            .par_iter()
+            .map(|(_, net)| phong_label(net, args.refit))
+            .collect::<Result<_>>()?;
+        let label_seconds = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        // The lobe is invariant under RGB permutations, so every augmented code shares it.
+        let mut examples = Vec::new();
+        for ((_, net), &(n, w)) in train.iter().zip(&labels) {
+            for p in PERMUTATIONS {
+                let flat = permute_outputs(&net.to_flat(), net.hidden_width(), p);
+                examples.push((ae.encode_flat(&flat), n, w));
+            }
+        }
+        let mut pred = PhongPredictor::train(&examples, args.hidden, args.iterations, args.seed)?;
+        let train_seconds = t1.elapsed().as_secs_f64();
+        if let Some(o) = pred.provenance.as_object_mut() {
+            o.insert("labels".into(), serde_json::json!(train.iter().zip(&labels).map(|((name, _), (n, w))| serde_json::json!({"name": name, "exponent": n, "specular_weight": w})).collect::<Vec<_>>()));
+            o.insert("label_seconds".into(), label_seconds.into());
+            o.insert("train_seconds".into(), train_seconds.into());
+        }
+        pred.save(&args.output)?;
+        emit(&format!(
+            "labels for {} materials in {:.1} s; trained the predictor on {} codes in {:.2} s\nwrote {}\n",
+            train.len(),
+            label_seconds,
+            examples.len(),
+            train_seconds,
+            args.output.display()
+        ))
+    })?
+}
+
+pub fn run_predict_phong(args: &PredictPhongArgs) -> Result<()> {
+    use nbrdf_core::latent::predictor::PhongPredictor;
+    use nbrdf_core::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
+    let ae = AutoEncoder::load(&args.ae)?;
+    let pred = PhongPredictor::load(&args.predictor)?;
+    let mut net = Nbrdf::load(&args.input)?;
+    let t0 = Instant::now();
+    let code = ae.encode(&net)?;
+    let (n, w) = pred.predict(&code);
+    let ms = t0.elapsed().as_secs_f64() * 1e3;
+    if args.timing {
+        eprintln!("encoded and predicted in {ms:.3} ms");
+    }
+    net.sampling = Some(SamplingParams {
+        model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
+        exponent: n,
+        specular_weight: w,
+        source: "predicted".to_string(),
+    });
+    net.validate()?;
+    let out = args.output.clone().unwrap_or_else(|| args.input.clone());
+    net.save(&out)?;
+    emit(&format!(
+        "predicted blinn-phong: exponent {n:.4}, specular weight {w:.4}\nwrote {}\n",
+        out.display()
+    ))
+}

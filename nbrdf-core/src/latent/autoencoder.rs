@@ -1,0 +1,629 @@
+//! The NBRDF autoencoder (DESIGN.md section 7): flattened networks (675 values at width 21)
+//! `-> 32 -> 675`, trained with the image loss of [`super::sphere`].
+//!
+//! Architecture: encoder `675 -> 96 (tanh) -> 32`, decoder `32 -> 96 (tanh) -> 675`, linear code
+//! and output. The decoder has `32*96 + 96 + 96*675 + 675 = 68,571` parameters, about 102
+//! NBRDFs (the paper's decoder: ~70k, ~105 NBRDFs). Inputs are standardised per dimension over
+//! the (augmented) training set; the decoder's output is de-standardised into network weights.
+//!
+//! Training: Adam, mini-batches over the training materials times the 6 permutations of the
+//! RGB outputs (augmentation), image loss on the 64 x 64 sphere at 45 degrees. The first
+//! `warmup_epochs` minimise the squared error of the standardised weights instead (a warm start
+//! that puts the decoded networks near real ones, where the image loss through `exp` is well
+//! behaved; the image loss alone from a random decoder gives exploding or dead pixels). Global
+//! gradient-norm clipping guards the image phase. Early stopping on the image loss of a
+//! validation subset of the training split (identity permutation), keeping the best epoch.
+//! Deterministic per seed: per-sample gradients are computed in parallel and summed in sample
+//! order.
+
+use super::mlp::Mlp;
+use super::sphere::SphereRenderer;
+use crate::error::{NbrdfError, Result};
+use crate::network::{self, Nbrdf, OUTPUTS};
+use crate::train::adam::{Adam, AdamConfig};
+use crate::train::rng::{SplitMix64, Stream};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+pub const FORMAT_NAME: &str = "nbrdf-autoencoder";
+pub const FORMAT_VERSION: u32 = 1;
+pub const CODE_SIZE: usize = 32;
+pub const PERMUTATIONS: [[usize; 3]; 6] = [
+    [0, 1, 2],
+    [0, 2, 1],
+    [1, 0, 2],
+    [1, 2, 0],
+    [2, 0, 1],
+    [2, 1, 0],
+];
+
+/// The recorded material split.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
+pub struct Split {
+    pub train: Vec<String>,
+    pub test: Vec<String>,
+    /// The subset of `train` held out of the autoencoder's gradient steps whose image loss
+    /// decides early stopping (the predictor trains on all of `train`).
+    #[serde(default)]
+    pub validation: Vec<String>,
+}
+
+impl Split {
+    /// A fixed 80/20 split of `names` (sorted first; shuffled with a constant seed so that it
+    /// does not change with the training seed), 10 % of the training part for validation.
+    pub fn fixed(names: &[String]) -> Self {
+        let mut sorted = names.to_vec();
+        sorted.sort();
+        SplitMix64::new(SPLIT_SEED, Stream::Latent, 0).shuffle(&mut sorted);
+        let n_test = (sorted.len() as f64 * 0.2).round() as usize;
+        let mut test = sorted[..n_test].to_vec();
+        let mut train = sorted[n_test..].to_vec();
+        test.sort();
+        let mut validation = train[..(train.len() / 10).max(1).min(train.len())].to_vec();
+        train.sort();
+        validation.sort();
+        Split {
+            train,
+            test,
+            validation,
+        }
+    }
+}
+
+/// The split's constant seed.
+const SPLIT_SEED: u64 = 0x5eed_5011;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AutoEncoder {
+    pub format: String,
+    pub version: u32,
+    /// Hidden width of the NBRDFs it encodes.
+    pub nbrdf_hidden: usize,
+    pub mean: Vec<f32>,
+    pub std: Vec<f32>,
+    /// Per-dimension range of the training networks: decoded weights are clamped to it (a
+    /// decoded network far outside it can make `exp` overflow to a white sphere).
+    #[serde(default)]
+    pub min: Vec<f32>,
+    #[serde(default)]
+    pub max: Vec<f32>,
+    pub encoder: Mlp,
+    pub decoder: Mlp,
+    pub split: Split,
+    #[serde(default)]
+    pub provenance: serde_json::Value,
+}
+
+/// Training settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AeConfig {
+    pub seed: u64,
+    pub hidden: usize,
+    pub max_epochs: usize,
+    pub warmup_epochs: usize,
+    pub patience: usize,
+    pub batch: usize,
+    /// Learning rate of the weight-space warm start.
+    pub learning_rate: f32,
+    /// Learning rate of the image-loss phase.
+    pub image_learning_rate: f32,
+    pub clip_norm: f32,
+    pub augment: bool,
+    /// `r0` of the surrogate image gradient (see [`SphereRenderer::loss`]); 0 for the exact one.
+    pub surrogate_floor: f32,
+    /// Side of the loss's sphere image (64; smaller only for tests).
+    pub image_size: usize,
+    /// Standard deviation of the Gaussian noise added to the standardised encoder input.
+    pub input_noise: f32,
+    /// L2 penalty gradient `weight_decay * p` added to every parameter's gradient.
+    pub weight_decay: f32,
+}
+
+impl Default for AeConfig {
+    fn default() -> Self {
+        AeConfig {
+            seed: 0,
+            hidden: 96,
+            max_epochs: 600,
+            warmup_epochs: 100,
+            patience: 40,
+            batch: 16,
+            learning_rate: 1e-3,
+            image_learning_rate: 3e-4,
+            clip_norm: 1.0,
+            augment: true,
+            surrogate_floor: 1e-3,
+            input_noise: 0.2,
+            weight_decay: 1e-4,
+            image_size: super::sphere::SIZE,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AeEpoch {
+    pub epoch: usize,
+    pub phase: &'static str,
+    pub train_loss: f64,
+    pub validation_image_loss: f64,
+    pub seconds: f64,
+}
+
+/// Swaps the RGB outputs of a flat network: output channel `k` becomes input channel `p[k]`.
+pub fn permute_outputs(flat: &[f32], hidden: usize, p: [usize; 3]) -> Vec<f32> {
+    let mut out = flat.to_vec();
+    let w3 = flat.len() - hidden * OUTPUTS - OUTPUTS;
+    let b3 = flat.len() - OUTPUTS;
+    for i in 0..hidden {
+        for k in 0..OUTPUTS {
+            out[w3 + i * OUTPUTS + k] = flat[w3 + i * OUTPUTS + p[k]];
+        }
+    }
+    for k in 0..OUTPUTS {
+        out[b3 + k] = flat[b3 + p[k]];
+    }
+    out
+}
+
+impl AutoEncoder {
+    pub fn code_size(&self) -> usize {
+        self.encoder.outputs()
+    }
+
+    pub fn load(path: impl AsRef<std::path::Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
+        let ae: AutoEncoder = serde_json::from_str(&text)
+            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
+        if ae.format != FORMAT_NAME || ae.mean.len() != ae.encoder.inputs() {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "{}: not an NBRDF autoencoder",
+                path.display()
+            )));
+        }
+        Ok(ae)
+    }
+
+    pub fn save(&self, path: impl AsRef<std::path::Path>) -> Result<()> {
+        let path = path.as_ref();
+        let text =
+            serde_json::to_string(self).map_err(|e| NbrdfError::InvalidArgument(e.to_string()))?;
+        std::fs::write(path, text)
+            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))
+    }
+
+    fn standardise(&self, flat: &[f32]) -> Vec<f32> {
+        flat.iter()
+            .zip(self.mean.iter().zip(&self.std))
+            .map(|(x, (m, s))| (x - m) / s)
+            .collect()
+    }
+
+    fn check(&self, net: &Nbrdf) -> Result<()> {
+        if net.hidden_width() != self.nbrdf_hidden {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "network '{}' has hidden width {}, the autoencoder takes {}",
+                net.name,
+                net.hidden_width(),
+                self.nbrdf_hidden
+            )));
+        }
+        Ok(())
+    }
+
+    pub fn encode_flat(&self, flat: &[f32]) -> Vec<f32> {
+        self.encoder.eval(&self.standardise(flat))
+    }
+
+    pub fn encode(&self, net: &Nbrdf) -> Result<Vec<f32>> {
+        self.check(net)?;
+        Ok(self.encode_flat(&net.to_flat()))
+    }
+
+    pub fn decode_flat(&self, code: &[f32]) -> Vec<f32> {
+        self.decoder
+            .eval(code)
+            .iter()
+            .zip(self.mean.iter().zip(&self.std))
+            .enumerate()
+            .map(|(j, (y, (m, s)))| {
+                let w = y * s + m;
+                match (self.min.get(j), self.max.get(j)) {
+                    (Some(&lo), Some(&hi)) => w.clamp(lo, hi),
+                    _ => w,
+                }
+            })
+            .collect()
+    }
+
+    pub fn decode(&self, code: &[f32], name: &str) -> Result<Nbrdf> {
+        if code.len() != self.code_size() {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "a code has {} values, got {}",
+                self.code_size(),
+                code.len()
+            )));
+        }
+        let mut net = Nbrdf::from_flat(name, self.nbrdf_hidden, &self.decode_flat(code))?;
+        net.provenance = serde_json::json!({"decoded_by": FORMAT_NAME});
+        Ok(net)
+    }
+
+    /// Trains on the named flat networks (all of one hidden width); `split` says which are
+    /// used. `progress` is called after every epoch.
+    pub fn train(
+        materials: &[(String, Vec<f32>)],
+        hidden_nbrdf: usize,
+        split: Split,
+        config: &AeConfig,
+        mut progress: impl FnMut(&AeEpoch),
+    ) -> Result<(AutoEncoder, Vec<AeEpoch>)> {
+        let start = std::time::Instant::now();
+        let find = |name: &String| -> Result<&Vec<f32>> {
+            materials
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, f)| f)
+                .ok_or_else(|| NbrdfError::InvalidArgument(format!("no network for '{name}'")))
+        };
+        let perms: &[[usize; 3]] = if config.augment {
+            &PERMUTATIONS
+        } else {
+            &PERMUTATIONS[..1]
+        };
+        let mut renderer = SphereRenderer::new(
+            config.image_size,
+            super::sphere::LIGHT_THETA_DEG.to_radians(),
+            hidden_nbrdf,
+        );
+        renderer.surrogate_floor = config.surrogate_floor;
+        // Training samples: (flat weights, target tone-mapped image).
+        let mut train_flats = Vec::new();
+        let fitted: Vec<&String> = if split.validation.len() < split.train.len() {
+            split
+                .train
+                .iter()
+                .filter(|n| !split.validation.contains(n))
+                .collect()
+        } else {
+            // Too few materials to hold any out (tests): validate on the training set.
+            split.train.iter().collect()
+        };
+        for name in fitted {
+            let flat = find(name)?;
+            for &p in perms {
+                train_flats.push(permute_outputs(flat, hidden_nbrdf, p));
+            }
+        }
+        if train_flats.is_empty() {
+            return Err(NbrdfError::InvalidArgument("no training materials".into()));
+        }
+        let dims = train_flats[0].len();
+        let n = train_flats.len() as f64;
+        let mut mean = vec![0.0f32; dims];
+        let mut std = vec![0.0f32; dims];
+        for d in 0..dims {
+            let m = train_flats.iter().map(|f| f[d] as f64).sum::<f64>() / n;
+            let v = train_flats
+                .iter()
+                .map(|f| (f[d] as f64 - m).powi(2))
+                .sum::<f64>()
+                / n;
+            mean[d] = m as f32;
+            std[d] = (v.sqrt() as f32).max(1e-4);
+        }
+        let targets: Vec<Vec<f32>> = train_flats
+            .par_iter()
+            .map(|f| renderer.render_toned(f, &mut renderer.scratch()))
+            .collect();
+        let validation: Vec<(Vec<f32>, Vec<f32>)> = split
+            .validation
+            .iter()
+            .map(|name| {
+                let f = find(name)?.clone();
+                let t = renderer.render_toned(&f, &mut renderer.scratch());
+                Ok((f, t))
+            })
+            .collect::<Result<_>>()?;
+
+        let mut ae = AutoEncoder {
+            format: FORMAT_NAME.into(),
+            version: FORMAT_VERSION,
+            nbrdf_hidden: hidden_nbrdf,
+            min: (0..dims)
+                .map(|d| {
+                    train_flats
+                        .iter()
+                        .map(|f| f[d])
+                        .fold(f32::INFINITY, f32::min)
+                })
+                .collect(),
+            max: (0..dims)
+                .map(|d| {
+                    train_flats
+                        .iter()
+                        .map(|f| f[d])
+                        .fold(f32::NEG_INFINITY, f32::max)
+                })
+                .collect(),
+            mean,
+            std,
+            encoder: Mlp::new(&[dims, config.hidden, CODE_SIZE], config.seed, 0),
+            decoder: Mlp::new(&[CODE_SIZE, config.hidden, dims], config.seed, 1 << 32),
+            split,
+            provenance: serde_json::Value::Null,
+        };
+        let standardised: Vec<Vec<f32>> = train_flats.iter().map(|f| ae.standardise(f)).collect();
+        let n_enc = ae.encoder.parameter_count();
+        let n_all = n_enc + ae.decoder.parameter_count();
+        let mut params: Vec<f32> = ae.encoder.to_flat();
+        params.extend(ae.decoder.to_flat());
+        let mut adam = Adam::new(
+            AdamConfig {
+                learning_rate: config.learning_rate,
+                ..AdamConfig::default()
+            },
+            n_all,
+        );
+        let mut order: Vec<usize> = (0..train_flats.len()).collect();
+        let mut history = Vec::new();
+        let mut best: Option<(f64, Vec<f32>, usize)> = None;
+        for epoch in 0..config.max_epochs {
+            let t0 = std::time::Instant::now();
+            let image_phase = epoch >= config.warmup_epochs;
+            if epoch == config.warmup_epochs && epoch > 0 {
+                // The weight-space moments are the wrong scale for the image loss: start afresh.
+                adam = Adam::new(adam.config, n_all);
+            }
+            let lr = if image_phase {
+                config.image_learning_rate
+            } else {
+                config.learning_rate
+            };
+            SplitMix64::new(config.seed, Stream::Latent, 2 << 32 | epoch as u64)
+                .shuffle(&mut order);
+            let mut epoch_loss = 0.0;
+            for batch in order.chunks(config.batch.max(1)) {
+                let results: Vec<(f64, Vec<f32>)> = batch
+                    .par_iter()
+                    .map(|&i| {
+                        let mut grad = vec![0.0f32; n_all];
+                        let x = &standardised[i];
+                        // Denoising: the encoder sees the input with Gaussian noise (a
+                        // regulariser; 72 materials x 6 permutations for ~130k parameters).
+                        let noisy: Vec<f32> = if config.input_noise > 0.0 {
+                            let mut rng = SplitMix64::new(
+                                config.seed,
+                                Stream::Latent,
+                                (4 << 40) | ((epoch as u64) << 20) | i as u64,
+                            );
+                            x.iter()
+                                .map(|v| {
+                                    let (u1, u2) = (rng.next_f64().max(1e-300), rng.next_f64());
+                                    let g = (-2.0 * u1.ln()).sqrt()
+                                        * (2.0 * std::f64::consts::PI * u2).cos();
+                                    v + config.input_noise * g as f32
+                                })
+                                .collect()
+                        } else {
+                            x.clone()
+                        };
+                        let acts_e = ae.encoder.forward(&noisy);
+                        let code = acts_e.last().cloned().unwrap_or_default();
+                        let acts_d = ae.decoder.forward(&code);
+                        let out = acts_d.last().cloned().unwrap_or_default();
+                        let (loss, g_out) = if image_phase {
+                            let flat: Vec<f32> = out
+                                .iter()
+                                .zip(ae.mean.iter().zip(&ae.std))
+                                .map(|(y, (m, s))| y * s + m)
+                                .collect();
+                            let mut g = vec![0.0f32; dims];
+                            let loss = renderer.loss(
+                                &flat,
+                                &targets[i],
+                                &mut renderer.scratch(),
+                                Some(&mut g),
+                            );
+                            let g: Vec<f32> = g.iter().zip(&ae.std).map(|(g, s)| g * s).collect();
+                            (loss, g)
+                        } else {
+                            let inv = 1.0 / dims as f32;
+                            let loss = out
+                                .iter()
+                                .zip(x)
+                                .map(|(y, x)| ((y - x) * (y - x)) as f64)
+                                .sum::<f64>()
+                                * inv as f64;
+                            let g = out
+                                .iter()
+                                .zip(x)
+                                .map(|(y, x)| 2.0 * (y - x) * inv)
+                                .collect();
+                            (loss, g)
+                        };
+                        let (ge, gd) = grad.split_at_mut(n_enc);
+                        let g_code = ae.decoder.backward(&acts_d, &g_out, gd);
+                        ae.encoder.backward(&acts_e, &g_code, ge);
+                        (loss, grad)
+                    })
+                    .collect();
+                let scale = 1.0 / batch.len() as f32;
+                let mut grad = vec![0.0f32; n_all];
+                for (loss, g) in &results {
+                    epoch_loss += loss;
+                    for (a, b) in grad.iter_mut().zip(g) {
+                        *a += b * scale;
+                    }
+                }
+                if config.weight_decay > 0.0 {
+                    for (g, p) in grad.iter_mut().zip(&params) {
+                        *g += config.weight_decay * p;
+                    }
+                }
+                let norm = grad.iter().map(|g| (g * g) as f64).sum::<f64>().sqrt() as f32;
+                if !norm.is_finite() {
+                    continue;
+                }
+                if norm > config.clip_norm {
+                    let s = config.clip_norm / norm;
+                    grad.iter_mut().for_each(|g| *g *= s);
+                }
+                adam.step(&mut params, &grad, lr);
+                ae.encoder.set_flat(&params[..n_enc]);
+                ae.decoder.set_flat(&params[n_enc..]);
+            }
+            let validation_image_loss = ae.image_loss(&renderer, &validation);
+            let stats = AeEpoch {
+                epoch,
+                phase: if image_phase { "image" } else { "weights" },
+                train_loss: epoch_loss / train_flats.len() as f64,
+                validation_image_loss,
+                seconds: t0.elapsed().as_secs_f64(),
+            };
+            progress(&stats);
+            history.push(stats);
+            if image_phase || config.warmup_epochs >= config.max_epochs {
+                let better = best
+                    .as_ref()
+                    .map_or(true, |(b, _, _)| validation_image_loss < *b);
+                if better {
+                    best = Some((validation_image_loss, params.clone(), epoch));
+                } else if best
+                    .as_ref()
+                    .is_some_and(|(_, _, e)| epoch - e >= config.patience)
+                {
+                    break;
+                }
+            }
+        }
+        let best_epoch = best.as_ref().map(|b| b.2);
+        if let Some((_, p, _)) = best {
+            ae.encoder.set_flat(&p[..n_enc]);
+            ae.decoder.set_flat(&p[n_enc..]);
+        }
+        ae.provenance = serde_json::json!({
+            "architecture": format!("{dims}-{h}-{CODE_SIZE}-{h}-{dims}, tanh hidden, linear code and output", h = config.hidden),
+            "decoder_parameters": ae.decoder.parameter_count(),
+            "encoder_parameters": ae.encoder.parameter_count(),
+            "seed": config.seed,
+            "epochs": history.len(),
+            "best_epoch": best_epoch,
+            "warmup_epochs": config.warmup_epochs,
+            "batch": config.batch,
+            "learning_rate": config.learning_rate,
+            "image_learning_rate": config.image_learning_rate,
+            "surrogate_floor": config.surrogate_floor,
+            "input_noise": config.input_noise,
+            "weight_decay": config.weight_decay,
+            "augmentation": if config.augment { "6 RGB permutations" } else { "none" },
+            "loss": format!("pixel MSE of max(x,1e-12)^(1/2.2), {s}x{s} sphere, light at 45 degrees", s = config.image_size),
+            "seconds": start.elapsed().as_secs_f64(),
+            "threads": rayon::current_num_threads(),
+        });
+        Ok((ae, history))
+    }
+
+    /// Mean image loss of reconstructing `(flat, target image)` pairs.
+    pub fn image_loss(&self, renderer: &SphereRenderer, set: &[(Vec<f32>, Vec<f32>)]) -> f64 {
+        if set.is_empty() {
+            return f64::NAN;
+        }
+        set.par_iter()
+            .map(|(f, t)| {
+                let rec = self.decode_flat(&self.encode_flat(f));
+                renderer.loss(&rec, t, &mut renderer.scratch(), None)
+            })
+            .collect::<Vec<_>>()
+            .iter()
+            .sum::<f64>()
+            / set.len() as f64
+    }
+}
+
+/// The default NBRDF width the CLI expects.
+pub const NBRDF_HIDDEN: usize = network::DEFAULT_HIDDEN;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn material(seed: u64, bias: [f32; 3]) -> Vec<f32> {
+        let mut net = Nbrdf::random("m", 21, seed);
+        for l in &mut net.layers {
+            l.weights.iter_mut().for_each(|v| *v *= 10.0);
+        }
+        net.layers[2].bias = bias.to_vec();
+        net.to_flat()
+    }
+
+    #[test]
+    fn permutation_swaps_the_rendered_channels() {
+        let r = SphereRenderer::new(8, 45f64.to_radians(), 21);
+        let f = material(1, [0.5, 0.0, -0.5]);
+        let p = [2, 0, 1];
+        let (a, b) = (
+            r.render(&f, &mut r.scratch()),
+            r.render(&permute_outputs(&f, 21, p), &mut r.scratch()),
+        );
+        for k in 0..3 {
+            assert_eq!(&b[k * 64..(k + 1) * 64], &a[p[k] * 64..(p[k] + 1) * 64]);
+        }
+    }
+
+    #[test]
+    fn tiny_autoencoder_overfits_two_materials() {
+        let mats = vec![
+            ("a".to_string(), material(1, [0.5, 0.2, -0.3])),
+            ("b".to_string(), material(2, [-0.4, 0.1, 0.6])),
+        ];
+        let split = Split {
+            train: vec!["a".into(), "b".into()],
+            test: vec![],
+            validation: vec!["a".into(), "b".into()],
+        };
+        let config = AeConfig {
+            hidden: 8,
+            max_epochs: 250,
+            warmup_epochs: 120,
+            patience: 1000,
+            batch: 2,
+            learning_rate: 3e-3,
+            augment: false,
+            input_noise: 0.0,
+            weight_decay: 0.0,
+            image_size: 16,
+            ..AeConfig::default()
+        };
+        let (ae, history) = AutoEncoder::train(&mats, 21, split, &config, |_| {}).unwrap();
+        let first_image = history.iter().find(|e| e.phase == "image").unwrap();
+        let last = history.last().unwrap();
+        assert!(
+            last.validation_image_loss < 1e-4,
+            "final image loss {} (first image epoch {})",
+            last.validation_image_loss,
+            first_image.validation_image_loss
+        );
+        // Codes decode to valid networks and are deterministic.
+        let code = ae.encode_flat(&mats[0].1);
+        assert_eq!(code.len(), CODE_SIZE);
+        ae.decode(&code, "a").unwrap();
+        let (ae2, _) = AutoEncoder::train(&mats, 21, ae.split.clone(), &config, |_| {}).unwrap();
+        assert_eq!(ae.decoder, ae2.decoder);
+    }
+
+    #[test]
+    fn fixed_split_is_80_20_and_stable() {
+        let names: Vec<String> = (0..100).map(|i| format!("m{i:03}")).collect();
+        let s = Split::fixed(&names);
+        assert_eq!(
+            (s.train.len(), s.test.len(), s.validation.len()),
+            (80, 20, 8)
+        );
+        assert!(s.validation.iter().all(|v| s.train.contains(v)));
+        let mut rev = names.clone();
+        rev.reverse();
+        assert_eq!(Split::fixed(&rev), s);
+    }
+}

@@ -1,0 +1,277 @@
+"""Test materials and their cached artefacts: MERL-format tables, NBRDFs and Blinn-Phong fits.
+
+* MERL materials: the table is synthesised from the published SGD fit (``nbrdf synth``); the
+  NBRDF is trained on it with ``nbrdf train`` (the Rust trainer, the paper's recipe) when the CLI
+  has the command, otherwise the authors' Keras network is imported from
+  ``../shared/data/reference-nbrdf/merl/NAME.h5`` (trained on the real MERL measurement, not on
+  our synthesised table: its error against the table is then not only the network's).
+* RGL materials (``../shared/data/rgl/NAME.bsdf``): the table is tabulated through Mitsuba's
+  ``measured`` plugin (``python -m nbrdf_mitsuba.tabulate_rgl``); the NBRDF is trained on it in
+  the same way (fallback: ``reference-nbrdf/rgl-isotropic/NAME.h5``).
+* The Blinn-Phong sampling lobe is fitted to the NBRDF with ``nbrdf fit-phong``, which stores it
+  in the network file.
+
+Every artefact lands under ``OUT/materials`` with a ``NAME.artefacts.json`` record of its inputs
+(content hashes, commands); it is rebuilt when they change.
+
+The test set: the MERL materials are split 80 % / 20 % by a fixed rule, every fifth material in
+alphabetical order starting with the third (:data:`MERL_TEST_SET`); the autoencoder and
+predictor of the latent-space work must not train on them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ground_truth import file_hash
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
+
+# The 100 MERL names in alphabetical order are `nbrdf list-materials`; the test set is
+# names[2::5] (fixed here so that scripts need not run the CLI to know it).
+MERL_TEST_SET = (
+    "aluminium", "black-oxidized-steel", "blue-metallic-paint", "chrome", "color-changing-paint3",
+    "fruitwood-241", "gray-plastic", "green-metallic-paint", "light-brown-fabric", "nickel",
+    "pink-fabric", "polyethylene", "red-fabric", "red-specular-plastic", "special-walnut-224",
+    "specular-orange-phenolic", "ss440", "two-layer-silver", "white-fabric", "yellow-paint",
+)
+# Default materials of the Veach evaluation: glossy test-set materials (metals, metallic paints,
+# plastics, phenolic) and one fabric as a near-diffuse control.
+VEACH_MERL = (
+    "aluminium", "black-oxidized-steel", "blue-metallic-paint", "color-changing-paint3", "gray-plastic",
+    "green-metallic-paint", "nickel", "red-specular-plastic", "pink-fabric",
+)
+VEACH_RGL = ("cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb")
+
+
+def test_split(names: list[str]) -> list[str]:
+    """The test split of a list of MERL names: every fifth in alphabetical order from the third."""
+    return sorted(names)[2::5]
+
+
+@dataclass
+class Material:
+    name: str
+    kind: str  # "merl" or "rgl"
+    table: Path  # MERL-format table (ground truth through the `merl` BSDF)
+    network: Path  # *.nbrdf.json
+    network_source: str  # "trained" (nbrdf train) or "keras" (imported reference network)
+    measured: Path | None = None  # RGL .bsdf (ground truth through Mitsuba's `measured` BSDF)
+    exponent: float | None = None
+    specular_weight: float | None = None
+    phong_source: str | None = None  # "fit" (nbrdf fit-phong) or None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def has_phong(self) -> bool:
+        return self.exponent is not None and self.specular_weight is not None
+
+    def nbrdf(self, sampling: str | None = None, **extra) -> dict:
+        bsdf = {"type": "nbrdf", "filename": str(self.network)}
+        if sampling is not None:
+            bsdf["sampling"] = sampling
+        bsdf.update(extra)
+        return bsdf
+
+    def table_bsdf(self, sampling: str | None = None) -> dict:
+        """The ``merl`` BSDF of the table; ``phong`` uses the NBRDF's fitted lobe."""
+        bsdf = {"type": "merl", "filename": str(self.table)}
+        if sampling == "phong":
+            bsdf.update(sampling="phong", exponent=float(self.exponent), specular_weight=float(self.specular_weight))
+        elif sampling is not None:
+            bsdf["sampling"] = sampling
+        return bsdf
+
+    def ground_truth_bsdf(self) -> dict:
+        """The BSDF of the ground truth: the measured data for RGL materials, else the table
+        (Phong-sampled when a lobe is known, which only changes its noise)."""
+        if self.measured is not None:
+            return {"type": "measured", "filename": str(self.measured)}
+        return self.table_bsdf("phong" if self.has_phong else None)
+
+
+def _run(command: list[str], quiet: bool = True) -> str:
+    result = subprocess.run([str(c) for c in command], check=False, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, command))} failed ({result.returncode}):\n{result.stderr.strip()}")
+    if not quiet and result.stdout.strip():
+        print(result.stdout.strip())
+    return result.stdout
+
+
+class Artefacts:
+    """Builds and caches tables, networks and Phong fits under ``out / "materials"``."""
+
+    def __init__(self, out: Path, cli: Path, shared: Path = SHARED, train_args: list[str] | None = None,
+                 log=print):
+        self.folder = Path(out) / "materials"
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.cli = Path(cli)
+        self.shared = Path(shared)
+        self.train_args = list(train_args or [])
+        self.log = log
+        self._commands = None
+
+    # -- what the CLI can do --------------------------------------------------------------------
+
+    def commands(self) -> set[str]:
+        if self._commands is None:
+            if not self.cli.is_file():
+                raise FileNotFoundError(f"the nbrdf CLI {self.cli} is missing: build it with "
+                                        "`cargo build --release -p nbrdf-core` (or pass --cli)")
+            text = _run([self.cli, "--help"])
+            listed, names = False, set()
+            for line in text.splitlines():
+                if line.strip().startswith("Commands:"):
+                    listed = True
+                    continue
+                if listed:
+                    if not line.startswith("  "):
+                        break
+                    names.add(line.split()[0])
+            self._commands = names
+        return self._commands
+
+    def can_train(self) -> bool:
+        return "train" in self.commands()
+
+    def can_fit_phong(self) -> bool:
+        return "fit-phong" in self.commands()
+
+    def predictor(self) -> Path | None:
+        """The Phong-parameter predictor of the latent-space work, when it exists (CLI command
+        ``predict-phong`` or ``predict``); None until then."""
+        for name in ("predict-phong", "predict"):
+            if name in self.commands():
+                return self.cli
+        return None
+
+    # -- records ------------------------------------------------------------------------------
+
+    def _record_path(self, name: str) -> Path:
+        return self.folder / f"{name}.artefacts.json"
+
+    def _record(self, name: str) -> dict:
+        path = self._record_path(name)
+        if path.is_file():
+            try:
+                return json.loads(path.read_text())
+            except json.JSONDecodeError:
+                return {}
+        return {}
+
+    def _save_record(self, name: str, record: dict) -> None:
+        self._record_path(name).write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
+
+    # -- building -----------------------------------------------------------------------------
+
+    def _table_merl(self, name: str, record: dict) -> Path:
+        table = self.folder / f"{name}.sgd.binary"
+        inputs = {"command": "nbrdf synth --model sgd", "material": name}
+        if not table.is_file() or record.get("table_inputs") != inputs or record.get("table_hash") != file_hash(table):
+            self.log(f"  {name}: synthesising the table (nbrdf synth --model sgd)")
+            _run([self.cli, "synth", "--model", "sgd", "--material", name, "-o", table])
+            record.update(table_inputs=inputs, table_hash=file_hash(table))
+        return table
+
+    def _table_rgl(self, name: str, measured: Path, record: dict) -> Path:
+        table = self.folder / f"{name}.binary"
+        inputs = {"command": "python -m nbrdf_mitsuba.tabulate_rgl", "measured": file_hash(measured)}
+        if not table.is_file() or record.get("table_inputs") != inputs or record.get("table_hash") != file_hash(table):
+            self.log(f"  {name}: tabulating {measured.name} onto the MERL grid (nbrdf_mitsuba.tabulate_rgl)")
+            _run([sys.executable, "-m", "nbrdf_mitsuba.tabulate_rgl", measured, "-o", table])
+            record.update(table_inputs=inputs, table_hash=file_hash(table))
+        return table
+
+    def _network(self, name: str, table: Path, keras: Path, record: dict) -> tuple[Path, str]:
+        network = self.folder / f"{name}.nbrdf.json"
+        if self.can_train():
+            inputs = {"source": "trained", "table": file_hash(table), "args": self.train_args}
+        elif keras.is_file():
+            inputs = {"source": "keras", "keras": file_hash(keras)}
+        else:
+            raise RuntimeError(f"{name}: the CLI {self.cli} cannot train (no `train` command) and "
+                               f"there is no reference network {keras}")
+        # network_hash is the file as last written (after fit-phong stored its lobe in it).
+        if network.is_file() and record.get("network_inputs") == inputs and record.get("network_hash") == file_hash(network):
+            return network, inputs["source"]
+        if inputs["source"] == "trained":
+            self.log(f"  {name}: training the NBRDF (nbrdf train {' '.join(self.train_args)})")
+            _run([self.cli, "train", table, "-o", network, "--name", name, "--quiet", *self.train_args])
+        else:
+            self.log(f"  {name}: importing the authors' Keras NBRDF {keras}")
+            from nbrdf_mitsuba import import_keras
+
+            if import_keras.main([str(keras), "-o", str(network), "-q"]) != 0:
+                raise RuntimeError(f"{name}: importing {keras} failed")
+        record.update(network_inputs=inputs, network_hash=file_hash(network), network_trained_hash=file_hash(network))
+        record.pop("phong_inputs", None)
+        return network, inputs["source"]
+
+    def _phong(self, name: str, network: Path, record: dict) -> None:
+        if not self.can_fit_phong():
+            return
+        inputs = {"command": "nbrdf fit-phong", "network": record.get("network_trained_hash")}
+        if record.get("phong_inputs") == inputs and record.get("network_hash") == file_hash(network):
+            return
+        self.log(f"  {name}: fitting the Blinn-Phong sampling lobe (nbrdf fit-phong)")
+        fit = json.loads(_run([self.cli, "fit-phong", network, "--json"]))
+        # fit-phong rewrites the network file (with the lobe): remember what it now holds.
+        record.update(phong_inputs=inputs, network_hash=file_hash(network),
+                      phong_fit={k: fit[k] for k in ("exponent", "specular_weight", "loss") if k in fit})
+
+    def _material(self, name: str, kind: str, table: Path, keras: Path, measured: Path | None, record: dict) -> Material:
+        network, source = self._network(name, table, keras, record)
+        self._phong(name, network, record)
+        self._save_record(name, record)
+        sampling = json.loads(network.read_text()).get("sampling") or {}
+        material = Material(name=name, kind=kind, table=table, network=network, network_source=source,
+                            measured=measured)
+        if sampling.get("model") == "blinn-phong":
+            material.exponent = float(sampling["exponent"])
+            material.specular_weight = float(sampling["specular_weight"])
+            material.phong_source = sampling.get("source", "fit")
+        if source == "keras":
+            material.notes.append("NBRDF imported from the authors' Keras network (no `nbrdf train`)")
+        if not material.has_phong:
+            material.notes.append("no Blinn-Phong lobe (no `nbrdf fit-phong`): phong strategies skipped")
+        return material
+
+    def merl(self, name: str) -> Material:
+        record = self._record(name)
+        table = self._table_merl(name, record)
+        keras = self.shared / "data" / "reference-nbrdf" / "merl" / f"{name}.h5"
+        return self._material(name, "merl", table, keras, None, record)
+
+    def rgl(self, name: str) -> Material:
+        measured = self.shared / "data" / "rgl" / f"{name}.bsdf"
+        if not measured.is_file():
+            raise FileNotFoundError(f"RGL material {measured} is missing")
+        record = self._record(name)
+        table = self._table_rgl(name, measured, record)
+        keras = self.shared / "data" / "reference-nbrdf" / "rgl-isotropic" / f"{name}.h5"
+        return self._material(name, "rgl", table, keras, measured, record)
+
+    def get(self, spec: str) -> Material:
+        """``NAME`` (MERL) or ``rgl:NAME`` / ``NAME_rgb`` (RGL)."""
+        if spec.startswith("rgl:"):
+            return self.rgl(spec[4:])
+        if (self.shared / "data" / "rgl" / f"{spec}.bsdf").is_file():
+            return self.rgl(spec)
+        return self.merl(spec)
+
+
+def default_cli() -> Path:
+    """The nbrdf CLI: $NBRDF_CLI, else target/release/nbrdf of this checkout."""
+    if os.environ.get("NBRDF_CLI"):
+        return Path(os.environ["NBRDF_CLI"])
+    return REPO / "target" / "release" / ("nbrdf.exe" if os.name == "nt" else "nbrdf")
+
+
+__all__ = ["MERL_TEST_SET", "VEACH_MERL", "VEACH_RGL", "Material", "Artefacts", "test_split", "default_cli"]
