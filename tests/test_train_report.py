@@ -188,7 +188,9 @@ def test_cell_reflectance_estimates():
 def test_measured_ground_truth_against_itself_has_no_error(shared):
     bsdf = shared / "data" / "rgl" / "paper_white_rgb.bsdf"
     c = cm.compare(bsdf, bsdf, RESOLUTION, 2000)
-    assert c.mean.rmse == 0.0 and c.mean.ssim == pytest.approx(1.0)
+    # Mitsuba's `measured` is not bitwise reproducible across batch layouts (float32 rounding,
+    # ~1e-8 here), so "no error" means far below any error of a fit.
+    assert c.mean.rmse < 1e-6 and c.mean.ssim == pytest.approx(1.0)
 
 
 def test_quick_report_on_one_rgl_material_compares_with_measured_and_authors(cli, shared, tmp_path):
