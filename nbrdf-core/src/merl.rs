@@ -54,6 +54,34 @@ pub enum Interpolation {
 pub struct MerlTable {
     cells: Vec<[f64; 3]>,
     channel_major: OnceLock<Vec<f64>>,
+    phi_fold: PhiFold,
+}
+
+/// How a lookup maps `phi_d` in `[0, 2 pi)` onto the stored half `[0, pi)`.
+///
+/// A MERL file does not say which; the format's convention is [`PhiFold::Reciprocal`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PhiFold {
+    /// `phi_d -> phi_d - pi`: swapping light and view (reciprocity) turns `phi_d` into
+    /// `phi_d + pi`. MERL's convention; the lookup wraps around in `phi_d`.
+    #[default]
+    Reciprocal,
+    /// `phi_d -> 2 pi - phi_d`: mirroring both directions in the plane of the half vector and the
+    /// normal, a symmetry of every isotropic material, reciprocal or not. For tables of measured
+    /// data that are not reciprocal (Mitsuba's `measured` BSDF, with the light as `wo`), tabulated
+    /// with `nbrdf_mitsuba.tabulate_rgl --phi-fold mirror`; the lookup is clamped in `phi_d`
+    /// (0 and pi are mirror planes). Such tables only make sense to tools told so
+    /// (`nbrdf train --phi-fold mirror`); the `merl` BSDF reads every table as reciprocal.
+    Mirror,
+}
+
+impl PhiFold {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PhiFold::Reciprocal => "reciprocal",
+            PhiFold::Mirror => "mirror",
+        }
+    }
 }
 
 /// Summary of a table for reports: reflectance statistics over the valid cells.
@@ -108,13 +136,35 @@ pub fn angles_at_index(index: [f64; 3]) -> RusinkiewiczAngles {
 /// Continuous (unfloored) indices `[theta_h, theta_d, phi_d]` of a set of angles, phi_d folded
 /// into `[0, pi)` by reciprocity.
 pub fn continuous_index(angles: &RusinkiewiczAngles) -> [f64; 3] {
+    continuous_index_folded(angles, PhiFold::Reciprocal)
+}
+
+/// [`continuous_index`] with phi_d folded by `fold` (into `[0, pi]` for [`PhiFold::Mirror`]).
+pub fn continuous_index_folded(angles: &RusinkiewiczAngles, fold: PhiFold) -> [f64; 3] {
     // sqrt of a negative would be NaN; a negative theta_h is the border cell anyway.
     let theta_h = angles.theta_h.max(0.0);
+    let phi_d = match fold {
+        PhiFold::Reciprocal => fold_phi_d(angles.phi_d),
+        PhiFold::Mirror => mirror_phi_d(angles.phi_d),
+    };
     [
         N_THETA_H as f64 * (theta_h / FRAC_PI_2).sqrt(),
         N_THETA_D as f64 * angles.theta_d / FRAC_PI_2,
-        N_PHI_D as f64 * fold_phi_d(angles.phi_d) / PI,
+        N_PHI_D as f64 * phi_d / PI,
     ]
+}
+
+/// Mirror symmetry of an isotropic BRDF (`phi_d -> -phi_d`): any angle onto `[0, pi]`.
+fn mirror_phi_d(phi_d: f64) -> f64 {
+    if !phi_d.is_finite() {
+        return phi_d;
+    }
+    let phi = phi_d.rem_euclid(2.0 * PI);
+    if phi > PI {
+        2.0 * PI - phi
+    } else {
+        phi
+    }
 }
 
 /// Reciprocity (swapping light and view) turns phi_d into phi_d + pi, so an isotropic table
@@ -289,7 +339,26 @@ impl MerlTable {
         Ok(MerlTable {
             cells,
             channel_major: OnceLock::new(),
+            phi_fold: PhiFold::Reciprocal,
         })
+    }
+
+    /// The same table read with another `phi_d` fold ([`PhiFold::Reciprocal`] unless set).
+    pub fn with_phi_fold(mut self, fold: PhiFold) -> Self {
+        self.phi_fold = fold;
+        self
+    }
+
+    pub fn phi_fold(&self) -> PhiFold {
+        self.phi_fold
+    }
+
+    /// Lower cell, upper cell and weight of the upper one on the `phi_d` axis.
+    fn lerp_phi(&self, t: f64) -> (usize, usize, f64) {
+        match self.phi_fold {
+            PhiFold::Reciprocal => lerp_wrapped(t, N_PHI_D),
+            PhiFold::Mirror => lerp_clamped(t, N_PHI_D),
+        }
     }
 
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
@@ -345,6 +414,7 @@ impl MerlTable {
         Ok(MerlTable {
             cells,
             channel_major: OnceLock::from(stored),
+            phi_fold: PhiFold::Reciprocal,
         })
     }
 
@@ -374,6 +444,7 @@ impl MerlTable {
         MerlTable {
             cells,
             channel_major: OnceLock::new(),
+            phi_fold: PhiFold::Reciprocal,
         }
     }
 
@@ -401,7 +472,7 @@ impl MerlTable {
     }
 
     pub fn lookup(&self, angles: &RusinkiewiczAngles, interpolation: Interpolation) -> [f64; 3] {
-        let index = continuous_index(angles);
+        let index = continuous_index_folded(angles, self.phi_fold);
         if index.iter().any(|x| !x.is_finite()) {
             return [0.0; 3];
         }
@@ -415,7 +486,10 @@ impl MerlTable {
         let cell = cell_index(
             nearest_clamped(index[0], N_THETA_H),
             nearest_clamped(index[1], N_THETA_D),
-            nearest_wrapped(index[2], N_PHI_D),
+            match self.phi_fold {
+                PhiFold::Reciprocal => nearest_wrapped(index[2], N_PHI_D),
+                PhiFold::Mirror => nearest_clamped(index[2], N_PHI_D),
+            },
         );
         self.cell(cell).unwrap_or([0.0; 3])
     }
@@ -423,7 +497,7 @@ impl MerlTable {
     fn trilinear(&self, index: [f64; 3]) -> [f64; 3] {
         let (h0, h1, wh) = lerp_clamped(index[0] - 0.5, N_THETA_H);
         let (d0, d1, wd) = lerp_clamped(index[1] - 0.5, N_THETA_D);
-        let (p0, p1, wp) = lerp_wrapped(index[2] - 0.5, N_PHI_D);
+        let (p0, p1, wp) = self.lerp_phi(index[2] - 0.5);
         let mut sum = [0.0; 3];
         let mut weight_sum = 0.0;
         for (ih, w_h) in [(h0, 1.0 - wh), (h1, wh)] {
@@ -456,13 +530,13 @@ impl MerlTable {
     /// of its channels is not measured), where `lookup` would return 0. Training uses it so that
     /// unmeasured regions never become targets.
     pub fn lookup_valid(&self, angles: &RusinkiewiczAngles) -> Option<[f64; 3]> {
-        let index = continuous_index(angles);
+        let index = continuous_index_folded(angles, self.phi_fold);
         if index.iter().any(|x| !x.is_finite()) {
             return None;
         }
         let (h0, h1, wh) = lerp_clamped(index[0] - 0.5, N_THETA_H);
         let (d0, d1, wd) = lerp_clamped(index[1] - 0.5, N_THETA_D);
-        let (p0, p1, wp) = lerp_wrapped(index[2] - 0.5, N_PHI_D);
+        let (p0, p1, wp) = self.lerp_phi(index[2] - 0.5);
         let any_valid = [(h0, 1.0 - wh), (h1, wh)].iter().any(|&(ih, w_h)| {
             [(d0, 1.0 - wd), (d1, wd)].iter().any(|&(id, w_d)| {
                 [(p0, 1.0 - wp), (p1, wp)].iter().any(|&(ip, w_p)| {
@@ -840,6 +914,74 @@ mod tests {
         let mut a = angles_at_index([5.5, 6.5, 179.8]);
         a.phi_d -= PI;
         assert!(close(t.lookup(&a, Interpolation::Trilinear)[0], expect));
+    }
+
+    #[test]
+    fn mirror_fold_reflects_phi_d_and_clamps() {
+        let t = shared_table().clone().with_phi_fold(PhiFold::Mirror);
+        assert_eq!(t.phi_fold(), PhiFold::Mirror);
+        // Stored centres come back as they are, whatever the fold.
+        let centre = cell_centre_angles(5, 6, 40);
+        assert!(close(
+            t.lookup(&centre, Interpolation::Trilinear)[1],
+            refl(&t, 1, 5, 6, 40)
+        ));
+        // phi_d + pi is the mirror image of pi - phi_d (cell 139), not cell 40 as by reciprocity.
+        let swapped = RusinkiewiczAngles {
+            phi_d: centre.phi_d + PI,
+            ..centre
+        };
+        for interpolation in [Interpolation::Nearest, Interpolation::Trilinear] {
+            let got = t.lookup(&swapped, interpolation)[1];
+            assert!(close(got, refl(&t, 1, 5, 6, 139)), "{got}");
+            let negative = RusinkiewiczAngles {
+                phi_d: -centre.phi_d,
+                ..centre
+            };
+            assert!(close(
+                t.lookup(&negative, interpolation)[1],
+                refl(&t, 1, 5, 6, 40)
+            ));
+        }
+        // Near the mirror planes 0 and pi the lookup clamps instead of wrapping around.
+        for (index, cell) in [(0.2, 0), (179.8, 179)] {
+            let got = t.lookup(
+                &angles_at_index([5.5, 6.5, index]),
+                Interpolation::Trilinear,
+            )[0];
+            assert!(close(got, refl(&t, 0, 5, 6, cell)), "{index}: {got}");
+        }
+        let i = continuous_index_folded(
+            &RusinkiewiczAngles {
+                phi_d: 1.5 * PI,
+                ..centre
+            },
+            PhiFold::Mirror,
+        );
+        assert!(close(i[2], 90.0), "{i:?}");
+        // lookup_valid folds the same way.
+        assert_eq!(
+            t.lookup_valid(&swapped),
+            Some(t.lookup(&swapped, Interpolation::Trilinear))
+        );
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        #[test]
+        fn mirror_fold_is_mirror_symmetric_and_rotation_invariant(
+            tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
+        ) {
+            let t = shared_table().clone().with_phi_fold(PhiFold::Mirror);
+            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+            let flip = DVec3::new(1.0, -1.0, 1.0);
+            let a = t.eval_f64(l, v, Interpolation::Trilinear);
+            let b = t.eval_f64(l * flip, v * flip, Interpolation::Trilinear);
+            let rot = glam::DMat3::from_rotation_z(0.77);
+            let c = t.eval_f64(rot * l, rot * v, Interpolation::Trilinear);
+            prop_assert!((0..3).all(|k| (a[k] - b[k]).abs() <= 1e-6 * (1.0 + a[k])), "{a:?} vs {b:?}");
+            prop_assert!((0..3).all(|k| (a[k] - c[k]).abs() <= 1e-6 * (1.0 + a[k])), "{a:?} vs {c:?}");
+        }
     }
 
     #[test]

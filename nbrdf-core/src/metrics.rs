@@ -10,7 +10,7 @@
 use crate::brdf::{Brdf, Directions, RgbMut};
 use crate::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
-use crate::merl::MerlTable;
+use crate::merl::{MerlTable, PhiFold};
 use crate::network::Nbrdf;
 use crate::train::dataset::{directions, AngularSampling};
 use crate::train::rng::{SplitMix64, Stream};
@@ -29,13 +29,20 @@ pub enum Material {
 impl Material {
     /// A network when the file name ends in `.json`, a MERL table otherwise.
     pub fn read(path: &std::path::Path) -> Result<Self> {
+        Self::read_folded(path, PhiFold::Reciprocal)
+    }
+
+    /// As [`Material::read`], a table being read with the `phi_d` fold `fold`.
+    pub fn read_folded(path: &std::path::Path, fold: PhiFold) -> Result<Self> {
         if path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("json"))
         {
             Ok(Material::Network(Box::new(Nbrdf::load(path)?)))
         } else {
-            Ok(Material::Table(Box::new(MerlTable::read(path)?)))
+            Ok(Material::Table(Box::new(
+                MerlTable::read(path)?.with_phi_fold(fold),
+            )))
         }
     }
 

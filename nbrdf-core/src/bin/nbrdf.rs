@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::analytic::{catalogue, AnalyticBrdf, ModelKind};
 use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
 use nbrdf_core::lobe_fit::{self, LobeFitConfig};
-use nbrdf_core::merl::{self, MerlTable};
+use nbrdf_core::merl::{self, MerlTable, PhiFold};
 use nbrdf_core::metrics;
 use nbrdf_core::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
 use nbrdf_core::phong_fit::{self, FitConfig};
@@ -124,6 +124,25 @@ impl From<SamplingArg> for AngularSampling {
     }
 }
 
+#[derive(Clone, Copy, Default, ValueEnum)]
+enum PhiFoldArg {
+    /// MERL's convention: phi_d + pi is the same cell (swapping light and view, reciprocity).
+    #[default]
+    Reciprocal,
+    /// 2 pi - phi_d is the same cell (mirror symmetry): tables of non-reciprocal measurements
+    /// written by `python -m nbrdf_mitsuba.tabulate_rgl --phi-fold mirror`.
+    Mirror,
+}
+
+impl From<PhiFoldArg> for PhiFold {
+    fn from(f: PhiFoldArg) -> Self {
+        match f {
+            PhiFoldArg::Reciprocal => PhiFold::Reciprocal,
+            PhiFoldArg::Mirror => PhiFold::Mirror,
+        }
+    }
+}
+
 #[derive(Args)]
 struct TrainArgs {
     /// The MERL-format table to learn.
@@ -136,6 +155,10 @@ struct TrainArgs {
     /// How training directions are drawn.
     #[arg(long, value_enum, default_value_t = SamplingArg::Adaptive)]
     sampling: SamplingArg,
+    /// How the table folds phi_d: reciprocal for MERL tables, mirror for non-reciprocal ones
+    /// tabulated with `tabulate_rgl --phi-fold mirror`.
+    #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
+    phi_fold: PhiFoldArg,
     /// Training samples (invalid cells and directions below the horizon are not counted);
     /// 10% more are drawn for validation.
     #[arg(long, default_value_t = TrainConfig::default().samples)]
@@ -198,6 +221,10 @@ struct FitPhongArgs {
     /// 7-parameter fit (DESIGN.md section 6), which can be a poor sampler for weak sharp spikes.
     #[arg(long, value_enum, default_value_t = LobeArg::Variance)]
     lobe: LobeArg,
+    /// How the table folds phi_d: reciprocal for MERL tables, mirror for non-reciprocal ones
+    /// tabulated with `tabulate_rgl --phi-fold mirror`.
+    #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
+    phi_fold: PhiFoldArg,
     /// Directions sampled (adaptively) for the fit.
     #[arg(long, default_value_t = FitConfig::default().samples)]
     samples: usize,
@@ -217,6 +244,10 @@ struct CompareArgs {
     /// The material compared against A, table or network.
     #[arg(value_name = "B")]
     test: PathBuf,
+    /// How tables fold phi_d: reciprocal for MERL tables, mirror for non-reciprocal ones
+    /// tabulated with `tabulate_rgl --phi-fold mirror`.
+    #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
+    phi_fold: PhiFoldArg,
     /// Width and height of the sphere images, pixels.
     #[arg(long, default_value_t = 128)]
     resolution: usize,
@@ -269,8 +300,9 @@ fn run(command: Command) -> Result<()> {
 }
 
 fn run_compare(args: &CompareArgs) -> Result<()> {
-    let reference = metrics::Material::read(&args.reference)?;
-    let test = metrics::Material::read(&args.test)?;
+    let fold = args.phi_fold.into();
+    let reference = metrics::Material::read_folded(&args.reference, fold)?;
+    let test = metrics::Material::read_folded(&args.test, fold)?;
     let c = with_threads(args.threads, || {
         metrics::compare(&reference, &test, args.resolution, args.samples)
     })??;
@@ -347,7 +379,7 @@ fn file_stem(path: &Path) -> String {
 }
 
 fn run_train(args: &TrainArgs) -> Result<()> {
-    let table = MerlTable::read(&args.table)?;
+    let table = MerlTable::read(&args.table)?.with_phi_fold(args.phi_fold.into());
     let name = args.name.clone().unwrap_or_else(|| file_stem(&args.table));
     let output = args
         .output
@@ -384,6 +416,9 @@ fn run_train(args: &TrainArgs) -> Result<()> {
     let report = &outcome.report;
     let mut network = outcome.network;
     network.provenance = train::provenance(&config, report, &args.table.display().to_string());
+    if let Some(p) = network.provenance.as_object_mut() {
+        p.insert("phi_fold".into(), table.phi_fold().as_str().into());
+    }
     network.validate()?;
     network.save(&output)?;
     emit(&format!(
@@ -425,14 +460,14 @@ enum FitSource {
 
 impl FitSource {
     /// A network when the file name ends in `.json`, a MERL table otherwise.
-    fn read(path: &Path) -> Result<Self> {
+    fn read(path: &Path, fold: PhiFold) -> Result<Self> {
         let is_json = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("json"));
         if is_json {
             Ok(FitSource::Network(Box::new(Nbrdf::load(path)?)))
         } else {
-            Ok(FitSource::Table(MerlTable::read(path)?))
+            Ok(FitSource::Table(MerlTable::read(path)?.with_phi_fold(fold)))
         }
     }
 
@@ -452,7 +487,7 @@ impl FitSource {
 }
 
 fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
-    let source = FitSource::read(&args.input)?;
+    let source = FitSource::read(&args.input, args.phi_fold.into())?;
     if args.output.is_some() && matches!(source, FitSource::Table(_)) {
         return Err(NbrdfError::InvalidArgument(
             "-o/--output applies to networks; for a table the fit is printed".into(),
@@ -705,6 +740,15 @@ mod tests {
             (1000, 3, Some(2), 9)
         );
         assert_eq!((args.hidden, args.batch), (21, 512));
+        assert!(matches!(args.phi_fold, PhiFoldArg::Reciprocal));
+        let Ok(Cli {
+            command: Command::Train(args),
+        }) = Cli::try_parse_from(["nbrdf", "train", "t.binary", "--phi-fold", "mirror"])
+        else {
+            panic!("train --phi-fold must parse")
+        };
+        assert_eq!(PhiFold::from(args.phi_fold), PhiFold::Mirror);
+        assert!(Cli::try_parse_from(["nbrdf", "train", "t.binary", "--phi-fold", "odd"]).is_err());
         assert!((args.lr - 5e-4).abs() < 1e-9);
         assert!(
             Cli::try_parse_from(["nbrdf", "train", "t.binary", "--sampling", "random"]).is_err()
