@@ -185,6 +185,13 @@ struct TrainArgs {
     /// Relative validation improvement that resets the patience.
     #[arg(long, default_value_t = TrainConfig::default().min_improvement)]
     min_improvement: f64,
+    /// When the patience runs out, multiply the learning rate by --lr-decay-factor and go on,
+    /// up to this many times, before stopping (0: the paper's constant rate).
+    #[arg(long, default_value_t = TrainConfig::default().lr_decays)]
+    lr_decays: usize,
+    /// Factor of each learning-rate drop, in (0, 1).
+    #[arg(long, default_value_t = TrainConfig::default().lr_decay_factor)]
+    lr_decay_factor: f32,
     /// Random seed; a seed gives the same network whatever the thread count.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -398,6 +405,8 @@ fn run_train(args: &TrainArgs) -> Result<()> {
         patience: args.patience,
         min_epochs: args.min_epochs,
         min_improvement: args.min_improvement,
+        lr_decays: args.lr_decays,
+        lr_decay_factor: args.lr_decay_factor,
         seed: args.seed,
         ..TrainConfig::default()
     };
