@@ -147,81 +147,89 @@ fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) ->
     q
 }
 
-/// Mean relative second moment over the views of `(n, w)`.
-fn mean_second_moment(views: &[ViewQuadrature], exponent: f64, weight: f64) -> f64 {
-    views
-        .iter()
-        .map(|q| second_moment(q, exponent, weight))
-        .sum::<f64>()
-        / views.len() as f64
+/// The quadrature of a material over all views, built once (it evaluates the material) and
+/// then scored for any number of lobes.
+pub struct LobeQuadrature {
+    views: Vec<ViewQuadrature>,
+}
+
+impl LobeQuadrature {
+    /// Evaluates `target` (a table or a network, `f_r` by Rusinkiewicz angles) on the
+    /// quadrature points of every view of `config`.
+    pub fn new(target: &TargetFn<'_>, config: &LobeFitConfig) -> Result<Self> {
+        if config.view_thetas.is_empty() || config.s_bins == 0 || config.phi_bins == 0 {
+            return Err(NbrdfError::InvalidArgument(
+                "lobe fit: needs views and quadrature bins".into(),
+            ));
+        }
+        let views = config
+            .view_thetas
+            .par_iter()
+            .map(|&theta| quadrature(target, theta, config))
+            .collect();
+        Ok(LobeQuadrature { views })
+    }
+
+    /// Mean relative variance `R - 1` over the views of sampling with the lobe `(n, w)`.
+    pub fn relative_variance(&self, exponent: f64, specular_weight: f64) -> f64 {
+        self.mean_second_moment(exponent, specular_weight) - 1.0
+    }
+
+    fn mean_second_moment(&self, exponent: f64, weight: f64) -> f64 {
+        self.views
+            .iter()
+            .map(|q| second_moment(q, exponent, weight))
+            .sum::<f64>()
+            / self.views.len() as f64
+    }
+
+    /// The candidate of `config` with the lowest mean relative variance.
+    pub fn fit(&self, config: &LobeFitConfig) -> Result<LobeFit> {
+        if config
+            .exponents
+            .iter()
+            .any(|n| !(n.is_finite() && *n >= 0.0))
+            || config.weights.iter().any(|w| !(0.0..=1.0).contains(w))
+            || config.exponents.is_empty()
+            || config.weights.is_empty()
+        {
+            return Err(NbrdfError::InvalidArgument(
+                "lobe fit: candidate exponents must be finite and >= 0, weights in [0, 1]".into(),
+            ));
+        }
+        let cosine = self.relative_variance(0.0, 0.0);
+        let candidates: Vec<(f64, f64)> = config
+            .exponents
+            .iter()
+            .flat_map(|&n| config.weights.iter().map(move |&w| (n, w)))
+            .collect();
+        let scored: Vec<(f64, f64, f64)> = candidates
+            .par_iter()
+            .map(|&(n, w)| (self.relative_variance(n, w), n, w))
+            .collect();
+        // Ties (e.g. a black material, R = 1 everywhere) go to the earliest candidate, the
+        // gentlest; if no candidate is finite, cosine sampling is the fallback.
+        let (relative_variance, exponent, specular_weight) =
+            scored.into_iter().filter(|(r, _, _)| r.is_finite()).fold(
+                (f64::INFINITY, 0.0, 0.0),
+                |acc, c| if c.0 < acc.0 { c } else { acc },
+            );
+        Ok(LobeFit {
+            exponent,
+            specular_weight,
+            relative_variance: if relative_variance.is_finite() {
+                relative_variance
+            } else {
+                cosine
+            },
+            cosine_relative_variance: cosine,
+        })
+    }
 }
 
 /// Chooses the lobe for `target` (a table or a network, `f_r` by Rusinkiewicz angles).
 pub fn fit_lobe(target: &TargetFn<'_>, config: &LobeFitConfig) -> Result<LobeFit> {
-    let bad = |what: &str| Err(NbrdfError::InvalidArgument(format!("lobe fit: {what}")));
-    if config.view_thetas.is_empty() || config.s_bins == 0 || config.phi_bins == 0 {
-        return bad("needs views and quadrature bins");
-    }
-    if config
-        .exponents
-        .iter()
-        .any(|n| !(n.is_finite() && *n >= 0.0))
-        || config.weights.iter().any(|w| !(0.0..=1.0).contains(w))
-        || config.exponents.is_empty()
-        || config.weights.is_empty()
-    {
-        return bad("candidate exponents must be finite and >= 0, weights in [0, 1]");
-    }
-    let views: Vec<ViewQuadrature> = config
-        .view_thetas
-        .par_iter()
-        .map(|&theta| quadrature(target, theta, config))
-        .collect();
-    let cosine = mean_second_moment(&views, 0.0, 0.0);
-    let candidates: Vec<(f64, f64)> = config
-        .exponents
-        .iter()
-        .flat_map(|&n| config.weights.iter().map(move |&w| (n, w)))
-        .collect();
-    let scored: Vec<(f64, f64, f64)> = candidates
-        .par_iter()
-        .map(|&(n, w)| (mean_second_moment(&views, n, w), n, w))
-        .collect();
-    // Ties (e.g. a black material, R = 1 everywhere) go to the earliest candidate, the gentlest.
-    let (best, exponent, specular_weight) =
-        scored.into_iter().filter(|(r, _, _)| r.is_finite()).fold(
-            (f64::INFINITY, 0.0, 0.0),
-            |acc, c| if c.0 < acc.0 { c } else { acc },
-        );
-    if !best.is_finite() {
-        return Ok(LobeFit {
-            exponent: 0.0,
-            specular_weight: 0.0,
-            relative_variance: cosine - 1.0,
-            cosine_relative_variance: cosine - 1.0,
-        });
-    }
-    Ok(LobeFit {
-        exponent,
-        specular_weight,
-        relative_variance: best - 1.0,
-        cosine_relative_variance: cosine - 1.0,
-    })
-}
-
-/// Mean relative variance of sampling `target` with the lobe `(n, w)`, by the same quadrature.
-pub fn relative_variance(
-    target: &TargetFn<'_>,
-    exponent: f64,
-    specular_weight: f64,
-    config: &LobeFitConfig,
-) -> f64 {
-    let views: Vec<ViewQuadrature> = config
-        .view_thetas
-        .par_iter()
-        .map(|&theta| quadrature(target, theta, config))
-        .collect();
-    mean_second_moment(&views, exponent, specular_weight) - 1.0
+    LobeQuadrature::new(target, config)?.fit(config)
 }
 
 #[cfg(test)]

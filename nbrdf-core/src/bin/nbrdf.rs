@@ -8,7 +8,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::analytic::{catalogue, AnalyticBrdf, ModelKind};
 use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
-use nbrdf_core::lobe_fit::{self, LobeFitConfig};
+use nbrdf_core::lobe_fit::{LobeFitConfig, LobeQuadrature};
 use nbrdf_core::merl::{self, MerlTable, PhiFold};
 use nbrdf_core::metrics;
 use nbrdf_core::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
@@ -511,13 +511,10 @@ fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
     let (fit, lobe, model_variance) = with_threads(args.threads, || -> Result<_> {
         let target = source.target();
         let fit = phong_fit::fit(&*target, &config)?;
-        let lobe = lobe_fit::fit_lobe(&*target, &lobe_config)?;
-        let model_variance = lobe_fit::relative_variance(
-            &*target,
-            fit.params.exponent,
-            fit.params.specular_weight(),
-            &lobe_config,
-        );
+        let quadrature = LobeQuadrature::new(&*target, &lobe_config)?;
+        let lobe = quadrature.fit(&lobe_config)?;
+        let model_variance =
+            quadrature.relative_variance(fit.params.exponent, fit.params.specular_weight());
         Ok((fit, lobe, model_variance))
     })??;
     let p = &fit.params;
