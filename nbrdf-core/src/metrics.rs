@@ -76,30 +76,55 @@ pub struct Image {
     pub rgb: [Vec<f32>; 3],
 }
 
-/// Renders the sphere lit from `(sin t, 0, cos t)`, `t = light_theta` radians.
-pub fn render_sphere(brdf: &dyn Brdf, size: usize, light_theta: f64) -> Image {
+/// A pixel of the evaluation sphere on the disk: index `py * size + px` and the view and light
+/// directions in its local shading frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpherePixel {
+    pub index: usize,
+    pub view: Vec3,
+    pub light: Vec3,
+}
+
+/// The pixels of a `size` x `size` orthographic view of the unit sphere from +z, lit from
+/// `(sin t, 0, cos t)`, `t = light_theta` radians, in row order; the one geometry of every
+/// sphere image (metrics, the autoencoder's loss, the PCA baseline). Directions may be below
+/// the horizon near the terminator.
+pub fn sphere_pixels(size: usize, light_theta: f64) -> Vec<SpherePixel> {
     let light_world = Vec3::new(light_theta.sin() as f32, 0.0, light_theta.cos() as f32);
-    let n_px = size * size;
-    let (mut view, mut light) = (vec![0.0f32; 3 * n_px], vec![0.0f32; 3 * n_px]);
+    let mut out = Vec::new();
     for py in 0..size {
         for px in 0..size {
             let x = (2.0 * (px as f32 + 0.5) / size as f32) - 1.0;
             let y = 1.0 - (2.0 * (py as f32 + 0.5) / size as f32);
             let r2 = x * x + y * y;
-            let i = py * size + px;
             if r2 >= 1.0 {
-                // Off the sphere: a light below the horizon makes the pixel black in any BRDF.
-                (view[2 * n_px + i], light[2 * n_px + i]) = (1.0, -1.0);
                 continue;
             }
             let normal = Vec3::new(x, y, (1.0 - r2).sqrt());
             let (t, b) = normal.any_orthonormal_pair();
             let local = |w: Vec3| Vec3::new(w.dot(t), w.dot(b), w.dot(normal));
-            let (v, l) = (local(Vec3::Z), local(light_world));
-            for (k, (vc, lc)) in [(v.x, l.x), (v.y, l.y), (v.z, l.z)].into_iter().enumerate() {
-                view[k * n_px + i] = vc;
-                light[k * n_px + i] = lc;
-            }
+            out.push(SpherePixel {
+                index: py * size + px,
+                view: local(Vec3::Z),
+                light: local(light_world),
+            });
+        }
+    }
+    out
+}
+
+/// Renders the sphere lit from `(sin t, 0, cos t)`, `t = light_theta` radians.
+pub fn render_sphere(brdf: &dyn Brdf, size: usize, light_theta: f64) -> Image {
+    let n_px = size * size;
+    let (mut view, mut light) = (vec![0.0f32; 3 * n_px], vec![0.0f32; 3 * n_px]);
+    // Off the sphere: a light below the horizon makes the pixel black in any BRDF.
+    view[2 * n_px..].fill(1.0);
+    light[2 * n_px..].fill(-1.0);
+    for p in sphere_pixels(size, light_theta) {
+        let (v, l, i) = (p.view, p.light, p.index);
+        for (k, (vc, lc)) in [(v.x, l.x), (v.y, l.y), (v.z, l.z)].into_iter().enumerate() {
+            view[k * n_px + i] = vc;
+            light[k * n_px + i] = lc;
         }
     }
     let mut out = vec![0.0f32; 3 * n_px];

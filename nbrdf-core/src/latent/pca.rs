@@ -16,8 +16,7 @@
 
 use crate::coords::{from_rusinkiewicz, to_rusinkiewicz};
 use crate::merl::{self, N_PHI_D, N_THETA_D, N_THETA_H};
-use crate::metrics::Image;
-use glam::Vec3;
+use crate::metrics::{self, Image};
 use rayon::prelude::*;
 
 /// `eps` of the log mapping (Nielsen et al.: 1e-3).
@@ -32,39 +31,26 @@ struct Pixel {
     cos: f64,
 }
 
-/// The evaluation sphere's pixels (the geometry of [`crate::metrics::render_sphere`]).
+/// The evaluation sphere's lit pixels (the geometry of [`crate::metrics::render_sphere`]).
 fn sphere_pixels(size: usize, light_theta: f64) -> Vec<Pixel> {
-    let light = Vec3::new(light_theta.sin() as f32, 0.0, light_theta.cos() as f32);
-    let mut out = Vec::new();
-    for py in 0..size {
-        for px in 0..size {
-            let x = (2.0 * (px as f32 + 0.5) / size as f32) - 1.0;
-            let y = 1.0 - (2.0 * (py as f32 + 0.5) / size as f32);
-            let r2 = x * x + y * y;
-            if r2 >= 1.0 {
-                continue;
-            }
-            let normal = Vec3::new(x, y, (1.0 - r2).sqrt());
-            let (t, b) = normal.any_orthonormal_pair();
-            let local = |w: Vec3| Vec3::new(w.dot(t), w.dot(b), w.dot(normal));
-            let (v, l) = (local(Vec3::Z), local(light));
-            if l.z <= 0.0 || v.z <= 0.0 {
-                continue;
-            }
-            let idx = merl::continuous_index(&to_rusinkiewicz(l.as_dvec3(), v.as_dvec3()));
+    metrics::sphere_pixels(size, light_theta)
+        .into_iter()
+        .filter(|p| p.light.z > 0.0 && p.view.z > 0.0)
+        .map(|p| {
+            let idx =
+                merl::continuous_index(&to_rusinkiewicz(p.light.as_dvec3(), p.view.as_dvec3()));
             let cell = merl::cell_index(
                 (idx[0].floor().max(0.0) as usize).min(N_THETA_H - 1),
                 (idx[1].floor().max(0.0) as usize).min(N_THETA_D - 1),
                 (idx[2].floor() as i64).rem_euclid(N_PHI_D as i64) as usize,
             );
-            out.push(Pixel {
-                index: py * size + px,
+            Pixel {
+                index: p.index,
                 cell,
-                cos: l.z as f64,
-            });
-        }
-    }
-    out
+                cos: p.light.z as f64,
+            }
+        })
+        .collect()
 }
 
 /// `cos_l cos_v` at a cell centre, `None` below the horizon.

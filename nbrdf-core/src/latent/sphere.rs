@@ -14,9 +14,9 @@
 //! chunk order, so the result is deterministic.
 
 use crate::coords::network_input;
+use crate::metrics;
 use crate::network::{self, Layer, INPUTS, OUTPUTS};
 use crate::train::mlp_grad::{ChunkScratch, Kernel, Layout, Weights, LANES};
-use glam::Vec3;
 
 /// The tone map's floor.
 pub const FLOOR: f32 = 1e-12;
@@ -58,27 +58,14 @@ pub struct Scratch {
 
 impl SphereRenderer {
     pub fn new(size: usize, light_theta: f64, hidden: usize) -> Self {
-        let light = Vec3::new(light_theta.sin() as f32, 0.0, light_theta.cos() as f32);
         let (mut pixels, mut inputs, mut cos) = (Vec::new(), Vec::new(), Vec::new());
-        for py in 0..size {
-            for px in 0..size {
-                let x = (2.0 * (px as f32 + 0.5) / size as f32) - 1.0;
-                let y = 1.0 - (2.0 * (py as f32 + 0.5) / size as f32);
-                let r2 = x * x + y * y;
-                if r2 >= 1.0 {
-                    continue;
-                }
-                let normal = Vec3::new(x, y, (1.0 - r2).sqrt());
-                let (t, b) = normal.any_orthonormal_pair();
-                let local = |w: Vec3| Vec3::new(w.dot(t), w.dot(b), w.dot(normal));
-                let (v, l) = (local(Vec3::Z), local(light));
-                if l.z <= 0.0 || v.z <= 0.0 {
-                    continue;
-                }
-                pixels.push(py * size + px);
-                inputs.push(network_input(l, v));
-                cos.push(l.z);
+        for p in metrics::sphere_pixels(size, light_theta) {
+            if p.light.z <= 0.0 || p.view.z <= 0.0 {
+                continue;
             }
+            pixels.push(p.index);
+            inputs.push(network_input(p.light, p.view));
+            cos.push(p.light.z);
         }
         let layout = Layout::new(hidden);
         let flat_to_padded = flat_to_padded(&layout);
