@@ -176,10 +176,7 @@ impl AutoEncoder {
 
     pub fn load(path: impl AsRef<std::path::Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
-        let ae: AutoEncoder = serde_json::from_str(&text)
-            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
+        let ae: AutoEncoder = super::read_json(path)?;
         if ae.format != FORMAT_NAME || ae.mean.len() != ae.encoder.inputs() {
             return Err(NbrdfError::InvalidArgument(format!(
                 "{}: not an NBRDF autoencoder",
@@ -190,11 +187,7 @@ impl AutoEncoder {
     }
 
     pub fn save(&self, path: impl AsRef<std::path::Path>) -> Result<()> {
-        let path = path.as_ref();
-        let text =
-            serde_json::to_string(self).map_err(|e| NbrdfError::InvalidArgument(e.to_string()))?;
-        std::fs::write(path, text)
-            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))
+        super::write_json(self, path.as_ref())
     }
 
     fn standardise(&self, flat: &[f32]) -> Vec<f32> {

@@ -7,3 +7,24 @@ pub mod mlp;
 pub mod pca;
 pub mod predictor;
 pub mod sphere;
+
+use crate::error::{NbrdfError, Result};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use std::path::Path;
+
+/// Reads a JSON model file (autoencoder, predictor); errors name the file.
+fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
+    let named =
+        |e: &dyn std::fmt::Display| NbrdfError::InvalidArgument(format!("{}: {e}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| named(&e))?;
+    serde_json::from_str(&text).map_err(|e| named(&e))
+}
+
+/// Writes a JSON model file; errors name the file.
+fn write_json<T: Serialize>(value: &T, path: &Path) -> Result<()> {
+    let text =
+        serde_json::to_string(value).map_err(|e| NbrdfError::InvalidArgument(e.to_string()))?;
+    std::fs::write(path, text)
+        .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))
+}

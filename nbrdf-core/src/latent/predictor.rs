@@ -128,10 +128,7 @@ impl PhongPredictor {
 
     pub fn load(path: impl AsRef<std::path::Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
-        let p: PhongPredictor = serde_json::from_str(&text)
-            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
+        let p: PhongPredictor = super::read_json(path)?;
         if p.format != FORMAT_NAME {
             return Err(NbrdfError::InvalidArgument(format!(
                 "{}: not a Phong predictor",
@@ -142,11 +139,7 @@ impl PhongPredictor {
     }
 
     pub fn save(&self, path: impl AsRef<std::path::Path>) -> Result<()> {
-        let path = path.as_ref();
-        let text =
-            serde_json::to_string(self).map_err(|e| NbrdfError::InvalidArgument(e.to_string()))?;
-        std::fs::write(path, text)
-            .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))
+        super::write_json(self, path.as_ref())
     }
 }
 
