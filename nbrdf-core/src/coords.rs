@@ -136,6 +136,25 @@ pub fn network_input_components(lx: f32, ly: f32, lz: f32, vx: f32, vy: f32, vz:
     [sin_th, 0.0, hz, dx, ty, dz]
 }
 
+/// The isotropic network input straight from Rusinkiewicz angles (`phi_h` is dropped):
+/// `[sin theta_h, 0, cos theta_h, d]` with `d = (sin theta_d cos phi_d, sin theta_d sin phi_d,
+/// cos theta_d)`. Unlike [`network_input`] of `f32` directions it stays exact where `theta_h`
+/// is tiny (the first rows of the MERL grid), where `phi_h` recomputed from the directions is
+/// rounding noise.
+pub fn network_input_from_angles(angles: &RusinkiewiczAngles) -> [f32; 6] {
+    let (sin_th, cos_th) = angles.theta_h.sin_cos();
+    let (sin_td, cos_td) = angles.theta_d.sin_cos();
+    let (sin_pd, cos_pd) = angles.phi_d.sin_cos();
+    [
+        sin_th as f32,
+        0.0,
+        cos_th as f32,
+        (sin_td * cos_pd) as f32,
+        (sin_td * sin_pd) as f32,
+        cos_td as f32,
+    ]
+}
+
 /// Unit vector, or the normal `+z` for zero-length, infinite or NaN input (selects only).
 #[inline(always)]
 fn normalize_or_normal_f32(x: f32, y: f32, z: f32) -> (f32, f32, f32) {

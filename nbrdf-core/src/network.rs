@@ -443,6 +443,22 @@ impl Nbrdf {
         self.sampling.as_ref().and_then(|s| s.strategy().ok())
     }
 
+    /// The MERL-format table of this network at cell-centre angles: cells whose centre has a
+    /// direction at or below the horizon are marked not measured, as in the tables synthesised
+    /// from analytic fits, so a network trained on the result never learns from them. This is
+    /// how a network of another origin (the authors' Keras files) is distilled into a table that
+    /// `nbrdf train` can learn again, e.g. from the common initialisation of the latent space.
+    pub fn tabulate(&self) -> crate::merl::MerlTable {
+        crate::merl::MerlTable::tabulate(|angles| {
+            let (light, view) = crate::coords::from_rusinkiewicz(angles);
+            if light.z <= 0.0 || view.z <= 0.0 {
+                return [f64::NAN; 3];
+            }
+            self.eval_input(crate::coords::network_input_from_angles(angles))
+                .map(f64::from)
+        })
+    }
+
     /// The raw network on one input vector: `f_r` in linear RGB, clamped at 0. Same arithmetic
     /// as the batched kernel (float32, fused multiply-adds where the CPU has them, the same exp
     /// approximation; the output is `max(expm1(min(z, 80)), 0)`, always finite). A network whose layer shapes
@@ -1182,6 +1198,50 @@ mod tests {
             }
             tally.assert_rare();
         }
+    }
+
+    #[test]
+    fn tabulation_holds_the_network_at_cell_centres_and_nothing_below_the_horizon() {
+        let net = test_net(21, 11);
+        let table = net.tabulate();
+        let mut tally = Tally::default();
+        let (mut valid, mut invalid) = (0, 0);
+        for cell in (0..crate::merl::CELLS).step_by(997) {
+            let (h, d, p) = crate::merl::cell_coordinates(cell);
+            let angles = crate::merl::cell_centre_angles(h, d, p);
+            let (l, v) = crate::coords::from_rusinkiewicz(&angles);
+            match table.cell(cell) {
+                None => {
+                    assert!(
+                        l.z <= 0.0 || v.z <= 0.0,
+                        "cell {cell} invalid above the horizon"
+                    );
+                    invalid += 1;
+                }
+                Some(rgb) => {
+                    assert!(
+                        l.z > 0.0 && v.z > 0.0,
+                        "cell {cell} valid below the horizon"
+                    );
+                    // The input written out from the angles (phi_h = 0), in float64.
+                    let (st, ct) = angles.theta_h.sin_cos();
+                    let (sd, cd) = angles.theta_d.sin_cos();
+                    let (sp, cp) = angles.phi_d.sin_cos();
+                    let x = [st, 0.0, ct, sd * cp, sd * sp, cd].map(|v| v as f32);
+                    let want = reference_f64(&net, x);
+                    for (c, &got) in rgb.iter().enumerate() {
+                        // The table stores float64 of the float32 value: compare as float32.
+                        tally.check(got as f32, &want, c, &format!("cell {cell}"));
+                    }
+                    valid += 1;
+                }
+            }
+        }
+        assert!(
+            valid > 1000 && invalid > 100,
+            "{valid} valid, {invalid} invalid"
+        );
+        tally.assert_rare();
     }
 
     #[test]

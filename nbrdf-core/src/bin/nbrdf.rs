@@ -43,6 +43,8 @@ enum Command {
     ListMaterials(ListMaterialsArgs),
     /// Tabulate an analytic fit of a MERL material into a MERL-format table (.binary).
     Synth(SynthArgs),
+    /// Tabulate a neural BRDF on the MERL grid into a MERL-format table (.binary).
+    Tabulate(TabulateArgs),
     /// Validate a MERL-format table and print per-channel reflectance statistics.
     Info(InfoArgs),
     /// Train a neural BRDF on a MERL-format table and write it as NAME.nbrdf.json.
@@ -98,6 +100,19 @@ struct SynthArgs {
     /// Where to write the table; defaults to MATERIAL.binary in the current directory.
     #[arg(short, long, value_name = "OUT.binary")]
     output: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct TabulateArgs {
+    /// The neural BRDF to tabulate (e.g. one of the authors' networks after import).
+    #[arg(value_name = "NBRDF.json")]
+    network: PathBuf,
+    /// Where to write the table; defaults to NAME.binary in the current directory.
+    #[arg(short, long, value_name = "OUT.binary")]
+    output: Option<PathBuf>,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(Args)]
@@ -295,6 +310,7 @@ fn run(command: Command) -> Result<()> {
     match command {
         Command::ListMaterials(args) => run_list_materials(&args),
         Command::Synth(args) => run_synth(&args),
+        Command::Tabulate(args) => run_tabulate(&args),
         Command::Info(args) => run_info(&args),
         Command::Train(args) => run_train(&args),
         Command::FitPhong(args) => run_fit_phong(&args),
@@ -613,6 +629,24 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         } else {
             String::new()
         },
+    ))
+}
+
+fn run_tabulate(args: &TabulateArgs) -> Result<()> {
+    let net = Nbrdf::load(&args.network)?;
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{}.binary", net.name)));
+    let start = Instant::now();
+    let table = with_threads(args.threads, || net.tabulate())?;
+    table.write(&output)?;
+    emit(&format!(
+        "wrote {} (network {}, {} cells below the horizon marked invalid) in {:.2} s\n",
+        output.display(),
+        net.name,
+        table.stats().invalid_cells,
+        start.elapsed().as_secs_f64()
     ))
 }
 
