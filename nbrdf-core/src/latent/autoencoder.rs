@@ -28,6 +28,8 @@ use serde::{Deserialize, Serialize};
 pub const FORMAT_NAME: &str = "nbrdf-autoencoder";
 pub const FORMAT_VERSION: u32 = 1;
 pub const CODE_SIZE: usize = 32;
+/// Adam step of [`AutoEncoder::refine_code`] (codes are O(1) to O(10)).
+pub const REFINE_LEARNING_RATE: f32 = 0.02;
 pub const PERMUTATIONS: [[usize; 3]; 6] = [
     [0, 1, 2],
     [0, 2, 1],
@@ -219,9 +221,12 @@ impl AutoEncoder {
     }
 
     pub fn decode_flat(&self, code: &[f32]) -> Vec<f32> {
-        self.decoder
-            .eval(code)
-            .iter()
+        self.destandardise_clamped(&self.decoder.eval(code))
+    }
+
+    /// Decoder output to network weights: de-standardised, clamped to the training range.
+    fn destandardise_clamped(&self, out: &[f32]) -> Vec<f32> {
+        out.iter()
             .zip(self.mean.iter().zip(&self.std))
             .enumerate()
             .map(|(j, (y, (m, s)))| {
@@ -232,6 +237,79 @@ impl AutoEncoder {
                 }
             })
             .collect()
+    }
+
+    /// Refines a code by analysis by synthesis: `steps` Adam steps on the image loss of the
+    /// decoded network against the input network's own sphere image, keeping the best code
+    /// (by the exact loss; the steps use the training's surrogate gradient). The encoder's code
+    /// is the start, so 0 steps returns it unchanged. This closes the gap between what the
+    /// encoder predicts for an unseen material and the best the decoder can express.
+    pub fn refine_code(
+        &self,
+        flat: &[f32],
+        code: &[f32],
+        steps: usize,
+        learning_rate: f32,
+    ) -> Vec<f32> {
+        if steps == 0 {
+            return code.to_vec();
+        }
+        let renderer = SphereRenderer::new(
+            super::sphere::SIZE,
+            super::sphere::LIGHT_THETA_DEG.to_radians(),
+            self.nbrdf_hidden,
+        );
+        let mut surrogate = renderer.clone();
+        surrogate.surrogate_floor = AeConfig::default().surrogate_floor;
+        let mut scratch = renderer.scratch();
+        let target = renderer.render_toned(flat, &mut scratch);
+        let exact = |c: &[f32], scratch: &mut super::sphere::Scratch| {
+            renderer.loss(&self.decode_flat(c), &target, scratch, None)
+        };
+        let mut best = (exact(code, &mut scratch), code.to_vec());
+        let mut z = code.to_vec();
+        let mut adam = Adam::new(AdamConfig::default(), z.len());
+        let mut unused = vec![0.0f32; self.decoder.parameter_count()];
+        let mut g_flat = vec![0.0f32; self.mean.len()];
+        for _ in 0..steps {
+            let acts = self.decoder.forward(&z);
+            let out = acts.last().cloned().unwrap_or_default();
+            let decoded: Vec<f32> = self.destandardise_clamped(&out);
+            surrogate.loss(&decoded, &target, &mut scratch, Some(&mut g_flat));
+            // Through the de-standardisation; the clamp passes no gradient outside its range.
+            let g_out: Vec<f32> = g_flat
+                .iter()
+                .enumerate()
+                .map(|(j, g)| {
+                    let w = out[j] * self.std[j] + self.mean[j];
+                    let inside = match (self.min.get(j), self.max.get(j)) {
+                        (Some(&lo), Some(&hi)) => (lo..=hi).contains(&w),
+                        _ => true,
+                    };
+                    if inside {
+                        g * self.std[j]
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            let g_code = self.decoder.backward(&acts, &g_out, &mut unused);
+            if !g_code.iter().all(|g| g.is_finite()) {
+                break;
+            }
+            adam.step(&mut z, &g_code, learning_rate);
+            let loss = exact(&z, &mut scratch);
+            if loss < best.0 {
+                best = (loss, z.clone());
+            }
+        }
+        best.1
+    }
+
+    /// Encoder code, then [`AutoEncoder::refine_code`] with `steps` steps.
+    pub fn encode_refined(&self, net: &Nbrdf, steps: usize) -> Result<Vec<f32>> {
+        let code = self.encode(net)?;
+        Ok(self.refine_code(&net.to_flat(), &code, steps, REFINE_LEARNING_RATE))
     }
 
     pub fn decode(&self, code: &[f32], name: &str) -> Result<Nbrdf> {
@@ -608,6 +686,46 @@ mod tests {
         ae.decode(&code, "a").unwrap();
         let (ae2, _) = AutoEncoder::train(&mats, 21, ae.split.clone(), &config, |_| {}).unwrap();
         assert_eq!(ae.decoder, ae2.decoder);
+    }
+
+    #[test]
+    fn refining_a_code_lowers_the_image_loss_and_zero_steps_keep_it() {
+        let mats = vec![
+            ("a".to_string(), material(1, [0.5, 0.2, -0.3])),
+            ("b".to_string(), material(2, [-0.4, 0.1, 0.6])),
+        ];
+        let split = Split {
+            train: vec!["a".into(), "b".into()],
+            test: vec![],
+            validation: vec!["a".into(), "b".into()],
+        };
+        // A barely trained autoencoder: its codes are poor, so refinement has work to do.
+        let config = AeConfig {
+            hidden: 8,
+            max_epochs: 4,
+            warmup_epochs: 3,
+            batch: 2,
+            augment: false,
+            input_noise: 0.0,
+            image_size: 16,
+            ..AeConfig::default()
+        };
+        let (ae, _) = AutoEncoder::train(&mats, 21, split, &config, |_| {}).unwrap();
+        let r = SphereRenderer::standard();
+        let mut s = r.scratch();
+        let flat = &mats[1].1;
+        let target = r.render_toned(flat, &mut s);
+        let code = ae.encode_flat(flat);
+        let loss = |c: &[f32], s: &mut crate::latent::sphere::Scratch| {
+            r.loss(&ae.decode_flat(c), &target, s, None)
+        };
+        assert_eq!(ae.refine_code(flat, &code, 0, REFINE_LEARNING_RATE), code);
+        let refined = ae.refine_code(flat, &code, 40, REFINE_LEARNING_RATE);
+        let (before, after) = (loss(&code, &mut s), loss(&refined, &mut s));
+        assert!(
+            after < 0.7 * before,
+            "refined loss {after} vs encoder's {before}"
+        );
     }
 
     #[test]

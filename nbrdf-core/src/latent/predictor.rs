@@ -5,8 +5,17 @@
 //! Network: `32 -> 16 (tanh) -> 2` on standardised codes. Output 0 is `ln n`, clamped to
 //! `[ln 1e-3, ln MAX_EXPONENT]` so that `n = e^o0` lies in `(0, 1e6]`; output 1 goes through a
 //! logistic so that `w` lies in `[0, 1]`: every output is a valid sampling lobe by construction.
-//! Loss: `(o0 - ln max(n, 1e-3))^2 + 25 (w_pred - w)^2` (a weight error of 0.2 costs as much as
-//! a factor e in the exponent), full-batch Adam.
+//! Loss, full-batch Adam, one of:
+//!
+//! * labels: `(o0 - ln max(n, 1e-3))^2 + 25 (w_pred - w)^2` (a weight error of 0.2 costs as
+//!   much as a factor e in the exponent);
+//! * variance (default of the CLI): what the fitted label was chosen for. `nbrdf fit-phong`
+//!   picks the lobe of lowest relative variance of BSDF sampling over a grid of `(n, w)`
+//!   ([`crate::lobe_fit`]); the loss is that objective at the predicted lobe, `ln(R - 1)`
+//!   interpolated bilinearly on the grid, minus its value at the label, plus 0.05 x the label
+//!   loss (a pull towards the label where the landscape is flat). An exponent 3x off costs
+//!   nothing on a material whose variance barely depends on it and much on a sharp metal, which
+//!   the label loss cannot tell apart.
 
 use super::mlp::Mlp;
 use crate::error::{NbrdfError, Result};
@@ -36,6 +45,78 @@ fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
+/// Exponent axis of [`VarianceGrid`]: `n = 10^(k / EXPONENT_STEPS_PER_DECADE)`, `k` in
+/// `0..=EXPONENT_STEPS` (1 to 1e5, the lobe search's grid without its `n = 0`).
+pub const EXPONENT_STEPS_PER_DECADE: f32 = 8.0;
+pub const EXPONENT_STEPS: usize = 40;
+/// Weight axis: `w = j / WEIGHT_STEPS`, `j` in `0..=WEIGHT_STEPS`.
+pub const WEIGHT_STEPS: usize = 20;
+/// Share of the label loss in the variance loss.
+const LABEL_SHARE: f32 = 0.05;
+
+/// The sampling objective of one material, `ln(R - 1)` of [`crate::lobe_fit`], on the grid of
+/// exponents and weights above, and its minimum.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VarianceGrid {
+    ln_variance: Vec<f32>,
+    minimum: f32,
+}
+
+impl VarianceGrid {
+    /// Builds the grid from `relative_variance(n, w)` (`R - 1`, e.g.
+    /// [`crate::lobe_fit::LobeQuadrature::relative_variance`]).
+    pub fn new(relative_variance: impl Fn(f64, f64) -> f64 + Sync) -> Self {
+        use rayon::prelude::*;
+        let ln_variance: Vec<f32> = (0..(EXPONENT_STEPS + 1) * (WEIGHT_STEPS + 1))
+            .into_par_iter()
+            .map(|i| {
+                let (k, j) = (i / (WEIGHT_STEPS + 1), i % (WEIGHT_STEPS + 1));
+                let n = 10f64.powf(k as f64 / EXPONENT_STEPS_PER_DECADE as f64);
+                let r = relative_variance(n, j as f64 / WEIGHT_STEPS as f64);
+                // Zero variance (a Lambertian under cosine sampling) and non-finite values
+                // (a lobe that misses the material) stay finite.
+                (if r.is_finite() { r.max(1e-6) } else { 1e6 }).ln() as f32
+            })
+            .collect();
+        let minimum = ln_variance.iter().copied().fold(f32::INFINITY, f32::min);
+        VarianceGrid {
+            ln_variance,
+            minimum,
+        }
+    }
+
+    /// `ln(R - 1)` minus its minimum at `(ln n, w)`, and its derivatives in `ln n` and `w`
+    /// (bilinear; 0 in `ln n` beyond the grid's ends).
+    pub fn excess(&self, ln_n: f32, w: f32) -> (f32, f32, f32) {
+        let per_ln = EXPONENT_STEPS_PER_DECADE / std::f32::consts::LN_10;
+        let k_raw = ln_n * per_ln;
+        let k = k_raw.clamp(0.0, EXPONENT_STEPS as f32);
+        let j = (w * WEIGHT_STEPS as f32).clamp(0.0, WEIGHT_STEPS as f32);
+        let (k0, j0) = (
+            (k.floor() as usize).min(EXPONENT_STEPS - 1),
+            (j.floor() as usize).min(WEIGHT_STEPS - 1),
+        );
+        let (fk, fj) = (k - k0 as f32, j - j0 as f32);
+        let at = |k: usize, j: usize| self.ln_variance[k * (WEIGHT_STEPS + 1) + j];
+        let (a, b, c, d) = (
+            at(k0, j0),
+            at(k0, j0 + 1),
+            at(k0 + 1, j0),
+            at(k0 + 1, j0 + 1),
+        );
+        let value =
+            a * (1.0 - fk) * (1.0 - fj) + b * (1.0 - fk) * fj + c * fk * (1.0 - fj) + d * fk * fj;
+        let d_k = (c - a) * (1.0 - fj) + (d - b) * fj;
+        let d_j = (b - a) * (1.0 - fk) + (d - c) * fk;
+        let inside = k_raw > 0.0 && k_raw < EXPONENT_STEPS as f32;
+        (
+            value - self.minimum,
+            if inside { d_k * per_ln } else { 0.0 },
+            d_j * WEIGHT_STEPS as f32,
+        )
+    }
+}
+
 impl PhongPredictor {
     fn raw(&self, code: &[f32]) -> Vec<f32> {
         let x: Vec<f32> = code
@@ -56,14 +137,22 @@ impl PhongPredictor {
         (n.clamp(0.0, MAX_EXPONENT as f32), w.clamp(0.0, 1.0))
     }
 
+    /// Trains on `examples` with the label loss, or with the variance loss where `grids` gives
+    /// each example's [`VarianceGrid`] (`grids[i]` for `examples[i]`).
     pub fn train(
         examples: &[Example],
+        grids: Option<&[&VarianceGrid]>,
         hidden: usize,
         iterations: usize,
         seed: u64,
     ) -> Result<Self> {
         if examples.is_empty() {
             return Err(NbrdfError::InvalidArgument("no training examples".into()));
+        }
+        if grids.is_some_and(|g| g.len() != examples.len()) {
+            return Err(NbrdfError::InvalidArgument(
+                "one variance grid per example".into(),
+            ));
         }
         let dims = examples[0].0.len();
         let n = examples.len() as f64;
@@ -102,15 +191,25 @@ impl PhongPredictor {
         for _ in 0..iterations {
             let mut grad = vec![0.0f32; params.len()];
             loss = 0.0;
-            for (x, e) in xs.iter().zip(examples) {
+            for (i, (x, e)) in xs.iter().zip(examples).enumerate() {
                 let acts = p.mlp.forward(x);
                 let o = acts.last().cloned().unwrap_or_default();
                 let ln_n = (e.1.max(1e-3)).ln() as f32;
                 let w = sigmoid(o[1]);
                 let (d0, d1) = (o[0] - ln_n, w - e.2 as f32);
-                loss += (d0 * d0 + WEIGHT_LOSS * d1 * d1) as f64;
                 let inv = 1.0 / n as f32;
-                let g = [2.0 * d0 * inv, 2.0 * WEIGHT_LOSS * d1 * w * (1.0 - w) * inv];
+                let label_loss = d0 * d0 + WEIGHT_LOSS * d1 * d1;
+                let (mut g0, mut g1) = (2.0 * d0, 2.0 * WEIGHT_LOSS * d1);
+                match grids {
+                    Some(grids) => {
+                        let (excess, d_ln_n, d_w) = grids[i].excess(o[0], w);
+                        loss += (excess + LABEL_SHARE * label_loss) as f64;
+                        g0 = d_ln_n + LABEL_SHARE * g0;
+                        g1 = d_w + LABEL_SHARE * g1;
+                    }
+                    None => loss += label_loss as f64,
+                }
+                let g = [g0 * inv, g1 * w * (1.0 - w) * inv];
                 p.mlp.backward(&acts, &g, &mut grad);
             }
             adam.step(&mut params, &grad, 3e-3);
@@ -118,6 +217,7 @@ impl PhongPredictor {
         }
         p.provenance = serde_json::json!({
             "architecture": format!("{dims}-{hidden}-2, tanh hidden; ln n clamped, w logistic"),
+            "loss": if grids.is_some() { "variance" } else { "labels" },
             "examples": examples.len(),
             "iterations": iterations,
             "final_loss": loss / n,
@@ -148,6 +248,81 @@ mod tests {
     use super::*;
     use crate::train::rng::{SplitMix64, Stream};
 
+    /// A material's landscape: `R - 1 = exp(0.5 (ln n - a)^2 + 6 (w - b)^2)`, minimum at
+    /// `(e^a, b)`.
+    fn landscape(a: f64, b: f64) -> VarianceGrid {
+        VarianceGrid::new(move |n, w| (0.5 * (n.ln() - a).powi(2) + 6.0 * (w - b).powi(2)).exp())
+    }
+
+    #[test]
+    fn variance_grid_is_exact_at_nodes_and_its_slopes_match_finite_differences() {
+        let g = landscape(4.0, 0.3);
+        // At a node: k = 16 (n = 100), j = 6 (w = 0.3).
+        let (v, _, _) = g.excess(100f32.ln(), 0.3);
+        let want = 0.5 * (100f64.ln() - 4.0).powi(2) - g.minimum as f64;
+        assert!((v as f64 - want).abs() < 1e-4, "{v} vs {want}");
+        assert!(g.excess(4.0 + 1e-3, 0.3).0 >= 0.0);
+        for &(ln_n, w) in &[(2.1f32, 0.42f32), (6.3, 0.77), (9.9, 0.07)] {
+            let (_, d_n, d_w) = g.excess(ln_n, w);
+            let h = 1e-3;
+            let fd_n = (g.excess(ln_n + h, w).0 - g.excess(ln_n - h, w).0) / (2.0 * h);
+            let fd_w = (g.excess(ln_n, w + h).0 - g.excess(ln_n, w - h).0) / (2.0 * h);
+            assert!(
+                (fd_n - d_n).abs() < 2e-2 * (1.0 + d_n.abs()),
+                "{fd_n} vs {d_n}"
+            );
+            assert!(
+                (fd_w - d_w).abs() < 2e-2 * (1.0 + d_w.abs()),
+                "{fd_w} vs {d_w}"
+            );
+        }
+        // Beyond the grid the exponent has no slope and the value is the edge's.
+        assert_eq!(g.excess(20.0, 0.3).1, 0.0);
+        assert_eq!(
+            g.excess(20.0, 0.3).0,
+            g.excess(EXPONENT_STEPS as f32 / 8.0 * std::f32::consts::LN_10, 0.3)
+                .0
+        );
+    }
+
+    #[test]
+    fn variance_loss_finds_each_landscape_minimum_despite_wrong_labels() {
+        let mut rng = SplitMix64::new(5, Stream::Latent, 0);
+        let mut examples = Vec::new();
+        let mut grids = Vec::new();
+        for _ in 0..24 {
+            let code: Vec<f32> = (0..32).map(|_| rng.next_f64() as f32 * 2.0 - 1.0).collect();
+            let (a, b) = (5.0 + 3.0 * code[0] as f64, 0.5 + 0.4 * code[1] as f64);
+            // Labels off by a factor e^2 in n and 0.2 in w: only the landscape says where to go.
+            examples.push((code, (a + 2.0).exp(), (b - 0.2).clamp(0.0, 1.0)));
+            grids.push(landscape(a, b));
+        }
+        let refs: Vec<&VarianceGrid> = grids.iter().collect();
+        let p = PhongPredictor::train(&examples, Some(&refs), 16, 2000, 0).unwrap();
+        let label_only = PhongPredictor::train(&examples, None, 16, 2000, 0).unwrap();
+        let mean_excess = |p: &PhongPredictor| {
+            examples
+                .iter()
+                .zip(&grids)
+                .map(|(e, g)| {
+                    let (n, w) = p.predict(&e.0);
+                    g.excess(n.ln(), w).0 as f64
+                })
+                .sum::<f64>()
+                / examples.len() as f64
+        };
+        let (with_variance, with_labels) = (mean_excess(&p), mean_excess(&label_only));
+        assert!(
+            with_variance < 0.25,
+            "variance loss leaves ln(R - 1) {with_variance} above the minimum"
+        );
+        assert!(
+            with_variance < 0.5 * with_labels,
+            "{with_variance} vs labels {with_labels}"
+        );
+        assert_eq!(p.provenance["loss"], "variance");
+    }
+
     #[test]
     fn fits_labels_and_outputs_are_always_valid() {
         let mut rng = SplitMix64::new(4, Stream::Latent, 0);
@@ -159,7 +334,7 @@ mod tests {
                 (code, n, w)
             })
             .collect();
-        let p = PhongPredictor::train(&examples, 16, 1500, 0).unwrap();
+        let p = PhongPredictor::train(&examples, None, 16, 1500, 0).unwrap();
         let (n, w) = p.predict(&examples[3].0);
         assert!(
             (n as f64 / examples[3].1).ln().abs() < 0.5,

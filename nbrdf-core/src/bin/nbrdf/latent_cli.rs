@@ -25,12 +25,41 @@ pub enum AeCommand {
 pub enum PredictorCommand {
     /// Train the Phong-parameter predictor on the codes of the training split.
     Train(PredictorTrainArgs),
+    /// Fitted vs predicted lobes of the test split, scored by the relative variance of BSDF
+    /// sampling (the quantity `fit-phong` minimises), as JSON.
+    Eval(PredictorEvalArgs),
 }
 
 pub fn run_predictor(command: PredictorCommand) -> Result<()> {
     match command {
         PredictorCommand::Train(a) => run_predictor_train(&a),
+        PredictorCommand::Eval(a) => run_predictor_eval(&a),
     }
+}
+
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+pub enum PredictorLoss {
+    /// The relative variance of sampling with the predicted lobe over that of the fitted one
+    /// (the objective `fit-phong` minimises), with a small pull towards the labels.
+    Variance,
+    /// Squared error of (ln n, w) against the fitted labels.
+    Labels,
+}
+
+#[derive(Args)]
+pub struct PredictorEvalArgs {
+    /// The trained autoencoder (from `nbrdf ae train`).
+    #[arg(long, value_name = "AE.json")]
+    ae: PathBuf,
+    /// The trained Phong-parameter predictor (from `nbrdf predictor train`).
+    #[arg(long, value_name = "P.json")]
+    predictor: PathBuf,
+    /// The networks (the test split is read from the autoencoder).
+    #[arg(long, value_name = "DIR")]
+    nbrdfs: PathBuf,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(Args)]
@@ -89,6 +118,10 @@ pub struct AeEncodeArgs {
     /// Print the encoding time to stderr.
     #[arg(long)]
     timing: bool,
+    /// Refine the encoder's code by this many steps of the image loss against the network's
+    /// own sphere image (analysis by synthesis; ~1 ms a step).
+    #[arg(long, default_value_t = 0)]
+    refine: usize,
 }
 
 #[derive(Args)]
@@ -241,7 +274,7 @@ fn run_ae_encode(args: &AeEncodeArgs) -> Result<()> {
     let ae = AutoEncoder::load(&args.ae)?;
     let net = Nbrdf::load(&args.input)?;
     let t0 = Instant::now();
-    let code = ae.encode(&net)?;
+    let code = ae.encode_refined(&net, args.refine)?;
     let ms = t0.elapsed().as_secs_f64() * 1e3;
     if args.timing {
         eprintln!("encoded in {ms:.3} ms");
@@ -334,6 +367,10 @@ pub struct AeEvalArgs {
     /// Principal components kept.
     #[arg(long, default_value_t = 32)]
     components: usize,
+    /// Also report the autoencoder with codes refined by this many image-loss steps
+    /// (`ae encode --refine`), as "ae_refined".
+    #[arg(long, default_value_t = 0)]
+    refine: usize,
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
@@ -370,13 +407,24 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
             let code = ae.encode(net)?;
             let encode_ms = t.elapsed().as_secs_f64() * 1e3;
             let rec = ae.decode(&code, name)?;
-            let e = image_errors(
-                &render_sphere(net, SIZE, theta),
-                &render_sphere(&rec, SIZE, theta),
-            );
-            rows.push(
-                serde_json::json!({"name": name, "ae": errors_json(&e), "encode_ms": encode_ms}),
-            );
+            let reference = render_sphere(net, SIZE, theta);
+            let e = image_errors(&reference, &render_sphere(&rec, SIZE, theta));
+            let mut row =
+                serde_json::json!({"name": name, "ae": errors_json(&e), "encode_ms": encode_ms});
+            if args.refine > 0 {
+                let t = Instant::now();
+                let refined = ae.refine_code(
+                    &net.to_flat(),
+                    &code,
+                    args.refine,
+                    nbrdf_core::latent::autoencoder::REFINE_LEARNING_RATE,
+                );
+                row["refine_ms"] = (t.elapsed().as_secs_f64() * 1e3).into();
+                let rec = ae.decode(&refined, name)?;
+                row["ae_refined"] =
+                    errors_json(&image_errors(&reference, &render_sphere(&rec, SIZE, theta)));
+            }
+            rows.push(row);
         }
         let ae_seconds = t0.elapsed().as_secs_f64();
         // PCA: cell values of each material.
@@ -428,7 +476,12 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
             serde_json::json!({"mean": mean, "std": sd, "median": median})
         };
         let mut table = serde_json::Map::new();
-        for key in ["ae", "pca"] {
+        let keys: &[&str] = if args.refine > 0 {
+            &["ae", "ae_refined", "pca"]
+        } else {
+            &["ae", "pca"]
+        };
+        for &key in keys {
             let mut m = serde_json::Map::new();
             for metric in ["mae", "rmse", "ssim"] {
                 m.insert(metric.into(), summary(key, metric));
@@ -471,6 +524,9 @@ pub struct PredictorTrainArgs {
     /// Refit the Blinn-Phong labels even where a file has "source": "fit" sampling.
     #[arg(long)]
     refit: bool,
+    /// Training loss.
+    #[arg(long, value_enum, default_value = "variance")]
+    loss: PredictorLoss,
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
@@ -515,9 +571,70 @@ fn phong_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
     Ok((fit.params.exponent, fit.params.specular_weight()))
 }
 
+/// The lobe-search quadrature of a network (it evaluates the network once).
+fn network_quadrature(net: &Nbrdf) -> Result<nbrdf_core::lobe_fit::LobeQuadrature> {
+    use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
+    use nbrdf_core::lobe_fit::{LobeFitConfig, LobeQuadrature};
+    let target = |a: &RusinkiewiczAngles| {
+        let (l, v) = from_rusinkiewicz(a);
+        Some(
+            net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                .map(f64::from),
+        )
+    };
+    LobeQuadrature::new(&target, &LobeFitConfig::default())
+}
+
+pub fn run_predictor_eval(args: &PredictorEvalArgs) -> Result<()> {
+    use nbrdf_core::latent::predictor::PhongPredictor;
+    let ae = AutoEncoder::load(&args.ae)?;
+    let pred = PhongPredictor::load(&args.predictor)?;
+    let nets = read_nbrdf_dir(&args.nbrdfs)?;
+    with_threads(args.threads, || -> Result<()> {
+        let mut rows = Vec::new();
+        let mut ratios = Vec::new();
+        for name in &ae.split.test {
+            let Some((_, net)) = nets.iter().find(|(n, _)| n == name) else {
+                return Err(invalid(format!("no network for '{name}'")));
+            };
+            let (n_fit, w_fit) = phong_label(net, false)?;
+            let (n_pred, w_pred) = pred.predict(&ae.encode(net)?);
+            let q = network_quadrature(net)?;
+            let (v_fit, v_pred, v_cos) = (
+                q.relative_variance(n_fit, w_fit),
+                q.relative_variance(n_pred as f64, w_pred as f64),
+                q.relative_variance(0.0, 0.0),
+            );
+            // The RMSE of an estimator scales with the square root of its variance.
+            let ratio = (v_pred.max(1e-12) / v_fit.max(1e-12)).sqrt();
+            ratios.push(ratio);
+            rows.push(serde_json::json!({
+                "name": name,
+                "fitted": {"exponent": n_fit, "specular_weight": w_fit, "relative_variance": v_fit},
+                "predicted": {"exponent": n_pred, "specular_weight": w_pred, "relative_variance": v_pred},
+                "cosine_relative_variance": v_cos,
+                "rmse_ratio": ratio,
+            }));
+        }
+        let mut sorted = ratios.clone();
+        sorted.sort_by(f64::total_cmp);
+        let out = serde_json::json!({
+            "test": rows,
+            "rmse_ratio": {
+                "median": sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN),
+                "max": sorted.last().copied().unwrap_or(f64::NAN),
+                "within_1_25": ratios.iter().filter(|&&r| r <= 1.25).count(),
+                "materials": ratios.len(),
+            },
+        });
+        let text = serde_json::to_string_pretty(&out).map_err(|e| invalid(e.to_string()))?;
+        emit(&format!("{text}\n"))
+    })?
+}
+
 pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
     use nbrdf_core::latent::autoencoder::{permute_outputs, PERMUTATIONS};
-    use nbrdf_core::latent::predictor::PhongPredictor;
+    use nbrdf_core::latent::predictor::{PhongPredictor, VarianceGrid};
     use rayon::prelude::*;
     let ae = AutoEncoder::load(&args.ae)?;
     let nets = read_nbrdf_dir(&args.nbrdfs)?;
@@ -531,17 +648,38 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
             .par_iter()
             .map(|(_, net)| phong_label(net, args.refit))
             .collect::<Result<_>>()?;
+        let grids: Vec<VarianceGrid> = if args.loss == PredictorLoss::Variance {
+            train
+                .iter()
+                .map(|(_, net)| {
+                    let q = network_quadrature(net)?;
+                    Ok(VarianceGrid::new(|n, w| q.relative_variance(n, w)))
+                })
+                .collect::<Result<_>>()?
+        } else {
+            Vec::new()
+        };
         let label_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        // The lobe is invariant under RGB permutations, so every augmented code shares it.
+        // The lobe (and its variance, computed on the mean over RGB) is invariant under RGB
+        // permutations, so every augmented code shares it.
         let mut examples = Vec::new();
-        for ((_, net), &(n, w)) in train.iter().zip(&labels) {
+        let mut example_grids = Vec::new();
+        for (m, ((_, net), &(n, w))) in train.iter().zip(&labels).enumerate() {
             for p in PERMUTATIONS {
                 let flat = permute_outputs(&net.to_flat(), net.hidden_width(), p);
                 examples.push((ae.encode_flat(&flat), n, w));
+                example_grids.extend(grids.get(m));
             }
         }
-        let mut pred = PhongPredictor::train(&examples, args.hidden, args.iterations, args.seed)?;
+        let grids_arg = (!example_grids.is_empty()).then_some(example_grids.as_slice());
+        let mut pred = PhongPredictor::train(
+            &examples,
+            grids_arg,
+            args.hidden,
+            args.iterations,
+            args.seed,
+        )?;
         let train_seconds = t1.elapsed().as_secs_f64();
         if let Some(o) = pred.provenance.as_object_mut() {
             o.insert("labels".into(), serde_json::json!(train.iter().zip(&labels).map(|((name, _), (n, w))| serde_json::json!({"name": name, "exponent": n, "specular_weight": w})).collect::<Vec<_>>()));
