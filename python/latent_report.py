@@ -1,21 +1,29 @@
 """The latent-space report (issue #6): autoencoder vs PCA-32 on the test split, a t-SNE map of
-the latent space, latent vs weight interpolation strips and (optionally) Phong sampling with
-predicted vs fitted parameters in the Veach scene.
+the latent space, latent vs weight interpolation strips with their measured smoothness, the
+predictor's lobes scored by sampling variance and (optionally) in the Veach scene.
 
-    python python/latent_report.py [--nbrdfs DIR | --train-missing] [--out DIR] [--veach]
+    python python/latent_report.py [--source sgd|authors] [--train-missing] [--veach]
 
-Inputs: a directory of NAME.nbrdf.json networks of the 100 MERL materials. By default they are
-trained here from the SGD-synthesised tables (``--train-missing``: ``nbrdf synth`` + ``nbrdf
-train`` + ``nbrdf fit-phong`` for every material not yet in the directory, ~100 x 15-25 s), or
-pass the authors' networks imported with ``python -m nbrdf_mitsuba.import_keras``.
-Everything else goes through the ``nbrdf`` CLI: ``ae train``, ``ae eval``, ``ae encode``,
-``interpolate``, ``predictor train``, ``predict-phong``.
+Inputs: NAME.nbrdf.json networks of the 100 MERL materials in OUT/nbrdfs (OUT = out/latent/SOURCE),
+all trained by ``nbrdf train`` from the common initialisation (seed 0), which is what aligns their
+hidden units (``--train-missing`` trains those not there yet, ~100 x 15 s on 2 cores):
+
+* ``--source sgd`` (default, runs on a fresh machine): on tables synthesised from the SGD fits;
+* ``--source authors``: on the tabulations of the authors' networks of the real MERL
+  measurements (``nbrdf tabulate``; needs ../shared/data/reference-nbrdf/merl/), i.e. the real
+  materials, re-learnt in our aligned family. PCA then decomposes those same networks' tables.
+
+Or pass any folder with ``--nbrdfs`` (e.g. the authors' networks as they are, imported with
+``python -m nbrdf_mitsuba.import_keras``). Everything else goes through the ``nbrdf`` CLI:
+``ae train``, ``ae eval``, ``ae encode``, ``interpolate``, ``predictor train``,
+``predictor eval``, ``predict-phong``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -30,11 +38,31 @@ def run(cmd: list, **kw) -> str:
     return subprocess.run([str(c) for c in cmd], check=True, capture_output=True, text=True, **kw).stdout
 
 
-def train_missing(cli: Path, out: Path, samples: int) -> None:
+SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
+AUTHORS_MERL = SHARED / "data" / "reference-nbrdf" / "merl"
+
+
+def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
+    """Trains `OUT/NAME.nbrdf.json` for every MERL material not yet there, with `nbrdf train`
+    from the common initialisation (seed 0), then fits its sampling lobe.
+
+    source "sgd": on the table synthesised from the material's SGD fit (runs anywhere).
+    source "authors": on the tabulation of the authors' network of the material (trained by them
+    on the real MERL measurement): the authors' networks are independently initialised, so
+    re-learning them from the common initialisation gives aligned networks of the real
+    materials (needs ../shared/data/reference-nbrdf/merl/).
+    """
     names = json.loads(run([cli, "list-materials", "--json"]))
+    if only is not None:
+        names = [e for e in names if e["name"] in only]
     out.mkdir(parents=True, exist_ok=True)
     tables = out / "tables"
     tables.mkdir(exist_ok=True)
+    if source == "authors":
+        if not AUTHORS_MERL.is_dir():
+            raise SystemExit(f"--source authors needs the authors' MERL networks in {AUTHORS_MERL} "
+                             "(../shared is not there; set NBRDF_SHARED to its location)")
+        from nbrdf_mitsuba.import_keras import convert
     for k, entry in enumerate(names):
         name = entry["name"]
         net = out / f"{name}.nbrdf.json"
@@ -42,10 +70,16 @@ def train_missing(cli: Path, out: Path, samples: int) -> None:
             continue
         table = tables / f"{name}.binary"
         start = time.perf_counter()
-        run([cli, "synth", "--model", "sgd", "--material", name, "-o", table])
-        run([cli, "train", table, "-o", net, "--samples", samples])
+        if source == "sgd":
+            run([cli, "synth", "--model", "sgd", "--material", name, "-o", table])
+        else:
+            keras = tables / f"{name}.authors.nbrdf.json"
+            convert(AUTHORS_MERL / f"{name}.h5", keras)
+            run([cli, "tabulate", keras, "-o", table])
+            keras.unlink()
+        run([cli, "train", table, "-o", net, "--samples", samples, "--name", name])
         run([cli, "fit-phong", net])
-        table.unlink()  # 35 MB each; the SGD fit regenerates it
+        table.unlink()  # 35 MB each; the source regenerates it
         print(f"[{k + 1}/{len(names)}] {name}: {time.perf_counter() - start:.1f} s", flush=True)
 
 
@@ -97,10 +131,77 @@ def tone(img: np.ndarray) -> np.ndarray:
     return np.clip(np.maximum(img, 1e-12) ** (1 / 2.2), 0.0, 1.0)
 
 
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def render_flat(layers: list[tuple[np.ndarray, np.ndarray]], size: int = 64, light_deg: float = 45.0) -> np.ndarray:
+    """The sphere of a network given as (W, b) pairs (for weight interpolation done here)."""
+    inp, cos = sphere_inputs(size, np.radians(light_deg))
+    a = inp.reshape(-1, 6)
+    for i, (w, b) in enumerate(layers):
+        a = a @ w + b
+        if i < len(layers) - 1:
+            a = np.maximum(a, 0.0)
+    f = np.maximum(np.expm1(np.minimum(a, 80.0)), 0.0).reshape(size, size, 3)
+    return f * cos[..., None]
+
+
+def read_layers(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    net = json.loads(Path(path).read_text())
+    return [(np.array(l["weights"], dtype=np.float64).reshape(l["inputs"], l["outputs"]),
+             np.array(l["bias"], dtype=np.float64)) for l in net["layers"]]
+
+
+def lerp_layers(a, b, t: float):
+    return [((1 - t) * wa + t * wb, (1 - t) * ba + t * bb) for (wa, ba), (wb, bb) in zip(a, b)]
+
+
+def appearance(img: np.ndarray) -> dict:
+    """What a person sees change along an interpolation, from a linear sphere image:
+    `highlight` = fraction of the lit disk at or above half the peak luminance (the highlight's
+    width: small for a sharp lobe, large for a diffuse one), `chromaticity` = the image's mean
+    RGB over its sum, `luminance` = mean luminance of the lit pixels."""
+    lum = img @ LUMINANCE
+    lit = lum > 0
+    if not lit.any():
+        return {"highlight": 0.0, "chromaticity": [1 / 3] * 3, "luminance": 0.0}
+    total = img[lit].sum(axis=0)
+    return {"highlight": float(np.mean(lum[lit] >= 0.5 * lum.max())),
+            "chromaticity": (total / max(total.sum(), 1e-30)).tolist(),
+            "luminance": float(lum[lit].mean())}
+
+
+def detour(values: np.ndarray) -> float:
+    """Length of a path through `values` (frames along axis 0) over the straight distance from
+    its first to its last value: 1 for a monotone, even change; large when the path swings away
+    and back (a dark or blown-out midpoint, a highlight that narrows and widens again)."""
+    values = np.asarray(values, dtype=np.float64).reshape(len(values), -1)
+    steps = np.linalg.norm(np.diff(values, axis=0), axis=1)
+    direct = np.linalg.norm(values[-1] - values[0])
+    return float(steps.sum() / max(direct, 1e-12))
+
+
+def smoothness(images: list[np.ndarray]) -> dict:
+    """Detours of an interpolation's tone-mapped images, highlight width and chromaticity, and
+    its largest single step over the mean step (1 for even steps)."""
+    toned = np.array([tone(i) for i in images])
+    looks = [appearance(i) for i in images]
+    steps = np.sqrt(np.mean(np.diff(toned, axis=0) ** 2, axis=(1, 2, 3)))
+    return {"image_detour": detour(toned),
+            "highlight_detour": detour(np.array([l["highlight"] for l in looks])),
+            "colour_detour": detour(np.array([l["chromaticity"] for l in looks])),
+            "largest_step": float(steps.max() / max(steps.mean(), 1e-12)),
+            "appearance": looks}
+
+
 def markdown_table(ev: dict) -> str:
     s = ev["summary"]
     lines = ["| method | MAE | RMSE | SSIM |", "|---|---|---|---|"]
-    for key, label in (("ae", "autoencoder (32)"), ("pca", f"PCA-32 ({ev['pca']['tables']} tables)")):
+    methods = [("ae", "autoencoder (32)"), ("ae_refined", "autoencoder (32), refined codes"),
+               ("pca", f"PCA-32 ({ev['pca']['tables']} tables)")]
+    for key, label in methods:
+        if key not in s:
+            continue
         cells = [f"{s[key][m]['mean']:.4f} ± {s[key][m]['std']:.4f} (median {s[key][m]['median']:.4f})"
                  for m in ("mae", "rmse", "ssim")]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
@@ -110,15 +211,25 @@ def markdown_table(ev: dict) -> str:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cli", type=Path, default=REPO / "target" / "release" / "nbrdf")
-    p.add_argument("--nbrdfs", type=Path, default=REPO / "out" / "latent" / "nbrdfs")
+    p.add_argument("--source", choices=["sgd", "authors"], default="sgd",
+                   help="which networks of the 100 MERL materials: trained on the SGD-synthesised tables "
+                        "(default, runs anywhere) or re-learnt from the authors' networks of the real "
+                        "measurements (needs ../shared); both from the common initialisation")
+    p.add_argument("--nbrdfs", type=Path, help="the networks (default: OUT/nbrdfs)")
     p.add_argument("--train-missing", action="store_true", help="train the networks not yet in --nbrdfs")
     p.add_argument("--samples", type=int, default=800_000)
-    p.add_argument("--out", type=Path, default=REPO / "out" / "latent")
+    p.add_argument("--out", type=Path, help="output folder (default: out/latent/SOURCE)")
     p.add_argument("--ae", type=Path, help="an existing AE.json (default: OUT/ae.json, trained if missing)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--pca-tables", default="sgd", choices=["sgd", "nbrdf"])
+    p.add_argument("--pca-tables", choices=["sgd", "nbrdf"],
+                   help="what PCA-32 decomposes: the SGD tables or the input networks' tabulations "
+                        "(default: sgd for --source sgd, nbrdf for --source authors)")
+    p.add_argument("--refine", type=int, default=100,
+                   help="also score codes refined by this many image-loss steps (ae encode --refine); 0: off")
     p.add_argument("--pair", nargs=2, help="materials to interpolate (default: two test materials)")
     p.add_argument("--steps", type=int, default=7)
+    p.add_argument("--authors", type=Path, default=AUTHORS_MERL,
+                   help="the authors' Keras networks, for the independently trained row of the interpolation")
     p.add_argument("--veach", action="store_true", help="also render the Veach scene, predicted vs fitted")
     p.add_argument("--veach-only", action="store_true",
                    help="only the Veach comparison (needs OUT/ae.json and OUT/predictor.json from an earlier run)")
@@ -126,9 +237,12 @@ def main() -> int:
     p.add_argument("--veach-gt-spp", type=int, default=512, help="spp of the converged MIS render")
     p.add_argument("--veach-seeds", type=int, default=4, help="renders (seeds) averaged per strategy")
     args = p.parse_args()
+    args.out = args.out or REPO / "out" / "latent" / args.source
+    args.nbrdfs = args.nbrdfs or args.out / "nbrdfs"
+    args.pca_tables = args.pca_tables or ("sgd" if args.source == "sgd" else "nbrdf")
     args.out.mkdir(parents=True, exist_ok=True)
     if args.train_missing:
-        train_missing(args.cli, args.nbrdfs, args.samples)
+        train_missing(args.cli, args.nbrdfs, args.samples, args.source)
     ae = args.ae or args.out / "ae.json"
     if not ae.exists():
         print(run([args.cli, "ae", "train", "--nbrdfs", args.nbrdfs, "-o", ae, "--seed", args.seed]))
@@ -139,12 +253,14 @@ def main() -> int:
 
     # 1. AE vs PCA on the test split.
     ev = json.loads(run([args.cli, "ae", "eval", "--ae", ae, "--nbrdfs", args.nbrdfs,
-                         "--pca-tables", args.pca_tables]))
+                         "--pca-tables", args.pca_tables, "--refine", args.refine]))
     (args.out / f"ae_vs_pca_{args.pca_tables}.json").write_text(json.dumps(ev, indent=1))
     table = markdown_table(ev)
-    rows = ["| material | AE MAE | PCA MAE | AE SSIM | PCA SSIM |", "|---|---|---|---|---|"]
-    rows += [f"| {r['name']} | {r['ae']['mae']:.4f} | {r['pca']['mae']:.4f} | {r['ae']['ssim']:.3f} | "
-             f"{r['pca']['ssim']:.3f} |" for r in ev["test"]]
+    keys = [k for k in ("ae", "ae_refined", "pca") if k in ev["test"][0]]
+    rows = ["| material | " + " | ".join(f"{k} {m}" for m in ("MAE", "RMSE", "SSIM") for k in keys) + " |",
+            "|---|" + "---|" * (3 * len(keys))]
+    rows += [f"| {r['name']} | " + " | ".join(f"{r[k][m]:.4f}" for m in ("mae", "rmse", "ssim") for k in keys) + " |"
+             for r in ev["test"]]
     (args.out / f"ae_vs_pca_{args.pca_tables}.md").write_text(table + "\n\n" + "\n".join(rows) + "\n")
     print(table)
 
@@ -170,23 +286,10 @@ def main() -> int:
     fig.savefig(args.out / "latent_tsne.png", dpi=150, bbox_inches="tight")
     plt.close(fig)
 
-    # 3. Interpolation strips.
+    # 3. Interpolation strips: latent, weights of the aligned networks, weights of the authors'
+    # independently trained networks of the same materials (the paper's comparison).
     a, b = args.pair or (split["test"][0], split["test"][-1])
-    interp = args.out / "interp"
-    run([args.cli, "interpolate", "--ae", ae, args.nbrdfs / f"{a}.nbrdf.json", args.nbrdfs / f"{b}.nbrdf.json",
-         "--steps", args.steps, "-o", interp])
-    fig, axes = plt.subplots(2, args.steps, figsize=(1.6 * args.steps, 3.6))
-    for row, kind in enumerate(("latent", "weights")):
-        for i in range(args.steps):
-            img = tone(render_network(interp / f"{kind}_{i:02d}.nbrdf.json"))
-            axes[row, i].imshow(img)
-            axes[row, i].set_xticks([])
-            axes[row, i].set_yticks([])
-            if i == 0:
-                axes[row, i].set_ylabel(kind, fontsize=9)
-    fig.suptitle(f"{a} → {b}: latent (top) vs weight (bottom) interpolation")
-    fig.savefig(args.out / "interpolation.png", dpi=150, bbox_inches="tight")
-    plt.close(fig)
+    interpolation(args, ae, a, b, plt)
 
     # 4. Predictor: fitted vs predicted on the test split.
     pred = args.out / "predictor.json"
@@ -210,9 +313,80 @@ def main() -> int:
                      f"{s['specular_weight']:.3f} |")
     (args.out / "predicted_vs_fitted.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    # The same lobes scored by the relative variance of BSDF sampling (noise-free, all views).
+    pe = json.loads(run([args.cli, "predictor", "eval", "--ae", ae, "--predictor", pred, "--nbrdfs", args.nbrdfs]))
+    (args.out / "predictor_eval.json").write_text(json.dumps(pe, indent=1))
+    lines = ["| material | fitted n, w | predicted n, w | R-1 fitted | R-1 predicted | R-1 cosine | RMSE ratio |",
+             "|---|---|---|---|---|---|---|"]
+    for r in pe["test"]:
+        f, q = r["fitted"], r["predicted"]
+        lines.append(f"| {r['name']} | {f['exponent']:.3g}, {f['specular_weight']:.2f} | "
+                     f"{q['exponent']:.3g}, {q['specular_weight']:.2f} | {f['relative_variance']:.3g} | "
+                     f"{q['relative_variance']:.3g} | {r['cosine_relative_variance']:.3g} | {r['rmse_ratio']:.2f} |")
+    q = pe["rmse_ratio"]
+    lines += ["", f"RMSE ratio sqrt((R-1) predicted / (R-1) fitted): median {q['median']:.2f}, max {q['max']:.2f}, "
+              f"within 1.25x for {q['within_1_25']} of {q['materials']}."]
+    (args.out / "predictor_eval.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
     if args.veach:
         veach(args, split)
     return 0
+
+
+def interpolation(args, ae: Path, a: str, b: str, plt) -> dict:
+    """Renders the strips, measures their smoothness, writes interpolation.{png,json,md}."""
+    interp = args.out / "interp"
+    run([args.cli, "interpolate", "--ae", ae, args.nbrdfs / f"{a}.nbrdf.json", args.nbrdfs / f"{b}.nbrdf.json",
+         "--steps", args.steps, "-o", interp])
+    ts = np.linspace(0.0, 1.0, args.steps)
+    rows = {"latent (autoencoder)": [render_network(interp / f"latent_{i:02d}.nbrdf.json") for i in range(args.steps)],
+            "weights, aligned networks": [render_network(interp / f"weights_{i:02d}.nbrdf.json")
+                                          for i in range(args.steps)]}
+    keras = [args.authors / f"{m}.h5" for m in (a, b)]
+    if all(k.exists() for k in keras):
+        from nbrdf_mitsuba.import_keras import convert
+        layers = []
+        for k in keras:
+            convert(k, interp / f"authors_{k.stem}.nbrdf.json")
+            layers.append(read_layers(interp / f"authors_{k.stem}.nbrdf.json"))
+        rows["weights, the authors' networks"] = [render_flat(lerp_layers(*layers, t)) for t in ts]
+    else:
+        print(f"note: the authors' networks of {a} and {b} are not in {args.authors}: "
+              "the independently trained row is left out", file=sys.stderr)
+    stats = {name: smoothness(images) for name, images in rows.items()}
+    fig = plt.figure(figsize=(1.6 * args.steps + 4.2, 1.7 * len(rows) + 0.6))
+    grid = fig.add_gridspec(len(rows), args.steps + 3)
+    for r, (name, images) in enumerate(rows.items()):
+        for i, img in enumerate(images):
+            ax = fig.add_subplot(grid[r, i])
+            ax.imshow(tone(img))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_ylabel(name.replace(", ", ",\n"), fontsize=7)
+            if r == 0:
+                ax.set_title(f"t = {ts[i]:.2f}", fontsize=7)
+    curves = fig.add_subplot(grid[:, args.steps:])
+    for name, st in stats.items():
+        line, = curves.plot(ts, [l["highlight"] for l in st["appearance"]], marker="o", ms=3,
+                            label=f"{name}: highlight (detour {st['highlight_detour']:.2f})")
+        curves.plot(ts, [l["chromaticity"][0] for l in st["appearance"]], ls="--", color=line.get_color(),
+                    label=f"red share (colour detour {st['colour_detour']:.2f})")
+    curves.set_xlabel("t")
+    curves.set_ylabel("highlight width (solid), red share of colour (dashed)")
+    curves.legend(fontsize=5)
+    fig.suptitle(f"{a} → {b}: interpolation in latent space and in weight space", fontsize=9)
+    fig.savefig(args.out / "interpolation.png", dpi=150, bbox_inches="tight")
+    plt.close(fig)
+    (args.out / "interpolation.json").write_text(json.dumps({"a": a, "b": b, "t": ts.tolist(), "rows": stats}, indent=1))
+    lines = [f"{a} → {b}, {args.steps} steps. Detour = path length / straight distance (1: monotone and even).", "",
+             "| path | image detour | highlight-width detour | colour detour | largest step / mean step |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {name} | {st['image_detour']:.2f} | {st['highlight_detour']:.2f} | {st['colour_detour']:.2f} | "
+              f"{st['largest_step']:.2f} |" for name, st in stats.items()]
+    (args.out / "interpolation.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return stats
 
 
 def veach(args, split) -> None:

@@ -1,0 +1,127 @@
+"""The latent-space report's own pieces (python/latent_report.py) and the CLI commands it drives
+that have no scene: ``nbrdf tabulate`` (checked against a NumPy evaluation of the network at the
+cell centres of DESIGN.md section 3), the distillation of the authors' networks into the common
+initialisation, ``predictor eval``, and the smoothness measures of the interpolation figure."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nbrdf_testing import (CELLS, SCALE, cell_centre_angles, from_angles, nbrdf_reference, random_layers,
+                           read_merl, read_network_layers, write_network)
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "python"))
+import latent_report  # noqa: E402
+
+
+def _cli_or_skip() -> Path:
+    from conftest import _cli
+
+    cli = _cli()
+    if cli is None:
+        pytest.skip("the nbrdf CLI is not built (target/release/nbrdf)")
+    return cli
+
+
+def test_detour_is_one_for_an_even_path_and_grows_with_a_swing():
+    assert latent_report.detour(np.linspace(0.2, 0.8, 7)) == pytest.approx(1.0)
+    # Out to 1 and back to 0.8: path 0.8 + 0.2 + ... over a straight distance of 0.6.
+    assert latent_report.detour(np.array([0.2, 1.0, 0.8])) == pytest.approx((0.8 + 0.2) / 0.6)
+    frames = np.zeros((3, 4, 4, 3))
+    frames[1] += 0.5  # a bright midpoint between two equal ends: a detour, however small the ends differ
+    frames[2] += 1e-3
+    assert latent_report.detour(frames) > 100
+
+
+def test_appearance_tells_a_sharp_highlight_from_a_broad_one_and_reads_colour():
+    inp, cos = latent_report.sphere_inputs(64, np.radians(45.0))
+    cos_h = inp[..., 2]
+    sharp = (np.where(cos > 0, cos_h ** 2000, 0.0) * cos)[..., None] * np.array([1.0, 1.0, 1.0])
+    broad = (np.where(cos > 0, 0.3, 0.0) * cos)[..., None] * np.array([0.6, 0.3, 0.1])
+    a, b = latent_report.appearance(sharp), latent_report.appearance(broad)
+    assert a["highlight"] < 0.02 < 0.3 < b["highlight"]
+    assert b["chromaticity"] == pytest.approx([0.6, 0.3, 0.1])
+    assert latent_report.appearance(np.zeros((8, 8, 3)))["luminance"] == 0.0
+
+
+def test_numpy_sphere_matches_the_networks_image(tmp_path):
+    layers = random_layers(seed=4)
+    path = write_network(tmp_path / "n.nbrdf.json", layers)
+    a = latent_report.render_network(path)
+    b = latent_report.render_flat(latent_report.read_layers(path))
+    assert np.allclose(a, b) and a.max() > 0
+    # Interpolating a network with itself changes nothing.
+    mid = latent_report.lerp_layers(latent_report.read_layers(path), latent_report.read_layers(path), 0.4)
+    assert np.allclose(latent_report.render_flat(mid), a)
+
+
+def test_tabulate_holds_the_network_at_cell_centres(tmp_path):
+    cli = _cli_or_skip()
+    layers = random_layers(seed=2)
+    net = write_network(tmp_path / "n.nbrdf.json", layers)
+    table = tmp_path / "n.binary"
+    subprocess.run([str(cli), "tabulate", str(net), "-o", str(table)], check=True, capture_output=True)
+    stored = read_merl(table).reshape(3, CELLS)
+    rng = np.random.default_rng(0)
+    cells = rng.integers(0, CELLS, 4000)
+    i_th, rest = np.divmod(cells, 90 * 180)
+    i_td, i_pd = np.divmod(rest, 180)
+    theta_h, theta_d, phi_d = cell_centre_angles(i_th, i_td, i_pd)
+    light, view = from_angles(theta_h, np.zeros_like(theta_h), theta_d, phi_d)
+    above = (light[2] > 0) & (view[2] > 0)
+    got = stored[:, cells]
+    assert np.all(got[:, ~above] < 0), "cells with a direction below the horizon must be invalid"
+    want = nbrdf_reference(layers, light, view)[:, above] / light[2][above] / SCALE[:, None]
+    assert np.allclose(got[:, above], want, rtol=1e-4, atol=1e-6 / SCALE.min())
+
+
+def test_authors_networks_distil_into_the_common_initialisation(tmp_path, shared):
+    cli = _cli_or_skip()
+    out = tmp_path / "nbrdfs"
+    latent_report.train_missing(cli, out, 20_000, source="authors", only=["pink-fabric"])
+    net = json.loads((out / "pink-fabric.nbrdf.json").read_text())
+    assert net["name"] == "pink-fabric" and net["sampling"]["source"] == "fit"
+    assert not list((out / "tables").iterdir()), "the 35 MB tables are removed"
+    # The distilled network reproduces the authors' network on the sphere of the AE's loss.
+    keras = tmp_path / "authors.nbrdf.json"
+    from nbrdf_mitsuba.import_keras import convert
+
+    convert(shared / "data" / "reference-nbrdf" / "merl" / "pink-fabric.h5", keras)
+    a, b = latent_report.render_network(keras), latent_report.render_network(out / "pink-fabric.nbrdf.json")
+    assert np.abs(a - b).mean() < 0.1 * a.mean()
+
+
+def test_predictor_eval_scores_fitted_and_predicted_lobes(tmp_path):
+    cli = _cli_or_skip()
+    folder = tmp_path / "nbrdfs"
+    folder.mkdir()
+    for k, name in enumerate("abcde"):
+        layers = random_layers(seed=10 + k)
+        write_network(folder / f"{name}.nbrdf.json", layers, name=name,
+                      sampling={"model": "blinn-phong", "exponent": 10.0 * (k + 1), "specular_weight": 0.2,
+                                "source": "fit"})
+    ae, predictor = tmp_path / "ae.json", tmp_path / "p.json"
+    for command in (["ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "3", "--warmup", "2", "--quiet"],
+                    ["predictor", "train", "--ae", ae, "--nbrdfs", folder, "-o", predictor, "--iterations", "50"],
+                    ):
+        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+    assert json.loads(predictor.read_text())["provenance"]["loss"] == "variance"
+    done = subprocess.run([str(cli), "predictor", "eval", "--ae", str(ae), "--predictor", str(predictor),
+                           "--nbrdfs", str(folder)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    (row,) = report["test"]
+    assert row["name"] == "c"
+    for lobe in (row["fitted"], row["predicted"]):
+        assert lobe["exponent"] >= 0 and 0 <= lobe["specular_weight"] <= 1 and lobe["relative_variance"] >= 0
+    assert row["rmse_ratio"] == pytest.approx(np.sqrt(row["predicted"]["relative_variance"]
+                                                      / row["fitted"]["relative_variance"]), rel=1e-6)
+    assert report["rmse_ratio"]["materials"] == 1
