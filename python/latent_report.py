@@ -224,8 +224,8 @@ def main() -> int:
     p.add_argument("--pca-tables", choices=["sgd", "nbrdf"],
                    help="what PCA-32 decomposes: the SGD tables or the input networks' tabulations "
                         "(default: sgd for --source sgd, nbrdf for --source authors)")
-    p.add_argument("--refine", type=int, default=100,
-                   help="also score codes refined by this many image-loss steps (ae encode --refine); 0: off")
+    p.add_argument("--refine", type=int, default=30,
+                   help="also score codes refined by this many Levenberg-Marquardt iterations (ae encode --refine); 0: off")
     p.add_argument("--pair", nargs=2, help="materials to interpolate (default: two test materials)")
     p.add_argument("--steps", type=int, default=7)
     p.add_argument("--authors", type=Path, default=AUTHORS_MERL,
@@ -256,11 +256,11 @@ def main() -> int:
                          "--pca-tables", args.pca_tables, "--refine", args.refine]))
     (args.out / f"ae_vs_pca_{args.pca_tables}.json").write_text(json.dumps(ev, indent=1))
     table = markdown_table(ev)
-    keys = [k for k in ("ae", "ae_refined", "pca") if k in ev["test"][0]]
+    keys = [k for k in ("ae", "ae_refined", "pca") if k in ev["materials"][0]]
     rows = ["| material | " + " | ".join(f"{k} {m}" for m in ("MAE", "RMSE", "SSIM") for k in keys) + " |",
             "|---|" + "---|" * (3 * len(keys))]
     rows += [f"| {r['name']} | " + " | ".join(f"{r[k][m]:.4f}" for m in ("mae", "rmse", "ssim") for k in keys) + " |"
-             for r in ev["test"]]
+             for r in ev["materials"]]
     (args.out / f"ae_vs_pca_{args.pca_tables}.md").write_text(table + "\n\n" + "\n".join(rows) + "\n")
     print(table)
 

@@ -28,8 +28,6 @@ use serde::{Deserialize, Serialize};
 pub const FORMAT_NAME: &str = "nbrdf-autoencoder";
 pub const FORMAT_VERSION: u32 = 1;
 pub const CODE_SIZE: usize = 32;
-/// Adam step of [`AutoEncoder::refine_code`] (codes are O(1) to O(10)).
-pub const REFINE_LEARNING_RATE: f32 = 0.02;
 pub const PERMUTATIONS: [[usize; 3]; 6] = [
     [0, 1, 2],
     [0, 2, 1],
@@ -38,6 +36,42 @@ pub const PERMUTATIONS: [[usize; 3]; 6] = [
     [2, 0, 1],
     [2, 1, 0],
 ];
+
+/// A standard normal deviate (Box-Muller).
+fn gaussian(rng: &mut SplitMix64) -> f32 {
+    let (u1, u2) = (rng.next_f64().max(1e-300), rng.next_f64());
+    ((-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()) as f32
+}
+
+/// Solves `m x = b` for a symmetric positive definite `m` (`n x n`, row-major) by Cholesky;
+/// `None` if `m` is not numerically positive definite.
+fn solve_spd(m: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0f64; n * n];
+    for i in 0..n {
+        for j in 0..=i {
+            let s: f64 = (0..j).map(|k| l[i * n + k] * l[j * n + k]).sum();
+            if i == j {
+                let d = m[i * n + i] - s;
+                // Also rejects NaN.
+                if d.is_nan() || d <= 0.0 {
+                    return None;
+                }
+                l[i * n + i] = d.sqrt();
+            } else {
+                l[i * n + j] = (m[i * n + j] - s) / l[j * n + j];
+            }
+        }
+    }
+    let mut y = vec![0.0f64; n];
+    for i in 0..n {
+        y[i] = (b[i] - (0..i).map(|k| l[i * n + k] * y[k]).sum::<f64>()) / l[i * n + i];
+    }
+    let mut x = vec![0.0f64; n];
+    for i in (0..n).rev() {
+        x[i] = (y[i] - (i + 1..n).map(|k| l[k * n + i] * x[k]).sum::<f64>()) / l[i * n + i];
+    }
+    Some(x)
+}
 
 /// The recorded material split.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
@@ -239,77 +273,93 @@ impl AutoEncoder {
             .collect()
     }
 
-    /// Refines a code by analysis by synthesis: `steps` Adam steps on the image loss of the
-    /// decoded network against the input network's own sphere image, keeping the best code
-    /// (by the exact loss; the steps use the training's surrogate gradient). The encoder's code
-    /// is the start, so 0 steps returns it unchanged. This closes the gap between what the
-    /// encoder predicts for an unseen material and the best the decoder can express.
-    pub fn refine_code(
-        &self,
-        flat: &[f32],
-        code: &[f32],
-        steps: usize,
-        learning_rate: f32,
-    ) -> Vec<f32> {
-        if steps == 0 {
-            return code.to_vec();
-        }
+    /// Refines a code by analysis by synthesis: Levenberg-Marquardt on the tone-mapped pixel
+    /// residuals of the decoded network's sphere against the input network's own (the image
+    /// loss is their mean square). The encoder's code is the start, so 0 iterations return it;
+    /// this closes the gap between what the encoder predicts for an unseen material and the
+    /// best the decoder can express.
+    /// With 32 unknowns the Jacobian costs 32 extra renders (forward differences) and the
+    /// damped normal equations are a 32 x 32 solve, so each iteration is a few milliseconds and
+    /// converges where first-order steps crawl along the loss's ill-conditioned valleys.
+    /// Returns the best code visited (the start if nothing improves).
+    pub fn refine_code(&self, flat: &[f32], code: &[f32], iterations: usize) -> Vec<f32> {
         let renderer = SphereRenderer::new(
             super::sphere::SIZE,
             super::sphere::LIGHT_THETA_DEG.to_radians(),
             self.nbrdf_hidden,
         );
-        let mut surrogate = renderer.clone();
-        surrogate.surrogate_floor = AeConfig::default().surrogate_floor;
         let mut scratch = renderer.scratch();
         let target = renderer.render_toned(flat, &mut scratch);
-        let exact = |c: &[f32], scratch: &mut super::sphere::Scratch| {
-            renderer.loss(&self.decode_flat(c), &target, scratch, None)
-        };
-        let mut best = (exact(code, &mut scratch), code.to_vec());
-        let mut z = code.to_vec();
-        let mut adam = Adam::new(AdamConfig::default(), z.len());
-        let mut unused = vec![0.0f32; self.decoder.parameter_count()];
-        let mut g_flat = vec![0.0f32; self.mean.len()];
-        for _ in 0..steps {
-            let acts = self.decoder.forward(&z);
-            let out = acts.last().cloned().unwrap_or_default();
-            let decoded: Vec<f32> = self.destandardise_clamped(&out);
-            surrogate.loss(&decoded, &target, &mut scratch, Some(&mut g_flat));
-            // Through the de-standardisation; the clamp passes no gradient outside its range.
-            let g_out: Vec<f32> = g_flat
+        let residual = |z: &[f32], scratch: &mut super::sphere::Scratch| -> Vec<f64> {
+            renderer
+                .render_toned(&self.decode_flat(z), scratch)
                 .iter()
-                .enumerate()
-                .map(|(j, g)| {
-                    let w = out[j] * self.std[j] + self.mean[j];
-                    let inside = match (self.min.get(j), self.max.get(j)) {
-                        (Some(&lo), Some(&hi)) => (lo..=hi).contains(&w),
-                        _ => true,
-                    };
-                    if inside {
-                        g * self.std[j]
-                    } else {
-                        0.0
-                    }
+                .zip(&target)
+                .map(|(a, b)| f64::from(a - b))
+                .collect()
+        };
+        let sum_sq = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
+        let dims = code.len();
+        let mut z = code.to_vec();
+        let mut r = residual(&z, &mut scratch);
+        let mut cost = sum_sq(&r);
+        let mut lambda = 1e-3;
+        for _ in 0..iterations {
+            // Jacobian columns by forward differences, in parallel.
+            let columns: Vec<Vec<f64>> = (0..dims)
+                .into_par_iter()
+                .map(|k| {
+                    let h = 1e-3 * z[k].abs().max(1.0);
+                    let mut zk = z.clone();
+                    zk[k] += h;
+                    let rk = residual(&zk, &mut renderer.scratch());
+                    let step = f64::from(zk[k] - z[k]);
+                    rk.iter().zip(&r).map(|(a, b)| (a - b) / step).collect()
                 })
                 .collect();
-            let g_code = self.decoder.backward(&acts, &g_out, &mut unused);
-            if !g_code.iter().all(|g| g.is_finite()) {
+            let mut jtj = vec![0.0f64; dims * dims];
+            let mut jtr = vec![0.0f64; dims];
+            for a in 0..dims {
+                jtr[a] = columns[a].iter().zip(&r).map(|(j, r)| j * r).sum();
+                for b in a..dims {
+                    let v: f64 = columns[a].iter().zip(&columns[b]).map(|(x, y)| x * y).sum();
+                    jtj[a * dims + b] = v;
+                    jtj[b * dims + a] = v;
+                }
+            }
+            let mut improved = false;
+            for _ in 0..8 {
+                let mut m = jtj.clone();
+                for a in 0..dims {
+                    m[a * dims + a] += lambda * jtj[a * dims + a].max(1e-12);
+                }
+                let Some(delta) = solve_spd(&m, &jtr, dims) else {
+                    lambda *= 4.0;
+                    continue;
+                };
+                let candidate: Vec<f32> =
+                    z.iter().zip(&delta).map(|(z, d)| z - *d as f32).collect();
+                let rc = residual(&candidate, &mut scratch);
+                let c = sum_sq(&rc);
+                if c.is_finite() && c < cost {
+                    (z, r, cost) = (candidate, rc, c);
+                    lambda = (lambda / 3.0).max(1e-9);
+                    improved = true;
+                    break;
+                }
+                lambda *= 4.0;
+            }
+            if !improved {
                 break;
             }
-            adam.step(&mut z, &g_code, learning_rate);
-            let loss = exact(&z, &mut scratch);
-            if loss < best.0 {
-                best = (loss, z.clone());
-            }
         }
-        best.1
+        z
     }
 
-    /// Encoder code, then [`AutoEncoder::refine_code`] with `steps` steps.
-    pub fn encode_refined(&self, net: &Nbrdf, steps: usize) -> Result<Vec<f32>> {
+    /// Encoder code, then [`AutoEncoder::refine_code`] with `iterations` iterations.
+    pub fn encode_refined(&self, net: &Nbrdf, iterations: usize) -> Result<Vec<f32>> {
         let code = self.encode(net)?;
-        Ok(self.refine_code(&net.to_flat(), &code, steps, REFINE_LEARNING_RATE))
+        Ok(self.refine_code(&net.to_flat(), &code, iterations))
     }
 
     pub fn decode(&self, code: &[f32], name: &str) -> Result<Nbrdf> {
@@ -326,7 +376,9 @@ impl AutoEncoder {
     }
 
     /// Trains on the named flat networks (all of one hidden width); `split` says which are
-    /// used. `progress` is called after every epoch.
+    /// used. A name may appear more than once (versions of a material from different sources:
+    /// all are training examples; validation uses the first). `progress` is called after every
+    /// epoch.
     pub fn train(
         materials: &[(String, Vec<f32>)],
         hidden_nbrdf: usize,
@@ -366,9 +418,12 @@ impl AutoEncoder {
             split.train.iter().collect()
         };
         for name in fitted {
-            let flat = find(name)?;
-            for &p in perms {
-                train_flats.push(permute_outputs(flat, hidden_nbrdf, p));
+            // Every network of the material (`materials` may hold several versions of one).
+            find(name)?;
+            for (_, flat) in materials.iter().filter(|(n, _)| n == name) {
+                for &p in perms {
+                    train_flats.push(permute_outputs(flat, hidden_nbrdf, p));
+                }
             }
         }
         if train_flats.is_empty() {
@@ -474,12 +529,7 @@ impl AutoEncoder {
                                 (4 << 40) | ((epoch as u64) << 20) | i as u64,
                             );
                             x.iter()
-                                .map(|v| {
-                                    let (u1, u2) = (rng.next_f64().max(1e-300), rng.next_f64());
-                                    let g = (-2.0 * u1.ln()).sqrt()
-                                        * (2.0 * std::f64::consts::PI * u2).cos();
-                                    v + config.input_noise * g as f32
-                                })
+                                .map(|v| v + config.input_noise * gaussian(&mut rng))
                                 .collect()
                         } else {
                             x.clone()
@@ -719,8 +769,8 @@ mod tests {
         let loss = |c: &[f32], s: &mut crate::latent::sphere::Scratch| {
             r.loss(&ae.decode_flat(c), &target, s, None)
         };
-        assert_eq!(ae.refine_code(flat, &code, 0, REFINE_LEARNING_RATE), code);
-        let refined = ae.refine_code(flat, &code, 40, REFINE_LEARNING_RATE);
+        assert_eq!(ae.refine_code(flat, &code, 0), code);
+        let refined = ae.refine_code(flat, &code, 10);
         let (before, after) = (loss(&code, &mut s), loss(&refined, &mut s));
         assert!(
             after < 0.7 * before,

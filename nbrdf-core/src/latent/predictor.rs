@@ -34,6 +34,10 @@ pub struct PhongPredictor {
     pub code_mean: Vec<f32>,
     pub code_std: Vec<f32>,
     pub mlp: Mlp,
+    /// Refinement iterations of the codes it was trained on ([`super::autoencoder::AutoEncoder::refine_code`]):
+    /// codes to predict from must be found the same way.
+    #[serde(default)]
+    pub refine_steps: usize,
     #[serde(default)]
     pub provenance: serde_json::Value,
 }
@@ -174,6 +178,7 @@ impl PhongPredictor {
             code_mean: mean,
             code_std: std,
             mlp: Mlp::new(&[dims, hidden, 2], seed, 3 << 32),
+            refine_steps: 0,
             provenance: serde_json::Value::Null,
         };
         let xs: Vec<Vec<f32>> = examples

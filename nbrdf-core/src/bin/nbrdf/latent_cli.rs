@@ -96,6 +96,11 @@ pub struct AeTrainArgs {
     input_noise: f32,
     #[arg(long, default_value_t = AeConfig::default().weight_decay)]
     weight_decay: f32,
+    /// More networks of the training split's materials (e.g. trained from another source of
+    /// the same materials): extra training examples. Networks of validation and test materials
+    /// in it are ignored, so nothing of a held-out material is seen.
+    #[arg(long, value_name = "DIR")]
+    extra_nbrdfs: Option<PathBuf>,
     /// Disable the 6 RGB-permutation augmentation.
     #[arg(long)]
     no_augment: bool,
@@ -118,8 +123,8 @@ pub struct AeEncodeArgs {
     /// Print the encoding time to stderr.
     #[arg(long)]
     timing: bool,
-    /// Refine the encoder's code by this many steps of the image loss against the network's
-    /// own sphere image (analysis by synthesis; ~1 ms a step).
+    /// Refine the encoder's code by this many Levenberg-Marquardt iterations on the image
+    /// loss against the network's own sphere image (analysis by synthesis; ~10 ms each).
     #[arg(long, default_value_t = 0)]
     refine: usize,
 }
@@ -202,10 +207,24 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
     }
     let names: Vec<String> = nets.iter().map(|(n, _)| n.clone()).collect();
     let split = Split::fixed(&names);
-    let materials: Vec<(String, Vec<f32>)> = nets
+    let mut materials: Vec<(String, Vec<f32>)> = nets
         .iter()
         .map(|(n, net)| (n.clone(), net.to_flat()))
         .collect();
+    if let Some(dir) = &args.extra_nbrdfs {
+        for (name, net) in read_nbrdf_dir(dir)? {
+            if net.hidden_width() != hidden {
+                return Err(invalid(format!(
+                    "{}: '{name}' has hidden width {}, the networks {hidden}",
+                    dir.display(),
+                    net.hidden_width()
+                )));
+            }
+            if split.train.contains(&name) && !split.validation.contains(&name) {
+                materials.push((name, net.to_flat()));
+            }
+        }
+    }
     let config = AeConfig {
         seed: args.seed,
         hidden: args.hidden,
@@ -254,6 +273,9 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
             serde_json::to_value(&history).unwrap_or_default(),
         );
         obj.insert("nbrdfs".into(), args.nbrdfs.display().to_string().into());
+        if let Some(dir) = &args.extra_nbrdfs {
+            obj.insert("extra_nbrdfs".into(), dir.display().to_string().into());
+        }
     }
     ae.save(&args.output)?;
     let last = history.last();
@@ -353,6 +375,12 @@ pub enum PcaTables {
     Nbrdf,
 }
 
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+pub enum SplitArg {
+    Test,
+    Train,
+}
+
 #[derive(Args)]
 pub struct AeEvalArgs {
     /// The trained autoencoder (from `nbrdf ae train`).
@@ -367,7 +395,11 @@ pub struct AeEvalArgs {
     /// Principal components kept.
     #[arg(long, default_value_t = 32)]
     components: usize,
-    /// Also report the autoencoder with codes refined by this many image-loss steps
+    /// Which materials to reconstruct: the test split (the comparison) or the training split
+    /// (how well the autoencoder fits what it saw; PCA then reconstructs its own training set).
+    #[arg(long, value_enum, default_value = "test")]
+    split: SplitArg,
+    /// Also report the autoencoder with codes refined by this many iterations
     /// (`ae encode --refine`), as "ae_refined".
     #[arg(long, default_value_t = 0)]
     refine: usize,
@@ -401,7 +433,11 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
     with_threads(args.threads, || -> Result<()> {
         let t0 = Instant::now();
         let mut rows = Vec::new();
-        for name in &ae.split.test {
+        let evaluated = match args.split {
+            SplitArg::Test => &ae.split.test,
+            SplitArg::Train => &ae.split.train,
+        };
+        for name in evaluated {
             let net = get(name)?;
             let t = Instant::now();
             let code = ae.encode(net)?;
@@ -413,12 +449,7 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
                 serde_json::json!({"name": name, "ae": errors_json(&e), "encode_ms": encode_ms});
             if args.refine > 0 {
                 let t = Instant::now();
-                let refined = ae.refine_code(
-                    &net.to_flat(),
-                    &code,
-                    args.refine,
-                    nbrdf_core::latent::autoencoder::REFINE_LEARNING_RATE,
-                );
+                let refined = ae.refine_code(&net.to_flat(), &code, args.refine);
                 row["refine_ms"] = (t.elapsed().as_secs_f64() * 1e3).into();
                 let rec = ae.decode(&refined, name)?;
                 row["ae_refined"] =
@@ -455,7 +486,7 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
         let refs: Vec<&CellValues<'_>> = train.iter().map(|b| b.as_ref()).collect();
         let pca = Pca::fit(&refs, args.components, SIZE, theta);
         let fit_seconds = t0.elapsed().as_secs_f64();
-        for (row, name) in rows.iter_mut().zip(&ae.split.test) {
+        for (row, name) in rows.iter_mut().zip(evaluated) {
             let f = cell_fn(name)?;
             let truth = pca.values(f.as_ref());
             let rec = pca.reconstruct(f.as_ref());
@@ -489,7 +520,8 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
             table.insert(key.into(), m.into());
         }
         let out = serde_json::json!({
-            "test": rows,
+            "split": match args.split { SplitArg::Test => "test", SplitArg::Train => "train" },
+            "materials": rows,
             "summary": table,
             "pca": {"tables": match args.pca_tables { PcaTables::Sgd => "sgd", PcaTables::Nbrdf => "nbrdf" },
                     "components": pca.components(), "cells": pca.cells.len(), "fit_seconds": fit_seconds},
@@ -527,6 +559,11 @@ pub struct PredictorTrainArgs {
     /// Training loss.
     #[arg(long, value_enum, default_value = "variance")]
     loss: PredictorLoss,
+    /// Predict from codes refined by this many iterations (`ae encode --refine`).
+    /// Recorded in P.json; `predict-phong` and `predictor eval` refine the same way. Off by
+    /// default: refined codes fit the image better but predicted worse lobes (README).
+    #[arg(long, default_value_t = 0)]
+    refine: usize,
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
@@ -598,7 +635,8 @@ pub fn run_predictor_eval(args: &PredictorEvalArgs) -> Result<()> {
                 return Err(invalid(format!("no network for '{name}'")));
             };
             let (n_fit, w_fit) = phong_label(net, false)?;
-            let (n_pred, w_pred) = pred.predict(&ae.encode(net)?);
+            let code = ae.encode_refined(net, pred.refine_steps)?;
+            let (n_pred, w_pred) = pred.predict(&code);
             let q = network_quadrature(net)?;
             let (v_fit, v_pred, v_cos) = (
                 q.relative_variance(n_fit, w_fit),
@@ -663,14 +701,25 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
         let t1 = Instant::now();
         // The lobe (and its variance, computed on the mean over RGB) is invariant under RGB
         // permutations, so every augmented code shares it.
+        let inputs: Vec<(usize, Vec<f32>)> = train
+            .iter()
+            .enumerate()
+            .flat_map(|(m, (_, net))| {
+                PERMUTATIONS
+                    .iter()
+                    .map(move |&p| (m, permute_outputs(&net.to_flat(), net.hidden_width(), p)))
+            })
+            .collect();
+        let codes: Vec<Vec<f32>> = inputs
+            .par_iter()
+            .map(|(_, flat)| ae.refine_code(flat, &ae.encode_flat(flat), args.refine))
+            .collect();
         let mut examples = Vec::new();
         let mut example_grids = Vec::new();
-        for (m, ((_, net), &(n, w))) in train.iter().zip(&labels).enumerate() {
-            for p in PERMUTATIONS {
-                let flat = permute_outputs(&net.to_flat(), net.hidden_width(), p);
-                examples.push((ae.encode_flat(&flat), n, w));
-                example_grids.extend(grids.get(m));
-            }
+        for ((m, _), code) in inputs.iter().zip(codes) {
+            let (n, w) = labels[*m];
+            examples.push((code, n, w));
+            example_grids.extend(grids.get(*m));
         }
         let grids_arg = (!example_grids.is_empty()).then_some(example_grids.as_slice());
         let mut pred = PhongPredictor::train(
@@ -680,6 +729,7 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
             args.iterations,
             args.seed,
         )?;
+        pred.refine_steps = args.refine;
         let train_seconds = t1.elapsed().as_secs_f64();
         if let Some(o) = pred.provenance.as_object_mut() {
             o.insert("labels".into(), serde_json::json!(train.iter().zip(&labels).map(|((name, _), (n, w))| serde_json::json!({"name": name, "exponent": n, "specular_weight": w})).collect::<Vec<_>>()));
@@ -705,7 +755,7 @@ pub fn run_predict_phong(args: &PredictPhongArgs) -> Result<()> {
     let pred = PhongPredictor::load(&args.predictor)?;
     let mut net = Nbrdf::load(&args.input)?;
     let t0 = Instant::now();
-    let code = ae.encode(&net)?;
+    let code = ae.encode_refined(&net, pred.refine_steps)?;
     let (n, w) = pred.predict(&code);
     let ms = t0.elapsed().as_secs_f64() * 1e3;
     if args.timing {
