@@ -125,3 +125,28 @@ def test_predictor_eval_scores_fitted_and_predicted_lobes(tmp_path):
     assert row["rmse_ratio"] == pytest.approx(np.sqrt(row["predicted"]["relative_variance"]
                                                       / row["fitted"]["relative_variance"]), rel=1e-6)
     assert report["rmse_ratio"]["materials"] == 1
+
+
+def test_extra_networks_train_only_on_training_materials(tmp_path):
+    cli = _cli_or_skip()
+    folders = {}
+    for source, offset in (("main", 20), ("extra", 40)):
+        folder = folders[source] = tmp_path / source
+        folder.mkdir()
+        for k, name in enumerate("abcde"):
+            write_network(folder / f"{name}.nbrdf.json", random_layers(seed=offset + k), name=name,
+                          sampling={"model": "blinn-phong", "exponent": 5.0 * (k + 1), "specular_weight": 0.3,
+                                    "source": "fit"})
+    ae, predictor = tmp_path / "ae.json", tmp_path / "p.json"
+    for command in (["ae", "train", "--nbrdfs", folders["main"], "--extra-nbrdfs", folders["extra"], "-o", ae,
+                     "--epochs", "2", "--warmup", "1", "--quiet"],
+                    ["predictor", "train", "--ae", ae, "--nbrdfs", folders["main"], "--extra-nbrdfs", folders["extra"],
+                     "-o", predictor, "--iterations", "20", "--members", "2", "--loss", "labels"]):
+        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+    model = json.loads(ae.read_text())
+    assert model["split"]["test"] == ["c"] and model["provenance"]["extra_nbrdfs"] == str(folders["extra"])
+    labels = [entry["name"] for entry in json.loads(predictor.read_text())["provenance"]["labels"]]
+    # Both versions of every training material, never the test material.
+    assert sorted(labels) == sorted(2 * ["a", "b", "d", "e"])
+    assert len(json.loads(predictor.read_text())["ensemble"]) == 1

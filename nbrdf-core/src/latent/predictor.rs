@@ -34,6 +34,11 @@ pub struct PhongPredictor {
     pub code_mean: Vec<f32>,
     pub code_std: Vec<f32>,
     pub mlp: Mlp,
+    /// Further members of the ensemble (trained from other seeds): the prediction averages
+    /// `ln n` and `w` over `mlp` and these. With 80 labelled materials a single network's
+    /// predictions swing with its seed; the mean does not.
+    #[serde(default)]
+    pub ensemble: Vec<Mlp>,
     /// Refinement iterations of the codes it was trained on ([`super::autoencoder::AutoEncoder::refine_code`]):
     /// codes to predict from must be found the same way.
     #[serde(default)]
@@ -122,23 +127,56 @@ impl VarianceGrid {
 }
 
 impl PhongPredictor {
-    fn raw(&self, code: &[f32]) -> Vec<f32> {
-        let x: Vec<f32> = code
-            .iter()
-            .zip(self.code_mean.iter().zip(&self.code_std))
-            .map(|(c, (m, s))| (c - m) / s)
-            .collect();
-        self.mlp.eval(&x)
+    /// `(ln n, w)` of one member, each within its valid range.
+    fn member(mlp: &Mlp, x: &[f32]) -> (f32, f32) {
+        let o = mlp.eval(x);
+        let ln_n = if o[0].is_finite() { o[0] } else { LN_N_MIN };
+        let w = if o[1].is_finite() { sigmoid(o[1]) } else { 0.0 };
+        (
+            ln_n.clamp(LN_N_MIN, (MAX_EXPONENT as f32).ln()),
+            w.clamp(0.0, 1.0),
+        )
     }
 
     /// `(exponent, specular_weight)` for a code: exponent in `(0, 1e6]`, weight in `[0, 1]`
     /// whatever the code (non-finite inputs give the most diffuse lobe).
     pub fn predict(&self, code: &[f32]) -> (f32, f32) {
-        let o = self.raw(code);
-        let ln_n = if o[0].is_finite() { o[0] } else { LN_N_MIN };
-        let n = ln_n.clamp(LN_N_MIN, (MAX_EXPONENT as f32).ln()).exp();
-        let w = if o[1].is_finite() { sigmoid(o[1]) } else { 0.0 };
-        (n.clamp(0.0, MAX_EXPONENT as f32), w.clamp(0.0, 1.0))
+        let x: Vec<f32> = code
+            .iter()
+            .zip(self.code_mean.iter().zip(&self.code_std))
+            .map(|(c, (m, s))| (c - m) / s)
+            .collect();
+        let members = std::iter::once(&self.mlp).chain(&self.ensemble);
+        let count = 1 + self.ensemble.len();
+        let (sum_ln_n, sum_w) = members
+            .map(|m| Self::member(m, &x))
+            .fold((0.0, 0.0), |(a, b), (ln_n, w)| (a + ln_n, b + w));
+        let ln_n = (sum_ln_n / count as f32).clamp(LN_N_MIN, (MAX_EXPONENT as f32).ln());
+        let w = (sum_w / count as f32).clamp(0.0, 1.0);
+        (ln_n.exp().clamp(0.0, MAX_EXPONENT as f32), w)
+    }
+
+    /// [`PhongPredictor::train`] from `members` seeds (`seed`, `seed + 1`, ...) in parallel,
+    /// combined into one ensemble.
+    pub fn train_ensemble(
+        examples: &[Example],
+        grids: Option<&[&VarianceGrid]>,
+        hidden: usize,
+        iterations: usize,
+        seed: u64,
+        members: usize,
+    ) -> Result<Self> {
+        use rayon::prelude::*;
+        let mut trained: Vec<PhongPredictor> = (0..members.max(1) as u64)
+            .into_par_iter()
+            .map(|k| Self::train(examples, grids, hidden, iterations, seed + k))
+            .collect::<Result<_>>()?;
+        let mut first = trained.remove(0);
+        first.ensemble = trained.into_iter().map(|p| p.mlp).collect();
+        if let Some(o) = first.provenance.as_object_mut() {
+            o.insert("members".into(), members.max(1).into());
+        }
+        Ok(first)
     }
 
     /// Trains on `examples` with the label loss, or with the variance loss where `grids` gives
@@ -178,6 +216,7 @@ impl PhongPredictor {
             code_mean: mean,
             code_std: std,
             mlp: Mlp::new(&[dims, hidden, 2], seed, 3 << 32),
+            ensemble: Vec::new(),
             refine_steps: 0,
             provenance: serde_json::Value::Null,
         };
@@ -339,7 +378,8 @@ mod tests {
                 (code, n, w)
             })
             .collect();
-        let p = PhongPredictor::train(&examples, None, 16, 1500, 0).unwrap();
+        let p = PhongPredictor::train_ensemble(&examples, None, 16, 1500, 0, 3).unwrap();
+        assert_eq!(p.ensemble.len(), 2);
         let (n, w) = p.predict(&examples[3].0);
         assert!(
             (n as f64 / examples[3].1).ln().abs() < 0.5,

@@ -559,6 +559,13 @@ pub struct PredictorTrainArgs {
     /// Training loss.
     #[arg(long, value_enum, default_value = "variance")]
     loss: PredictorLoss,
+    /// More labelled networks of the training split's materials (e.g. from another source of
+    /// the same materials); networks of test materials in it are ignored.
+    #[arg(long, value_name = "DIR")]
+    extra_nbrdfs: Option<PathBuf>,
+    /// Networks in the ensemble (seeds SEED, SEED + 1, ...; the prediction is their mean).
+    #[arg(long, default_value_t = 8)]
+    members: usize,
     /// Predict from codes refined by this many iterations (`ae encode --refine`).
     /// Recorded in P.json; `predict-phong` and `predictor eval` refine the same way. Off by
     /// default: refined codes fit the image better but predicted worse lobes (README).
@@ -675,7 +682,11 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
     use nbrdf_core::latent::predictor::{PhongPredictor, VarianceGrid};
     use rayon::prelude::*;
     let ae = AutoEncoder::load(&args.ae)?;
-    let nets = read_nbrdf_dir(&args.nbrdfs)?;
+    let mut nets = read_nbrdf_dir(&args.nbrdfs)?;
+    if let Some(dir) = &args.extra_nbrdfs {
+        // Only training materials: `train` below keeps those.
+        nets.extend(read_nbrdf_dir(dir)?);
+    }
     with_threads(args.threads, || -> Result<()> {
         let t0 = Instant::now();
         let train: Vec<&(String, Nbrdf)> = nets
@@ -722,12 +733,13 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
             example_grids.extend(grids.get(*m));
         }
         let grids_arg = (!example_grids.is_empty()).then_some(example_grids.as_slice());
-        let mut pred = PhongPredictor::train(
+        let mut pred = PhongPredictor::train_ensemble(
             &examples,
             grids_arg,
             args.hidden,
             args.iterations,
             args.seed,
+            args.members,
         )?;
         pred.refine_steps = args.refine;
         let train_seconds = t1.elapsed().as_secs_f64();
