@@ -158,15 +158,19 @@ def lerp_layers(a, b, t: float):
 
 def appearance(img: np.ndarray) -> dict:
     """What a person sees change along an interpolation, from a linear sphere image:
-    `highlight` = fraction of the lit disk at or above half the peak luminance (the highlight's
-    width: small for a sharp lobe, large for a diffuse one), `chromaticity` = the image's mean
+    `highlight` = fraction of the lit disk at or above half the peak luminance, both measured
+    above the median lit pixel (the highlight's width: small for a sharp lobe, large for a
+    diffuse one), `chromaticity` = the image's mean
     RGB over its sum, `luminance` = mean luminance of the lit pixels."""
     lum = img @ LUMINANCE
     lit = lum > 0
     if not lit.any():
         return {"highlight": 0.0, "chromaticity": [1 / 3] * 3, "luminance": 0.0}
     total = img[lit].sum(axis=0)
-    return {"highlight": float(np.mean(lum[lit] >= 0.5 * lum.max())),
+    # Above the diffuse floor (the median lit pixel), so that a sharp spot on a bright base and
+    # a broad glossy lobe are told apart.
+    above = np.maximum(lum[lit] - np.median(lum[lit]), 0.0)
+    return {"highlight": float(np.mean(above >= 0.5 * above.max())) if above.max() > 0 else 1.0,
             "chromaticity": (total / max(total.sum(), 1e-30)).tolist(),
             "luminance": float(lum[lit].mean())}
 
@@ -202,7 +206,7 @@ def markdown_table(ev: dict) -> str:
     for key, label in methods:
         if key not in s:
             continue
-        cells = [f"{s[key][m]['mean']:.4f} ± {s[key][m]['std']:.4f} (median {s[key][m]['median']:.4f})"
+        cells = [f"{s[key][m]['mean']:.5f} ± {s[key][m]['std']:.5f} (median {s[key][m]['median']:.5f})"
                  for m in ("mae", "rmse", "ssim")]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -228,14 +232,18 @@ def main() -> int:
                    help="also score codes refined by this many Levenberg-Marquardt iterations (ae encode --refine); 0: off")
     p.add_argument("--pair", nargs=2, help="materials to interpolate (default: two test materials)")
     p.add_argument("--steps", type=int, default=7)
+    p.add_argument("--interpolation-pairs", type=int, default=10,
+                   help="pairs of test materials whose interpolations are measured (besides the figure's)")
     p.add_argument("--authors", type=Path, default=AUTHORS_MERL,
                    help="the authors' Keras networks, for the independently trained row of the interpolation")
     p.add_argument("--veach", action="store_true", help="also render the Veach scene, predicted vs fitted")
+    p.add_argument("--interpolation-only", action="store_true",
+                   help="only the interpolation figure (needs OUT/ae.json from an earlier run)")
     p.add_argument("--veach-only", action="store_true",
                    help="only the Veach comparison (needs OUT/ae.json and OUT/predictor.json from an earlier run)")
     p.add_argument("--veach-spp", type=int, default=16)
     p.add_argument("--veach-gt-spp", type=int, default=512, help="spp of the converged MIS render")
-    p.add_argument("--veach-seeds", type=int, default=4, help="renders (seeds) averaged per strategy")
+    p.add_argument("--veach-seeds", type=int, default=8, help="renders (seeds) averaged per strategy")
     args = p.parse_args()
     args.out = args.out or REPO / "out" / "latent" / args.source
     args.nbrdfs = args.nbrdfs or args.out / "nbrdfs"
@@ -250,6 +258,14 @@ def main() -> int:
     if args.veach_only:
         veach(args, split)
         return 0
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    a, b = args.pair or (split["test"][0], split["test"][-1])
+    if args.interpolation_only:
+        interpolation(args, ae, a, b, plt, split)
+        return 0
 
     # 1. AE vs PCA on the test split.
     ev = json.loads(run([args.cli, "ae", "eval", "--ae", ae, "--nbrdfs", args.nbrdfs,
@@ -259,14 +275,10 @@ def main() -> int:
     keys = [k for k in ("ae", "ae_refined", "pca") if k in ev["materials"][0]]
     rows = ["| material | " + " | ".join(f"{k} {m}" for m in ("MAE", "RMSE", "SSIM") for k in keys) + " |",
             "|---|" + "---|" * (3 * len(keys))]
-    rows += [f"| {r['name']} | " + " | ".join(f"{r[k][m]:.4f}" for m in ("mae", "rmse", "ssim") for k in keys) + " |"
+    rows += [f"| {r['name']} | " + " | ".join(f"{r[k][m]:.5f}" for m in ("mae", "rmse", "ssim") for k in keys) + " |"
              for r in ev["materials"]]
     (args.out / f"ae_vs_pca_{args.pca_tables}.md").write_text(table + "\n\n" + "\n".join(rows) + "\n")
     print(table)
-
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     # 2. t-SNE of the codes.
     names = sorted(f.name[: -len(".nbrdf.json")] for f in args.nbrdfs.glob("*.nbrdf.json"))
@@ -288,8 +300,7 @@ def main() -> int:
 
     # 3. Interpolation strips: latent, weights of the aligned networks, weights of the authors'
     # independently trained networks of the same materials (the paper's comparison).
-    a, b = args.pair or (split["test"][0], split["test"][-1])
-    interpolation(args, ae, a, b, plt)
+    interpolation(args, ae, a, b, plt, split)
 
     # 4. Predictor: fitted vs predicted on the test split.
     pred = args.out / "predictor.json"
@@ -333,12 +344,13 @@ def main() -> int:
     return 0
 
 
-def interpolation(args, ae: Path, a: str, b: str, plt) -> dict:
-    """Renders the strips, measures their smoothness, writes interpolation.{png,json,md}."""
-    interp = args.out / "interp"
+def interpolation_rows(args, ae: Path, a: str, b: str, interp: Path) -> dict:
+    """The rendered paths from material a to b: latent, weights of the aligned networks, and
+    weights of the authors' networks when their Keras files are there."""
     run([args.cli, "interpolate", "--ae", ae, args.nbrdfs / f"{a}.nbrdf.json", args.nbrdfs / f"{b}.nbrdf.json",
-         "--steps", args.steps, "-o", interp])
+         "--steps", args.steps, "--refine", args.refine, "-o", interp])
     ts = np.linspace(0.0, 1.0, args.steps)
+    interp.mkdir(parents=True, exist_ok=True)
     rows = {"latent (autoencoder)": [render_network(interp / f"latent_{i:02d}.nbrdf.json") for i in range(args.steps)],
             "weights, aligned networks": [render_network(interp / f"weights_{i:02d}.nbrdf.json")
                                           for i in range(args.steps)]}
@@ -353,6 +365,15 @@ def interpolation(args, ae: Path, a: str, b: str, plt) -> dict:
     else:
         print(f"note: the authors' networks of {a} and {b} are not in {args.authors}: "
               "the independently trained row is left out", file=sys.stderr)
+    return rows
+
+
+def interpolation(args, ae: Path, a: str, b: str, plt, split: dict | None = None) -> dict:
+    """Renders the strips of a and b, measures their smoothness (also averaged over
+    --interpolation-pairs pairs of test materials), writes interpolation.{png,json,md}."""
+    interp = args.out / "interp"
+    ts = np.linspace(0.0, 1.0, args.steps)
+    rows = interpolation_rows(args, ae, a, b, interp)
     stats = {name: smoothness(images) for name, images in rows.items()}
     fig = plt.figure(figsize=(1.6 * args.steps + 4.2, 1.7 * len(rows) + 0.6))
     grid = fig.add_gridspec(len(rows), args.steps + 3)
@@ -373,17 +394,41 @@ def interpolation(args, ae: Path, a: str, b: str, plt) -> dict:
         curves.plot(ts, [l["chromaticity"][0] for l in st["appearance"]], ls="--", color=line.get_color(),
                     label=f"red share (colour detour {st['colour_detour']:.2f})")
     curves.set_xlabel("t")
-    curves.set_ylabel("highlight width (solid), red share of colour (dashed)")
+    curves.set_ylabel("highlight width (solid), red share (dashed)", fontsize=7)
+    curves.yaxis.set_label_position("right")
+    curves.yaxis.tick_right()
     curves.legend(fontsize=5)
     fig.suptitle(f"{a} → {b}: interpolation in latent space and in weight space", fontsize=9)
     fig.savefig(args.out / "interpolation.png", dpi=150, bbox_inches="tight")
     plt.close(fig)
-    (args.out / "interpolation.json").write_text(json.dumps({"a": a, "b": b, "t": ts.tolist(), "rows": stats}, indent=1))
     lines = [f"{a} → {b}, {args.steps} steps. Detour = path length / straight distance (1: monotone and even).", "",
              "| path | image detour | highlight-width detour | colour detour | largest step / mean step |",
              "|---|---|---|---|---|"]
     lines += [f"| {name} | {st['image_detour']:.2f} | {st['highlight_detour']:.2f} | {st['colour_detour']:.2f} | "
               f"{st['largest_step']:.2f} |" for name, st in stats.items()]
+    # The same measures over pairs of test materials (first with last, second with second to
+    # last, ...): one pair is an anecdote.
+    test = (split or {}).get("test", [])
+    pairs = [(test[i], test[-1 - i]) for i in range(min(args.interpolation_pairs, len(test) // 2))]
+    per_pair = {}
+    for pa, pb in pairs:
+        pair_rows = interpolation_rows(args, ae, pa, pb, args.out / "interp_pairs")
+        per_pair[f"{pa} -> {pb}"] = {name: {k: v for k, v in smoothness(images).items() if k != "appearance"}
+                                     for name, images in pair_rows.items()}
+    if per_pair:
+        names = list(next(iter(per_pair.values())))
+        lines += ["", f"Over {len(per_pair)} pairs of test materials (median, and worst pair):", "",
+                  "| path | image detour | colour detour | largest step / mean step | image detour < latent's |",
+                  "|---|---|---|---|---|"]
+        latent = [v[names[0]]["image_detour"] for v in per_pair.values()]
+        for name in names:
+            vals = {k: [v[name][k] for v in per_pair.values() if name in v]
+                    for k in ("image_detour", "colour_detour", "largest_step")}
+            mine = [v[name]["image_detour"] for v in per_pair.values()]
+            lines.append(f"| {name} | " + " | ".join(f"{np.median(x):.2f} ({max(x):.2f})" for x in vals.values())
+                         + f" | {sum(m < l for m, l in zip(mine, latent))} of {len(mine)} |")
+    (args.out / "interpolation.json").write_text(json.dumps({"a": a, "b": b, "t": ts.tolist(), "rows": stats,
+                                                             "pairs": per_pair}, indent=1))
     (args.out / "interpolation.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return stats

@@ -2,7 +2,7 @@
 //! code to the sampling parameters `(n, w)`, supervised by Blinn-Phong fits of the training
 //! split.
 //!
-//! Network: `32 -> 16 (tanh) -> 2` on standardised codes. Output 0 is `ln n`, clamped to
+//! Network: `32 -> 32 (tanh) -> 2` on standardised codes (an ensemble of 8 by default). Output 0 is `ln n`, clamped to
 //! `[ln 1e-3, ln MAX_EXPONENT]` so that `n = e^o0` lies in `(0, 1e6]`; output 1 goes through a
 //! logistic so that `w` lies in `[0, 1]`: every output is a valid sampling lobe by construction.
 //! Loss, full-batch Adam, one of:

@@ -159,6 +159,10 @@ pub struct InterpolateArgs {
     /// Number of networks per path, endpoints included.
     #[arg(long, default_value_t = 7)]
     steps: usize,
+    /// Refine the endpoint codes by this many iterations (`ae encode --refine`), so that the
+    /// latent path starts and ends at faithful reconstructions of A and B.
+    #[arg(long, default_value_t = 0)]
+    refine: usize,
     /// Where to write the result.
     #[arg(short, long, value_name = "DIR")]
     output: PathBuf,
@@ -337,7 +341,10 @@ pub fn run_interpolate(args: &InterpolateArgs) -> Result<()> {
     }
     let ae = AutoEncoder::load(&args.ae)?;
     let (a, b) = (Nbrdf::load(&args.a)?, Nbrdf::load(&args.b)?);
-    let (za, zb) = (ae.encode(&a)?, ae.encode(&b)?);
+    let (za, zb) = (
+        ae.encode_refined(&a, args.refine)?,
+        ae.encode_refined(&b, args.refine)?,
+    );
     let (wa, wb) = (a.to_flat(), b.to_flat());
     if wa.len() != wb.len() {
         return Err(invalid("the networks differ in size".into()));
@@ -545,7 +552,7 @@ pub struct PredictorTrainArgs {
     #[arg(short, long, value_name = "P.json")]
     output: PathBuf,
     /// Width of the hidden layer.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 32)]
     hidden: usize,
     /// Full-batch Adam iterations.
     #[arg(long, default_value_t = 3000)]
