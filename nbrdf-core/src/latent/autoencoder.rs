@@ -683,6 +683,20 @@ mod tests {
         net.to_flat()
     }
 
+    /// Two visible materials, both trained on and validated on.
+    fn two_materials() -> (Vec<(String, Vec<f32>)>, Split) {
+        let mats = vec![
+            ("a".to_string(), material(1, [0.5, 0.2, -0.3])),
+            ("b".to_string(), material(2, [-0.4, 0.1, 0.6])),
+        ];
+        let split = Split {
+            train: vec!["a".into(), "b".into()],
+            test: vec![],
+            validation: vec!["a".into(), "b".into()],
+        };
+        (mats, split)
+    }
+
     #[test]
     fn permutation_swaps_the_rendered_channels() {
         let r = SphereRenderer::new(8, 45f64.to_radians(), 21);
@@ -699,15 +713,7 @@ mod tests {
 
     #[test]
     fn tiny_autoencoder_overfits_two_materials() {
-        let mats = vec![
-            ("a".to_string(), material(1, [0.5, 0.2, -0.3])),
-            ("b".to_string(), material(2, [-0.4, 0.1, 0.6])),
-        ];
-        let split = Split {
-            train: vec!["a".into(), "b".into()],
-            test: vec![],
-            validation: vec!["a".into(), "b".into()],
-        };
+        let (mats, split) = two_materials();
         let config = AeConfig {
             hidden: 8,
             max_epochs: 250,
@@ -740,15 +746,7 @@ mod tests {
 
     #[test]
     fn refining_a_code_lowers_the_image_loss_and_zero_steps_keep_it() {
-        let mats = vec![
-            ("a".to_string(), material(1, [0.5, 0.2, -0.3])),
-            ("b".to_string(), material(2, [-0.4, 0.1, 0.6])),
-        ];
-        let split = Split {
-            train: vec!["a".into(), "b".into()],
-            test: vec![],
-            validation: vec!["a".into(), "b".into()],
-        };
+        let (mats, split) = two_materials();
         // A barely trained autoencoder: its codes are poor, so refinement has work to do.
         let config = AeConfig {
             hidden: 8,
