@@ -90,12 +90,24 @@ pub struct SpherePixel {
 /// sphere image (metrics, the autoencoder's loss, the PCA baseline). Directions may be below
 /// the horizon near the terminator.
 pub fn sphere_pixels(size: usize, light_theta: f64) -> Vec<SpherePixel> {
+    sphere_pixels_window(size, light_theta, (0.0, 0.0), 1.0)
+}
+
+/// [`sphere_pixels`] of a square window of the view, centred on `centre` (image coordinates:
+/// `x` right, `y` up, the sphere's outline the unit circle) with half side `half_width`; 1 and
+/// the origin give the whole sphere, smaller windows zoom in (e.g. on the highlight).
+pub fn sphere_pixels_window(
+    size: usize,
+    light_theta: f64,
+    centre: (f32, f32),
+    half_width: f32,
+) -> Vec<SpherePixel> {
     let light_world = Vec3::new(light_theta.sin() as f32, 0.0, light_theta.cos() as f32);
     let mut out = Vec::new();
     for py in 0..size {
         for px in 0..size {
-            let x = (2.0 * (px as f32 + 0.5) / size as f32) - 1.0;
-            let y = 1.0 - (2.0 * (py as f32 + 0.5) / size as f32);
+            let x = centre.0 + half_width * ((2.0 * (px as f32 + 0.5) / size as f32) - 1.0);
+            let y = centre.1 + half_width * (1.0 - (2.0 * (py as f32 + 0.5) / size as f32));
             let r2 = x * x + y * y;
             if r2 >= 1.0 {
                 continue;

@@ -73,6 +73,42 @@ fn solve_spd(m: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
     Some(x)
 }
 
+/// The images of the training loss: the sphere, and optionally the zoom on its highlight.
+/// The loss is the sum of the images' losses.
+struct LossViews(Vec<SphereRenderer>);
+
+impl LossViews {
+    /// The tone-mapped target image of each view.
+    fn targets(&self, flat: &[f32]) -> Vec<Vec<f32>> {
+        self.0
+            .iter()
+            .map(|v| v.render_toned(flat, &mut v.scratch()))
+            .collect()
+    }
+
+    /// Summed loss against `targets`; the summed gradient is written into `grad` if given.
+    fn loss(&self, flat: &[f32], targets: &[Vec<f32>], mut grad: Option<&mut [f32]>) -> f64 {
+        let mut total = 0.0;
+        let mut g_view = vec![0.0f32; flat.len()];
+        if let Some(g) = grad.as_deref_mut() {
+            g.fill(0.0);
+        }
+        for (view, target) in self.0.iter().zip(targets) {
+            let want_grad = grad.is_some();
+            total += view.loss(
+                flat,
+                target,
+                &mut view.scratch(),
+                want_grad.then_some(g_view.as_mut_slice()),
+            );
+            if let Some(g) = grad.as_deref_mut() {
+                g.iter_mut().zip(&g_view).for_each(|(a, b)| *a += b);
+            }
+        }
+        total
+    }
+}
+
 /// The recorded material split.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 pub struct Split {
@@ -153,6 +189,9 @@ pub struct AeConfig {
     pub surrogate_floor: f32,
     /// Side of the loss's sphere image (64; smaller only for tests).
     pub image_size: usize,
+    /// Half width of a second loss image zoomed on the highlight (0: the sphere alone, the
+    /// paper's loss). See [`SphereRenderer::highlight`].
+    pub highlight_zoom: f32,
     /// Standard deviation of the Gaussian noise added to the standardised encoder input.
     pub input_noise: f32,
     /// L2 penalty gradient `weight_decay * p` added to every parameter's gradient.
@@ -176,6 +215,7 @@ impl Default for AeConfig {
             input_noise: 0.2,
             weight_decay: 1e-4,
             image_size: super::sphere::SIZE,
+            highlight_zoom: 0.0,
         }
     }
 }
@@ -399,12 +439,20 @@ impl AutoEncoder {
         } else {
             &PERMUTATIONS[..1]
         };
-        let mut renderer = SphereRenderer::new(
-            config.image_size,
-            super::sphere::LIGHT_THETA_DEG.to_radians(),
-            hidden_nbrdf,
-        );
-        renderer.surrogate_floor = config.surrogate_floor;
+        let theta = super::sphere::LIGHT_THETA_DEG.to_radians();
+        let mut views = vec![SphereRenderer::new(config.image_size, theta, hidden_nbrdf)];
+        if config.highlight_zoom > 0.0 {
+            views.push(SphereRenderer::highlight(
+                config.image_size,
+                theta,
+                hidden_nbrdf,
+                config.highlight_zoom,
+            ));
+        }
+        views
+            .iter_mut()
+            .for_each(|v| v.surrogate_floor = config.surrogate_floor);
+        let views = LossViews(views);
         // Training samples: (flat weights, target tone-mapped image).
         let mut train_flats = Vec::new();
         let fitted: Vec<&String> = if split.validation.len() < split.train.len() {
@@ -443,16 +491,14 @@ impl AutoEncoder {
             mean[d] = m as f32;
             std[d] = (v.sqrt() as f32).max(1e-4);
         }
-        let targets: Vec<Vec<f32>> = train_flats
-            .par_iter()
-            .map(|f| renderer.render_toned(f, &mut renderer.scratch()))
-            .collect();
-        let validation: Vec<(Vec<f32>, Vec<f32>)> = split
+        let targets: Vec<Vec<Vec<f32>>> =
+            train_flats.par_iter().map(|f| views.targets(f)).collect();
+        let validation: Vec<(Vec<f32>, Vec<Vec<f32>>)> = split
             .validation
             .iter()
             .map(|name| {
                 let f = find(name)?.clone();
-                let t = renderer.render_toned(&f, &mut renderer.scratch());
+                let t = views.targets(&f);
                 Ok((f, t))
             })
             .collect::<Result<_>>()?;
@@ -545,12 +591,7 @@ impl AutoEncoder {
                                 .map(|(y, (m, s))| y * s + m)
                                 .collect();
                             let mut g = vec![0.0f32; dims];
-                            let loss = renderer.loss(
-                                &flat,
-                                &targets[i],
-                                &mut renderer.scratch(),
-                                Some(&mut g),
-                            );
+                            let loss = views.loss(&flat, &targets[i], Some(&mut g));
                             let g: Vec<f32> = g.iter().zip(&ae.std).map(|(g, s)| g * s).collect();
                             (loss, g)
                         } else {
@@ -599,7 +640,7 @@ impl AutoEncoder {
                 ae.encoder.set_flat(&params[..n_enc]);
                 ae.decoder.set_flat(&params[n_enc..]);
             }
-            let validation_image_loss = ae.image_loss(&renderer, &validation);
+            let validation_image_loss = ae.image_loss(&views, &validation);
             let stats = AeEpoch {
                 epoch,
                 phase: if image_phase { "image" } else { "weights" },
@@ -644,6 +685,7 @@ impl AutoEncoder {
             "weight_decay": config.weight_decay,
             "augmentation": if config.augment { "6 RGB permutations" } else { "none" },
             "loss": format!("pixel MSE of max(x,1e-12)^(1/2.2), {s}x{s} sphere, light at 45 degrees", s = config.image_size),
+            "highlight_zoom": config.highlight_zoom,
             "seconds": start.elapsed().as_secs_f64(),
             "threads": rayon::current_num_threads(),
         });
@@ -651,14 +693,14 @@ impl AutoEncoder {
     }
 
     /// Mean image loss of reconstructing `(flat, target image)` pairs.
-    pub fn image_loss(&self, renderer: &SphereRenderer, set: &[(Vec<f32>, Vec<f32>)]) -> f64 {
+    fn image_loss(&self, views: &LossViews, set: &[(Vec<f32>, Vec<Vec<f32>>)]) -> f64 {
         if set.is_empty() {
             return f64::NAN;
         }
         set.par_iter()
             .map(|(f, t)| {
                 let rec = self.decode_flat(&self.encode_flat(f));
-                renderer.loss(&rec, t, &mut renderer.scratch(), None)
+                views.loss(&rec, t, None)
             })
             .collect::<Vec<_>>()
             .iter()

@@ -58,8 +58,28 @@ pub struct Scratch {
 
 impl SphereRenderer {
     pub fn new(size: usize, light_theta: f64, hidden: usize) -> Self {
+        Self::window(size, light_theta, hidden, (0.0, 0.0), 1.0)
+    }
+
+    /// The same view zoomed on the mirror direction's point of the sphere (the normal halfway
+    /// between light and view), `half_width` of the sphere's radius on each side: a 64 x 64
+    /// image of half width 0.1 resolves the highlight ten times finer than the whole sphere,
+    /// where lobes sharper than `n ~ 1000` are a pixel or less.
+    pub fn highlight(size: usize, light_theta: f64, hidden: usize, half_width: f32) -> Self {
+        let centre = ((light_theta / 2.0).sin() as f32, 0.0);
+        Self::window(size, light_theta, hidden, centre, half_width)
+    }
+
+    /// A `size x size` image of a window of the view ([`metrics::sphere_pixels_window`]).
+    pub fn window(
+        size: usize,
+        light_theta: f64,
+        hidden: usize,
+        centre: (f32, f32),
+        half_width: f32,
+    ) -> Self {
         let (mut pixels, mut inputs, mut cos) = (Vec::new(), Vec::new(), Vec::new());
-        for p in metrics::sphere_pixels(size, light_theta) {
+        for p in metrics::sphere_pixels_window(size, light_theta, centre, half_width) {
             if p.light.z <= 0.0 || p.view.z <= 0.0 {
                 continue;
             }
@@ -373,6 +393,25 @@ mod tests {
                 "param {i}: {fd} vs {g}"
             );
         }
+    }
+
+    #[test]
+    fn highlight_view_looks_at_the_mirror_direction_only() {
+        let theta = 45f64.to_radians();
+        let whole = SphereRenderer::new(32, theta, 21);
+        let zoom = SphereRenderer::highlight(32, theta, 21, 0.1);
+        let max_sin_th = |r: &SphereRenderer| r.inputs.iter().map(|x| x[0]).fold(0.0f32, f32::max);
+        let min_sin_th = |r: &SphereRenderer| r.inputs.iter().map(|x| x[0]).fold(1.0f32, f32::min);
+        // Every pixel of the zoom is lit, within 10 degrees of the half vector, and one of them
+        // sits on it; the whole sphere spans half vectors to the horizon.
+        assert_eq!(zoom.pixels.len(), 32 * 32);
+        assert!(
+            max_sin_th(&zoom) < 10f32.to_radians().sin(),
+            "{}",
+            max_sin_th(&zoom)
+        );
+        assert!(min_sin_th(&zoom) < 0.5f32.to_radians().sin());
+        assert!(max_sin_th(&whole) > 0.9);
     }
 
     #[test]

@@ -101,6 +101,10 @@ pub struct AeTrainArgs {
     /// in it are ignored, so nothing of a held-out material is seen.
     #[arg(long, value_name = "DIR")]
     extra_nbrdfs: Option<PathBuf>,
+    /// Half width of a second loss image zoomed on the highlight (0: the sphere alone, the
+    /// paper's loss): lets the codes hold the sharpness of lobes finer than the sphere's pixels.
+    #[arg(long, default_value_t = AeConfig::default().highlight_zoom)]
+    highlight_zoom: f32,
     /// Disable the 6 RGB-permutation augmentation.
     #[arg(long)]
     no_augment: bool,
@@ -240,6 +244,7 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
         input_noise: args.input_noise,
         weight_decay: args.weight_decay,
         augment: !args.no_augment,
+        highlight_zoom: args.highlight_zoom,
         ..AeConfig::default()
     };
     let target = if args.quiet {
