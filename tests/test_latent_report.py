@@ -157,3 +157,40 @@ def test_extra_networks_train_only_on_training_materials(tmp_path):
     # Both versions of every training material, never the test material.
     assert sorted(labels) == sorted(2 * ["a", "b", "d", "e"])
     assert len(json.loads(predictor.read_text())["ensemble"]) == 1
+
+
+def test_lobe_loss_and_linear_predictor_from_the_cli(tmp_path):
+    """`ae train --lobe-weight` reads each training material's fitted lobe and changes the
+    codes (the lobe head pulls them); `predictor train --hidden 0 --weight-decay` gives a
+    regularised linear predictor whose lobes are valid."""
+    cli = _cli_or_skip()
+    folder = tmp_path / "nbrdfs"
+    folder.mkdir()
+    for k, name in enumerate("abcde"):
+        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=60 + k), name=name,
+                      sampling={"model": "blinn-phong", "exponent": 3.0 ** (k + 1), "specular_weight": 0.1 * (k + 1),
+                                "source": "fit"})
+
+    def nbrdf(*command):
+        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    codes = {}
+    for weight in ("0", "0.5"):
+        ae = tmp_path / f"ae-{weight}.json"
+        nbrdf("ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "4", "--warmup", "2", "--quiet",
+              "--lobe-weight", weight)
+        assert json.loads(ae.read_text())["provenance"]["lobe_weight"] == float(weight)
+        codes[weight] = np.array(json.loads(nbrdf("ae", "encode", "--ae", ae, folder / "c.nbrdf.json")))
+    assert codes["0"].shape == (32,) and np.all(np.isfinite(codes["0.5"]))
+    assert np.abs(codes["0"] - codes["0.5"]).max() > 1e-4
+    predictor = tmp_path / "p.json"
+    nbrdf("predictor", "train", "--ae", tmp_path / "ae-0.5.json", "--nbrdfs", folder, "-o", predictor,
+          "--iterations", "50", "--members", "2", "--hidden", "0", "--weight-decay", "0.01")
+    provenance = json.loads(predictor.read_text())["provenance"]
+    assert provenance["architecture"].startswith("32-2, linear") and provenance["weight_decay"] == pytest.approx(0.01)
+    report = json.loads(nbrdf("predictor", "eval", "--ae", tmp_path / "ae-0.5.json", "--predictor", predictor,
+                              "--nbrdfs", folder))
+    (row,) = report["test"]
+    assert row["predicted"]["exponent"] > 0 and 0 <= row["predicted"]["specular_weight"] <= 1

@@ -166,9 +166,17 @@ pub struct AutoEncoder {
     pub encoder: Mlp,
     pub decoder: Mlp,
     pub split: Split,
+    /// Codes of the training examples (every permutation), recorded after training: further
+    /// starting points of [`AutoEncoder::refine_code`]. Empty in files from before.
+    #[serde(default)]
+    pub anchors: Vec<Vec<f32>>,
     #[serde(default)]
     pub provenance: serde_json::Value,
 }
+
+/// Starts of a refinement: the encoder's code and the training codes whose spheres are
+/// closest to the target's.
+pub const REFINE_STARTS: usize = 3;
 
 /// Training settings.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,6 +204,12 @@ pub struct AeConfig {
     pub input_noise: f32,
     /// L2 penalty gradient `weight_decay * p` added to every parameter's gradient.
     pub weight_decay: f32,
+    /// Weight of the auxiliary lobe loss (0: off, the paper's loss alone): a linear head on
+    /// the code, trained jointly and then discarded, regresses each training material's fitted
+    /// sampling lobe (standardised `ln n` and `w`). The image loss cannot see highlights
+    /// sharper than the sphere's pixels, so without it codes need not hold the sharpness that
+    /// the Phong predictor must read from them.
+    pub lobe_weight: f32,
 }
 
 impl Default for AeConfig {
@@ -216,6 +230,7 @@ impl Default for AeConfig {
             weight_decay: 1e-4,
             image_size: super::sphere::SIZE,
             highlight_zoom: 0.0,
+            lobe_weight: 0.0,
         }
     }
 }
@@ -227,6 +242,23 @@ pub struct AeEpoch {
     pub train_loss: f64,
     pub validation_image_loss: f64,
     pub seconds: f64,
+}
+
+/// The auxiliary lobe loss `weight/2 |head(code) - target|^2` of one example: its value, its
+/// gradient in the code (returned) and in the head's parameters (added to `grad_head`).
+fn lobe_loss(
+    head: &Mlp,
+    code: &[f32],
+    target: &[f32; 2],
+    weight: f32,
+    grad_head: &mut [f32],
+) -> (f64, Vec<f32>) {
+    let acts = head.forward(code);
+    let pred = acts.last().cloned().unwrap_or_default();
+    let d = [pred[0] - target[0], pred[1] - target[1]];
+    let loss = (weight * 0.5 * (d[0] * d[0] + d[1] * d[1])) as f64;
+    let g_code = head.backward(&acts, &[weight * d[0], weight * d[1]], grad_head);
+    (loss, g_code)
 }
 
 /// Swaps the RGB outputs of a flat network: output channel `k` becomes input channel `p[k]`.
@@ -315,32 +347,81 @@ impl AutoEncoder {
 
     /// Refines a code by analysis by synthesis: Levenberg-Marquardt on the tone-mapped pixel
     /// residuals of the decoded network's sphere against the input network's own (the image
-    /// loss is their mean square). The encoder's code is the start, so 0 iterations return it;
-    /// this closes the gap between what the encoder predicts for an unseen material and the
-    /// best the decoder can express.
+    /// loss is their mean square), from the encoder's code and from the [`REFINE_STARTS`]` - 1`
+    /// recorded training codes ([`AutoEncoder::anchors`]) whose spheres are closest to the
+    /// target; the best result wins. 0 iterations return the encoder's code. This closes the
+    /// gap between what the encoder predicts for an unseen material and the best the decoder
+    /// can express.
     /// With 32 unknowns the Jacobian costs 32 extra renders (forward differences) and the
     /// damped normal equations are a 32 x 32 solve, so each iteration is a few milliseconds and
     /// converges where first-order steps crawl along the loss's ill-conditioned valleys.
     /// Returns the best code visited (the start if nothing improves).
     pub fn refine_code(&self, flat: &[f32], code: &[f32], iterations: usize) -> Vec<f32> {
+        if iterations == 0 {
+            return code.to_vec();
+        }
         let renderer = SphereRenderer::new(
             super::sphere::SIZE,
             super::sphere::LIGHT_THETA_DEG.to_radians(),
             self.nbrdf_hidden,
         );
+        let target = renderer.render_toned(flat, &mut renderer.scratch());
+        // Local search can stall in a poor valley of the decoder's manifold; starting also
+        // from the training codes that already look most like the target avoids most stalls.
+        let mut ranked: Vec<(f64, &Vec<f32>)> = self
+            .anchors
+            .par_iter()
+            .filter(|a| a.len() == code.len())
+            .map(|a| {
+                let r = self.residual(&renderer, &target, a, &mut renderer.scratch());
+                (r.iter().map(|v| v * v).sum::<f64>(), a)
+            })
+            .filter(|(c, _)| c.is_finite())
+            .collect();
+        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let starts: Vec<&[f32]> = std::iter::once(code)
+            .chain(ranked.iter().map(|(_, a)| a.as_slice()))
+            .take(REFINE_STARTS)
+            .collect();
+        starts
+            .iter()
+            .map(|z| self.levenberg_marquardt(&renderer, &target, z, iterations))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or_else(|| code.to_vec(), |(z, _)| z)
+    }
+
+    /// Tone-mapped pixel residuals of the sphere decoded from `z` against `target`.
+    fn residual(
+        &self,
+        renderer: &SphereRenderer,
+        target: &[f32],
+        z: &[f32],
+        scratch: &mut super::sphere::Scratch,
+    ) -> Vec<f64> {
+        renderer
+            .render_toned(&self.decode_flat(z), scratch)
+            .iter()
+            .zip(target)
+            .map(|(a, b)| f64::from(a - b))
+            .collect()
+    }
+
+    /// `iterations` Levenberg-Marquardt steps from `start`: the best code visited and its
+    /// sum of squared residuals.
+    fn levenberg_marquardt(
+        &self,
+        renderer: &SphereRenderer,
+        target: &[f32],
+        start: &[f32],
+        iterations: usize,
+    ) -> (Vec<f32>, f64) {
         let mut scratch = renderer.scratch();
-        let target = renderer.render_toned(flat, &mut scratch);
-        let residual = |z: &[f32], scratch: &mut super::sphere::Scratch| -> Vec<f64> {
-            renderer
-                .render_toned(&self.decode_flat(z), scratch)
-                .iter()
-                .zip(&target)
-                .map(|(a, b)| f64::from(a - b))
-                .collect()
+        let residual = |z: &[f32], scratch: &mut super::sphere::Scratch| {
+            self.residual(renderer, target, z, scratch)
         };
         let sum_sq = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
-        let dims = code.len();
-        let mut z = code.to_vec();
+        let dims = start.len();
+        let mut z = start.to_vec();
         let mut r = residual(&z, &mut scratch);
         let mut cost = sum_sq(&r);
         let mut lambda = 1e-3;
@@ -393,7 +474,7 @@ impl AutoEncoder {
                 break;
             }
         }
-        z
+        (z, cost)
     }
 
     /// Encoder code, then [`AutoEncoder::refine_code`] with `iterations` iterations.
@@ -417,10 +498,12 @@ impl AutoEncoder {
 
     /// Trains on the named flat networks (all of one hidden width); `split` says which are
     /// used. A name may appear more than once (versions of a material from different sources:
-    /// all are training examples; validation uses the first). `progress` is called after every
-    /// epoch.
+    /// all are training examples; validation uses the first). `lobes` holds the fitted sampling
+    /// lobes `(name, n, w)` of the training materials, used only when `config.lobe_weight > 0`.
+    /// `progress` is called after every epoch.
     pub fn train(
         materials: &[(String, Vec<f32>)],
+        lobes: &[(String, f64, f64)],
         hidden_nbrdf: usize,
         split: Split,
         config: &AeConfig,
@@ -453,8 +536,10 @@ impl AutoEncoder {
             .iter_mut()
             .for_each(|v| v.surrogate_floor = config.surrogate_floor);
         let views = LossViews(views);
-        // Training samples: (flat weights, target tone-mapped image).
+        // Training samples: (flat weights, target tone-mapped image, lobe label).
         let mut train_flats = Vec::new();
+        let mut train_lobes: Vec<[f32; 2]> = Vec::new();
+        let use_lobes = config.lobe_weight > 0.0;
         let fitted: Vec<&String> = if split.validation.len() < split.train.len() {
             split
                 .train
@@ -468,9 +553,22 @@ impl AutoEncoder {
         for name in fitted {
             // Every network of the material (`materials` may hold several versions of one).
             find(name)?;
+            // The lobe is fitted to the mean over RGB, so it labels every permutation.
+            let lobe = match lobes.iter().find(|(n, _, _)| n == name) {
+                Some(&(_, n, w)) if n.is_finite() && w.is_finite() => {
+                    [n.max(1e-3).ln() as f32, w as f32]
+                }
+                _ if use_lobes => {
+                    return Err(NbrdfError::InvalidArgument(format!(
+                        "the lobe loss needs the fitted sampling lobe of '{name}'"
+                    )))
+                }
+                _ => [0.0; 2],
+            };
             for (_, flat) in materials.iter().filter(|(n, _)| n == name) {
                 for &p in perms {
                     train_flats.push(permute_outputs(flat, hidden_nbrdf, p));
+                    train_lobes.push(lobe);
                 }
             }
         }
@@ -528,13 +626,41 @@ impl AutoEncoder {
             encoder: Mlp::new(&[dims, config.hidden, CODE_SIZE], config.seed, 0),
             decoder: Mlp::new(&[CODE_SIZE, config.hidden, dims], config.seed, 1 << 32),
             split,
+            anchors: Vec::new(),
             provenance: serde_json::Value::Null,
         };
         let standardised: Vec<Vec<f32>> = train_flats.iter().map(|f| ae.standardise(f)).collect();
+        // The lobe head's targets: ln n and w standardised over the training examples.
+        let lobe_targets: Vec<[f32; 2]> = {
+            let stats = |k: usize| {
+                let m = train_lobes.iter().map(|l| l[k] as f64).sum::<f64>() / n;
+                let v = train_lobes
+                    .iter()
+                    .map(|l| (l[k] as f64 - m).powi(2))
+                    .sum::<f64>()
+                    / n;
+                (m as f32, (v.sqrt() as f32).max(1e-3))
+            };
+            let (s0, s1) = (stats(0), stats(1));
+            train_lobes
+                .iter()
+                .map(|l| [(l[0] - s0.0) / s0.1, (l[1] - s1.0) / s1.1])
+                .collect()
+        };
+        let mut lobe_head = Mlp::new(&[CODE_SIZE, 2], config.seed, 5 << 32);
         let n_enc = ae.encoder.parameter_count();
-        let n_all = n_enc + ae.decoder.parameter_count();
+        let n_dec = n_enc + ae.decoder.parameter_count();
+        let n_all = n_dec
+            + if use_lobes {
+                lobe_head.parameter_count()
+            } else {
+                0
+            };
         let mut params: Vec<f32> = ae.encoder.to_flat();
         params.extend(ae.decoder.to_flat());
+        if use_lobes {
+            params.extend(lobe_head.to_flat());
+        }
         let mut adam = Adam::new(
             AdamConfig {
                 learning_rate: config.learning_rate,
@@ -609,8 +735,21 @@ impl AutoEncoder {
                                 .collect();
                             (loss, g)
                         };
-                        let (ge, gd) = grad.split_at_mut(n_enc);
-                        let g_code = ae.decoder.backward(&acts_d, &g_out, gd);
+                        let (ge, rest) = grad.split_at_mut(n_enc);
+                        let (gd, gh) = rest.split_at_mut(n_dec - n_enc);
+                        let mut g_code = ae.decoder.backward(&acts_d, &g_out, gd);
+                        let mut loss = loss;
+                        if use_lobes {
+                            let (l, g) = lobe_loss(
+                                &lobe_head,
+                                &code,
+                                &lobe_targets[i],
+                                config.lobe_weight,
+                                gh,
+                            );
+                            loss += l;
+                            g_code.iter_mut().zip(&g).for_each(|(a, b)| *a += b);
+                        }
                         ae.encoder.backward(&acts_e, &g_code, ge);
                         (loss, grad)
                     })
@@ -638,7 +777,10 @@ impl AutoEncoder {
                 }
                 adam.step(&mut params, &grad, lr);
                 ae.encoder.set_flat(&params[..n_enc]);
-                ae.decoder.set_flat(&params[n_enc..]);
+                ae.decoder.set_flat(&params[n_enc..n_dec]);
+                if use_lobes {
+                    lobe_head.set_flat(&params[n_dec..]);
+                }
             }
             let validation_image_loss = ae.image_loss(&views, &validation);
             let stats = AeEpoch {
@@ -667,8 +809,9 @@ impl AutoEncoder {
         let best_epoch = best.as_ref().map(|b| b.2);
         if let Some((_, p, _)) = best {
             ae.encoder.set_flat(&p[..n_enc]);
-            ae.decoder.set_flat(&p[n_enc..]);
+            ae.decoder.set_flat(&p[n_enc..n_dec]);
         }
+        ae.anchors = train_flats.par_iter().map(|f| ae.encode_flat(f)).collect();
         ae.provenance = serde_json::json!({
             "architecture": format!("{dims}-{h}-{CODE_SIZE}-{h}-{dims}, tanh hidden, linear code and output", h = config.hidden),
             "decoder_parameters": ae.decoder.parameter_count(),
@@ -686,6 +829,7 @@ impl AutoEncoder {
             "augmentation": if config.augment { "6 RGB permutations" } else { "none" },
             "loss": format!("pixel MSE of max(x,1e-12)^(1/2.2), {s}x{s} sphere, light at 45 degrees", s = config.image_size),
             "highlight_zoom": config.highlight_zoom,
+            "lobe_weight": config.lobe_weight,
             "seconds": start.elapsed().as_secs_f64(),
             "threads": rayon::current_num_threads(),
         });
@@ -740,6 +884,78 @@ mod tests {
     }
 
     #[test]
+    fn lobe_loss_gradients_match_finite_differences() {
+        let head = Mlp::new(&[CODE_SIZE, 2], 3, 5 << 32);
+        let code: Vec<f32> = (0..CODE_SIZE).map(|k| (k as f32 * 0.37).sin()).collect();
+        let target = [0.8f32, -1.3];
+        let mut g_head = vec![0.0f32; head.parameter_count()];
+        let (loss, g_code) = lobe_loss(&head, &code, &target, 0.7, &mut g_head);
+        let eps = 1e-2f32;
+        let f = |h: &Mlp, c: &[f32]| {
+            lobe_loss(h, c, &target, 0.7, &mut vec![0.0; h.parameter_count()]).0
+        };
+        assert!((f(&head, &code) - loss).abs() < 1e-12);
+        for k in [0, 7, 31] {
+            let (mut up, mut down) = (code.clone(), code.clone());
+            up[k] += eps;
+            down[k] -= eps;
+            let fd = (f(&head, &up) - f(&head, &down)) / (2.0 * eps as f64);
+            assert!(
+                (fd - g_code[k] as f64).abs() < 1e-3 * (1.0 + fd.abs()),
+                "code {k}: {fd} vs {}",
+                g_code[k]
+            );
+        }
+        let flat = head.to_flat();
+        for k in [0, 5, 40, 64, 65] {
+            let (mut up, mut down) = (head.clone(), head.clone());
+            let mut p = flat.clone();
+            p[k] += eps;
+            up.set_flat(&p);
+            p[k] -= 2.0 * eps;
+            down.set_flat(&p);
+            let fd = (f(&up, &code) - f(&down, &code)) / (2.0 * eps as f64);
+            assert!(
+                (fd - g_head[k] as f64).abs() < 1e-3 * (1.0 + fd.abs()),
+                "param {k}: {fd} vs {}",
+                g_head[k]
+            );
+        }
+    }
+
+    #[test]
+    fn lobe_loss_needs_every_training_lobe_and_is_off_at_weight_zero() {
+        let (mats, split) = two_materials();
+        let config = AeConfig {
+            hidden: 8,
+            max_epochs: 6,
+            warmup_epochs: 3,
+            batch: 2,
+            augment: false,
+            image_size: 16,
+            lobe_weight: 1.0,
+            ..AeConfig::default()
+        };
+        let only_a = [("a".to_string(), 30.0, 0.5)];
+        let err = AutoEncoder::train(&mats, &only_a, 21, split.clone(), &config, |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("'b'"), "{err}");
+        let both = [("a".to_string(), 30.0, 0.5), ("b".to_string(), 3000.0, 0.9)];
+        let (with, _) =
+            AutoEncoder::train(&mats, &both, 21, split.clone(), &config, |_| {}).unwrap();
+        let off = AeConfig {
+            lobe_weight: 0.0,
+            ..config
+        };
+        let (plain, _) = AutoEncoder::train(&mats, &[], 21, split.clone(), &off, |_| {}).unwrap();
+        let (labelled_off, _) = AutoEncoder::train(&mats, &both, 21, split, &off, |_| {}).unwrap();
+        // Weight 0 is the paper's loss exactly, labels or not; the lobe term changes training.
+        assert_eq!(plain.encoder, labelled_off.encoder);
+        assert_ne!(plain.encoder, with.encoder);
+    }
+
+    #[test]
     fn permutation_swaps_the_rendered_channels() {
         let r = SphereRenderer::new(8, 45f64.to_radians(), 21);
         let f = material(1, [0.5, 0.0, -0.5]);
@@ -769,7 +985,7 @@ mod tests {
             image_size: 16,
             ..AeConfig::default()
         };
-        let (ae, history) = AutoEncoder::train(&mats, 21, split, &config, |_| {}).unwrap();
+        let (ae, history) = AutoEncoder::train(&mats, &[], 21, split, &config, |_| {}).unwrap();
         let first_image = history.iter().find(|e| e.phase == "image").unwrap();
         let last = history.last().unwrap();
         assert!(
@@ -782,7 +998,8 @@ mod tests {
         let code = ae.encode_flat(&mats[0].1);
         assert_eq!(code.len(), CODE_SIZE);
         ae.decode(&code, "a").unwrap();
-        let (ae2, _) = AutoEncoder::train(&mats, 21, ae.split.clone(), &config, |_| {}).unwrap();
+        let (ae2, _) =
+            AutoEncoder::train(&mats, &[], 21, ae.split.clone(), &config, |_| {}).unwrap();
         assert_eq!(ae.decoder, ae2.decoder);
     }
 
@@ -800,7 +1017,7 @@ mod tests {
             image_size: 16,
             ..AeConfig::default()
         };
-        let (ae, _) = AutoEncoder::train(&mats, 21, split, &config, |_| {}).unwrap();
+        let (ae, _) = AutoEncoder::train(&mats, &[], 21, split, &config, |_| {}).unwrap();
         let r = SphereRenderer::standard();
         let mut s = r.scratch();
         let flat = &mats[1].1;
@@ -815,6 +1032,46 @@ mod tests {
         assert!(
             after < 0.7 * before,
             "refined loss {after} vs encoder's {before}"
+        );
+    }
+
+    #[test]
+    fn refinement_also_starts_from_the_closest_training_codes() {
+        let (mats, split) = two_materials();
+        let config = AeConfig {
+            hidden: 8,
+            max_epochs: 40,
+            warmup_epochs: 30,
+            batch: 2,
+            augment: false,
+            input_noise: 0.0,
+            image_size: 16,
+            ..AeConfig::default()
+        };
+        let (ae, _) = AutoEncoder::train(&mats, &[], 21, split, &config, |_| {}).unwrap();
+        // One anchor per training example, each the encoder's code of that example.
+        assert_eq!(ae.anchors.len(), 2);
+        assert_eq!(ae.anchors[1], ae.encode_flat(&mats[1].1));
+        let r = SphereRenderer::standard();
+        let mut s = r.scratch();
+        let flat = &mats[1].1;
+        let target = r.render_toned(flat, &mut s);
+        let loss = |c: &[f32], s: &mut crate::latent::sphere::Scratch| {
+            r.loss(&ae.decode_flat(c), &target, s, None)
+        };
+        // A start far off the manifold: alone it stays poor, the anchors rescue it.
+        let far: Vec<f32> = ae.anchors[1].iter().map(|v| v + 40.0).collect();
+        let mut alone = ae.clone();
+        alone.anchors.clear();
+        let (single, multi) = (
+            loss(&alone.refine_code(flat, &far, 3), &mut s),
+            loss(&ae.refine_code(flat, &far, 3), &mut s),
+        );
+        let at_anchor = loss(&ae.anchors[1], &mut s);
+        assert!(multi <= at_anchor, "{multi} vs the anchor's {at_anchor}");
+        assert!(
+            multi < 0.5 * single,
+            "multi-start {multi} vs single start {single}"
         );
     }
 

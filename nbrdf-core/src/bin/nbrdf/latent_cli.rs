@@ -5,6 +5,7 @@ use super::{emit, with_threads};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::latent::autoencoder::{AeConfig, AutoEncoder, Split};
+use nbrdf_core::latent::predictor::PredictorConfig;
 use nbrdf_core::{Nbrdf, NbrdfError, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -105,6 +106,11 @@ pub struct AeTrainArgs {
     /// paper's loss): lets the codes hold the sharpness of lobes finer than the sphere's pixels.
     #[arg(long, default_value_t = AeConfig::default().highlight_zoom)]
     highlight_zoom: f32,
+    /// Weight of the auxiliary lobe loss (0: the paper's image loss alone): a linear head on
+    /// the code regresses each training material's fitted sampling lobe (ln n, w; from the
+    /// networks' "fit" sampling, or fitted here), so that codes hold the lobe's sharpness.
+    #[arg(long, default_value_t = AeConfig::default().lobe_weight)]
+    lobe_weight: f32,
     /// Disable the 6 RGB-permutation augmentation.
     #[arg(long)]
     no_augment: bool,
@@ -245,7 +251,19 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
         weight_decay: args.weight_decay,
         augment: !args.no_augment,
         highlight_zoom: args.highlight_zoom,
+        lobe_weight: args.lobe_weight,
         ..AeConfig::default()
+    };
+    let lobes: Vec<(String, f64, f64)> = if config.lobe_weight > 0.0 {
+        use rayon::prelude::*;
+        with_threads(args.threads, || {
+            nets.par_iter()
+                .filter(|(name, _)| split.train.contains(name))
+                .map(|(name, net)| phong_label(net, false).map(|(n, w)| (name.clone(), n, w)))
+                .collect::<Result<_>>()
+        })??
+    } else {
+        Vec::new()
     };
     let target = if args.quiet {
         ProgressDrawTarget::hidden()
@@ -259,7 +277,7 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
         ProgressBar::with_draw_target(Some(config.max_epochs as u64), target).with_style(style);
     let start = Instant::now();
     let (ae, history) = with_threads(args.threads, || {
-        AutoEncoder::train(&materials, hidden, split, &config, |e| {
+        AutoEncoder::train(&materials, &lobes, hidden, split, &config, |e| {
             bar.set_position(e.epoch as u64 + 1);
             if !args.quiet && bar.is_hidden() {
                 eprintln!(
@@ -556,12 +574,15 @@ pub struct PredictorTrainArgs {
     /// Where to write the result.
     #[arg(short, long, value_name = "P.json")]
     output: PathBuf,
-    /// Width of the hidden layer.
-    #[arg(long, default_value_t = 32)]
+    /// Width of the hidden layer (0: a linear map from the code).
+    #[arg(long, default_value_t = PredictorConfig::default().hidden)]
     hidden: usize,
     /// Full-batch Adam iterations.
-    #[arg(long, default_value_t = 3000)]
+    #[arg(long, default_value_t = PredictorConfig::default().iterations)]
     iterations: usize,
+    /// L2 penalty on the weights (a regulariser: 80 labelled materials).
+    #[arg(long, default_value_t = PredictorConfig::default().weight_decay)]
+    weight_decay: f32,
     /// Random seed (training is deterministic per seed).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -576,7 +597,7 @@ pub struct PredictorTrainArgs {
     #[arg(long, value_name = "DIR")]
     extra_nbrdfs: Option<PathBuf>,
     /// Networks in the ensemble (seeds SEED, SEED + 1, ...; the prediction is their mean).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = PredictorConfig::default().members)]
     members: usize,
     /// Predict from codes refined by this many iterations (`ae encode --refine`).
     /// Recorded in P.json; `predict-phong` and `predictor eval` refine the same way. Off by
@@ -748,10 +769,13 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
         let mut pred = PhongPredictor::train_ensemble(
             &examples,
             grids_arg,
-            args.hidden,
-            args.iterations,
-            args.seed,
-            args.members,
+            &PredictorConfig {
+                hidden: args.hidden,
+                iterations: args.iterations,
+                seed: args.seed,
+                members: args.members,
+                weight_decay: args.weight_decay,
+            },
         )?;
         pred.refine_steps = args.refine;
         let train_seconds = t1.elapsed().as_secs_f64();
