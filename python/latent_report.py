@@ -225,6 +225,11 @@ def main() -> int:
     p.add_argument("--out", type=Path, help="output folder (default: out/latent/SOURCE)")
     p.add_argument("--ae", type=Path, help="an existing AE.json (default: OUT/ae.json, trained if missing)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--lobe-weight", type=float, default=0.0,
+                   help="ae train --lobe-weight: auxiliary loss pulling the codes towards the fitted lobes (0: the paper's loss)")
+    p.add_argument("--predictor-hidden", type=int,
+                   help="predictor train --hidden (default: the CLI's; 0 for a linear predictor)")
+    p.add_argument("--predictor-weight-decay", type=float, help="predictor train --weight-decay (default: the CLI's)")
     p.add_argument("--pca-tables", choices=["sgd", "nbrdf"],
                    help="what PCA-32 decomposes: the SGD tables or the input networks' tabulations "
                         "(default: sgd for --source sgd, nbrdf for --source authors)")
@@ -253,7 +258,8 @@ def main() -> int:
         train_missing(args.cli, args.nbrdfs, args.samples, args.source)
     ae = args.ae or args.out / "ae.json"
     if not ae.exists():
-        print(run([args.cli, "ae", "train", "--nbrdfs", args.nbrdfs, "-o", ae, "--seed", args.seed]))
+        print(run([args.cli, "ae", "train", "--nbrdfs", args.nbrdfs, "-o", ae, "--seed", args.seed,
+                   "--lobe-weight", args.lobe_weight]))
     split = json.loads(ae.read_text())["split"]
     if args.veach_only:
         veach(args, split)
@@ -305,7 +311,12 @@ def main() -> int:
     # 4. Predictor: fitted vs predicted on the test split.
     pred = args.out / "predictor.json"
     if not pred.exists():
-        print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred]))
+        options = []
+        if args.predictor_hidden is not None:
+            options += ["--hidden", args.predictor_hidden]
+        if args.predictor_weight_decay is not None:
+            options += ["--weight-decay", args.predictor_weight_decay]
+        print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred, *options]))
     predicted_dir = args.out / "predicted"
     predicted_dir.mkdir(exist_ok=True)
     lines = ["| material | fitted n | predicted n | fitted w | predicted w |", "|---|---|---|---|---|"]
