@@ -1003,14 +1003,14 @@ mod tests {
         assert_eq!(ae.decoder, ae2.decoder);
     }
 
-    #[test]
-    fn refining_a_code_lowers_the_image_loss_and_zero_steps_keep_it() {
+    /// A small autoencoder of the two-material fixture after `epochs` epochs, `warmup` of
+    /// them in weight space.
+    fn small_autoencoder(epochs: usize, warmup: usize) -> (AutoEncoder, Vec<(String, Vec<f32>)>) {
         let (mats, split) = two_materials();
-        // A barely trained autoencoder: its codes are poor, so refinement has work to do.
         let config = AeConfig {
             hidden: 8,
-            max_epochs: 4,
-            warmup_epochs: 3,
+            max_epochs: epochs,
+            warmup_epochs: warmup,
             batch: 2,
             augment: false,
             input_noise: 0.0,
@@ -1018,17 +1018,27 @@ mod tests {
             ..AeConfig::default()
         };
         let (ae, _) = AutoEncoder::train(&mats, &[], 21, split, &config, |_| {}).unwrap();
+        (ae, mats)
+    }
+
+    /// The image loss of a code's decoded network against the sphere of `flat`.
+    fn code_loss(ae: &AutoEncoder, flat: &[f32], code: &[f32]) -> f64 {
         let r = SphereRenderer::standard();
         let mut s = r.scratch();
-        let flat = &mats[1].1;
         let target = r.render_toned(flat, &mut s);
+        r.loss(&ae.decode_flat(code), &target, &mut s, None)
+    }
+
+    #[test]
+    fn refining_a_code_lowers_the_image_loss_and_zero_steps_keep_it() {
+        // A barely trained autoencoder: its codes are poor, so refinement has work to do.
+        let (ae, mats) = small_autoencoder(4, 3);
+        let flat = &mats[1].1;
         let code = ae.encode_flat(flat);
-        let loss = |c: &[f32], s: &mut crate::latent::sphere::Scratch| {
-            r.loss(&ae.decode_flat(c), &target, s, None)
-        };
+        let loss = |c: &[f32]| code_loss(&ae, flat, c);
         assert_eq!(ae.refine_code(flat, &code, 0), code);
         let refined = ae.refine_code(flat, &code, 10);
-        let (before, after) = (loss(&code, &mut s), loss(&refined, &mut s));
+        let (before, after) = (loss(&code), loss(&refined));
         assert!(
             after < 0.7 * before,
             "refined loss {after} vs encoder's {before}"
@@ -1037,37 +1047,21 @@ mod tests {
 
     #[test]
     fn refinement_also_starts_from_the_closest_training_codes() {
-        let (mats, split) = two_materials();
-        let config = AeConfig {
-            hidden: 8,
-            max_epochs: 40,
-            warmup_epochs: 30,
-            batch: 2,
-            augment: false,
-            input_noise: 0.0,
-            image_size: 16,
-            ..AeConfig::default()
-        };
-        let (ae, _) = AutoEncoder::train(&mats, &[], 21, split, &config, |_| {}).unwrap();
+        let (ae, mats) = small_autoencoder(40, 30);
         // One anchor per training example, each the encoder's code of that example.
         assert_eq!(ae.anchors.len(), 2);
         assert_eq!(ae.anchors[1], ae.encode_flat(&mats[1].1));
-        let r = SphereRenderer::standard();
-        let mut s = r.scratch();
         let flat = &mats[1].1;
-        let target = r.render_toned(flat, &mut s);
-        let loss = |c: &[f32], s: &mut crate::latent::sphere::Scratch| {
-            r.loss(&ae.decode_flat(c), &target, s, None)
-        };
+        let loss = |c: &[f32]| code_loss(&ae, flat, c);
         // A start far off the manifold: alone it stays poor, the anchors rescue it.
         let far: Vec<f32> = ae.anchors[1].iter().map(|v| v + 40.0).collect();
         let mut alone = ae.clone();
         alone.anchors.clear();
         let (single, multi) = (
-            loss(&alone.refine_code(flat, &far, 3), &mut s),
-            loss(&ae.refine_code(flat, &far, 3), &mut s),
+            loss(&alone.refine_code(flat, &far, 3)),
+            loss(&ae.refine_code(flat, &far, 3)),
         );
-        let at_anchor = loss(&ae.anchors[1], &mut s);
+        let at_anchor = loss(&ae.anchors[1]);
         assert!(multi <= at_anchor, "{multi} vs the anchor's {at_anchor}");
         assert!(
             multi < 0.5 * single,
