@@ -576,19 +576,7 @@ impl AutoEncoder {
             return Err(NbrdfError::InvalidArgument("no training materials".into()));
         }
         let dims = train_flats[0].len();
-        let n = train_flats.len() as f64;
-        let mut mean = vec![0.0f32; dims];
-        let mut std = vec![0.0f32; dims];
-        for d in 0..dims {
-            let m = train_flats.iter().map(|f| f[d] as f64).sum::<f64>() / n;
-            let v = train_flats
-                .iter()
-                .map(|f| (f[d] as f64 - m).powi(2))
-                .sum::<f64>()
-                / n;
-            mean[d] = m as f32;
-            std[d] = (v.sqrt() as f32).max(1e-4);
-        }
+        let (mean, std) = super::column_mean_std(&train_flats, 1e-4);
         let targets: Vec<Vec<Vec<f32>>> =
             train_flats.par_iter().map(|f| views.targets(f)).collect();
         let validation: Vec<(Vec<f32>, Vec<Vec<f32>>)> = split
@@ -632,35 +620,21 @@ impl AutoEncoder {
         let standardised: Vec<Vec<f32>> = train_flats.iter().map(|f| ae.standardise(f)).collect();
         // The lobe head's targets: ln n and w standardised over the training examples.
         let lobe_targets: Vec<[f32; 2]> = {
-            let stats = |k: usize| {
-                let m = train_lobes.iter().map(|l| l[k] as f64).sum::<f64>() / n;
-                let v = train_lobes
-                    .iter()
-                    .map(|l| (l[k] as f64 - m).powi(2))
-                    .sum::<f64>()
-                    / n;
-                (m as f32, (v.sqrt() as f32).max(1e-3))
-            };
-            let (s0, s1) = (stats(0), stats(1));
+            let (m, s) = super::column_mean_std(&train_lobes, 1e-3);
             train_lobes
                 .iter()
-                .map(|l| [(l[0] - s0.0) / s0.1, (l[1] - s1.0) / s1.1])
+                .map(|l| [(l[0] - m[0]) / s[0], (l[1] - m[1]) / s[1]])
                 .collect()
         };
         let mut lobe_head = Mlp::new(&[CODE_SIZE, 2], config.seed, 5 << 32);
         let n_enc = ae.encoder.parameter_count();
         let n_dec = n_enc + ae.decoder.parameter_count();
-        let n_all = n_dec
-            + if use_lobes {
-                lobe_head.parameter_count()
-            } else {
-                0
-            };
         let mut params: Vec<f32> = ae.encoder.to_flat();
         params.extend(ae.decoder.to_flat());
         if use_lobes {
             params.extend(lobe_head.to_flat());
         }
+        let n_all = params.len();
         let mut adam = Adam::new(
             AdamConfig {
                 learning_rate: config.learning_rate,

@@ -13,6 +13,24 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::path::Path;
 
+/// Per-column mean and standard deviation (population, accumulated in f64) of equally long
+/// rows; each deviation is at least `floor`, so that standardising never divides by ~0.
+fn column_mean_std<R: AsRef<[f32]>>(rows: &[R], floor: f32) -> (Vec<f32>, Vec<f32>) {
+    let dims = rows.first().map_or(0, |r| r.as_ref().len());
+    let n = rows.len() as f64;
+    (0..dims)
+        .map(|d| {
+            let m = rows.iter().map(|r| r.as_ref()[d] as f64).sum::<f64>() / n;
+            let v = rows
+                .iter()
+                .map(|r| (r.as_ref()[d] as f64 - m).powi(2))
+                .sum::<f64>()
+                / n;
+            (m as f32, (v.sqrt() as f32).max(floor))
+        })
+        .unzip()
+}
+
 /// Reads a JSON model file (autoencoder, predictor); errors name the file.
 fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
     let named =

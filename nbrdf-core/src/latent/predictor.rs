@@ -236,18 +236,8 @@ impl PhongPredictor {
         }
         let dims = examples[0].0.len();
         let n = examples.len() as f64;
-        let mut mean = vec![0.0f32; dims];
-        let mut std = vec![0.0f32; dims];
-        for d in 0..dims {
-            let m = examples.iter().map(|e| e.0[d] as f64).sum::<f64>() / n;
-            let v = examples
-                .iter()
-                .map(|e| (e.0[d] as f64 - m).powi(2))
-                .sum::<f64>()
-                / n;
-            mean[d] = m as f32;
-            std[d] = (v.sqrt() as f32).max(1e-6);
-        }
+        let codes: Vec<&[f32]> = examples.iter().map(|e| e.0.as_slice()).collect();
+        let (mean, std) = super::column_mean_std(&codes, 1e-6);
         let mut p = PhongPredictor {
             format: FORMAT_NAME.into(),
             version: 1,
