@@ -194,3 +194,39 @@ def test_lobe_loss_and_linear_predictor_from_the_cli(tmp_path):
                               "--nbrdfs", folder))
     (row,) = report["test"]
     assert row["predicted"]["exponent"] > 0 and 0 <= row["predicted"]["specular_weight"] <= 1
+
+
+def test_seed_selection_keeps_the_best_refined_validation_autoencoder(tmp_path):
+    """`ae train --seeds 2` trains seeds 0 and 1 and keeps the one whose refined codes
+    reconstruct the validation materials best: the kept decoder is that seed's own, as trained
+    alone; `ae eval --split validation` reconstructs exactly those held-out materials."""
+    cli = _cli_or_skip()
+    folder = tmp_path / "nbrdfs"
+    folder.mkdir()
+    for k, name in enumerate("abcdefghij"):
+        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=80 + k), name=name)
+
+    def nbrdf(*command):
+        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    common = ["--epochs", "3", "--warmup", "2", "--quiet", "--mixup", "8"]
+    nbrdf("ae", "train", "--nbrdfs", folder, "-o", tmp_path / "best.json", "--seeds", "2", "--select-refine", "2",
+          *common)
+    best = json.loads((tmp_path / "best.json").read_text())
+    assert best["provenance"]["mixup"] == 8
+    candidates = best["provenance"]["selection"]["candidates"]
+    assert [c["seed"] for c in candidates] == [0, 1]
+    losses = [c["refined_validation_loss"] for c in candidates]
+    assert all(np.isfinite(losses)) and losses[0] != losses[1]
+    chosen = int(np.argmin(losses))
+    for seed in (0, 1):
+        nbrdf("ae", "train", "--nbrdfs", folder, "-o", tmp_path / f"seed{seed}.json", "--seed", seed, *common)
+        alone = json.loads((tmp_path / f"seed{seed}.json").read_text())
+        assert (alone["decoder"] == best["decoder"]) == (seed == chosen)
+    report = json.loads(nbrdf("ae", "eval", "--ae", tmp_path / "best.json", "--nbrdfs", folder, "--split",
+                              "validation", "--refine", "2", "--pca-tables", "nbrdf"))
+    validation = best["split"]["validation"]
+    assert validation and [r["name"] for r in report["materials"]] == validation
+    assert not set(validation) & set(best["split"]["test"])

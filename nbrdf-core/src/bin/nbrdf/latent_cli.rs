@@ -4,7 +4,7 @@
 use super::{emit, with_threads};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use nbrdf_core::latent::autoencoder::{AeConfig, AutoEncoder, Split};
+use nbrdf_core::latent::autoencoder::{AeConfig, AeEpoch, AutoEncoder, Split};
 use nbrdf_core::latent::predictor::PredictorConfig;
 use nbrdf_core::{Nbrdf, NbrdfError, Result};
 use std::path::{Path, PathBuf};
@@ -74,6 +74,14 @@ pub struct AeTrainArgs {
     /// Random seed (training is deterministic per seed).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Train this many autoencoders (seeds SEED, SEED + 1, ...) and keep the one whose refined
+    /// codes reconstruct the validation materials best (held-out training materials, never
+    /// the test split). Results vary with the seed; this makes them far less of a draw.
+    #[arg(long, default_value_t = 1)]
+    seeds: u64,
+    /// Refinement iterations of that choice.
+    #[arg(long, default_value_t = 30)]
+    select_refine: usize,
     /// Epoch limit (early stopping usually ends sooner).
     #[arg(long, default_value_t = AeConfig::default().max_epochs)]
     epochs: usize,
@@ -111,6 +119,11 @@ pub struct AeTrainArgs {
     /// networks' "fit" sampling, or fitted here), so that codes hold the lobe's sharpness.
     #[arg(long, default_value_t = AeConfig::default().lobe_weight)]
     lobe_weight: f32,
+    /// Extra examples per epoch mixed in weight space from two random training examples
+    /// (0: none). The networks share one initialisation, so mixtures are plausible materials
+    /// between the two; they fill the decoder's manifold between the training materials.
+    #[arg(long, default_value_t = AeConfig::default().mixup)]
+    mixup: usize,
     /// Disable the 6 RGB-permutation augmentation.
     #[arg(long)]
     no_augment: bool,
@@ -239,7 +252,7 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
             }
         }
     }
-    let config = AeConfig {
+    let base_config = AeConfig {
         seed: args.seed,
         hidden: args.hidden,
         max_epochs: args.epochs,
@@ -252,8 +265,10 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
         augment: !args.no_augment,
         highlight_zoom: args.highlight_zoom,
         lobe_weight: args.lobe_weight,
+        mixup: args.mixup,
         ..AeConfig::default()
     };
+    let config = &base_config;
     let lobes: Vec<(String, f64, f64)> = if config.lobe_weight > 0.0 {
         use rayon::prelude::*;
         with_threads(args.threads, || {
@@ -265,36 +280,75 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
     } else {
         Vec::new()
     };
-    let target = if args.quiet {
-        ProgressDrawTarget::hidden()
-    } else {
-        ProgressDrawTarget::stderr()
+    let target = || {
+        if args.quiet {
+            ProgressDrawTarget::hidden()
+        } else {
+            ProgressDrawTarget::stderr()
+        }
     };
-    let style = ProgressStyle::with_template("epoch {pos:>3}/{len} [{bar:24}] {msg}  ETA {eta}")
-        .map_err(|e| invalid(format!("progress bar template: {e}")))?
-        .progress_chars("=> ");
-    let bar =
-        ProgressBar::with_draw_target(Some(config.max_epochs as u64), target).with_style(style);
+    let style =
+        ProgressStyle::with_template("{prefix}epoch {pos:>3}/{len} [{bar:24}] {msg}  ETA {eta}")
+            .map_err(|e| invalid(format!("progress bar template: {e}")))?
+            .progress_chars("=> ");
     let start = Instant::now();
-    let (ae, history) = with_threads(args.threads, || {
-        AutoEncoder::train(&materials, &lobes, hidden, split, &config, |e| {
-            bar.set_position(e.epoch as u64 + 1);
-            if !args.quiet && bar.is_hidden() {
-                eprintln!(
-                    "epoch {:>3} {} loss {:.4e} validation image loss {:.4e} ({:.1} s)",
-                    e.epoch, e.phase, e.train_loss, e.validation_image_loss, e.seconds
-                );
-            }
-            bar.set_message(format!(
-                "{} loss {:.3e}, validation image loss {:.3e}",
-                e.phase, e.train_loss, e.validation_image_loss
-            ));
-        })
-    })??;
-    bar.finish_and_clear();
+    let mut best: Option<(f64, AutoEncoder, Vec<AeEpoch>)> = None;
+    let mut candidates = Vec::new();
+    for seed in args.seed..args.seed + args.seeds.max(1) {
+        let config = AeConfig {
+            seed,
+            ..config.clone()
+        };
+        let bar = ProgressBar::with_draw_target(Some(config.max_epochs as u64), target())
+            .with_style(style.clone());
+        if args.seeds > 1 {
+            bar.set_prefix(format!("seed {seed} "));
+        }
+        let (ae, history) = with_threads(args.threads, || {
+            AutoEncoder::train(&materials, &lobes, hidden, split.clone(), &config, |e| {
+                bar.set_position(e.epoch as u64 + 1);
+                if !args.quiet && bar.is_hidden() {
+                    eprintln!(
+                        "epoch {:>3} {} loss {:.4e} validation image loss {:.4e} ({:.1} s)",
+                        e.epoch, e.phase, e.train_loss, e.validation_image_loss, e.seconds
+                    );
+                }
+                bar.set_message(format!(
+                    "{} loss {:.3e}, validation image loss {:.3e}",
+                    e.phase, e.train_loss, e.validation_image_loss
+                ));
+            })
+        })??;
+        bar.finish_and_clear();
+        if args.seeds <= 1 {
+            best = Some((f64::NAN, ae, history));
+            break;
+        }
+        let loss = with_threads(args.threads, || {
+            ae.refined_validation_loss(&materials, args.select_refine)
+        })??;
+        if !args.quiet {
+            eprintln!("seed {seed}: refined validation image loss {loss:.4e}");
+        }
+        candidates.push(serde_json::json!({"seed": seed, "refined_validation_loss": loss}));
+        if best.as_ref().map_or(true, |(b, _, _)| loss < *b) {
+            best = Some((loss, ae, history));
+        }
+    }
+    let Some((_, mut ae, history)) = best else {
+        return Err(invalid("no autoencoder trained".into()));
+    };
     let seconds = start.elapsed().as_secs_f64();
-    let mut ae = ae;
     if let Some(obj) = ae.provenance.as_object_mut() {
+        if args.seeds > 1 {
+            obj.insert(
+                "selection".into(),
+                serde_json::json!({
+                    "criterion": format!("mean image loss of the validation materials' codes refined by {} iterations", args.select_refine),
+                    "candidates": candidates,
+                }),
+            );
+        }
         obj.insert(
             "history".into(),
             serde_json::to_value(&history).unwrap_or_default(),
@@ -409,6 +463,9 @@ pub enum PcaTables {
 pub enum SplitArg {
     Test,
     Train,
+    /// The training materials held out of the autoencoder's updates (early stopping): unseen
+    /// by its weights, so they can choose between autoencoders without touching the test split.
+    Validation,
 }
 
 #[derive(Args)]
@@ -466,6 +523,7 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
         let evaluated = match args.split {
             SplitArg::Test => &ae.split.test,
             SplitArg::Train => &ae.split.train,
+            SplitArg::Validation => &ae.split.validation,
         };
         for name in evaluated {
             let net = get(name)?;
@@ -550,7 +608,7 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
             table.insert(key.into(), m.into());
         }
         let out = serde_json::json!({
-            "split": match args.split { SplitArg::Test => "test", SplitArg::Train => "train" },
+            "split": match args.split { SplitArg::Test => "test", SplitArg::Train => "train", SplitArg::Validation => "validation" },
             "materials": rows,
             "summary": table,
             "pca": {"tables": match args.pca_tables { PcaTables::Sgd => "sgd", PcaTables::Nbrdf => "nbrdf" },
