@@ -7,7 +7,8 @@
 //! the (augmented) training set; the decoder's output is de-standardised into network weights.
 //!
 //! Training: Adam, mini-batches over the training materials times the 6 permutations of the
-//! RGB outputs (augmentation), image loss on the 64 x 64 sphere at 45 degrees. The first
+//! RGB outputs (augmentation) plus fresh weight-space mixtures of two training examples every
+//! epoch ([`AeConfig::mixup`]), image loss on the 64 x 64 sphere at 45 degrees. The first
 //! `warmup_epochs` minimise the squared error of the standardised weights instead (a warm start
 //! that puts the decoded networks near real ones, where the image loss through `exp` is well
 //! behaved; the image loss alone from a random decoder gives exploding or dead pixels). Global

@@ -294,7 +294,7 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
     let start = Instant::now();
     let mut best: Option<(f64, AutoEncoder, Vec<AeEpoch>)> = None;
     let mut candidates = Vec::new();
-    for seed in args.seed..args.seed + args.seeds.max(1) {
+    for seed in args.seed..args.seed.saturating_add(args.seeds.max(1)) {
         let config = AeConfig {
             seed,
             ..config.clone()
