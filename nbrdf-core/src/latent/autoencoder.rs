@@ -274,12 +274,22 @@ fn lobe_loss(
     (loss, g_code)
 }
 
-/// The epoch's [`AeConfig::mixup`] examples: (standardised weights, target images).
+/// The flat network of the material `name` in `(name, flat)` pairs (the first, if several).
+fn find_network<'a>(materials: &'a [(String, Vec<f32>)], name: &str) -> Result<&'a Vec<f32>> {
+    materials
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, f)| f)
+        .ok_or_else(|| NbrdfError::InvalidArgument(format!("no network for '{name}'")))
+}
+
+/// The epoch's [`AeConfig::mixup`] examples: (standardised weights, target images). Without
+/// `views` (the weight-space warm start, which needs no images) the targets are left empty.
 fn mixtures(
     train_flats: &[Vec<f32>],
     config: &AeConfig,
     epoch: usize,
-    views: &LossViews,
+    views: Option<&LossViews>,
     ae: &AutoEncoder,
 ) -> Vec<(Vec<f32>, Vec<Vec<f32>>)> {
     if train_flats.len() < 2 {
@@ -301,7 +311,8 @@ fn mixtures(
                 .zip(&train_flats[b])
                 .map(|(x, y)| (1.0 - t) * x + t * y)
                 .collect();
-            (ae.standardise(&flat), views.targets(&flat))
+            let targets = views.map_or_else(Vec::new, |v| v.targets(&flat));
+            (ae.standardise(&flat), targets)
         })
         .collect()
 }
@@ -390,6 +401,15 @@ impl AutoEncoder {
             .collect()
     }
 
+    /// The loss's sphere (64 x 64, light at 45 degrees) for this autoencoder's networks.
+    fn sphere(&self) -> SphereRenderer {
+        SphereRenderer::new(
+            super::sphere::SIZE,
+            super::sphere::LIGHT_THETA_DEG.to_radians(),
+            self.nbrdf_hidden,
+        )
+    }
+
     /// Refines a code by analysis by synthesis: Levenberg-Marquardt on the tone-mapped pixel
     /// residuals of the decoded network's sphere against the input network's own (the image
     /// loss is their mean square), from the encoder's code and from the [`SCREEN_STARTS`]` - 1`
@@ -406,11 +426,7 @@ impl AutoEncoder {
         if iterations == 0 {
             return code.to_vec();
         }
-        let renderer = SphereRenderer::new(
-            super::sphere::SIZE,
-            super::sphere::LIGHT_THETA_DEG.to_radians(),
-            self.nbrdf_hidden,
-        );
+        let renderer = self.sphere();
         let target = renderer.render_toned(flat, &mut renderer.scratch());
         // Local search can stall in a poor valley of the decoder's manifold; starting also
         // from the training codes that already look most like the target avoids most stalls.
@@ -547,22 +563,12 @@ impl AutoEncoder {
         materials: &[(String, Vec<f32>)],
         iterations: usize,
     ) -> Result<f64> {
-        let renderer = SphereRenderer::new(
-            super::sphere::SIZE,
-            super::sphere::LIGHT_THETA_DEG.to_radians(),
-            self.nbrdf_hidden,
-        );
+        let renderer = self.sphere();
         let flats = self
             .split
             .validation
             .iter()
-            .map(|name| {
-                materials
-                    .iter()
-                    .find(|(n, _)| n == name)
-                    .map(|(_, f)| f)
-                    .ok_or_else(|| NbrdfError::InvalidArgument(format!("no network for '{name}'")))
-            })
+            .map(|name| find_network(materials, name))
             .collect::<Result<Vec<_>>>()?;
         if flats.is_empty() {
             return Err(NbrdfError::InvalidArgument(
@@ -614,13 +620,7 @@ impl AutoEncoder {
         mut progress: impl FnMut(&AeEpoch),
     ) -> Result<(AutoEncoder, Vec<AeEpoch>)> {
         let start = std::time::Instant::now();
-        let find = |name: &String| -> Result<&Vec<f32>> {
-            materials
-                .iter()
-                .find(|(n, _)| n == name)
-                .map(|(_, f)| f)
-                .ok_or_else(|| NbrdfError::InvalidArgument(format!("no network for '{name}'")))
-        };
+        let find = |name: &String| find_network(materials, name);
         let perms: &[[usize; 3]] = if config.augment {
             &PERMUTATIONS
         } else {
@@ -763,7 +763,13 @@ impl AutoEncoder {
             };
             SplitMix64::new(config.seed, Stream::Latent, 2 << 32 | epoch as u64)
                 .shuffle(&mut order);
-            let mixed = mixtures(&train_flats, config, epoch, &views, &ae);
+            let mixed = mixtures(
+                &train_flats,
+                config,
+                epoch,
+                image_phase.then_some(&views),
+                &ae,
+            );
             let mut epoch_order = order.clone();
             if !mixed.is_empty() {
                 epoch_order.extend(train_flats.len()..train_flats.len() + mixed.len());
@@ -1106,7 +1112,7 @@ mod tests {
         };
         let theta = super::super::sphere::LIGHT_THETA_DEG.to_radians();
         let views = LossViews(vec![SphereRenderer::new(16, theta, 21)]);
-        let mixed = mixtures(&flats, &config, 3, &views, &ae);
+        let mixed = mixtures(&flats, &config, 3, Some(&views), &ae);
         assert_eq!(mixed.len(), 12);
         let (a, b) = (&flats[0], &flats[1]);
         let mut strictly_between = 0;
@@ -1150,9 +1156,9 @@ mod tests {
         }
         assert!(strictly_between > 0, "no mixture strictly between a and b");
         // Deterministic per epoch, fresh between epochs.
-        let again = mixtures(&flats, &config, 3, &views, &ae);
+        let again = mixtures(&flats, &config, 3, Some(&views), &ae);
         assert_eq!(mixed, again);
-        assert_ne!(mixed, mixtures(&flats, &config, 4, &views, &ae));
+        assert_ne!(mixed, mixtures(&flats, &config, 4, Some(&views), &ae));
     }
 
     /// A small autoencoder of the two-material fixture after `epochs` epochs, `warmup` of

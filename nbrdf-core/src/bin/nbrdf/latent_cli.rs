@@ -252,7 +252,7 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
             }
         }
     }
-    let base_config = AeConfig {
+    let config = AeConfig {
         seed: args.seed,
         hidden: args.hidden,
         max_epochs: args.epochs,
@@ -268,7 +268,6 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
         mixup: args.mixup,
         ..AeConfig::default()
     };
-    let config = &base_config;
     let lobes: Vec<(String, f64, f64)> = if config.lobe_weight > 0.0 {
         use rayon::prelude::*;
         with_threads(args.threads, || {
