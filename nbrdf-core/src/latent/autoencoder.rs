@@ -361,6 +361,16 @@ impl AutoEncoder {
             .collect()
     }
 
+    /// Standardised weights back to network weights, unclamped (the training's decoded
+    /// networks, whose gradient must not vanish at the training range's bounds).
+    fn destandardise(&self, standardised: &[f32]) -> Vec<f32> {
+        standardised
+            .iter()
+            .zip(self.mean.iter().zip(&self.std))
+            .map(|(y, (m, s))| y * s + m)
+            .collect()
+    }
+
     fn check(&self, net: &Nbrdf) -> Result<()> {
         if net.hidden_width() != self.nbrdf_hidden {
             return Err(NbrdfError::InvalidArgument(format!(
@@ -805,11 +815,7 @@ impl AutoEncoder {
                         let acts_d = ae.decoder.forward(&code);
                         let out = acts_d.last().cloned().unwrap_or_default();
                         let (loss, g_out) = if image_phase {
-                            let flat: Vec<f32> = out
-                                .iter()
-                                .zip(ae.mean.iter().zip(&ae.std))
-                                .map(|(y, (m, s))| y * s + m)
-                                .collect();
+                            let flat = ae.destandardise(&out);
                             let mut g = vec![0.0f32; dims];
                             let loss = views.loss(&flat, target, Some(&mut g));
                             let g: Vec<f32> = g.iter().zip(&ae.std).map(|(g, s)| g * s).collect();
@@ -1117,11 +1123,7 @@ mod tests {
         let (a, b) = (&flats[0], &flats[1]);
         let mut strictly_between = 0;
         for (standardised, targets) in &mixed {
-            let flat: Vec<f32> = standardised
-                .iter()
-                .zip(ae.mean.iter().zip(&ae.std))
-                .map(|(y, (m, s))| y * s + m)
-                .collect();
+            let flat = ae.destandardise(standardised);
             // Each mixture is a, b, or (1 - t) a + t b with one t for every weight.
             let candidates = [(a, a), (b, b), (a, b), (b, a)];
             let on_segment = candidates.iter().any(|(p, q)| {
@@ -1208,7 +1210,7 @@ mod tests {
     fn refined_validation_loss_is_the_mean_loss_of_the_validation_materials() {
         let (ae, mats) = small_autoencoder(4, 3);
         assert!(!ae.split.validation.is_empty());
-        let flat_of = |name: &String| &mats.iter().find(|(n, _)| n == name).unwrap().1;
+        let flat_of = |name: &String| find_network(&mats, name).unwrap();
         let encoder_only: f64 = ae
             .split
             .validation
