@@ -30,6 +30,13 @@ def _cli_or_skip() -> Path:
     return cli
 
 
+def _nbrdf(cli: Path, *command) -> str:
+    """Runs the CLI, fails the test with its stderr unless it succeeds; returns its stdout."""
+    done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
 def test_detour_is_one_for_an_even_path_and_grows_with_a_swing():
     assert latent_report.detour(np.linspace(0.2, 0.8, 7)) == pytest.approx(1.0)
     # Out to 1 and back to 0.8: path 0.8 + 0.2 + ... over a straight distance of 0.6.
@@ -118,13 +125,9 @@ def test_predictor_eval_scores_fitted_and_predicted_lobes(tmp_path):
     for command in (["ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "3", "--warmup", "2", "--quiet"],
                     ["predictor", "train", "--ae", ae, "--nbrdfs", folder, "-o", predictor, "--iterations", "50"],
                     ):
-        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
+        _nbrdf(cli, *command)
     assert json.loads(predictor.read_text())["provenance"]["loss"] == "variance"
-    done = subprocess.run([str(cli), "predictor", "eval", "--ae", str(ae), "--predictor", str(predictor),
-                           "--nbrdfs", str(folder)], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
+    report = json.loads(_nbrdf(cli, "predictor", "eval", "--ae", ae, "--predictor", predictor, "--nbrdfs", folder))
     (row,) = report["test"]
     assert row["name"] == "c"
     for lobe in (row["fitted"], row["predicted"]):
@@ -149,8 +152,7 @@ def test_extra_networks_train_only_on_training_materials(tmp_path):
                      "--epochs", "2", "--warmup", "1", "--quiet"],
                     ["predictor", "train", "--ae", ae, "--nbrdfs", folders["main"], "--extra-nbrdfs", folders["extra"],
                      "-o", predictor, "--iterations", "20", "--members", "2", "--loss", "labels"]):
-        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
+        _nbrdf(cli, *command)
     model = json.loads(ae.read_text())
     assert model["split"]["test"] == ["c"] and model["provenance"]["extra_nbrdfs"] == str(folders["extra"])
     labels = [entry["name"] for entry in json.loads(predictor.read_text())["provenance"]["labels"]]
@@ -172,9 +174,7 @@ def test_lobe_loss_and_linear_predictor_from_the_cli(tmp_path):
                                 "source": "fit"})
 
     def nbrdf(*command):
-        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
-        return done.stdout
+        return _nbrdf(cli, *command)
 
     codes = {}
     for weight in ("0", "0.5"):
@@ -207,9 +207,7 @@ def test_seed_selection_keeps_the_best_refined_validation_autoencoder(tmp_path):
         write_network(folder / f"{name}.nbrdf.json", random_layers(seed=80 + k), name=name)
 
     def nbrdf(*command):
-        done = subprocess.run([str(cli), *map(str, command)], capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
-        return done.stdout
+        return _nbrdf(cli, *command)
 
     common = ["--epochs", "3", "--warmup", "2", "--quiet", "--mixup", "8"]
     nbrdf("ae", "train", "--nbrdfs", folder, "-o", tmp_path / "best.json", "--seeds", "2", "--select-refine", "2",
