@@ -187,9 +187,10 @@ def test_lobe_loss_and_linear_predictor_from_the_cli(tmp_path):
     assert np.abs(codes["0"] - codes["0.5"]).max() > 1e-4
     predictor = tmp_path / "p.json"
     nbrdf("predictor", "train", "--ae", tmp_path / "ae-0.5.json", "--nbrdfs", folder, "-o", predictor,
-          "--iterations", "50", "--members", "2", "--hidden", "0", "--weight-decay", "0.01")
+          "--iterations", "50", "--members", "2", "--hidden", "0", "--weight-decay", "0.01", "--code-only")
     provenance = json.loads(predictor.read_text())["provenance"]
     assert provenance["architecture"].startswith("32-2, linear") and provenance["weight_decay"] == pytest.approx(0.01)
+    assert provenance["highlight_profile"] is False
     report = json.loads(nbrdf("predictor", "eval", "--ae", tmp_path / "ae-0.5.json", "--predictor", predictor,
                               "--nbrdfs", folder))
     (row,) = report["test"]
@@ -228,3 +229,38 @@ def test_seed_selection_keeps_the_best_refined_validation_autoencoder(tmp_path):
     validation = best["split"]["validation"]
     assert validation and [r["name"] for r in report["materials"]] == validation
     assert not set(validation) & set(best["split"]["test"])
+
+
+def test_default_predictor_reads_the_highlight_profile_and_cross_validates(tmp_path):
+    """`predictor train` predicts from the code and the network's 27-value highlight profile
+    (its inputs are 32 + 27 wide), `--cross-validate K` scores held-out training materials
+    before training, and `predict-phong` stores a valid lobe from it."""
+    cli = _cli_or_skip()
+    folder = tmp_path / "nbrdfs"
+    folder.mkdir()
+    for k, name in enumerate("abcdefg"):
+        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=120 + k), name=name,
+                      sampling={"model": "blinn-phong", "exponent": 4.0 ** (k + 1), "specular_weight": 0.1 * (k + 1),
+                                "source": "fit"})
+    ae, predictor = tmp_path / "ae.json", tmp_path / "p.json"
+    _nbrdf(cli, "ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "3", "--warmup", "2", "--quiet")
+    out = _nbrdf(cli, "predictor", "train", "--ae", ae, "--nbrdfs", folder, "-o", predictor, "--iterations", "50",
+                 "--members", "2", "--cross-validate", "2")
+    assert "2-fold cross-validation over the training split" in out
+    model = json.loads(predictor.read_text())
+    assert model["highlight_profile"] is True and len(model["code_mean"]) == 32 + 27
+    assert model["provenance"]["architecture"].startswith("59-32-2, tanh hidden")
+    cv = model["provenance"]["cross_validation"]
+    train = json.loads(ae.read_text())["split"]["train"]
+    rows = cv["materials_ratio"]
+    assert sorted(r["name"] for r in rows) == sorted(train) and cv["materials"] == len(train)
+    ratios = np.array([r["rmse_ratio"] for r in rows])
+    assert np.all(np.isfinite(ratios)) and np.all(ratios > 0)
+    assert cv["within_1_25"] == int((ratios <= 1.25).sum())
+    assert cv["geometric_mean"] == pytest.approx(float(np.exp(np.log(ratios).mean())), rel=1e-9)
+    assert cv["max"] == pytest.approx(ratios.max())
+    test_name = json.loads(ae.read_text())["split"]["test"][0]
+    dst = tmp_path / "predicted.nbrdf.json"
+    _nbrdf(cli, "predict-phong", "--ae", ae, "--predictor", predictor, folder / f"{test_name}.nbrdf.json", "-o", dst)
+    lobe = json.loads(dst.read_text())["sampling"]
+    assert lobe["source"] == "predicted" and lobe["exponent"] > 0 and 0 <= lobe["specular_weight"] <= 1

@@ -5,7 +5,8 @@ use super::{emit, with_threads};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::latent::autoencoder::{AeConfig, AeEpoch, AutoEncoder, Split};
-use nbrdf_core::latent::predictor::PredictorConfig;
+use nbrdf_core::latent::predictor::{PredictorConfig, VarianceGrid};
+use nbrdf_core::lobe_fit::LobeQuadrature;
 use nbrdf_core::{Nbrdf, NbrdfError, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -656,6 +657,17 @@ pub struct PredictorTrainArgs {
     /// Networks in the ensemble (seeds SEED, SEED + 1, ...; the prediction is their mean).
     #[arg(long, default_value_t = PredictorConfig::default().members)]
     members: usize,
+    /// Before training, report K-fold cross-validation over the training split's materials
+    /// (held-out sampling RMSE ratio, as `predictor eval`): a way to choose settings without
+    /// looking at the test split. 0: off.
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    cross_validate: usize,
+    /// Predict from the 32-value code alone (DESIGN.md section 7), without the network's
+    /// highlight profile (27 evaluations along theta_h). The code cannot hold peaks sharper
+    /// than the autoencoder's 64 x 64 sphere resolves (README); the settings the code alone
+    /// did best with were `--hidden 0 --weight-decay 0.01`.
+    #[arg(long)]
+    code_only: bool,
     /// Predict from codes refined by this many iterations (`ae encode --refine`).
     /// Recorded in P.json; `predict-phong` and `predictor eval` refine the same way. Off by
     /// default: refined codes fit the image better but predicted worse lobes (README).
@@ -705,10 +717,80 @@ fn phong_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
     Ok((fit.params.exponent, fit.params.specular_weight()))
 }
 
+/// What [`cross_validate`] needs of the training split: per material (`names`, `labels`,
+/// `quadratures`), and the examples with the index of their material.
+struct CrossValidationData<'a> {
+    names: &'a [&'a str],
+    labels: &'a [(f64, f64)],
+    quadratures: &'a [LobeQuadrature],
+    examples: &'a [nbrdf_core::latent::predictor::Example],
+    example_material: &'a [usize],
+    grids: Option<&'a [&'a VarianceGrid]>,
+}
+
+/// `folds`-fold cross-validation by material name over the training split (the test split stays
+/// unseen, so settings can be chosen here): each fold's materials are predicted by an ensemble
+/// trained on the others, from their unpermuted code; the score is the sampling RMSE ratio
+/// `sqrt(R_pred - 1) / sqrt(R_fit - 1)` of the lobe-search quadrature, as `predictor eval`.
+fn cross_validate(
+    data: &CrossValidationData<'_>,
+    config: &PredictorConfig,
+    folds: usize,
+) -> Result<serde_json::Value> {
+    use nbrdf_core::latent::predictor::PhongPredictor;
+    let mut unique: Vec<&str> = data.names.to_vec();
+    unique.sort_unstable();
+    unique.dedup();
+    let fold_of = |m: usize| unique.iter().position(|u| *u == data.names[m]).unwrap_or(0) % folds;
+    let mut rows = Vec::new();
+    for fold in 0..folds {
+        let keep: Vec<usize> = (0..data.examples.len())
+            .filter(|&i| fold_of(data.example_material[i]) != fold)
+            .collect();
+        let examples: Vec<_> = keep.iter().map(|&i| data.examples[i].clone()).collect();
+        let grids: Option<Vec<&VarianceGrid>> =
+            data.grids.map(|g| keep.iter().map(|&i| g[i]).collect());
+        let pred = PhongPredictor::train_ensemble(&examples, grids.as_deref(), config)?;
+        // The first example of a material is its identity permutation.
+        let mut seen = Vec::new();
+        for (i, &m) in data.example_material.iter().enumerate() {
+            if fold_of(m) != fold || seen.contains(&m) {
+                continue;
+            }
+            seen.push(m);
+            let (n, w) = pred.predict(&data.examples[i].0);
+            let q = &data.quadratures[m];
+            let (n_fit, w_fit) = data.labels[m];
+            let ratio = (q.relative_variance(n as f64, w as f64).max(1e-12)
+                / q.relative_variance(n_fit, w_fit).max(1e-12))
+            .sqrt();
+            rows.push((data.names[m].to_string(), ratio, n, w));
+        }
+    }
+    let mut ratios: Vec<f64> = rows.iter().map(|r| r.1).collect();
+    ratios.sort_by(f64::total_cmp);
+    let worst = rows
+        .iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|r| format!("{} {:.2}", r.0, r.1))
+        .unwrap_or_default();
+    Ok(serde_json::json!({
+        "folds": folds,
+        "geometric_mean": (ratios.iter().map(|r| r.ln()).sum::<f64>() / ratios.len().max(1) as f64).exp(),
+        "median": ratios.get(ratios.len() / 2).copied().unwrap_or(f64::NAN),
+        "mean": ratios.iter().sum::<f64>() / ratios.len().max(1) as f64,
+        "max": ratios.last().copied().unwrap_or(f64::NAN),
+        "worst": worst,
+        "within_1_25": ratios.iter().filter(|&&r| r <= 1.25).count(),
+        "materials": ratios.len(),
+        "materials_ratio": rows.iter().map(|r| serde_json::json!({"name": r.0, "rmse_ratio": r.1, "exponent": r.2, "specular_weight": r.3})).collect::<Vec<_>>(),
+    }))
+}
+
 /// The lobe-search quadrature of a network (it evaluates the network once).
-fn network_quadrature(net: &Nbrdf) -> Result<nbrdf_core::lobe_fit::LobeQuadrature> {
+fn network_quadrature(net: &Nbrdf) -> Result<LobeQuadrature> {
     use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
-    use nbrdf_core::lobe_fit::{LobeFitConfig, LobeQuadrature};
+    use nbrdf_core::lobe_fit::LobeFitConfig;
     let target = |a: &RusinkiewiczAngles| {
         let (l, v) = from_rusinkiewicz(a);
         Some(
@@ -733,7 +815,7 @@ pub fn run_predictor_eval(args: &PredictorEvalArgs) -> Result<()> {
             };
             let (n_fit, w_fit) = phong_label(net, false)?;
             let code = ae.encode_refined(net, pred.refine_steps)?;
-            let (n_pred, w_pred) = pred.predict(&code);
+            let (n_pred, w_pred) = pred.predict(&pred.inputs(&code, net));
             let q = network_quadrature(net)?;
             let (v_fit, v_pred, v_cos) = (
                 q.relative_variance(n_fit, w_fit),
@@ -769,7 +851,7 @@ pub fn run_predictor_eval(args: &PredictorEvalArgs) -> Result<()> {
 
 pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
     use nbrdf_core::latent::autoencoder::{permute_outputs, PERMUTATIONS};
-    use nbrdf_core::latent::predictor::{PhongPredictor, VarianceGrid};
+    use nbrdf_core::latent::predictor::{highlight_profile, PhongPredictor};
     use rayon::prelude::*;
     let ae = AutoEncoder::load(&args.ae)?;
     let mut nets = read_nbrdf_dir(&args.nbrdfs)?;
@@ -787,14 +869,20 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
             .par_iter()
             .map(|(_, net)| phong_label(net, args.refit))
             .collect::<Result<_>>()?;
+        let quadratures: Vec<LobeQuadrature> =
+            if args.loss == PredictorLoss::Variance || args.cross_validate > 1 {
+                train
+                    .iter()
+                    .map(|(_, net)| network_quadrature(net))
+                    .collect::<Result<_>>()?
+            } else {
+                Vec::new()
+            };
         let grids: Vec<VarianceGrid> = if args.loss == PredictorLoss::Variance {
-            train
+            quadratures
                 .iter()
-                .map(|(_, net)| {
-                    let q = network_quadrature(net)?;
-                    Ok(VarianceGrid::new(|n, w| q.relative_variance(n, w)))
-                })
-                .collect::<Result<_>>()?
+                .map(|q| VarianceGrid::new(|n, w| q.relative_variance(n, w)))
+                .collect()
         } else {
             Vec::new()
         };
@@ -817,29 +905,73 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
             .collect();
         let mut examples = Vec::new();
         let mut example_grids = Vec::new();
-        for ((m, _), code) in inputs.iter().zip(codes) {
+        // The profile is a mean over RGB: one per material serves its 6 permutations.
+        let profiles: Vec<Vec<f32>> = train
+            .iter()
+            .map(|(_, net)| {
+                if !args.code_only {
+                    highlight_profile(net)
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect();
+        for ((m, _), mut code) in inputs.iter().zip(codes) {
             let (n, w) = labels[*m];
+            code.extend_from_slice(&profiles[*m]);
             examples.push((code, n, w));
             example_grids.extend(grids.get(*m));
         }
         let grids_arg = (!example_grids.is_empty()).then_some(example_grids.as_slice());
-        let mut pred = PhongPredictor::train_ensemble(
-            &examples,
-            grids_arg,
-            &PredictorConfig {
-                hidden: args.hidden,
-                iterations: args.iterations,
-                seed: args.seed,
-                members: args.members,
-                weight_decay: args.weight_decay,
-            },
-        )?;
+        let config = PredictorConfig {
+            hidden: args.hidden,
+            iterations: args.iterations,
+            seed: args.seed,
+            members: args.members,
+            weight_decay: args.weight_decay,
+        };
+        let cross_validation = if args.cross_validate > 1 {
+            let names: Vec<&str> = train.iter().map(|(n, _)| n.as_str()).collect();
+            let example_material: Vec<usize> = inputs.iter().map(|(m, _)| *m).collect();
+            let cv = cross_validate(
+                &CrossValidationData {
+                    names: &names,
+                    labels: &labels,
+                    quadratures: &quadratures,
+                    examples: &examples,
+                    example_material: &example_material,
+                    grids: grids_arg,
+                },
+                &config,
+                args.cross_validate,
+            )?;
+            emit(&format!(
+                "{}-fold cross-validation over the training split: sampling RMSE ratio predicted/fitted (lobe-search quadrature) geometric mean {:.3}, median {:.3}, mean {:.3}, max {:.3} ({}), within 1.25x for {} of {} materials\n",
+                args.cross_validate,
+                cv["geometric_mean"].as_f64().unwrap_or(f64::NAN),
+                cv["median"].as_f64().unwrap_or(f64::NAN),
+                cv["mean"].as_f64().unwrap_or(f64::NAN),
+                cv["max"].as_f64().unwrap_or(f64::NAN),
+                cv["worst"].as_str().unwrap_or(""),
+                cv["within_1_25"],
+                cv["materials"],
+            ))?;
+            Some(cv)
+        } else {
+            None
+        };
+        let mut pred = PhongPredictor::train_ensemble(&examples, grids_arg, &config)?;
         pred.refine_steps = args.refine;
+        pred.highlight_profile = !args.code_only;
         let train_seconds = t1.elapsed().as_secs_f64();
         if let Some(o) = pred.provenance.as_object_mut() {
             o.insert("labels".into(), serde_json::json!(train.iter().zip(&labels).map(|((name, _), (n, w))| serde_json::json!({"name": name, "exponent": n, "specular_weight": w})).collect::<Vec<_>>()));
             o.insert("label_seconds".into(), label_seconds.into());
             o.insert("train_seconds".into(), train_seconds.into());
+            o.insert("highlight_profile".into(), (!args.code_only).into());
+            if let Some(cv) = cross_validation {
+                o.insert("cross_validation".into(), cv);
+            }
         }
         pred.save(&args.output)?;
         emit(&format!(
@@ -861,7 +993,7 @@ pub fn run_predict_phong(args: &PredictPhongArgs) -> Result<()> {
     let mut net = Nbrdf::load(&args.input)?;
     let t0 = Instant::now();
     let code = ae.encode_refined(&net, pred.refine_steps)?;
-    let (n, w) = pred.predict(&code);
+    let (n, w) = pred.predict(&pred.inputs(&code, &net));
     let ms = t0.elapsed().as_secs_f64() * 1e3;
     if args.timing {
         eprintln!("encoded and predicted in {ms:.3} ms");
