@@ -1,6 +1,7 @@
 """The latent-space report (issue #6): autoencoder vs PCA-32 on the test split, a t-SNE map of
 the latent space, latent vs weight interpolation strips with their measured smoothness, the
-predictor's lobes scored by sampling variance and (optionally) in the Veach scene.
+lobes of two predictors (the default: code + the network's highlight profile; and the code
+alone, DESIGN.md section 7) scored by sampling variance and (optionally) in the Veach scene.
 
     python python/latent_report.py [--source sgd|authors] [--train-missing] [--veach]
 
@@ -28,6 +29,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -212,6 +214,23 @@ def markdown_table(ev: dict) -> str:
     return "\n".join(lines)
 
 
+class Predictor(NamedTuple):
+    label: str
+    file: str
+    folder: str
+    suffix: str
+    options: tuple
+
+
+# The shipped predictor (code + highlight profile, the CLI's defaults) and the code-only one of
+# DESIGN.md section 7 with the settings it did best with (README).
+PREDICTORS = (
+    Predictor("code+profile", "predictor.json", "predicted", "", ()),
+    Predictor("code only", "predictor_code_only.json", "predicted_code_only", "_code_only",
+              ("--code-only", "--hidden", 0, "--weight-decay", 0.01)),
+)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cli", type=Path, default=REPO / "target" / "release" / "nbrdf")
@@ -248,7 +267,7 @@ def main() -> int:
     p.add_argument("--interpolation-only", action="store_true",
                    help="only the interpolation figure (needs OUT/ae.json from an earlier run)")
     p.add_argument("--veach-only", action="store_true",
-                   help="only the Veach comparison (needs OUT/ae.json and OUT/predictor.json from an earlier run)")
+                   help="only the Veach comparison (needs OUT/ae.json and the predicted lobes of an earlier run)")
     p.add_argument("--veach-spp", type=int, default=16)
     p.add_argument("--veach-gt-spp", type=int, default=512, help="spp of the converged MIS render")
     p.add_argument("--veach-seeds", type=int, default=8, help="renders (seeds) averaged per strategy")
@@ -321,47 +340,55 @@ def main() -> int:
     # independently trained networks of the same materials (the paper's comparison).
     interpolation(args, ae, a, b, plt, split)
 
-    # 4. Predictor: fitted vs predicted on the test split.
-    pred = args.out / "predictor.json"
-    if not pred.exists():
-        options = []
-        if args.predictor_hidden is not None:
-            options += ["--hidden", args.predictor_hidden]
-        if args.predictor_weight_decay is not None:
-            options += ["--weight-decay", args.predictor_weight_decay]
-        print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred, *options]))
-    predicted_dir = args.out / "predicted"
-    predicted_dir.mkdir(exist_ok=True)
-    lines = ["| material | fitted n | predicted n | fitted w | predicted w |", "|---|---|---|---|---|"]
+    # 4. Predictors: fitted vs predicted on the test split. The default reads the code and the
+    # network's highlight profile; the code-only one is DESIGN.md section 7 to the letter.
+    for variant in PREDICTORS:
+        pred = args.out / variant.file
+        if not pred.exists():
+            options = list(variant.options)
+            if args.predictor_hidden is not None:
+                options += ["--hidden", args.predictor_hidden]
+            if args.predictor_weight_decay is not None:
+                options += ["--weight-decay", args.predictor_weight_decay]
+            print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred, *options]))
+        (args.out / variant.folder).mkdir(exist_ok=True)
+    lines = ["| material | fitted n | fitted w | " + " | ".join(f"{v.label} n | {v.label} w" for v in PREDICTORS) + " |",
+             "|---|---|---|" + "---|---|" * len(PREDICTORS)]
     for n in split["test"]:
         src = args.nbrdfs / f"{n}.nbrdf.json"
-        dst = predicted_dir / f"{n}.nbrdf.json"
-        run([args.cli, "predict-phong", "--ae", ae, "--predictor", pred, src, "-o", dst])
         fitted = json.loads(src.read_text()).get("sampling")
         if fitted is None or fitted.get("source") != "fit":
             fitted_dir = args.out / "fitted"
             fitted_dir.mkdir(exist_ok=True)
             run([args.cli, "fit-phong", src, "-o", fitted_dir / f"{n}.nbrdf.json"])
             fitted = json.loads((fitted_dir / f"{n}.nbrdf.json").read_text())["sampling"]
-        s = json.loads(dst.read_text())["sampling"]
-        lines.append(f"| {n} | {fitted['exponent']:.1f} | {s['exponent']:.1f} | {fitted['specular_weight']:.3f} | "
-                     f"{s['specular_weight']:.3f} |")
+        row = f"| {n} | {fitted['exponent']:.1f} | {fitted['specular_weight']:.3f} |"
+        for variant in PREDICTORS:
+            dst = args.out / variant.folder / f"{n}.nbrdf.json"
+            run([args.cli, "predict-phong", "--ae", ae, "--predictor", args.out / variant.file, src, "-o", dst])
+            s = json.loads(dst.read_text())["sampling"]
+            row += f" {s['exponent']:.1f} | {s['specular_weight']:.3f} |"
+        lines.append(row)
     (args.out / "predicted_vs_fitted.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     # The same lobes scored by the relative variance of BSDF sampling (noise-free, all views).
-    pe = json.loads(run([args.cli, "predictor", "eval", "--ae", ae, "--predictor", pred, "--nbrdfs", args.nbrdfs]))
-    (args.out / "predictor_eval.json").write_text(json.dumps(pe, indent=1))
-    lines = ["| material | fitted n, w | predicted n, w | R-1 fitted | R-1 predicted | R-1 cosine | RMSE ratio |",
-             "|---|---|---|---|---|---|---|"]
-    for r in pe["test"]:
-        f, q = r["fitted"], r["predicted"]
-        lines.append(f"| {r['name']} | {f['exponent']:.3g}, {f['specular_weight']:.2f} | "
-                     f"{q['exponent']:.3g}, {q['specular_weight']:.2f} | {f['relative_variance']:.3g} | "
-                     f"{q['relative_variance']:.3g} | {r['cosine_relative_variance']:.3g} | {r['rmse_ratio']:.2f} |")
-    q = pe["rmse_ratio"]
-    lines += ["", f"RMSE ratio sqrt((R-1) predicted / (R-1) fitted): median {q['median']:.2f}, max {q['max']:.2f}, "
-              f"within 1.25x for {q['within_1_25']} of {q['materials']}."]
-    (args.out / "predictor_eval.md").write_text("\n".join(lines) + "\n")
+    lines = []
+    for variant in PREDICTORS:
+        pe = json.loads(run([args.cli, "predictor", "eval", "--ae", ae, "--predictor", args.out / variant.file,
+                             "--nbrdfs", args.nbrdfs]))
+        (args.out / f"predictor_eval{variant.suffix}.json").write_text(json.dumps(pe, indent=1))
+        lines += [f"Predictor: {variant.label}.", "",
+                  "| material | fitted n, w | predicted n, w | R-1 fitted | R-1 predicted | R-1 cosine | RMSE ratio |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in pe["test"]:
+            f, q = r["fitted"], r["predicted"]
+            lines.append(f"| {r['name']} | {f['exponent']:.3g}, {f['specular_weight']:.2f} | "
+                         f"{q['exponent']:.3g}, {q['specular_weight']:.2f} | {f['relative_variance']:.3g} | "
+                         f"{q['relative_variance']:.3g} | {r['cosine_relative_variance']:.3g} | {r['rmse_ratio']:.2f} |")
+        q = pe["rmse_ratio"]
+        lines += ["", f"RMSE ratio sqrt((R-1) predicted / (R-1) fitted): median {q['median']:.2f}, "
+                  f"max {q['max']:.2f}, within 1.25x for {q['within_1_25']} of {q['materials']}.", ""]
+    (args.out / "predictor_eval.md").write_text("\n".join(lines))
     print("\n".join(lines))
     if args.veach:
         veach(args, split)
@@ -476,15 +503,18 @@ def veach(args, split) -> None:
     # anti-aliased edges of the bright lights would swamp the plates' sampling noise.
     plates = plate_mask(mi.load_dict(veach_scene_dict({"type": "diffuse"}, resolution=(192, 128))))
     lines = [f"Veach scene, pure BSDF sampling, 192x128, {args.veach_spp} spp, RMSE on the plates against "
-             f"{args.veach_gt_spp} spp MIS, mean over {len(seeds)} seeds.", "",
-             "| material | fitted n, w | predicted n, w | RMSE fitted | RMSE predicted | cosine | predicted / fitted |",
-             "|---|---|---|---|---|---|---|"]
-    ratios = []
+             f"{args.veach_gt_spp} spp MIS, mean over {len(seeds)} seeds. Predicted lobes: "
+             + "; ".join(f"{v.label} ({v.file})" for v in PREDICTORS) + ".", "",
+             "| material | fitted n, w | " + " | ".join(f"{v.label} n, w" for v in PREDICTORS)
+             + " | RMSE fitted | " + " | ".join(f"RMSE {v.label}" for v in PREDICTORS) + " | cosine | "
+             + " | ".join(f"{v.label} / fitted" for v in PREDICTORS) + " |",
+             "|---|---|" + "---|" * (3 * len(PREDICTORS) + 2)]
+    ratios = {v.label: [] for v in PREDICTORS}
     for n in tqdm(split["test"], desc="veach: predicted vs fitted", unit="material"):
         fitted = args.out / "fitted" / f"{n}.nbrdf.json"
         if not fitted.exists():
             fitted = args.nbrdfs / f"{n}.nbrdf.json"
-        predicted = args.out / "predicted" / f"{n}.nbrdf.json"
+        predicted = [args.out / v.folder / f"{n}.nbrdf.json" for v in PREDICTORS]
 
         def render(path, spp, seed, integrator="bsdf", sampling="phong"):
             d = veach_scene_dict({"type": "nbrdf", "filename": str(path), "sampling": sampling},
@@ -497,14 +527,18 @@ def veach(args, split) -> None:
             return float(np.mean([np.sqrt(np.mean((render(path, args.veach_spp, s, sampling=sampling) - gt)[plates] ** 2))
                                   for s in seeds]))
 
-        r_fit, r_pred, r_cos = rmse(fitted), rmse(predicted), rmse(fitted, "cosine")
-        ratios.append(r_pred / r_fit)
-        lobe = [json.loads(Path(p).read_text())["sampling"] for p in (fitted, predicted)]
-        lines.append(f"| {n} | {lobe[0]['exponent']:.3g}, {lobe[0]['specular_weight']:.2f} | "
-                     f"{lobe[1]['exponent']:.3g}, {lobe[1]['specular_weight']:.2f} | {r_fit:.4g} | {r_pred:.4g} | "
-                     f"{r_cos:.4g} | {r_pred / r_fit:.2f} |")
-    lines += ["", f"predicted / fitted: median {np.median(ratios):.2f}, mean {np.mean(ratios):.2f}, "
-              f"within 1.25x for {sum(r <= 1.25 for r in ratios)} of {len(ratios)} materials."]
+        r_fit, r_cos = rmse(fitted), rmse(fitted, "cosine")
+        r_pred = [rmse(p) for p in predicted]
+        for v, r in zip(PREDICTORS, r_pred):
+            ratios[v.label].append(r / r_fit)
+        lobe = [json.loads(Path(p).read_text())["sampling"] for p in (fitted, *predicted)]
+        lines.append(f"| {n} | " + " | ".join(f"{x['exponent']:.3g}, {x['specular_weight']:.2f}" for x in lobe)
+                     + f" | {r_fit:.4g} | " + " | ".join(f"{r:.4g}" for r in r_pred) + f" | {r_cos:.4g} | "
+                     + " | ".join(f"{r / r_fit:.2f}" for r in r_pred) + " |")
+    lines.append("")
+    for label, rs in ratios.items():
+        lines.append(f"{label} / fitted: median {np.median(rs):.2f}, mean {np.mean(rs):.2f}, max {np.max(rs):.2f}, "
+                     f"within 1.25x for {sum(r <= 1.25 for r in rs)} of {len(rs)} materials.")
     (args.out / "veach_predicted_vs_fitted.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
