@@ -259,6 +259,9 @@ def test_default_predictor_reads_the_highlight_profile_and_cross_validates(tmp_p
     assert cv["within_1_25"] == int((ratios <= 1.25).sum())
     assert cv["geometric_mean"] == pytest.approx(float(np.exp(np.log(ratios).mean())), rel=1e-9)
     assert cv["max"] == pytest.approx(ratios.max())
+    one_fold = subprocess.run([str(cli), "predictor", "train", "--ae", str(ae), "--nbrdfs", str(folder), "-o",
+                               str(tmp_path / "q.json"), "--cross-validate", "1"], capture_output=True, text=True)
+    assert one_fold.returncode != 0 and "at least 2 folds" in one_fold.stderr
     test_name = json.loads(ae.read_text())["split"]["test"][0]
     dst = tmp_path / "predicted.nbrdf.json"
     _nbrdf(cli, "predict-phong", "--ae", ae, "--predictor", predictor, folder / f"{test_name}.nbrdf.json", "-o", dst)

@@ -853,6 +853,11 @@ pub fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
     use nbrdf_core::latent::autoencoder::{permute_outputs, PERMUTATIONS};
     use nbrdf_core::latent::predictor::{highlight_profile, PhongPredictor};
     use rayon::prelude::*;
+    if args.cross_validate == 1 {
+        return Err(invalid(
+            "--cross-validate needs at least 2 folds (0 turns it off)".into(),
+        ));
+    }
     let ae = AutoEncoder::load(&args.ae)?;
     let mut nets = read_nbrdf_dir(&args.nbrdfs)?;
     if let Some(dir) = &args.extra_nbrdfs {
