@@ -741,11 +741,16 @@ fn cross_validate(
     let mut unique: Vec<&str> = data.names.to_vec();
     unique.sort_unstable();
     unique.dedup();
-    let fold_of = |m: usize| unique.iter().position(|u| *u == data.names[m]).unwrap_or(0) % folds;
+    // Every network of one material name (extra networks included) falls in the same fold.
+    let material_fold: Vec<usize> = data
+        .names
+        .iter()
+        .map(|n| unique.iter().position(|u| u == n).unwrap_or(0) % folds)
+        .collect();
     let mut rows = Vec::new();
     for fold in 0..folds {
         let keep: Vec<usize> = (0..data.examples.len())
-            .filter(|&i| fold_of(data.example_material[i]) != fold)
+            .filter(|&i| material_fold[data.example_material[i]] != fold)
             .collect();
         let examples: Vec<_> = keep.iter().map(|&i| data.examples[i].clone()).collect();
         let grids: Option<Vec<&VarianceGrid>> =
@@ -754,16 +759,17 @@ fn cross_validate(
         // The first example of a material is its identity permutation.
         let mut seen = Vec::new();
         for (i, &m) in data.example_material.iter().enumerate() {
-            if fold_of(m) != fold || seen.contains(&m) {
+            if material_fold[m] != fold || seen.contains(&m) {
                 continue;
             }
             seen.push(m);
             let (n, w) = pred.predict(&data.examples[i].0);
             let q = &data.quadratures[m];
             let (n_fit, w_fit) = data.labels[m];
-            let ratio = (q.relative_variance(n as f64, w as f64).max(1e-12)
-                / q.relative_variance(n_fit, w_fit).max(1e-12))
-            .sqrt();
+            let ratio = rmse_ratio(
+                q.relative_variance(n as f64, w as f64),
+                q.relative_variance(n_fit, w_fit),
+            );
             rows.push((data.names[m].to_string(), ratio, n, w));
         }
     }
@@ -785,6 +791,12 @@ fn cross_validate(
         "materials": ratios.len(),
         "materials_ratio": rows.iter().map(|r| serde_json::json!({"name": r.0, "rmse_ratio": r.1, "exponent": r.2, "specular_weight": r.3})).collect::<Vec<_>>(),
     }))
+}
+
+/// Sampling RMSE of a lobe over the fitted lobe's, from their relative variances `R - 1`: the
+/// RMSE of an estimator scales with the square root of its variance.
+fn rmse_ratio(relative_variance: f64, fitted_relative_variance: f64) -> f64 {
+    (relative_variance.max(1e-12) / fitted_relative_variance.max(1e-12)).sqrt()
 }
 
 /// The lobe-search quadrature of a network (it evaluates the network once).
@@ -822,8 +834,7 @@ pub fn run_predictor_eval(args: &PredictorEvalArgs) -> Result<()> {
                 q.relative_variance(n_pred as f64, w_pred as f64),
                 q.relative_variance(0.0, 0.0),
             );
-            // The RMSE of an estimator scales with the square root of its variance.
-            let ratio = (v_pred.max(1e-12) / v_fit.max(1e-12)).sqrt();
+            let ratio = rmse_ratio(v_pred, v_fit);
             ratios.push(ratio);
             rows.push(serde_json::json!({
                 "name": name,
