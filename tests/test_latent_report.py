@@ -37,6 +37,17 @@ def _nbrdf(cli: Path, *command) -> str:
     return done.stdout
 
 
+def _labelled_networks(folder: Path, names: str, seed: int, lobe) -> None:
+    """Writes a random network per name into `folder` (seeds `seed`, `seed + 1`, ...), each with
+    the fitted Blinn-Phong sampling `lobe(k) = (exponent, specular_weight)` of the k-th name."""
+    folder.mkdir(exist_ok=True)
+    for k, name in enumerate(names):
+        exponent, weight = lobe(k)
+        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=seed + k), name=name,
+                      sampling={"model": "blinn-phong", "exponent": exponent, "specular_weight": weight,
+                                "source": "fit"})
+
+
 def test_detour_is_one_for_an_even_path_and_grows_with_a_swing():
     assert latent_report.detour(np.linspace(0.2, 0.8, 7)) == pytest.approx(1.0)
     # Out to 1 and back to 0.8: path 0.8 + 0.2 + ... over a straight distance of 0.6.
@@ -115,12 +126,7 @@ def test_authors_networks_distil_into_the_common_initialisation(tmp_path, shared
 def test_predictor_eval_scores_fitted_and_predicted_lobes(tmp_path):
     cli = _cli_or_skip()
     folder = tmp_path / "nbrdfs"
-    folder.mkdir()
-    for k, name in enumerate("abcde"):
-        layers = random_layers(seed=10 + k)
-        write_network(folder / f"{name}.nbrdf.json", layers, name=name,
-                      sampling={"model": "blinn-phong", "exponent": 10.0 * (k + 1), "specular_weight": 0.2,
-                                "source": "fit"})
+    _labelled_networks(folder, "abcde", 10, lambda k: (10.0 * (k + 1), 0.2))
     ae, predictor = tmp_path / "ae.json", tmp_path / "p.json"
     for command in (["ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "3", "--warmup", "2", "--quiet"],
                     ["predictor", "train", "--ae", ae, "--nbrdfs", folder, "-o", predictor, "--iterations", "50"],
@@ -141,12 +147,8 @@ def test_extra_networks_train_only_on_training_materials(tmp_path):
     cli = _cli_or_skip()
     folders = {}
     for source, offset in (("main", 20), ("extra", 40)):
-        folder = folders[source] = tmp_path / source
-        folder.mkdir()
-        for k, name in enumerate("abcde"):
-            write_network(folder / f"{name}.nbrdf.json", random_layers(seed=offset + k), name=name,
-                          sampling={"model": "blinn-phong", "exponent": 5.0 * (k + 1), "specular_weight": 0.3,
-                                    "source": "fit"})
+        folders[source] = tmp_path / source
+        _labelled_networks(folders[source], "abcde", offset, lambda k: (5.0 * (k + 1), 0.3))
     ae, predictor = tmp_path / "ae.json", tmp_path / "p.json"
     for command in (["ae", "train", "--nbrdfs", folders["main"], "--extra-nbrdfs", folders["extra"], "-o", ae,
                      "--epochs", "2", "--warmup", "1", "--quiet"],
@@ -167,11 +169,7 @@ def test_lobe_loss_and_linear_predictor_from_the_cli(tmp_path):
     regularised linear predictor whose lobes are valid."""
     cli = _cli_or_skip()
     folder = tmp_path / "nbrdfs"
-    folder.mkdir()
-    for k, name in enumerate("abcde"):
-        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=60 + k), name=name,
-                      sampling={"model": "blinn-phong", "exponent": 3.0 ** (k + 1), "specular_weight": 0.1 * (k + 1),
-                                "source": "fit"})
+    _labelled_networks(folder, "abcde", 60, lambda k: (3.0 ** (k + 1), 0.1 * (k + 1)))
 
     def nbrdf(*command):
         return _nbrdf(cli, *command)
@@ -237,11 +235,7 @@ def test_default_predictor_reads_the_highlight_profile_and_cross_validates(tmp_p
     before training, and `predict-phong` stores a valid lobe from it."""
     cli = _cli_or_skip()
     folder = tmp_path / "nbrdfs"
-    folder.mkdir()
-    for k, name in enumerate("abcdefg"):
-        write_network(folder / f"{name}.nbrdf.json", random_layers(seed=120 + k), name=name,
-                      sampling={"model": "blinn-phong", "exponent": 4.0 ** (k + 1), "specular_weight": 0.1 * (k + 1),
-                                "source": "fit"})
+    _labelled_networks(folder, "abcdefg", 120, lambda k: (4.0 ** (k + 1), 0.1 * (k + 1)))
     ae, predictor = tmp_path / "ae.json", tmp_path / "p.json"
     _nbrdf(cli, "ae", "train", "--nbrdfs", folder, "-o", ae, "--epochs", "3", "--warmup", "2", "--quiet")
     out = _nbrdf(cli, "predictor", "train", "--ae", ae, "--nbrdfs", folder, "-o", predictor, "--iterations", "50",
