@@ -250,8 +250,10 @@ def main() -> int:
     p.add_argument("--lobe-weight", type=float, default=0.0,
                    help="ae train --lobe-weight: auxiliary loss pulling the codes towards the fitted lobes (0: the paper's loss)")
     p.add_argument("--predictor-hidden", type=int,
-                   help="predictor train --hidden (default: the CLI's; 0 for a linear predictor)")
-    p.add_argument("--predictor-weight-decay", type=float, help="predictor train --weight-decay (default: the CLI's)")
+                   help="predictor train --hidden of the default predictor (default: the CLI's; 0 for a linear "
+                        "predictor); the code-only one keeps --hidden 0 --weight-decay 0.01")
+    p.add_argument("--predictor-weight-decay", type=float,
+                   help="predictor train --weight-decay of the default predictor (default: the CLI's)")
     p.add_argument("--pca-tables", choices=["sgd", "nbrdf"],
                    help="what PCA-32 decomposes: the SGD tables or the input networks' tabulations "
                         "(default: sgd for --source sgd, nbrdf for --source authors)")
@@ -346,9 +348,10 @@ def main() -> int:
         pred = args.out / variant.file
         if not pred.exists():
             options = list(variant.options)
-            if args.predictor_hidden is not None:
+            # The code-only comparison keeps its own settings (the CLI refuses a repeated option).
+            if variant is PREDICTORS[0] and args.predictor_hidden is not None:
                 options += ["--hidden", args.predictor_hidden]
-            if args.predictor_weight_decay is not None:
+            if variant is PREDICTORS[0] and args.predictor_weight_decay is not None:
                 options += ["--weight-decay", args.predictor_weight_decay]
             print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred, *options]))
         (args.out / variant.folder).mkdir(exist_ok=True)
