@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import nbrdf_mitsuba
-from nbrdf_testing import (bsdf_eval, bsdf_eval_pdf, bsdf_pdf, bsdf_sample, f32, is_jit, phong_pdf, random_layers,
-                           random_pairs, write_merl, write_network)
+from nbrdf_testing import (bsdf_eval, bsdf_eval_pdf, bsdf_pdf, bsdf_sample, f32, is_jit, nbrdf_reference, phong_pdf,
+                           random_layers, random_pairs, read_network_layers, write_merl, write_network)
 
 PHONG = {"sampling": "phong", "exponent": 40.0, "specular_weight": 0.6}
 
@@ -148,6 +148,42 @@ def test_non_finite_weights_are_rejected_on_update(llvm_variant, network_file, j
     params[key] = mi.Float(darker)
     params.update()
     assert np.array(mi.render(scene, seed=1)).max() == 0
+
+
+def test_random_weight_update_sequences_end_in_the_last_valid_network(llvm_variant, network_file):
+    """Seeded random sequences of weight updates (perturbations, NaN/inf corruptions, wrong
+    counts): the BSDF always evaluates the last valid network (float64 NumPy oracle)."""
+    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(network_file), "jit_weights": "opaque"})
+    params = mi.traverse(bsdf)
+    key = next(k for k in params.keys() if k.endswith("weights"))
+    shapes = [(w.shape, b.shape) for w, b in read_network_layers(network_file)]
+    state = np.array(params[key], dtype=np.float32)
+    view, light = (f32(a) for a in random_pairs(64, 13))
+    rng = np.random.default_rng(160)
+    for _ in range(25):
+        candidate = state + rng.normal(0, 0.02, state.size).astype(np.float32)
+        kind = rng.uniform()
+        if kind < 0.3:
+            candidate[rng.integers(candidate.size, size=rng.integers(1, 4))] = rng.choice([np.nan, np.inf, -np.inf])
+        elif kind < 0.4:
+            candidate = candidate[: -int(rng.integers(1, 5))]
+        params[key] = mi.Float(candidate)
+        if kind < 0.4:
+            with pytest.raises(Exception, match="update rejected"):
+                params.update()
+        else:
+            params.update()
+            state = candidate
+        layers, offset = [], 0
+        for (w_shape, b_shape) in shapes:
+            w = state[offset:offset + np.prod(w_shape)].reshape(w_shape).astype(np.float64)
+            offset += w.size
+            b = state[offset:offset + b_shape[0]].astype(np.float64)
+            offset += b.size
+            layers.append((w, b))
+        reference = nbrdf_reference(layers, light, view)
+        got = bsdf_eval(bsdf, view, light)
+        assert np.all(np.abs(got - reference) <= 1e-5 * (1 + reference) + 1e-5 * reference)
 
 
 # ---------------------------------------------------------------------------------------------
