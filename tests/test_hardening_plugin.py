@@ -447,7 +447,7 @@ def _load_error(plugin, path) -> str:
     return _error_chain(info.value)
 
 
-def test_wrong_file_kinds_are_named(network_file, merl_table):
+def test_wrong_file_kinds_are_named(network_file, merl_table, tmp_path):
     mi.set_variant("scalar_rgb")
     message = _load_error("nbrdf", merl_table)
     assert "this is a MERL table; the nbrdf BSDF reads *.nbrdf.json" in message and "merl BSDF" in message
@@ -455,6 +455,9 @@ def test_wrong_file_kinds_are_named(network_file, merl_table):
     message = _load_error("merl", network_file)
     assert "this is a JSON file" in message and "nbrdf BSDF" in message
     assert "538970747" not in message
+    odd = tmp_path / "odd.binary"  # a MERL-like file with other dimensions
+    odd.write_bytes(np.array([90, 90, 90], "<i4").tobytes() + merl_table.read_bytes()[12:1000])
+    assert "this is binary data, not an *.nbrdf.json network" in _load_error("nbrdf", odd)
 
 
 def test_paths_appear_once(tmp_path):

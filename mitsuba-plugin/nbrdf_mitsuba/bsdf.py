@@ -98,10 +98,6 @@ def use_wavefront_mode(reason: str = "requested") -> list[str]:
     return changed
 
 
-def _symbolic_scope() -> bool:
-    return _is_jit() and dr.flag(dr.JitFlag.SymbolicScope)
-
-
 # --------------------------------------------------------------------------------------------
 # Marshalling between Mitsuba values and planar float32 arrays
 
@@ -199,7 +195,9 @@ class _NativeBSDFMixin:
         path = _resolve(self._filename)
         problem = _file_problem(path, self.PLUGIN)
         if problem:
-            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem}')
+            # The status names of the library's own checks (I/O for special files, else format).
+            status = "NBRDF_ERROR_IO" if problem.startswith("not a regular file") else "NBRDF_ERROR_FORMAT"
+            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [{status}]')
         try:
             self._native = self._load(path)
         except _native.NbrdfError as error:
@@ -224,7 +222,7 @@ class _NativeBSDFMixin:
                     raise RuntimeError(f"{self._type_name()}: {error}") from None
             # The rust backend keeps a traced twin for symbolic scopes: Dr.Jit traces a symbolic
             # call through every live BSDF, wherever it was built, and native code cannot run
-            # there (see _traced_or_raise).
+            # there (see _traced_path).
             if self._backend == "jit" or not self._traced_width_problem():
                 self._traced = self._trace(path, None if self._backend == "jit" else "literal")
                 self._apply_traced_state()
@@ -514,7 +512,7 @@ class NbrdfMixin(_NativeBSDFMixin):
             mi.ParamFlags.Differentiable if differentiable else mi.ParamFlags.NonDifferentiable)
 
     def _validated_weights(self, keys):
-        """The new network weights (NumPy) when they changed and are valid; raises ValueError."""
+        """The new network weights (NumPy) when the update names them, if valid; raises ValueError."""
         if keys is not None and not any(str(key).endswith("weights") for key in keys):
             return None
         flat = self._traced.flat
@@ -663,6 +661,9 @@ def _file_problem(path: str, plugin: str) -> str | None:
     if plugin == "nbrdf" and is_merl:
         return ("this is a MERL table; the nbrdf BSDF reads *.nbrdf.json networks "
                 '(use the merl BSDF: "type": "merl")')
+    if plugin == "nbrdf" and b"\0" in head:
+        return ("this is binary data, not an *.nbrdf.json network (JSON text); MERL tables go to "
+                'the merl BSDF ("type": "merl")')
     if plugin == "merl" and is_json:
         return ("this is a JSON file (an *.nbrdf.json network?); the merl BSDF reads MERL .binary "
                 'tables (use the nbrdf BSDF for networks: "type": "nbrdf")')
