@@ -210,19 +210,14 @@ def test_register_is_idempotent_across_variants(network_file):
         assert type(bsdf).__name__ == "NbrdfBSDF" and isinstance(bsdf, mi.BSDF)
 
 
-def test_rust_backend_switches_to_wavefront_mode_and_jit_does_not(llvm_variant, network_file, merl_table):
-    try:
-        for plugin, path in (("nbrdf", network_file), ("merl", merl_table)):
-            dr.set_flag(dr.JitFlag.SymbolicLoops, True)
-            dr.set_flag(dr.JitFlag.SymbolicCalls, True)
-            bsdf = mi.load_dict({"type": plugin, "filename": str(path)})
-            assert "backend = jit" in str(bsdf)
-            assert dr.flag(dr.JitFlag.SymbolicLoops) and dr.flag(dr.JitFlag.SymbolicCalls)
-            mi.load_dict({"type": plugin, "filename": str(path), "backend": "rust"})
-            assert not dr.flag(dr.JitFlag.SymbolicLoops) and not dr.flag(dr.JitFlag.SymbolicCalls)
-    finally:
-        dr.set_flag(dr.JitFlag.SymbolicLoops, True)
-        dr.set_flag(dr.JitFlag.SymbolicCalls, True)
+def test_constructing_either_backend_leaves_dr_jit_flags_alone(llvm_variant, network_file, merl_table):
+    """Flags are per thread and plugins are built on worker threads: switching them at
+    construction would help only sometimes (issue 16), so neither backend touches them."""
+    for plugin, path in (("nbrdf", network_file), ("merl", merl_table)):
+        bsdf = mi.load_dict({"type": plugin, "filename": str(path)})
+        assert "backend = jit" in str(bsdf)
+        mi.load_dict({"type": plugin, "filename": str(path), "backend": "rust"})
+        assert dr.flag(dr.JitFlag.SymbolicLoops) and dr.flag(dr.JitFlag.SymbolicCalls)
 
 
 def test_scene_with_builtin_bsdfs_renders_in_symbolic_mode(llvm_variant, network_file, merl_table):
@@ -246,23 +241,13 @@ def test_unknown_backend_and_jit_in_scalar_are_errors(network_file):
         mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": "jit"})
 
 
-def test_symbolic_mode_gives_a_clear_error(llvm_variant, network_file):
-    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": "rust"})
+def test_rust_backend_in_symbolic_mode_uses_its_traced_twin(llvm_variant, network_file):
+    """Inside a symbolic scope the library cannot run; the rust-backed BSDF evaluates its traced
+    twin there (tests/test_hardening_plugin.py compares it with the wavefront render)."""
     scene = mi.load_dict(scene_dict({"type": "nbrdf", "filename": str(network_file), "backend": "rust"}, "path"))
-    try:
-        dr.set_flag(dr.JitFlag.SymbolicLoops, True)
-        dr.set_flag(dr.JitFlag.SymbolicCalls, True)
-        with pytest.raises(Exception) as info:
-            mi.render(scene)
-        chain, error = [], info.value
-        while error is not None:  # Dr.Jit wraps the plugin's exception
-            chain.append(str(error))
-            error = error.__cause__ or error.__context__
-        assert any("symbolic Dr.Jit loop or call" in message for message in chain), chain
-    finally:
-        dr.set_flag(dr.JitFlag.SymbolicLoops, True)
-        dr.set_flag(dr.JitFlag.SymbolicCalls, True)
-    assert bsdf is not None
+    assert dr.flag(dr.JitFlag.SymbolicLoops) and dr.flag(dr.JitFlag.SymbolicCalls)
+    image = np.array(mi.render(scene, spp=4))
+    assert np.all(np.isfinite(image)) and image.max() > 0
 
 
 def test_bundled_header_matches_the_repository():

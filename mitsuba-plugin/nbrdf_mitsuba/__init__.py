@@ -34,9 +34,9 @@ def register(variant: str | None = None) -> bool:
     """Registers the ``nbrdf`` and ``merl`` BSDFs for the current Mitsuba variant.
 
     Idempotent per variant; Dr.Jit's flags are left alone (the default ``jit`` backend traces
-    into Mitsuba's symbolic kernels; only ``backend="rust"`` in a JIT variant needs
-    :func:`use_wavefront_mode`). Returns False when no variant is set (nothing to register for
-    yet).
+    into Mitsuba's symbolic kernels; ``backend="rust"`` in a JIT variant runs the library only
+    in wavefront mode, see :func:`use_wavefront_mode`, and its traced twin elsewhere). Returns
+    False when no variant is set (nothing to register for yet).
     """
     variant = variant or mi.variant()
     if variant is None:

@@ -12,13 +12,25 @@ Two backends (parameter ``backend``):
 * ``rust`` (default in scalar variants, the reference): the native library evaluates whole
   wavefronts on the host. Directions are evaluated (``dr.eval``), copied to NumPy in Dr.Jit's
   planar (3, N) layout, handed to the library, and copied back. That cannot happen while Dr.Jit
-  records a symbolic loop or call, so in JIT variants this backend needs wavefront mode (see
-  :func:`use_wavefront_mode`). Outputs are not differentiable.
+  records a symbolic loop or call, so in JIT variants the library runs in wavefront mode on the
+  thread that renders (see :func:`use_wavefront_mode`). Dr.Jit's flags are per thread, Mitsuba
+  builds a scene's plugins on worker threads, and a symbolic call is traced through every live
+  BSDF, so constructing a BSDF changes no flag; inside a symbolic scope a rust-backed BSDF
+  evaluates its traced twin instead (logged once), on whichever thread. Outputs are not
+  differentiable.
+
+Parameter updates (``mi.traverse`` + ``params.update()``) are validated as a whole and applied
+atomically: a rejected update raises, puts the previous values back into the traversed
+parameters and leaves the BSDF in its last good state; later valid updates take effect.
+Rejected: non-finite or negative exponents, exponents above ``MAX_EXPONENT`` (1e6), specular
+weights outside [0, 1], NaN or infinite network weights, weights of the wrong count.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import stat
 
 import drjit as dr
 import mitsuba as mi
@@ -33,6 +45,16 @@ BACKENDS = ("auto", "jit", "rust")
 # recompiling, gradients flow to the weights; a few to 15 % slower).
 JIT_WEIGHT_MODES = ("literal", "opaque")
 _default_backend = "auto"
+#: Widest hidden layer the traced backend takes. Its kernels unroll the network into straight-line
+#: code, so tracing and compiling grow with width^2. Measured: construction plus the first eval
+#: of one 65536-lane wavefront (llvm_ad_rgb, literal weights, the shared 2-core machine):
+#: width 21: 0.4 s, 32: 0.7 s, 40: 1.2 s, 48: 1.9 s, 64: 4.7 s, 96: 11.6 s, 200: ~25 s,
+#: 1000: minutes and gigabytes. Wider networks go to the Rust backend (``auto``, with a
+#: warning) or are refused (``jit``).
+JIT_MAX_HIDDEN_WIDTH = 40
+MAX_EXPONENT = jit.MAX_EXPONENT
+# The MERL format: three little-endian int32 dimensions, then 3 * 90 * 90 * 180 float64.
+_MERL_HEADER = np.array([90, 90, 180], dtype="<i4").tobytes()
 
 
 def set_default_backend(backend: str) -> str:
@@ -54,12 +76,12 @@ _WAVEFRONT_FLAGS = ("SymbolicLoops", "SymbolicCalls")
 def use_wavefront_mode(reason: str = "requested") -> list[str]:
     """Switches Dr.Jit's symbolic loops and calls off on the calling thread (JIT variants).
 
-    Only the ``rust`` backend needs this. Mitsuba's ``direct`` integrator records the BSDF call
-    symbolically (needs SymbolicCalls off); ``path`` also runs the bounce loop symbolically
-    (needs SymbolicLoops off as well). Dr.Jit's flags are per thread and Mitsuba may construct
-    plugins on a scene-loading thread, so constructing a ``rust``-backed BSDF switches them on
-    the constructing thread, and a render on another thread must call this first (a BSDF called
-    inside a symbolic scope raises an error that says so). Returns the flags switched off.
+    Only the ``rust`` backend needs this, on the thread that renders. Mitsuba's ``direct``
+    integrator records the BSDF call symbolically (needs SymbolicCalls off); ``path`` also runs
+    the bounce loop symbolically (needs SymbolicLoops off as well). Dr.Jit's flags are per
+    thread and Mitsuba constructs a scene's plugins on worker threads, so no BSDF switches
+    them: call this before rendering (a rust-backed BSDF called inside a symbolic scope uses its
+    traced twin and logs a warning that says so). Returns the flags switched off.
     """
     if not dr.is_jit_v(mi.Float):
         return []
@@ -74,17 +96,6 @@ def use_wavefront_mode(reason: str = "requested") -> list[str]:
                                   f"thread ({reason}): the nbrdf/merl BSDFs call native code on whole "
                                   "wavefronts and cannot run inside symbolic loops or calls")
     return changed
-
-
-def _require_wavefront(type_name: str) -> None:
-    if dr.flag(dr.JitFlag.SymbolicScope):
-        raise RuntimeError(
-            f"{type_name}: called inside a symbolic Dr.Jit loop or call, but the BSDF evaluates "
-            "native code on host arrays. Render with wavefront mode on the rendering thread: "
-            "dr.set_flag(dr.JitFlag.SymbolicLoops, False); dr.set_flag(dr.JitFlag.SymbolicCalls, "
-            "False) (nbrdf_mitsuba.use_wavefront_mode() does this on the calling thread), or use "
-            'the traced backend: <string name="backend" value="jit"/>'
-        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -102,7 +113,8 @@ def _width(*values) -> int:
 def _planar(values, n: int) -> np.ndarray:
     """(k, n) float32 array of k Dr.Jit values of width 1 or n (already evaluated)."""
     if _is_jit():
-        rows = [np.asarray(dr.detach(v).numpy(), dtype=np.float32).reshape(-1) for v in values]
+        rows = [np.asarray(v if isinstance(v, (int, float)) else dr.detach(v).numpy(),
+                           dtype=np.float32).reshape(-1) for v in values]
     else:
         rows = [np.asarray([v], dtype=np.float32) for v in values]
     return np.ascontiguousarray(np.stack([np.broadcast_to(r, (n,)) for r in rows]))
@@ -181,10 +193,18 @@ class _NativeBSDFMixin:
                              f'(e.g. <string name="filename" value="..."/>)')
         self._filename = str(filename)
         path = _resolve(self._filename)
+        problem = _file_problem(path, self.PLUGIN)
+        if problem:
+            # The status names of the library's own checks (I/O for special files, else format).
+            status = "NBRDF_ERROR_IO" if problem.startswith("not a regular file") else "NBRDF_ERROR_FORMAT"
+            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [{status}]')
         try:
             self._native = self._load(path)
         except _native.NbrdfError as error:
-            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {_strip_function(error)} '
+            message = _strip_function(error)
+            # Library messages name the file already: say it once.
+            where = "" if path in message else f'"{path}": '
+            raise RuntimeError(f"{self._type_name()}: cannot load {where}{message} "
                                f"[{error.status_name}]") from None
         self._path = path
 
@@ -200,22 +220,36 @@ class _NativeBSDFMixin:
                     _llvm.check_backend()
                 except RuntimeError as error:
                     raise RuntimeError(f"{self._type_name()}: {error}") from None
-            if self._backend == "rust":
-                use_wavefront_mode(f'{self.PLUGIN} BSDF "{self._filename}" with backend "rust"')
-            else:
-                self._traced = self._trace(path)
+            # The rust backend keeps a traced twin for symbolic scopes: Dr.Jit traces a symbolic
+            # call through every live BSDF, wherever it was built, and native code cannot run
+            # there (see _traced_path).
+            if self._backend == "jit" or not self._traced_width_problem():
+                self._traced = self._trace(path, None if self._backend == "jit" else "literal")
+                self._apply_traced_state()
 
     def _choose_backend(self, backend) -> str:
         backend = str(backend).strip().lower()
         if backend not in BACKENDS:
             raise ValueError(f'{self._type_name()} "{self._filename}": unknown backend "{backend}" '
                              f"(expected one of: {', '.join(BACKENDS)})")
-        if backend == "auto":
-            return "jit" if _is_jit() else "rust"
         if backend == "jit" and not _is_jit():
             raise ValueError(f'{self._type_name()} "{self._filename}": backend "jit" needs a JIT '
                              f"variant (llvm_* or cuda_*); {mi.variant()} uses the rust backend")
+        too_wide = self._traced_width_problem() if _is_jit() else None
+        if backend == "auto":
+            if too_wide:
+                mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": {too_wide}; using '
+                                         'the rust backend, which needs wavefront mode on the rendering '
+                                         "thread (nbrdf_mitsuba.use_wavefront_mode())")
+                return "rust"
+            return "jit" if _is_jit() else "rust"
+        if backend == "jit" and too_wide:
+            raise ValueError(f'{self._type_name()} "{self._filename}": {too_wide}; use '
+                             '<string name="backend" value="rust"/> (with wavefront mode)')
         return backend
+
+    def _traced_width_problem(self) -> str | None:
+        return None
 
     # -- configuration ------------------------------------------------------------------------
 
@@ -232,11 +266,10 @@ class _NativeBSDFMixin:
         exponent, weight = self._phong_parameters(sampling, exponent, weight)
         self._sampling = sampling
         self._set_sampler(exponent, weight)
+        # What traverse exposes: updated in place by SceneParameters, read only by
+        # parameters_changed (the kernels use validated copies, see _apply_traced_state).
         self.exponent = _parameter(exponent)
         self.specular_weight = _parameter(weight)
-        if _is_jit():
-            # Kernel parameters rather than constants: new values do not recompile kernels.
-            dr.make_opaque(self.exponent, self.specular_weight)
 
     def _phong_parameters(self, sampling, exponent, weight) -> tuple[float, float]:
         """(exponent, weight) with file defaults applied; errors when phong lacks them."""
@@ -246,6 +279,9 @@ class _NativeBSDFMixin:
         return _as_float(self, "exponent", exponent, 0.0), _as_float(self, "specular_weight", weight, 0.0)
 
     def _set_sampler(self, exponent: float, weight: float) -> None:
+        problem = _sampling_problem(exponent, weight)
+        if problem:
+            raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: {problem}')
         try:
             self._sampler = _native.sampler(self._sampling, exponent, weight)
         except _native.NbrdfError as error:
@@ -253,22 +289,29 @@ class _NativeBSDFMixin:
                              f"{_strip_function(error)}") from None
         self._exponent_value, self._weight_value = exponent, weight
 
+    def _apply_traced_state(self) -> None:
+        """The traced kernels' copies of the validated sampling parameters: kernel parameters
+        rather than constants, so that new values do not recompile kernels."""
+        self._exponent_jit = mi.Float(self._exponent_value)
+        self._weight_jit = mi.Float(self._weight_value)
+        dr.make_opaque(self._exponent_jit, self._weight_jit)
+
     # -- Mitsuba interface --------------------------------------------------------------------
 
     # -- traced backend -----------------------------------------------------------------------
 
     def _jit_eval(self, si, wo, active):
         f = self._traced.eval(si.wi, wo)
-        return dr.select(_both_above(active, si.wi, wo), f * mi.Frame3f.cos_theta(wo), 0.0)
+        return dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0)
 
     def _jit_pdf(self, si, wo, active):
-        pdf = jit.pdf(self._sampling, si.wi, wo, self.exponent, self.specular_weight)
+        pdf = jit.pdf(self._sampling, si.wi, wo, self._exponent_jit, self._weight_jit)
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def _jit_sample(self, ctx, si, sample1, sample2, active):
         bs = dr.zeros(mi.BSDFSample3f)
         light, pdf = jit.sample(self._sampling, si.wi, sample1, sample2.x, sample2.y,
-                                self.exponent, self.specular_weight)
+                                self._exponent_jit, self._weight_jit)
         active = active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (pdf > 0)
         bs.wo = light
@@ -276,41 +319,67 @@ class _NativeBSDFMixin:
         bs.eta = 1.0
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
         bs.sampled_component = mi.UInt32(0)
-        f_cos = self._traced.eval(si.wi, light) * mi.Frame3f.cos_theta(light)
-        weight = dr.select(active, f_cos / dr.select(active, pdf, 1.0), 0.0)
+        f_cos = self._traced.eval(si.wi, light) * jit.cos_theta(light)
+        weight = f_cos / dr.select(active, pdf, 1.0)
+        # As sampling.rs sample_weight: 0 where a tiny pdf would overflow the quotient.
+        weight = dr.select(active & dr.all(dr.isfinite(weight)), weight, 0.0)
         return bs, weight
+
+    def _traced_path(self, *values) -> bool:
+        """Whether this call goes through the traced code: the jit backend, or the rust backend
+        inside a symbolic loop or call. Dr.Jit's flags are per thread and plugins are built on
+        worker threads, so a rust-backed BSDF cannot count on wavefront mode; in a symbolic
+        scope it uses its traced twin (the same math, held to the library by
+        tests/test_backends.py) and says so once in the log."""
+        if not _is_jit() or _width(*values) == 0:
+            return False
+        if self._backend == "jit":
+            return True
+        if not dr.flag(dr.JitFlag.SymbolicScope):
+            return False
+        if not hasattr(self, "_traced"):
+            raise RuntimeError(
+                f'{self._type_name()} "{self._filename}": called inside a symbolic Dr.Jit loop or call, '
+                f"where the rust backend cannot run and the traced one is refused "
+                f"({self._traced_width_problem()}). Render in wavefront mode: call "
+                "nbrdf_mitsuba.use_wavefront_mode() on the rendering thread before rendering")
+        if not getattr(self, "_warned_twin", False):
+            self._warned_twin = True
+            mi.Log(mi.LogLevel.Warn,
+                   f'{self._type_name()} "{self._filename}": backend "rust" called inside a symbolic '
+                   "Dr.Jit loop or call (wavefront mode is off on this thread); evaluating its traced "
+                   "twin instead. For the reference library, call nbrdf_mitsuba.use_wavefront_mode() "
+                   "on the rendering thread before rendering")
+        return True
 
     # -- Mitsuba interface --------------------------------------------------------------------
 
     def eval(self, ctx, si, wo, active=True):
-        if self._backend == "jit" and _width(si.wi, wo) > 0:
+        if self._traced_path(si.wi, wo):
             enabled = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
             return self._jit_eval(si, wo, active & enabled)
         if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Color3f, _width(si.wi, wo) if _is_jit() else 1)
-        _require_wavefront(self._type_name())
         view, light = _directions(si.wi, wo)
         value = _to_color(self._native.eval(view, light))
         return dr.select(_both_above(active, si.wi, wo), value, 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        if self._backend == "jit" and _width(si.wi, wo) > 0:
+        if self._traced_path(si.wi, wo):
             return self._jit_pdf(si, wo, active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0))
         if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Float, _width(si.wi, wo) if _is_jit() else 1)
-        _require_wavefront(self._type_name())
         view, light = _directions(si.wi, wo)
         pdf = _to_float(_native.pdf(self._sampler, view, light))
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
-        if self._backend == "jit" and _width(si.wi, wo) > 0:
+        if self._traced_path(si.wi, wo):
             active = active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
             return self._jit_eval(si, wo, active), self._jit_pdf(si, wo, active)
         if not self._enabled(ctx, si.wi, wo):
             n = _width(si.wi, wo) if _is_jit() else 1
             return dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
-        _require_wavefront(self._type_name())
         view, light = _directions(si.wi, wo)
         value = _to_color(self._native.eval(view, light))
         pdf = _to_float(_native.pdf(self._sampler, view, light))
@@ -318,13 +387,12 @@ class _NativeBSDFMixin:
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        if self._backend == "jit" and _width(si.wi, sample1, sample2) > 0:
+        if self._traced_path(si.wi, sample1, sample2):
             return self._jit_sample(ctx, si, sample1, sample2, active)
         n = _width(si.wi, sample1, sample2) if _is_jit() else 1
         bs = dr.zeros(mi.BSDFSample3f, n) if _is_jit() else mi.BSDFSample3f()
         if not self._enabled(ctx, si.wi, sample1, sample2):
             return bs, dr.zeros(mi.Color3f, n) if _is_jit() else mi.Color3f(0.0)
-        _require_wavefront(self._type_name())
         _evaluate(si.wi, sample1, sample2)
         view = _planar(_vector_rows(si.wi), n)
         u = _planar([sample1, sample2.x, sample2.y], n)
@@ -355,26 +423,47 @@ class _NativeBSDFMixin:
             self._traverse_traced(put)
 
     def parameters_changed(self, keys=None):
-        """Re-validates the sampling parameters; invalid ones raise and leave the previous
-        (valid) sampler in use."""
-        if self._backend == "jit":
-            self._traced_changed(keys)
-        exponent = _scalar(self.exponent)
-        weight = _scalar(self.specular_weight)
-        if (exponent, weight) == (self._exponent_value, self._weight_value):
-            return
+        """Validates the whole update, then applies all of it or nothing.
+
+        A rejected update raises ValueError (saying what was wrong), writes the last good values
+        back into the traversed parameters (in place, so the ``SceneParameters`` that holds them
+        sees them too) and leaves the BSDF as it was; later valid updates take effect."""
         try:
-            self._set_sampler(exponent, weight)
-        except ValueError:
-            self.exponent = _parameter(self._exponent_value)
-            self.specular_weight = _parameter(self._weight_value)
-            raise
-        if _is_jit():
-            dr.make_opaque(self.exponent, self.specular_weight)
-        if self._sampling != "phong":
-            mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
-                                     f'specular_weight only affect sampling "phong" (this BSDF '
-                                     f'uses "{self._sampling}")')
+            exponent = _scalar(self.exponent, "exponent")
+            weight = _scalar(self.specular_weight, "specular_weight")
+            problem = _sampling_problem(exponent, weight)
+            if problem:
+                raise ValueError(f"invalid sampling parameters: {problem}")
+            weights = self._validated_weights(keys) if self._backend == "jit" else None
+        except ValueError as error:
+            self._restore_parameters()
+            raise ValueError(f'{self._type_name()} "{self._filename}": update rejected, the BSDF keeps '
+                             f"its previous parameters: {error}") from None
+        if weights is not None:
+            self._apply_weights(weights)
+        if (exponent, weight) != (self._exponent_value, self._weight_value):
+            self._set_sampler(exponent, weight)  # validated above: cannot fail
+            if self._sampling != "phong":
+                mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
+                                         f'specular_weight only affect sampling "phong" (this BSDF '
+                                         f'uses "{self._sampling}")')
+        if hasattr(self, "_traced"):
+            self._apply_traced_state()
+
+    def _restore_parameters(self) -> None:
+        _assign(self.exponent, self._exponent_value)
+        _assign(self.specular_weight, self._weight_value)
+        if self._backend == "jit":
+            self._restore_weights()
+
+    def _validated_weights(self, keys):
+        return None
+
+    def _apply_weights(self, weights) -> None:
+        pass
+
+    def _restore_weights(self) -> None:
+        pass
 
     def to_string(self):
         lines = [f'filename = "{self._filename}"', *self._describe(), f"backend = {self._backend}",
@@ -401,11 +490,11 @@ class NbrdfMixin(_NativeBSDFMixin):
     def _load(self, path):
         return _native.Network(path)
 
-    def _trace(self, path):
+    def _trace(self, path, mode=None):
         # The library has validated the file; its layers are plain JSON.
         with open(path, encoding="utf-8") as file:
             layers = json.load(file)["layers"]
-        mode = str(self._props_jit_weights).strip().lower()
+        mode = str(self._props_jit_weights if mode is None else mode).strip().lower()
         if mode not in JIT_WEIGHT_MODES:
             raise ValueError(f'{self._type_name()} "{self._filename}": unknown jit_weights "{mode}" '
                              f"(expected one of: {', '.join(JIT_WEIGHT_MODES)})")
@@ -422,12 +511,36 @@ class NbrdfMixin(_NativeBSDFMixin):
         put("weights", self._traced.flat,
             mi.ParamFlags.Differentiable if differentiable else mi.ParamFlags.NonDifferentiable)
 
-    def _traced_changed(self, keys):
-        if keys is None or any(str(key).endswith("weights") for key in keys):
-            if dr.width(self._traced.flat) != self._traced.parameter_count:
-                raise ValueError(f'{self._type_name()} "{self._filename}": "weights" must hold '
-                                 f"{self._traced.parameter_count} values")
-            self._traced.refresh()
+    def _validated_weights(self, keys):
+        """The new network weights (NumPy) when the update names them, if valid; raises ValueError."""
+        if keys is not None and not any(str(key).endswith("weights") for key in keys):
+            return None
+        flat = self._traced.flat
+        count = dr.width(flat)
+        if count != self._traced.parameter_count:
+            raise ValueError(f'"weights" must hold {self._traced.parameter_count} values, got {count}')
+        values = np.asarray(dr.detach(flat).numpy(), dtype=np.float32).reshape(-1)
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            k = int(bad[0])
+            raise ValueError(f'"weights" value {k} ({self._traced.describe_index(k)}) is '
+                             f"{_non_finite_name(values[k])}; {bad.size} of {values.size} weights are "
+                             "not finite (every weight must be a finite float32)")
+        return values  # refreshed even when equal: enabling gradients marks the key as changed
+
+    def _apply_weights(self, weights) -> None:
+        self._traced.refresh()
+
+    def _restore_weights(self) -> None:
+        if not np.array_equal(np.asarray(dr.detach(self._traced.flat).numpy()).reshape(-1), self._traced.good):
+            _assign(self._traced.flat, self._traced.good)
+
+    def _traced_width_problem(self) -> str | None:
+        width = self._native.hidden_width
+        if width <= JIT_MAX_HIDDEN_WIDTH:
+            return None
+        return (f"hidden width {width} is above {JIT_MAX_HIDDEN_WIDTH}, the widest network the traced "
+                f"(jit) backend evaluates in reasonable time (JIT_MAX_HIDDEN_WIDTH)")
 
     def _default_sampling(self, exponent, weight) -> str:
         if self._native.has_sampling or (exponent is not None and weight is not None):
@@ -464,15 +577,12 @@ class MerlMixin(_NativeBSDFMixin):
     def _load(self, path):
         return _native.MerlTable(path)
 
-    def _trace(self, path):
+    def _trace(self, path, mode=None):
         # The library has validated size, header and values.
         stored = np.fromfile(path, dtype="<f8", offset=12)
         return jit.TracedMerl(stored)
 
     def _traverse_traced(self, put):
-        pass
-
-    def _traced_changed(self, keys):
         pass
 
     def _default_sampling(self, exponent, weight) -> str:
@@ -497,13 +607,93 @@ def _parameter(value: float):
     return mi.Float(value) if _is_jit() else mi.Vector1f(value)
 
 
-def _scalar(value) -> float:
+def _assign(target, values) -> None:
+    """Writes ``values`` into the Mitsuba array ``target`` in place (what SceneParameters holds)."""
+    values = np.asarray(values, dtype=np.float32).reshape(-1)
+    mi.set_property(target, type(target)(values) if _is_jit() else type(target)(*map(float, values)))
+
+
+def _scalar(value, name: str = "value") -> float:
     if isinstance(value, (int, float)):
         return float(value)
-    array = np.asarray(value.numpy() if _is_jit() else value, dtype=np.float64).reshape(-1)
+    array = np.asarray(dr.detach(value).numpy() if _is_jit() else value, dtype=np.float64).reshape(-1)
     if array.size != 1:
-        raise ValueError(f"expected a single value, got {array.size}")
+        raise ValueError(f'"{name}" must be a single value, got {array.size}')
     return float(array[0])
+
+
+def _non_finite_name(value) -> str:
+    return "NaN" if np.isnan(value) else ("+inf" if value > 0 else "-inf")
+
+
+def _sampling_problem(exponent: float, weight: float) -> str | None:
+    """Why (exponent, specular_weight) cannot be used, naming NaN where NaN is the problem."""
+    if not np.isfinite(exponent):
+        return f"exponent is {_non_finite_name(exponent)} (must be finite, in [0, {MAX_EXPONENT:g}])"
+    if exponent < 0:
+        return f"exponent {exponent:g} is negative (must be in [0, {MAX_EXPONENT:g}])"
+    if exponent > MAX_EXPONENT:
+        return (f"exponent {exponent:g} is above the maximum {MAX_EXPONENT:g} (MAX_EXPONENT: sharper "
+                "lobes are not resolved by float32 directions)")
+    if not np.isfinite(weight):
+        return f"specular_weight is {_non_finite_name(weight)} (must be in [0, 1])"
+    if not 0.0 <= weight <= 1.0:
+        return f"specular_weight {weight:g} is outside [0, 1]"
+    return None
+
+
+def _file_problem(path: str, plugin: str) -> str | None:
+    """What is wrong with ``path`` as input of ``plugin``, judged before the library reads it:
+    special files (a FIFO would block, /dev/zero never ends) and the other plugin's format."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None  # the library reports missing and unreadable files
+    if not stat.S_ISREG(info.st_mode):
+        return "not a regular file (a directory, FIFO or device cannot be read as a BSDF)"
+    try:
+        with open(path, "rb") as file:
+            head = file.read(64)
+    except OSError as error:
+        return error.strerror or str(error)
+    is_merl = head[:12] == _MERL_HEADER
+    is_json = head.lstrip()[:1] in (b"{", b"[")
+    if plugin == "nbrdf" and is_merl:
+        return ("this is a MERL table; the nbrdf BSDF reads *.nbrdf.json networks "
+                '(use the merl BSDF: "type": "merl")')
+    if plugin == "nbrdf" and b"\0" in head:
+        return ("this is binary data, not an *.nbrdf.json network (JSON text); MERL tables go to "
+                'the merl BSDF ("type": "merl")')
+    if plugin == "merl" and is_json:
+        return ("this is a JSON file (an *.nbrdf.json network?); the merl BSDF reads MERL .binary "
+                'tables (use the nbrdf BSDF for networks: "type": "nbrdf")')
+    if plugin == "merl" and is_merl:
+        return _merl_values_problem(path)
+    return None
+
+
+def _merl_values_problem(path: str) -> str | None:
+    """Values the renderer cannot use although float64 can hold them: beyond float32 once
+    scaled (they would render inf/NaN), or no valid (non-negative) cell at all."""
+    try:
+        stored = np.fromfile(path, dtype="<f8", offset=12)
+    except (OSError, ValueError):
+        return None  # the library reports size and read errors
+    if stored.size != 3 * 90 * 90 * 180:
+        return None
+    stored = stored.reshape(3, -1)
+    finite = np.isfinite(stored)
+    if not finite.all():
+        return None  # the library names the value
+    scaled = stored * np.asarray(jit.MERL_SCALE)[:, None]
+    too_big = np.abs(scaled) > np.finfo(np.float32).max
+    if too_big.any():
+        channel, cell = np.argwhere(too_big)[0]
+        return (f"value {stored[channel, cell]:g} (channel {channel}, cell {cell}) overflows float32, "
+                f"the precision the table is rendered in ({int(too_big.sum())} such values)")
+    if not np.any(np.all(stored >= 0, axis=0)):
+        return "no valid cell: every cell has a negative (unmeasured) value"
+    return None
 
 
 def _strip_function(error: Exception) -> str:

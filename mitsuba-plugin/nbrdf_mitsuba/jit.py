@@ -1,9 +1,30 @@
-"""The NBRDF evaluation and the Blinn-Phong mixture written as Dr.Jit arithmetic.
+"""The NBRDF evaluation, the MERL lookup and the Blinn-Phong mixture written as Dr.Jit arithmetic.
 
 Traced into Mitsuba's own kernels, so a scene with NBRDFs keeps Dr.Jit's symbolic (megakernel)
-mode and runs on CUDA as well as LLVM. The Rust library stays the reference: every formula here
-mirrors `nbrdf-core` (`coords::network_input_components`, `network`, `sampling`) and the parity
-tests hold the two together.
+mode and runs on CUDA as well as LLVM.
+
+This module is a deliberate second copy of the Rust library's math (the Rust code stays the
+reference). Its twins, and the tests that hold the two together:
+
+* :func:`network_input` - ``nbrdf-core/src/coords.rs`` ``network_input_components`` (the
+  isotropic Rusinkiewicz input encoding);
+* :class:`TracedNetwork` - ``nbrdf-core/src/network.rs`` ``eval_input`` / ``eval_chunks``: the
+  same fused multiply-adds, ReLU as a compare-select (NaN -> 0, ``relu``) and the exp argument
+  clamped to ``[EXP_ARGUMENT_MIN, EXP_ARGUMENT_MAX]`` with NaN going to the lower end
+  (``clamp_exp_arg``), so that no finite weights give NaN or infinity; directions normalised
+  like ``rescale_out_of_range`` (zero and non-finite vectors give 0);
+* :func:`mixture_pdf`, :func:`sample`, :func:`blinn_phong_half_vector` -
+  ``nbrdf-core/src/sampling.rs`` (``SamplingStrategy::sample``/``pdf``, ``cos_power``,
+  ``blinn_phong_half_vector``; uniforms clamped like ``unit_interval``);
+* :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``.
+
+Tests: ``tests/test_backends.py`` (eval, pdf, samples and renders of both backends, and a
+float64 NumPy oracle), ``tests/test_sampling.py`` (chi^2, quadrature, the design formula) and
+``tests/test_hardening_plugin.py`` (NaN-safety, degenerate directions, sharp lobes at
+``n = 1e4, 1e6`` in a zoomed chi^2 domain).
+
+Sharp lobes: ``1 - cos(theta_h)`` is computed from ``|h_xy|^2`` (never as ``1 - h.z``, which
+cancels in float32), so the pdf keeps its accuracy up to :data:`MAX_EXPONENT`.
 
 Weights enter the kernel either as literals (``literal``: constant-folded, fastest, but one kernel
 per material) or as opaque scalar variables (``opaque``: one kernel per network width shared by
@@ -18,16 +39,53 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-EXP_ARGUMENT_MAX = 80.0  # keeps exp() finite in float32, as the Rust evaluator does
+# The exp argument range of nbrdf-core's network.rs (EXP_ARG_MAX / EXP_ARG_MIN): e^80 ~ 5.5e34
+# stays far below float32's maximum, and below -87 the result is -1 to float32 precision.
+EXP_ARGUMENT_MAX = 80.0
+EXP_ARGUMENT_MIN = -87.0
 SIN_THETA_H_EPS = 1e-7
+#: The largest Blinn-Phong exponent the plugins accept (DESIGN.md promises stable sampling up to
+#: 1e6; beyond it float32 directions cannot resolve the lobe and the backends would disagree).
+MAX_EXPONENT = 1e6
+
+
+def relu(v):
+    """``max(v, 0)`` with NaN -> 0 (``network.rs`` ``relu``: ``if v > 0 { v } else { 0 }``)."""
+    return dr.select(v > 0, v, 0.0)
+
+
+def clamp_exp_argument(z):
+    """``network.rs`` ``clamp_exp_arg``: into ``[EXP_ARGUMENT_MIN, EXP_ARGUMENT_MAX]``, NaN to the
+    lower end (compare-selects, not min/max, whose NaN handling is backend-specific)."""
+    z = dr.select(z > EXP_ARGUMENT_MIN, z, EXP_ARGUMENT_MIN)
+    return dr.select(z < EXP_ARGUMENT_MAX, z, EXP_ARGUMENT_MAX)
+
+
+def unit_vector(x, y, z):
+    """``(x, y, z) / |(x, y, z)|`` and whether it exists (false for zero, infinite and NaN input).
+
+    Divides by the largest component first, as ``network.rs`` ``rescale_out_of_range`` does, so
+    that vectors far too short or long to square in float32 keep their direction."""
+    m = dr.maximum(dr.maximum(dr.abs(x), dr.abs(y)), dr.abs(z))
+    finite = dr.isfinite(x) & dr.isfinite(y) & dr.isfinite(z)
+    ok = finite & (m > 0)
+    inv_m = dr.select(ok, dr.rcp(m), 0.0)
+    x, y, z = x * inv_m, y * inv_m, z * inv_m
+    length2 = dr.fma(x, x, dr.fma(y, y, z * z))
+    inv = dr.select(ok, dr.rsqrt(length2), 0.0)
+    return x * inv, y * inv, z * inv, ok
+
+
+def cos_theta(v: mi.Vector3f):
+    """``brdf.rs`` ``cos_theta_light``: ``z / |v|``, 0 for zero and non-finite vectors."""
+    _, _, z, ok = unit_vector(v.x, v.y, v.z)
+    return dr.select(ok, dr.maximum(z, 0.0), 0.0)
 
 
 def _unit_or_normal(x, y, z):
     """Unit vector, or the normal +z for zero, infinite or NaN input (as the Rust core)."""
-    length2 = dr.fma(x, x, dr.fma(y, y, z * z))
-    usable = (length2 > 0) & (length2 < float("inf"))
-    inv = dr.rsqrt(length2)
-    return dr.select(usable, x * inv, 0.0), dr.select(usable, y * inv, 0.0), dr.select(usable, z * inv, 1.0)
+    x, y, z, usable = unit_vector(x, y, z)
+    return dr.select(usable, x, 0.0), dr.select(usable, y, 0.0), dr.select(usable, z, 1.0)
 
 
 def network_input(view: mi.Vector3f, light: mi.Vector3f) -> list:
@@ -78,10 +136,24 @@ class TracedNetwork:
         self.flat = mi.Float(flat.astype(np.float32))
         self.refresh()
 
+    def describe_index(self, k: int) -> str:
+        """Where flat index ``k`` lives, e.g. ``layer 2 weight 17`` or ``layer 3 bias 0``."""
+        offset = 0
+        for layer, (n_in, n_out) in enumerate(self.shapes, start=1):
+            if k < offset + n_in * n_out:
+                return f"layer {layer} weight {k - offset}"
+            offset += n_in * n_out
+            if k < offset + n_out:
+                return f"layer {layer} bias {k - offset}"
+            offset += n_out
+        return f"index {k}"
+
     def refresh(self) -> None:
-        """Rebuilds the per-weight scalars from ``flat``."""
+        """Rebuilds the per-weight scalars from ``flat`` (the caller has validated it) and keeps
+        a copy as ``good``, the state a rejected update returns to."""
+        values = np.array(dr.detach(self.flat).numpy(), dtype=np.float32).reshape(-1)
+        self.good = values
         if self.mode == "literal":
-            values = np.array(self.flat, dtype=np.float32)
             scalars = [mi.Float(float(v)) for v in values]
         else:
             # Gathers at literal indices give 675 size-1 variables; make_opaque evaluates them in
@@ -108,15 +180,21 @@ class TracedNetwork:
                     if h_i is not None:
                         acc = dr.fma(h_i, W[i][o], acc)
                 out.append(acc)
-            h = [dr.maximum(v, 0.0) for v in out] if k < len(self._layers) - 1 else out
-        rgb = [dr.maximum(expm1(dr.minimum(v, EXP_ARGUMENT_MAX)), 0.0) for v in h]
+            h = [relu(v) for v in out] if k < len(self._layers) - 1 else out
+        rgb = [relu(expm1(clamp_exp_argument(v))) for v in h]
         return mi.Color3f(rgb[0], rgb[1], rgb[2])
 
     def eval(self, view: mi.Vector3f, light: mi.Vector3f) -> mi.Color3f:
-        """``f_r(light, view)``, zero at or below the horizon."""
+        """``f_r(light, view)``, zero at or below the horizon and for zero or non-finite
+        directions (``network.rs`` ``eval_chunks``)."""
         f = self.eval_input(network_input(view, light))
-        above = (view.z > 0) & (light.z > 0)
-        return dr.select(above, f, 0.0)
+        return dr.select(_both_valid_above(view, light), f, 0.0)
+
+
+def _both_valid_above(view, light):
+    *_, vz, v_ok = unit_vector(view.x, view.y, view.z)
+    *_, lz, l_ok = unit_vector(light.x, light.y, light.z)
+    return v_ok & l_ok & (vz > 0) & (lz > 0)
 
 
 def _expm1_nonpositive(x):
@@ -126,10 +204,20 @@ def _expm1_nonpositive(x):
     return dr.select(small, series, dr.exp(x) - 1.0)
 
 
-def _cos_power(cos_theta, exponent):
-    """cos^n as exp(n ln cos), with n = 0 -> 1 and cos <= 0 -> 0 (never NaN)."""
-    positive = cos_theta > 0
-    value = dr.exp(exponent * dr.log(dr.select(positive, dr.minimum(cos_theta, 1.0), 1.0)))
+def _log1m(x):
+    """ln(1 - x) for x in [0, 1) with full relative accuracy for small x (Kahan's trick: the
+    rounding of 1 - x is divided back out)."""
+    u = 1.0 - x
+    exact = u == 1.0
+    ratio = dr.log(dr.select(exact, 0.5, u)) * (-x) / dr.select(exact, 1.0, u - 1.0)
+    return dr.select(exact, -x, ratio)
+
+
+def _cos_power_from_one_minus(one_minus_cos, exponent):
+    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling.rs`` ``cos_power``), with
+    n = 0 -> 1 and cos <= 0 -> 0 (never NaN)."""
+    positive = one_minus_cos < 1.0
+    value = dr.exp(exponent * _log1m(dr.select(positive, dr.maximum(one_minus_cos, 0.0), 0.0)))
     value = dr.select(positive, value, 0.0)
     return dr.select(exponent == 0, 1.0, value)
 
@@ -137,6 +225,11 @@ def _cos_power(cos_theta, exponent):
 def _spherical(cos_theta, sin_theta, u):
     sin_phi, cos_phi = dr.sincos(2.0 * math.pi * u)
     return mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
+
+
+def unit_interval(u):
+    """``sampling.rs`` ``unit_interval``: clamped into [0, 1], NaN -> 0."""
+    return dr.select(u >= 0, dr.minimum(u, 1.0), 0.0)
 
 
 def uniform_hemisphere(u1, u2) -> mi.Vector3f:
@@ -164,9 +257,39 @@ def blinn_phong_half_vector(exponent, u1, u2) -> mi.Vector3f:
 
 def _unit(v: mi.Vector3f):
     """Unit vector and whether ``v`` had one (zero, infinite and NaN vectors give zero)."""
-    length2 = dr.squared_norm(v)
-    usable = (length2 > 0) & (length2 < float("inf"))
-    return dr.select(usable, v * dr.rsqrt(length2), 0.0), usable
+    x, y, z, ok = unit_vector(v.x, v.y, v.z)
+    return mi.Vector3f(x, y, z), ok
+
+
+def _in_range(x, y, z):
+    """``x, y, z`` divided by the largest component unless the length is within a factor 2 of 1
+    (unit inputs stay bit-exact; products of two such vectors cannot overflow)."""
+    length2 = dr.fma(x, x, dr.fma(y, y, z * z))
+    fine = (length2 > 0.25) & (length2 < 4.0)
+    m = dr.maximum(dr.maximum(dr.abs(x), dr.abs(y)), dr.abs(z))
+    scale = dr.select(fine | ~(m > 0) | ~dr.isfinite(m), 1.0, dr.rcp(m))
+    return mi.Vector3f(x * scale, y * scale, z * scale)
+
+
+def _half_vector_terms(view: mi.Vector3f, light: mi.Vector3f):
+    """``1 - |cos(theta_h)|`` and ``|v . h|`` of the half vector of the (possibly non-unit) view
+    and light, without cancellation, and whether the half vector exists (``l != -v``).
+
+    With ``s = v |l| + l |v|`` (parallel to ``v/|v| + l/|l|``; for unit float32 inputs the norms
+    are exactly 1 and ``s`` is exact where ``l`` mirrors ``v``):
+    ``1 - |s_z|/|s| = |s_xy|^2 / (|s|^2 + |s_z| |s|)`` and ``v . h = |s| / (2 |v| |l|)``.
+    ``1 - h.z`` in float32 would lose the whole lobe of ``n = 1e6`` (width ~1e-6) to rounding."""
+    v, l = _in_range(view.x, view.y, view.z), _in_range(light.x, light.y, light.z)
+    v_norm, l_norm = dr.norm(v), dr.norm(l)
+    s = v * l_norm + l * v_norm
+    xy2 = dr.fma(s.x, s.x, s.y * s.y)
+    s2 = dr.fma(s.z, s.z, xy2)
+    ok = (s2 > 0) & dr.isfinite(s2)
+    norm = dr.sqrt(s2)
+    denominator = dr.select(ok, dr.fma(dr.abs(s.z), norm, s2), 1.0)
+    one_minus_cos = dr.select(ok, xy2 / denominator, 1.0)
+    v_dot_h = dr.select(ok, norm / (2.0 * v_norm * l_norm), 0.0)
+    return one_minus_cos, v_dot_h, ok
 
 
 def mixture_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight):
@@ -174,9 +297,8 @@ def mixture_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight
     zero unless both directions are above the horizon."""
     v, v_ok = _unit(view)
     l, l_ok = _unit(light)
-    h, h_ok = _unit(v + l)
-    v_dot_h = dr.abs(dr.dot(v, h))
-    lobe = (exponent + 1.0) * (0.5 / math.pi) * _cos_power(dr.abs(h.z), exponent)
+    one_minus_cos, v_dot_h, h_ok = _half_vector_terms(view, light)
+    lobe = (exponent + 1.0) * (0.5 / math.pi) * _cos_power_from_one_minus(one_minus_cos, exponent)
     specular = dr.select(h_ok & (v_dot_h > 0), lobe / (4.0 * v_dot_h), 0.0)
     specular = dr.select(specular_weight > 0, specular_weight * specular, 0.0)
     pdf = specular + (1.0 - specular_weight) * dr.maximum(l.z, 0.0) / math.pi
@@ -199,6 +321,7 @@ def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0):
 def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
     """Draws a light direction like ``SamplingStrategy::sample``: ``(light, pdf)`` with pdf 0
     for invalid samples (a specular reflection below the horizon, a view below it)."""
+    u0, u1, u2 = unit_interval(u0), unit_interval(u1), unit_interval(u2)
     if strategy == "uniform":
         light = uniform_hemisphere(u1, u2)
     elif strategy == "cosine":
@@ -211,7 +334,10 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
         light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
     else:
         raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
-    light, _ = _unit(light)
+    _, view_ok = _unit(view)
+    light, light_ok = _unit(light)
+    # As SamplingStrategy::sample: +z (with pdf 0) when there is no direction to return.
+    light = dr.select(view_ok & light_ok, light, mi.Vector3f(0.0, 0.0, 1.0))
     return light, pdf(strategy, view, light, exponent, specular_weight)
 
 
@@ -275,4 +401,4 @@ class TracedMerl:
                     total += dr.select(use, w * rgb, 0.0)
                     weight_sum += dr.select(use, w, 0.0)
         f = dr.select(weight_sum > 0, total / weight_sum, 0.0)
-        return dr.select((view.z > 0) & (light.z > 0), f, 0.0)
+        return dr.select(_both_valid_above(view, light), f, 0.0)
