@@ -8,7 +8,6 @@ use libfuzzer_sys::fuzz_target;
 use nbrdf_core::merl::MerlTable;
 use nbrdf_core_fuzz::{
     assert_acceptable_merl, check_error_names_origin, check_evaluations, fixed_pairs,
-    merl_reflectance_bound,
 };
 use std::path::Path;
 
@@ -17,8 +16,7 @@ const ORIGIN: &str = "fuzz/input.binary";
 fuzz_target!(|data: &[u8]| {
     match MerlTable::from_bytes(data, Path::new(ORIGIN)) {
         Ok(table) => {
-            assert_acceptable_merl(data);
-            let bound = merl_reflectance_bound(data);
+            let bound = assert_acceptable_merl(data);
             check_evaluations(&table, &fixed_pairs(), Some(bound));
         }
         Err(error) => check_error_names_origin(&error, ORIGIN),

@@ -122,8 +122,11 @@ pub fn merl_values(bytes: &[u8]) -> impl Iterator<Item = f64> + '_ {
 }
 
 /// What an accepted MERL file must be: the (90, 90, 180) header, exactly the right size, and
-/// only finite values (negative ones mean "not measured").
-pub fn assert_acceptable_merl(bytes: &[u8]) {
+/// only finite values (negative ones mean "not measured"). Returns an upper bound of any
+/// reflectance the table can return: interpolation only blends valid (non-negative) stored
+/// values, so nothing may exceed the largest of them times the largest channel scale (with a
+/// margin for rounding to float32).
+pub fn assert_acceptable_merl(bytes: &[u8]) -> f64 {
     assert_eq!(
         bytes.len(),
         MERL_FILE_SIZE,
@@ -134,17 +137,15 @@ pub fn assert_acceptable_merl(bytes: &[u8]) {
         .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
     assert_eq!(header, MERL_HEADER, "accepted a wrong header");
-    if let Some((k, v)) = merl_values(bytes).enumerate().find(|(_, v)| !v.is_finite()) {
-        panic!("accepted the non-finite value {v} at value index {k}");
+    let mut largest = 0.0f64;
+    for (k, v) in merl_values(bytes).enumerate() {
+        assert!(
+            v.is_finite(),
+            "accepted the non-finite value {v} at value index {k}"
+        );
+        if v > largest {
+            largest = v;
+        }
     }
-}
-
-/// An upper bound of any reflectance an accepted table can return: interpolation only blends
-/// valid (non-negative) stored values, so nothing may exceed the largest of them times the
-/// largest channel scale (with a margin for rounding to float32).
-pub fn merl_reflectance_bound(bytes: &[u8]) -> f64 {
-    let largest = merl_values(bytes)
-        .filter(|v| v.is_finite() && *v >= 0.0)
-        .fold(0.0f64, f64::max);
     largest * MERL_MAX_SCALE * (1.0 + 1e-6)
 }
