@@ -1,0 +1,151 @@
+//! Shared checks of the fuzz targets: every reflectance the readers accept must evaluate, single
+//! and batched, to finite non-negative values at any pair of directions (the `Brdf` contract),
+//! degenerate directions included.
+
+use glam::Vec3;
+use nbrdf_core::{Brdf, Directions, RgbMut};
+
+/// `(light, view)` pairs every accepted table or network is evaluated at: ordinary ones, the
+/// specular configuration, grazing and below-horizon ones, and degenerate vectors (zero,
+/// non-unit, huge, tiny, NaN, infinite) that callers may pass.
+pub fn fixed_pairs() -> Vec<(Vec3, Vec3)> {
+    let up = Vec3::new(0.0, 0.0, 1.0);
+    let a = Vec3::new(0.3, 0.2, 0.932_737_9);
+    let b = Vec3::new(-0.5, 0.1, 0.860_232_5);
+    let mirror = Vec3::new(-a.x, -a.y, a.z);
+    let grazing = Vec3::new(1.0, 0.0, 1e-7);
+    vec![
+        (a, b),
+        (b, a),
+        (up, up),
+        (a, mirror),
+        (a, a),
+        (grazing, up),
+        (up, grazing),
+        (grazing, Vec3::new(-1.0, 0.0, 1e-7)),
+        (Vec3::new(0.0, 0.0, -1.0), up),
+        (a, Vec3::new(0.3, 0.1, -0.2)),
+        (Vec3::ZERO, up),
+        (up, Vec3::ZERO),
+        (3.0 * a, 0.25 * b),
+        (1e30 * a, b),
+        (a, 1e-30 * b),
+        (Vec3::new(f32::MAX, 0.0, f32::MAX), up),
+        (Vec3::new(f32::MIN_POSITIVE, 0.0, f32::MIN_POSITIVE), up),
+        (Vec3::new(f32::NAN, 0.0, 1.0), up),
+        (up, Vec3::new(0.0, f32::INFINITY, 1.0)),
+        (Vec3::new(0.0, 0.0, f32::INFINITY), up),
+    ]
+}
+
+/// Evaluates `brdf` at `pairs` one by one and as one batch; panics (a fuzzer finding) if any
+/// value is negative, NaN or infinite, or above `max` (when the caller knows a bound).
+/// Returns the single and the batched (cosine-weighted) values for further checks.
+pub fn check_evaluations(
+    brdf: &dyn Brdf,
+    pairs: &[(Vec3, Vec3)],
+    max: Option<f64>,
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let in_range = |x: f32| x.is_finite() && x >= 0.0 && max.is_none_or(|m| f64::from(x) <= m);
+    let single: Vec<[f32; 3]> = pairs
+        .iter()
+        .map(|&(light, view)| {
+            let f = brdf.eval(light, view);
+            assert!(
+                f.iter().all(|&x| in_range(x)),
+                "eval(light {light}, view {view}) = {f:?} (bound {max:?})"
+            );
+            f
+        })
+        .collect();
+    let n = pairs.len();
+    let mut light = vec![0.0f32; 3 * n];
+    let mut view = vec![0.0f32; 3 * n];
+    for (i, (l, v)) in pairs.iter().enumerate() {
+        for k in 0..3 {
+            light[k * n + i] = l[k];
+            view[k * n + i] = v[k];
+        }
+    }
+    let mut out = vec![-1.0f32; 3 * n];
+    brdf.eval_cos_batch(
+        Directions::from_planar(&view).expect("3 n long"),
+        Directions::from_planar(&light).expect("3 n long"),
+        RgbMut::from_planar(&mut out).expect("3 n long"),
+    );
+    let batch: Vec<[f32; 3]> = (0..n)
+        .map(|i| [out[i], out[n + i], out[2 * n + i]])
+        .collect();
+    for (i, f) in batch.iter().enumerate() {
+        assert!(
+            f.iter().all(|&x| in_range(x)),
+            "eval_cos_batch lane {i} (light {}, view {}) = {f:?} (bound {max:?})",
+            pairs[i].0,
+            pairs[i].1
+        );
+    }
+    (single, batch)
+}
+
+/// Directions from fuzzer-chosen components, so that odd values (NaN, subnormal, huge, signed
+/// zeros) reach the evaluators beside [`fixed_pairs`].
+pub fn pairs_from_components(components: &[[f32; 6]]) -> Vec<(Vec3, Vec3)> {
+    components
+        .iter()
+        .map(|c| (Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5])))
+        .collect()
+}
+
+/// An error must say which file it is about (the reader is told a path; every message names it).
+pub fn check_error_names_origin(error: &dyn std::fmt::Display, origin: &str) {
+    let text = error.to_string();
+    assert!(
+        text.contains(origin),
+        "error does not name the file {origin}: {text}"
+    );
+}
+
+/// MERL grid: `theta_h x theta_d x phi_d` cells, three float64 channels after a 12-byte header.
+pub const MERL_HEADER: [i32; 3] = [90, 90, 180];
+pub const MERL_CELLS: usize = 90 * 90 * 180;
+pub const MERL_FILE_SIZE: usize = 12 + 3 * MERL_CELLS * 8;
+/// The largest of MERL's per-channel scale factors (blue: 1.66 / 1500), part of the format.
+const MERL_MAX_SCALE: f64 = 1.66 / 1500.0;
+
+/// The stored values of a MERL file (after the header), as float64.
+pub fn merl_values(bytes: &[u8]) -> impl Iterator<Item = f64> + '_ {
+    bytes[12..].chunks_exact(8).map(|chunk| {
+        let mut raw = [0u8; 8];
+        raw.copy_from_slice(chunk);
+        f64::from_le_bytes(raw)
+    })
+}
+
+/// What an accepted MERL file must be: the (90, 90, 180) header, exactly the right size, and
+/// only finite values (negative ones mean "not measured"). Returns an upper bound of any
+/// reflectance the table can return: interpolation only blends valid (non-negative) stored
+/// values, so nothing may exceed the largest of them times the largest channel scale (with a
+/// margin for rounding to float32).
+pub fn assert_acceptable_merl(bytes: &[u8]) -> f64 {
+    assert_eq!(
+        bytes.len(),
+        MERL_FILE_SIZE,
+        "accepted a file of the wrong size"
+    );
+    let header: Vec<i32> = bytes[..12]
+        .chunks_exact(4)
+        .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    assert_eq!(header, MERL_HEADER, "accepted a wrong header");
+    let mut largest = 0.0f64;
+    for (k, v) in merl_values(bytes).enumerate() {
+        assert!(
+            v.is_finite(),
+            "accepted the non-finite value {v} at value index {k}"
+        );
+        if v > largest {
+            largest = v;
+        }
+    }
+    largest * MERL_MAX_SCALE * (1.0 + 1e-6)
+}
