@@ -1,7 +1,7 @@
 """The latent-space report's own pieces (nbrdf_tools.latent_report, nbrdf_tools.network) and the
 CLI commands it drives
 that have no scene: ``nbrdf tabulate`` (checked against a NumPy evaluation of the network at the
-cell centres of DESIGN.md section 3), the distillation of the authors' networks into the common
+cell centres of docs/design.md section 3), the distillation of the authors' networks into the common
 initialisation, ``predictor eval``, and the smoothness measures of the interpolation figure."""
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ repeated with the same seed and the fastest time kept) and compared with a conve
 reference; a CSV, a JSON file, EXR renders, PNG plots (log-log, one curve per strategy) and a
 Markdown summary land in the output folder.
 
-Strategies (DESIGN.md section 6): ``uniform``, ``cosine`` and ``phong-fit`` sample our NBRDF
+Strategies (docs/design.md section 6): ``uniform``, ``cosine`` and ``phong-fit`` sample our NBRDF
 (the ``nbrdf`` BSDF) by the uniform hemisphere, the cosine lobe and the Blinn-Phong lobe fitted by
 ``nbrdf fit-phong``; ``phong-predicted`` samples the NBRDF through the lobe that the latent-space
 predictor gives (``--ae AE.json --predictor P.json``, from ``nbrdf ae train`` and ``nbrdf predictor

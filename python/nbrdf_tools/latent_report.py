@@ -1,7 +1,7 @@
 """The latent-space report (issue #6): autoencoder vs PCA-32 on the test split, a t-SNE map of
 the latent space, latent vs weight interpolation strips with their measured smoothness, the
 lobes of two predictors (the default: code + the network's highlight profile; and the code
-alone, DESIGN.md section 7) scored by sampling variance and (optionally) in the Veach scene.
+alone, docs/design.md section 7) scored by sampling variance and (optionally) in the Veach scene.
 
     python python/latent_report.py [--source sgd|authors] [--train-missing] [--veach]
 
@@ -194,7 +194,7 @@ class Predictor(NamedTuple):
 
 
 # The shipped predictor (code + highlight profile, the CLI's defaults) and the code-only one of
-# DESIGN.md section 7 with the settings it did best with (README).
+# docs/design.md section 7 with the settings it did best with (README).
 PREDICTORS = (
     Predictor("code+profile", "predictor.json", "predicted", "", ()),
     Predictor("code only", "predictor_code_only.json", "predicted_code_only", "_code_only",
@@ -348,7 +348,7 @@ def report(argv: list[str] | None) -> int:
     interpolation(args, ae, a, b, plt, split)
 
     # 4. Predictors: fitted vs predicted on the test split. The default reads the code and the
-    # network's highlight profile; the code-only one is DESIGN.md section 7 to the letter.
+    # network's highlight profile; the code-only one is docs/design.md section 7 to the letter.
     for variant in PREDICTORS:
         pred = args.out / variant.file
         if not pred.exists():

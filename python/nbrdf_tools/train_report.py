@@ -2,7 +2,7 @@
 
     python -m nbrdf_tools.train_report [--set sgd|rgl|all] [--materials A,B,...] [--quick] [--out DIR]
 
-Sets (DESIGN.md sections 5, 8, 9, 11, 12):
+Sets (docs/design.md sections 5, 8, 9, 11, 12):
 
 * ``sgd``: the 100 MERL materials as tables synthesised from their published SGD fits
   (``nbrdf synth --model sgd``); the reference of the metrics is the table.

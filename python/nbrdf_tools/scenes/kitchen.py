@@ -1,4 +1,4 @@
-"""The 'Country Kitchen' scene with materials replaced by measured ones (DESIGN.md section 10).
+"""The 'Country Kitchen' scene with materials replaced by measured ones (docs/design.md section 10).
 
 'Country Kitchen' by Jay-Artist (https://www.blendswap.com/blends/view/42851), Mitsuba version
 by B. Bitterli (https://benedikt-bitterli.me/resources/), released under CC BY 3.0

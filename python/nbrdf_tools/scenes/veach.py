@@ -1,4 +1,4 @@
-"""The Veach multiple-importance-sampling scene (DESIGN.md section 10) as a Mitsuba 3 dict.
+"""The Veach multiple-importance-sampling scene (docs/design.md section 10) as a Mitsuba 3 dict.
 
 Four glossy plates under four sphere lights of equal power and growing radius, a diffuse floor
 and back wall, and a fill light. The plates take the materials under test: any Mitsuba BSDF dict
