@@ -299,6 +299,7 @@ def test_convergence_quick_json(tmp_path):
     env = {**os.environ, "NBRDF_SHARED": str(tmp_path / "nonexistent")} if can_train else None
     run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
                           "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress",
+                          "--seeds", "2",
                           "--ae", str(ae), "--predictor", str(predictor)],
                          capture_output=True, text=True, timeout=300, env=env)
     assert run.returncode == 0, run.stderr[-3000:]
@@ -320,6 +321,8 @@ def test_convergence_quick_json(tmp_path):
         assert 0 < rep["ssim"] <= 1 and 0 <= rep["flip_hdr"] < 1 and rep["relmse"] >= 0
     folder = tmp_path / "out" / "veach"
     assert (folder / "convergence.csv").is_file() and (folder / "plots" / "veach-overview.png").is_file()
+    assert (folder / "plots" / "veach-overview.pdf").is_file()
+    assert {r["seed"] for r in rows} == {0, 1}  # --seeds 2
     assert list((folder / "renders").rglob("*.exr"))
     # --out holds the caches too.
     assert list((tmp_path / "out" / "materials").glob("*.nbrdf.json"))
@@ -371,3 +374,5 @@ def test_bench_rays_quick_json(tmp_path):
         for name in ("nbrdf", "roughconductor", "diffuse", "principled"):
             assert run["bsdfs"][name]["mrays_per_s"] > 0 and run["bsdfs"][name]["seconds"] > 0
     assert {"nbrdf-rust", "merl"} <= set(report["runs"][1]["bsdfs"])
+    chart = tmp_path / "bench" / "rays_per_second.png"
+    assert chart.stat().st_size > 1000 and chart.with_suffix(".pdf").is_file()

@@ -115,6 +115,37 @@ def print_table(results: list[dict]) -> None:
             print(f"{name:<16}{figures['mrays_per_s']:>10.2f}{figures['mrays_per_s'] / reference:>19.2f}x")
 
 
+def plot(results: list[dict], path: Path) -> Path:
+    """Bar chart of Mrays/s per BSDF, one bar per mode (PNG and PDF), built-ins in grey tones."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    names = list(dict.fromkeys(name for result in results for name in result["bsdfs"]))
+    x = np.arange(len(names))
+    width = 0.8 / len(results)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.75 * len(names) + 2), 3.8))
+    for k, result in enumerate(results):
+        values = [result["bsdfs"].get(name, {}).get("mrays_per_s", 0.0) for name in names]
+        bars = ax.bar(x + (k - (len(results) - 1) / 2) * width, values, width, label=f"{result['mode']} mode")
+        ax.bar_label(bars, labels=[f"{v:.1f}" if v > 0 else "" for v in values], fontsize=6, padding=1)
+    ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("Mrays/s (higher is better)")
+    first = results[0]
+    ax.set_title(f"{first['scene']} scene, {first['variant']}, {first['resolution'][0]}x{first['resolution'][1]}, "
+                 f"{first['spp']} spp (MIS: 3 rays per sample)", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=150)
+    fig.savefig(path.with_suffix(".pdf"))
+    plt.close(fig)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--variant", default="llvm_ad_rgb")
@@ -128,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=default_out("bench"),
                         help="folder of the table and network (default: %(default)s)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
+    parser.add_argument("--plot", type=Path, help="bar chart (PNG, and PDF beside it; default: OUT/rays_per_second.png)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
     args = parser.parse_args(argv)
     progress.set_enabled(not args.no_progress)
@@ -149,8 +181,11 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for mode in args.modes.split(","):
         bsdfs = bench_mode(mode, candidates(network, table, mode), resolution, args.spp, args.repeats)
-        results.append({"scene": "veach", "variant": args.variant, "mode": mode, "bsdfs": bsdfs})
+        results.append({"scene": "veach", "variant": args.variant, "mode": mode, "resolution": list(resolution),
+                        "spp": args.spp, "bsdfs": bsdfs})
     print_table(results)
+    chart = plot(results, args.plot or args.out / "rays_per_second.png")
+    print(f"\nwrote {chart} and {chart.with_suffix('.pdf')}")
     if args.json:
         payload = results[0] if len(results) == 1 else {"runs": results, **results[0]}
         args.json.write_text(json.dumps(payload, indent=2))

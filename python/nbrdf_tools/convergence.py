@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import math
 import sys
@@ -165,30 +166,33 @@ def rmse_at_time(points: list[tuple[float, float]], seconds: float) -> float:
 
 
 def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str, save_dir: Path | None,
-            save_spp: set[int]) -> list[dict]:
-    """Renders every strategy at every spp level (interleaved, so that machine load hits them
-    alike) and measures each against its reference and against the ground truth."""
+            save_spp: set[int], seeds: int = 1) -> list[dict]:
+    """Renders every strategy at every spp level, ``seeds`` times with independent random numbers
+    (interleaved, so that machine load hits them alike), and measures each against its reference
+    and against the ground truth. Rows carry the seed's index (``seed``)."""
     rows = []
     for entry in strategies.values():
         entry["warm_up_seconds"] = warm_up(entry["scene"])
-    total = len(levels) * len(strategies)
+    total = len(levels) * len(strategies) * seeds
     with bar(total=total, desc=f"{label}: renders", unit="render", leave=False) as renders:
         for level_index, spp in enumerate(levels):
-            for strategy_index, (name, entry) in enumerate(strategies.items()):
-                seed = 1000 * (level_index + 1) + strategy_index
+            for seed_index, (strategy_index, (name, entry)) in itertools.product(range(seeds),
+                                                                                 enumerate(strategies.items())):
+                # Seed index 0 keeps the random numbers of single-seed runs.
+                seed = 1000 * (level_index + 1) + strategy_index + 100_000 * seed_index
                 image, seconds = timed_render(entry["scene"], spp, seed=seed)
                 # Short renders are timed again (same seed, same image) and the fastest run kept:
                 # other processes on the machine disturb short timings the most.
                 for _ in range(timing_repeats(spp) - 1):
                     seconds = min(seconds, timed_render(entry["scene"], spp, seed=seed)[1])
-                row = {"strategy": name, "spp": spp, "seconds": seconds,
+                row = {"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds,
                        **metrics.render_metrics(entry["reference"], image, mask),
                        "nonfinite": metrics.nonfinite_count(image)}
                 for key, value in metrics.render_metrics(ground_truth, image, mask).items():
                     row[f"{key}_vs_ground_truth"] = value
                 row["reference"] = entry["reference_name"]
                 rows.append(row)
-                if save_dir is not None and spp in save_spp:
+                if save_dir is not None and spp in save_spp and seed_index == 0:
                     write_exr(save_dir / f"{name}-{spp:04d}spp.exr", image)
                 renders.update()
     return rows
@@ -212,11 +216,27 @@ def timing_repeats(spp: int) -> int:
     return 3 if spp <= 8 else 2 if spp <= 32 else 1
 
 
+def series(rows: list[dict], strategy: str, metric: str = "rmse") -> dict[str, np.ndarray] | None:
+    """A strategy's curve over its seeds: per spp level the median time and the median, lowest
+    and highest error (arrays in spp order), or None when the strategy has no rows."""
+    levels = sorted({r["spp"] for r in rows if r["strategy"] == strategy})
+    if not levels:
+        return None
+    per_level = [[r for r in rows if r["strategy"] == strategy and r["spp"] == spp] for spp in levels]
+    errors = [np.array([r[metric] for r in level]) for level in per_level]
+    return {"spp": np.array(levels), "seconds": np.array([np.median([r["seconds"] for r in level])
+                                                         for level in per_level]),
+            "median": np.array([np.median(e) for e in errors]), "low": np.array([e.min() for e in errors]),
+            "high": np.array([e.max() for e in errors]), "seeds": min(len(level) for level in per_level)}
+
+
 def equal_time_summary(rows: list[dict]) -> dict:
-    """RMSE of every strategy at the longest render time that all strategies reached."""
+    """RMSE (median over seeds) of every strategy at the longest render time that all
+    strategies reached."""
     by_strategy: dict[str, list[tuple[float, float]]] = {}
-    for row in rows:
-        by_strategy.setdefault(row["strategy"], []).append((row["seconds"], row["rmse"]))
+    for strategy in dict.fromkeys(r["strategy"] for r in rows):
+        curve = series(rows, strategy)
+        by_strategy[strategy] = list(zip(curve["seconds"], curve["median"]))
     budget = min(max(t for t, _ in points) for points in by_strategy.values())
     return {"seconds": budget, "rmse": {s: rmse_at_time(p, budget) for s, p in by_strategy.items()}}
 
@@ -225,20 +245,62 @@ def equal_time_summary(rows: list[dict]) -> dict:
 # Plots
 
 
-def plot_material(path: Path, title: str, rows: list[dict], representation: float | None, metric: str = "rmse"):
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _power_of_two_axis(ax, levels) -> None:
+    """spp on a log2 axis, ticks labelled 1, 2, 4, ... (every other one when crowded)."""
+    from matplotlib.ticker import FixedLocator, NullLocator
+
+    levels = sorted(levels)
+    step = 1 if len(levels) <= 9 else 2
+    ax.set_xscale("log", base=2)
+    ax.xaxis.set_major_locator(FixedLocator(levels[::step]))
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.set_xticklabels([str(int(v)) for v in levels[::step]])
+
+
+def _curve(ax, x, curve, colour, label, ms=4):
+    """Median over seeds (time order), with the min-max band when there are several seeds."""
+    order = np.argsort(x)
+    (line,) = ax.plot(x[order], curve["median"][order], "o-", ms=ms, color=colour, label=label)
+    if curve["seeds"] > 1:
+        ax.fill_between(x[order], curve["low"][order], curve["high"][order], color=colour, alpha=0.2, lw=0)
+    return line
+
+
+def save_figure(fig, path: Path, dpi: int = 150) -> None:
+    """PNG and PDF side by side."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    fig.savefig(path.with_suffix(".pdf"))
+
+
+def plot_material(path: Path, title: str, rows: list[dict], representation: float | None, metric: str = "rmse"):
+    """Error against spp (power-of-two axis, with a 1/sqrt(spp) guide) and against render time
+    (points in time order), one curve per strategy: the median over seeds with a min-max band."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    seeds, first = 1, []
     for i, strategy in enumerate(STRATEGIES):
-        points = sorted((r["spp"], r["seconds"], r[metric]) for r in rows if r["strategy"] == strategy)
-        if not points:
+        curve = series(rows, strategy, metric)
+        if curve is None:
             continue
-        spp, seconds, error = zip(*points)
-        axes[0].plot(spp, error, "o-", color=f"C{i}", label=strategy)
-        axes[1].plot(seconds, error, "o-", color=f"C{i}", label=strategy)
+        seeds = max(seeds, curve["seeds"])
+        _curve(axes[0], curve["spp"].astype(float), curve, f"C{i}", strategy)
+        _curve(axes[1], curve["seconds"], curve, f"C{i}", strategy)
+        first.append((curve["spp"][0], curve["median"][0]))
+    levels = sorted({r["spp"] for r in rows})
+    if first and len(levels) > 1:
+        spp0, error0 = max(first, key=lambda p: p[1])
+        guide = error0 * np.sqrt(spp0 / np.array(levels, dtype=float))
+        axes[0].plot(levels, guide, color="black", ls=":", lw=1, label=r"$\propto 1/\sqrt{\mathrm{spp}}$")
     for ax, xlabel in zip(axes, ("samples per pixel", "render time (s)")):
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -247,20 +309,18 @@ def plot_material(path: Path, title: str, rows: list[dict], representation: floa
         ax.grid(True, which="both", alpha=0.3)
         if representation is not None and representation > 0:
             ax.axhline(representation, color="grey", ls="--", lw=1, label="NBRDF vs ground truth")
+    _power_of_two_axis(axes[0], levels)
     axes[0].legend(fontsize=8)
-    fig.suptitle(title)
+    band = f"; median of {seeds} seeds, band min-max" if seeds > 1 else ""
+    fig.suptitle(title + band)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 
 def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], metric: str = "rmse"):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """Error against render time per material (small multiples)."""
+    plt = _pyplot()
     names = list(per_material)
     cols = min(4, len(names))
     rows_n = math.ceil(len(names) / cols)
@@ -269,10 +329,9 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
     handles = {}
     for ax, name in zip(axes.ravel(), names):
         for strategy in STRATEGIES:
-            points = sorted((r["spp"], r["seconds"], r[metric]) for r in per_material[name] if r["strategy"] == strategy)
-            if points:
-                _, seconds, error = zip(*points)
-                (handles[strategy],) = ax.plot(seconds, error, "o-", ms=3, color=colours[strategy], label=strategy)
+            curve = series(per_material[name], strategy, metric)
+            if curve is not None:
+                handles[strategy] = _curve(ax, curve["seconds"], curve, colours[strategy], strategy, ms=3)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(name, fontsize=9)
@@ -285,7 +344,7 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
     fig.supylabel(f"{metric.upper()} (sampling error)")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -370,7 +429,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
                                         "reference_name": "measured"}
         save_dir = out / f"renders{tag}" / label
         save_spp = {levels[0], levels[len(levels) // 2], levels[-1]}
-        rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp)
+        rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp, args.seeds)
         write_exr(save_dir / "ground-truth.exr", ground_truth)
         write_exr(save_dir / "nbrdf-converged.exr", nbrdf_ref)
         write_png(save_dir / "ground-truth.png", ground_truth)
@@ -441,7 +500,7 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
         strategies[strategy] = {"scene": setup.load(bsdfs(NBRDF_SAMPLING[strategy])), "reference": nbrdf_ref,
                                 "reference_name": "nbrdf"}
     save_dir = out / "renders" / "kitchen"
-    rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]})
+    rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]}, args.seeds)
     for row in rows:
         row.update(scene="kitchen", material="14 overrides", integrator="path", region="image")
     # Fireflies traceable to our BSDFs: the NBRDF and the table, Phong-sampled alike with the same
@@ -487,7 +546,9 @@ def markdown(report: dict) -> str:
         strategies = [s for s in STRATEGIES if any(s in e["rmse"] for e in report["equal_time"])]
         lines += [f"RMSE (sampling error{', plates only' if scene == 'veach' else ''}) at equal render time "
                   f"({report['settings']['integrator_label']}, {report['settings']['resolution'][0]}x"
-                  f"{report['settings']['resolution'][1]}):", ""]
+                  f"{report['settings']['resolution'][1]}"
+                  + (f", median of {report['settings']['seeds']} seeds" if report["settings"].get("seeds", 1) > 1 else "")
+                  + "):", ""]
         header = ("| material | Phong n, w | time (s) | " + " | ".join(strategies)
                   + " | phong-fit / cosine | phong-fit / uniform |")
         predicted = "phong-predicted" in strategies
@@ -585,6 +646,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, help="image width (Veach: 384, kitchen: from kitchen_materials.json)")
     parser.add_argument("--height", type=int, help="image height (default: 2/3 of the width, kitchen 9/16)")
     parser.add_argument("--max-spp", type=int, default=128, help="highest spp of the series 1, 2, 4, ...")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="independent renders per strategy and spp; the plots show their median and range "
+                             "(default: %(default)s)")
     parser.add_argument("--gt-spp", type=int, default=1024, help="spp of the ground truths and references")
     parser.add_argument("--spp-per-pass", type=int, default=64, help="spp per pass of the reference renders")
     parser.add_argument("--max-depth", type=int, help="kitchen: path length (default from kitchen_materials.json)")
@@ -697,7 +761,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     report["notes"] = notes
     report["settings"] = {"scene": args.scene, "resolution": list(resolution), "max_spp": args.max_spp,
-                          "gt_spp": args.gt_spp, "integrator": args.integrator if args.scene == "veach" else "path",
+                          "gt_spp": args.gt_spp, "seeds": args.seeds,
+                          "integrator": args.integrator if args.scene == "veach" else "path",
                           "integrator_label": integrator_label, "variant": args.variant, "quick": args.quick,
                           "train_args": train_args, "seconds": round(time.perf_counter() - start, 1),
                           "metrics": "MAE, RMSE, relMSE (eps 0.01), MAPE (eps 0.01), PSNR (peak 1) on linear RGB; "
