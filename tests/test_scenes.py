@@ -376,3 +376,16 @@ def test_bench_rays_quick_json(tmp_path):
     assert {"nbrdf-rust", "merl"} <= set(report["runs"][1]["bsdfs"])
     chart = tmp_path / "bench" / "rays_per_second.png"
     assert chart.stat().st_size > 1000 and chart.with_suffix(".pdf").is_file()
+
+
+def test_command_errors_carry_the_commands_stderr(tmp_path):
+    """The scripts' one CLI wrapper: a failing command raises with its exit status and stderr."""
+    from nbrdf_tools import cli
+
+    exe = _cli_or_skip()
+    with pytest.raises(cli.CommandError) as failure:
+        cli.nbrdf(exe, "synth", "--model", "sgd", "--material", "unobtainium", "-o", tmp_path / "x.binary")
+    assert failure.value.returncode != 0 and failure.value.stderr.strip()
+    assert failure.value.stderr.strip() in str(failure.value) and "unobtainium" in str(failure.value)
+    with pytest.raises(FileNotFoundError, match="nbrdf CLI"):
+        cli.nbrdf(tmp_path / "no-cli", "--help")

@@ -23,12 +23,13 @@ class CommandError(RuntimeError):
 
 def run(command: list, capture: bool = True, **kwargs) -> subprocess.CompletedProcess:
     """Runs ``command`` (items converted to str); raises :class:`CommandError` on failure. With
-    ``capture=False`` stdout passes through to the terminal (stderr is still captured)."""
+    ``capture=False`` its output and progress go to the terminal as they come (the error then
+    points at them instead of repeating them)."""
     argv = [str(c) for c in command]
-    stdout = subprocess.PIPE if capture else None
-    result = subprocess.run(argv, stdout=stdout, stderr=subprocess.PIPE, text=True, check=False, **kwargs)
+    pipe = subprocess.PIPE if capture else None
+    result = subprocess.run(argv, stdout=pipe, stderr=pipe, text=True, check=False, **kwargs)
     if result.returncode != 0:
-        raise CommandError(argv, result.returncode, result.stderr or "")
+        raise CommandError(argv, result.returncode, result.stderr if capture else "(its messages are above)")
     return result
 
 
