@@ -46,7 +46,7 @@ def authors_merl() -> Path:
     return shared_path("data", "reference-nbrdf", "merl")
 
 
-def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
+def train_missing(nbrdf: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
     """Trains `OUT/NAME.nbrdf.json` for every MERL material not yet there, with `nbrdf train`
     from the common initialisation (seed 0), then fits its sampling lobe.
 
@@ -56,7 +56,7 @@ def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only:
     re-learning them from the common initialisation gives aligned networks of the real
     materials (needs ../shared/data/reference-nbrdf/merl/).
     """
-    names = json.loads(run([cli, "list-materials", "--json"]))
+    names = json.loads(run([nbrdf, "list-materials", "--json"]))
     if only is not None:
         names = [e for e in names if e["name"] in only]
     out.mkdir(parents=True, exist_ok=True)
@@ -75,14 +75,14 @@ def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only:
         table = tables / f"{name}.binary"
         start = time.perf_counter()
         if source == "sgd":
-            run([cli, "synth", "--model", "sgd", "--material", name, "-o", table])
+            run([nbrdf, "synth", "--model", "sgd", "--material", name, "-o", table])
         else:
             keras = tables / f"{name}.authors.nbrdf.json"
             convert(authors_merl() / f"{name}.h5", keras)
-            run([cli, "tabulate", keras, "-o", table])
+            run([nbrdf, "tabulate", keras, "-o", table])
             keras.unlink()
-        run([cli, "train", table, "-o", net, "--samples", samples, "--name", name])
-        run([cli, "fit-phong", net])
+        run([nbrdf, "train", table, "-o", net, "--samples", samples, "--name", name])
+        run([nbrdf, "fit-phong", net])
         table.unlink()  # 35 MB each; the source regenerates it
         print(f"[{k + 1}/{len(names)}] {name}: {time.perf_counter() - start:.1f} s", flush=True)
 
