@@ -266,6 +266,19 @@ def _power_of_two_axis(ax, levels) -> None:
     ax.set_xticklabels([str(int(v)) for v in levels[::step]])
 
 
+def _log_axes(ax) -> None:
+    """Log-log axes; the x axis (render time) labelled at 1, 2, 5 x 10^k as plain numbers (the
+    default minor labels such as 2x10^-1 overlap), the y axis at the decades."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
 def _curve(ax, x, curve, colour, label, ms=4):
     """Median over seeds (time order), with the min-max band when there are several seeds."""
     order = np.argsort(x)
@@ -302,8 +315,7 @@ def plot_material(path: Path, title: str, rows: list[dict], representation: floa
         guide = error0 * np.sqrt(spp0 / np.array(levels, dtype=float))
         axes[0].plot(levels, guide, color="black", ls=":", lw=1, label=r"$\propto 1/\sqrt{\mathrm{spp}}$")
     for ax, xlabel in zip(axes, ("samples per pixel", "render time (s)")):
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        _log_axes(ax)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(f"{metric.upper()} (sampling error)")
         ax.grid(True, which="both", alpha=0.3)
@@ -332,8 +344,7 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
             curve = series(per_material[name], strategy, metric)
             if curve is not None:
                 handles[strategy] = _curve(ax, curve["seconds"], curve, colours[strategy], strategy, ms=3)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        _log_axes(ax)
         ax.set_title(name, fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         ax.tick_params(labelsize=7)
