@@ -590,11 +590,15 @@ def markdown(report: dict) -> str:
                   "PSNR, peak 1 (dB) | SSIM (image) | HDR-FLIP (image) |",
                   "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in report["representation"]:
+            # (Reports written before relMSE, SSIM and FLIP were added show "-" there on --replot;
+            # their "psnr" was the peak-1 one.)
             ssim = f"{r['ssim']:.4f}" if "ssim" in r else "-"
             flip = f"{r['flip_hdr']:.4f}" if "flip_hdr" in r else "-"
+            relmse = f"{r['relmse']:.4g}" if "relmse" in r else "-"
+            psnr = r.get("psnr_peak1", r.get("psnr"))
             lines.append(f"| {r['material']} | {r['model']} | {r['network']} | {r['region']} | {r['mae']:.4g} | "
-                         f"{r['rmse']:.4g} | {r['relative_rmse']:.3f} | {r['relmse']:.4g} | {r['mape']:.4g} | "
-                         f"{r['psnr_peak1']:.1f} | {ssim} | {flip} |")
+                         f"{r['rmse']:.4g} | {r['relative_rmse']:.3f} | {relmse} | {r['mape']:.4g} | "
+                         f"{psnr:.1f} | {ssim} | {flip} |")
         lines.append("")
     if report.get("kitchen"):
         k = report["kitchen"]
