@@ -278,7 +278,7 @@ def test_default_predictor_reads_the_highlight_profile_and_cross_validates(tmp_p
     assert lobe["source"] == "predicted" and lobe["exponent"] > 0 and 0 <= lobe["specular_weight"] <= 1
 
 
-def test_missing_networks_are_reported_before_any_work(tmp_path, capsys):
+def test_missing_networks_are_reported_before_any_work(tmp_path, capsys, monkeypatch):
     """Without networks and without --train-missing the report stops at once and says what to
     pass (it used to die inside `nbrdf ae train` with a swallowed error)."""
     cli = _cli_or_skip()
@@ -289,3 +289,8 @@ def test_missing_networks_are_reported_before_any_work(tmp_path, capsys):
     assert not out.exists()
     assert latent_report.main(["--cli", str(tmp_path / "no-cli"), "--out", str(out)]) == 2
     assert "nbrdf CLI" in capsys.readouterr().err
+    monkeypatch.setenv("NBRDF_SHARED", str(tmp_path / "nonexistent"))
+    assert latent_report.main(["--cli", str(cli), "--source", "authors", "--train-missing", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "authors' MERL networks" in err and str(tmp_path / "nonexistent") in err
+    assert not out.exists()

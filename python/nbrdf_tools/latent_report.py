@@ -33,7 +33,7 @@ import numpy as np
 
 from nbrdf_tools import cli, metrics, progress
 from nbrdf_tools.network import Layers, forward, lerp, network_input, read_layers
-from nbrdf_tools.paths import MissingDataError, default_cli, default_out, shared_path
+from nbrdf_tools.paths import MissingDataError, default_cli, default_out, require_shared, shared_path
 
 
 def run(cmd: list) -> str:
@@ -63,9 +63,7 @@ def train_missing(nbrdf: Path, out: Path, samples: int, source: str = "sgd", onl
     tables = out / "tables"
     tables.mkdir(exist_ok=True)
     if source == "authors":
-        if not authors_merl().is_dir():
-            raise MissingDataError(f"--source authors needs the authors' MERL networks in {authors_merl()} "
-                                   "(set NBRDF_SHARED to the shared data folder)")
+        require_shared("data", "reference-nbrdf", "merl", what="--source authors: the authors' MERL networks")
         from nbrdf_mitsuba.import_keras import convert
     for k, entry in enumerate(names):
         name = entry["name"]
@@ -217,9 +215,11 @@ def missing_inputs(args, ae: Path) -> list[str]:
     except MissingDataError as error:
         return [str(error)]
     problems = []
-    if args.source == "authors" and args.train_missing and not authors_merl().is_dir():
-        problems.append(f"--source authors: the authors' MERL networks {authors_merl()} are missing "
-                        "(set NBRDF_SHARED to the shared data folder)")
+    if args.source == "authors" and args.train_missing:
+        try:
+            require_shared("data", "reference-nbrdf", "merl", what="--source authors: the authors' MERL networks")
+        except MissingDataError as error:
+            problems.append(str(error))
     has_networks = args.nbrdfs.is_dir() and any(args.nbrdfs.glob("*.nbrdf.json"))
     if not args.train_missing and not has_networks and not (ae.exists() and (args.veach_only or args.interpolation_only)):
         problems.append(f"no networks in {args.nbrdfs}: pass --train-missing to train them (~100 x 15 s on 2 cores), "
