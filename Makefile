@@ -14,11 +14,13 @@ PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*
 
 setup: $(VENV)/.plugin-installed llvm
 
-# Python environment: Mitsuba, Dr.Jit and the script and test dependencies.
-$(VENV)/.deps-installed: python/requirements.txt
+# Python environment: Mitsuba, Dr.Jit and the script and test dependencies, and the scripts'
+# package nbrdf_tools (editable: `python -m nbrdf_tools.convergence` runs this checkout's code).
+$(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -r python/requirements.txt
+	$(PY) -m pip install -q --no-deps --no-build-isolation -e ./python
 	touch $@
 
 # One release build gives the CLI (target/release/nbrdf) and the C ABI library.
@@ -44,7 +46,7 @@ llvm: $(VENV)/.plugin-installed
 	fi
 
 demo: setup
-	$(PY) python/demo.py
+	$(PY) -m nbrdf_tools.demo
 
 test: setup test-rust test-python
 
@@ -61,6 +63,7 @@ bench:
 lint:
 	$(CARGO) fmt --all --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	$(VENV)/bin/ruff check python tests
 
 clean:
 	rm -rf target $(VENV) out mitsuba-plugin/build

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 from pathlib import Path
 
@@ -23,9 +22,9 @@ import pytest
 
 import nbrdf_testing
 from nbrdf_testing import write_merl, write_network
+from nbrdf_tools.paths import default_cli, shared_dir
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
+SHARED = shared_dir()
 KERAS_MATERIALS = ["alum-bronze", "blue-metallic-paint", "specular-black-phenolic", "white-diffuse-bball", "pink-fabric"]
 SYNTH_MATERIAL = "gold-metallic-paint"
 VARIANTS = ["scalar_rgb", "llvm_ad_rgb"]
@@ -91,12 +90,8 @@ def shared() -> Path:
 
 
 def _cli() -> Path | None:
-    if os.environ.get("NBRDF_CLI"):
-        return Path(os.environ["NBRDF_CLI"])
-    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
-    if not target.is_absolute():
-        target = REPO / target
-    exe = target / "release" / ("nbrdf.exe" if os.name == "nt" else "nbrdf")
+    """The nbrdf CLI ($NBRDF_CLI, else target/release/nbrdf), or None when it is not built."""
+    exe = default_cli()
     return exe if exe.is_file() else None
 
 

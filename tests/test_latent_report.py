@@ -1,24 +1,21 @@
-"""The latent-space report's own pieces (python/latent_report.py) and the CLI commands it drives
+"""The latent-space report's own pieces (nbrdf_tools.latent_report, nbrdf_tools.network) and the
+CLI commands it drives
 that have no scene: ``nbrdf tabulate`` (checked against a NumPy evaluation of the network at the
-cell centres of DESIGN.md section 3), the distillation of the authors' networks into the common
+cell centres of docs/design.md section 3), the distillation of the authors' networks into the common
 initialisation, ``predictor eval``, and the smoothness measures of the interpolation figure."""
 
 from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from nbrdf_testing import (CELLS, SCALE, cell_centre_angles, from_angles, nbrdf_reference, random_layers,
-                           read_merl, read_network_layers, write_network)
-
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "python"))
-import latent_report  # noqa: E402
+from nbrdf_testing import (CELLS, SCALE, bsdf_eval, cell_centre_angles, f32, from_angles, nbrdf_reference,
+                           normalize, random_layers, random_pairs, read_merl, write_network)
+from nbrdf_tools import latent_report, network
 
 
 def _cli_or_skip() -> Path:
@@ -76,15 +73,33 @@ def test_appearance_tells_a_sharp_highlight_from_a_broad_one_and_reads_colour():
     assert latent_report.appearance(np.zeros((8, 8, 3)))["luminance"] == 0.0
 
 
-def test_numpy_sphere_matches_the_networks_image(tmp_path):
+def test_numpy_network_matches_the_plugin(variant, tmp_path):
+    """nbrdf_tools.network (the scripts' NumPy forward pass) against its Rust twin through the
+    `nbrdf` BSDF, and against the tests' float64 oracle written from the paper."""
+    import mitsuba as mi
+
+    layers = random_layers(seed=4)
+    path = write_network(tmp_path / "n.nbrdf.json", layers)
+    view, light = random_pairs(300 if variant.startswith("llvm") else 60, seed=5)
+    view, light = f32(view), f32(light)
+    # (float32 rounding leaves the directions unit to 1e-7; the oracle normalises them)
+    unit_view, unit_light = normalize(view), normalize(light)
+    ours = network.evaluate(network.read_layers(path), unit_view.T, unit_light.T).T * unit_light[2]
+    oracle = nbrdf_reference([(w.astype(np.float64), b.astype(np.float64)) for w, b in layers], light, view)
+    assert np.allclose(ours, oracle, rtol=1e-9, atol=1e-12)
+    plugin = bsdf_eval(mi.load_dict({"type": "nbrdf", "filename": str(path)}), view, light)
+    assert np.allclose(ours, plugin, rtol=2e-4, atol=1e-6), np.abs(ours - plugin).max()
+
+
+def test_sphere_images_and_weight_interpolation(tmp_path):
     layers = random_layers(seed=4)
     path = write_network(tmp_path / "n.nbrdf.json", layers)
     a = latent_report.render_network(path)
-    b = latent_report.render_flat(latent_report.read_layers(path))
-    assert np.allclose(a, b) and a.max() > 0
+    assert a.shape == (64, 64, 3) and a.max() > 0
+    assert np.all(a[0, 0] == 0) and np.all(a[-1, -1] == 0)  # corners: off the sphere
     # Interpolating a network with itself changes nothing.
-    mid = latent_report.lerp_layers(latent_report.read_layers(path), latent_report.read_layers(path), 0.4)
-    assert np.allclose(latent_report.render_flat(mid), a)
+    mid = network.lerp(network.read_layers(path), network.read_layers(path), 0.4)
+    assert np.allclose(latent_report.render_layers(mid), a)
 
 
 def test_tabulate_holds_the_network_at_cell_centres(tmp_path):
@@ -261,3 +276,21 @@ def test_default_predictor_reads_the_highlight_profile_and_cross_validates(tmp_p
     _nbrdf(cli, "predict-phong", "--ae", ae, "--predictor", predictor, folder / f"{test_name}.nbrdf.json", "-o", dst)
     lobe = json.loads(dst.read_text())["sampling"]
     assert lobe["source"] == "predicted" and lobe["exponent"] > 0 and 0 <= lobe["specular_weight"] <= 1
+
+
+def test_missing_networks_are_reported_before_any_work(tmp_path, capsys, monkeypatch):
+    """Without networks and without --train-missing the report stops at once and says what to
+    pass (it used to die inside `nbrdf ae train` with a swallowed error)."""
+    cli = _cli_or_skip()
+    out = tmp_path / "latent"
+    assert latent_report.main(["--cli", str(cli), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--train-missing" in err and str(out / "nbrdfs") in err
+    assert not out.exists()
+    assert latent_report.main(["--cli", str(tmp_path / "no-cli"), "--out", str(out)]) == 2
+    assert "nbrdf CLI" in capsys.readouterr().err
+    monkeypatch.setenv("NBRDF_SHARED", str(tmp_path / "nonexistent"))
+    assert latent_report.main(["--cli", str(cli), "--source", "authors", "--train-missing", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "authors' MERL networks" in err and str(tmp_path / "nonexistent") in err
+    assert not out.exists()

@@ -5,6 +5,7 @@ convergence and rays/sec scripts. Tiny images throughout (64x43 Veach, 48x27 kit
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -13,12 +14,11 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "python"))
+from nbrdf_testing import random_layers, write_network
+from nbrdf_tools import metrics
+from nbrdf_tools.render import bsdf_xml, render, render_passes
 
-import metrics  # noqa: E402
-from render_utils import bsdf_xml, render, render_passes  # noqa: E402
-from nbrdf_testing import random_layers, write_network  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
 
 VEACH_SIZE = (64, 43)
 KITCHEN_SIZE = (48, 27)
@@ -28,7 +28,7 @@ PHONG = {"exponent": 40.0, "specular_weight": 0.7}
 
 
 def veach(plates, integrator="bsdf", xml=False, size=VEACH_SIZE):
-    from veach_scene import load_veach_xml, veach_scene_dict
+    from nbrdf_tools.scenes.veach import load_veach_xml, veach_scene_dict
 
     if xml:
         return load_veach_xml(plates, integrator=integrator, resolution=size)
@@ -37,7 +37,7 @@ def veach(plates, integrator="bsdf", xml=False, size=VEACH_SIZE):
 
 @pytest.fixture
 def plates_mask(llvm_variant):
-    from veach_scene import plate_mask
+    from nbrdf_tools.scenes.veach import plate_mask
 
     return plate_mask(veach({"type": "diffuse"}))
 
@@ -48,7 +48,7 @@ def plates_mask(llvm_variant):
 
 @pytest.mark.parametrize("integrator", ["bsdf", "mis"])
 def test_veach_xml_is_the_dict_scene(llvm_variant, integrator, network_file, merl_table):
-    """scenes/veach_mis.xml and python/veach_scene.py give bit-identical renders, with our BSDFs
+    """scenes/veach_mis.xml and nbrdf_tools.scenes.veach give bit-identical renders, with our BSDFs
     and built-ins on the plates; no NaN or Inf."""
     cases = [
         {"type": "nbrdf", "filename": str(network_file)},
@@ -69,7 +69,7 @@ def test_veach_xml_is_the_dict_scene(llvm_variant, integrator, network_file, mer
 def test_veach_xml_defaults_and_parameters(llvm_variant, merl_table, tmp_path):
     """The XML loads with its defaults (the built-in plate) and as a user would call it: one
     plate file for all plates, or one per plate, and emitter_samples = 0 for BSDF sampling."""
-    from veach_scene import VEACH_XML
+    from nbrdf_tools.scenes.veach import VEACH_XML
 
     scene = mi.load_file(str(VEACH_XML), resx="32", resy="22")
     assert "RoughPlastic" in str(scene)
@@ -133,7 +133,7 @@ def test_phong_sampling_beats_uniform_on_a_glossy_material(llvm_variant, merl_ta
 
 
 def test_override_xml_replaces_only_the_named_bsdfs():
-    from kitchen_scene import bsdf_ids, override_xml
+    from nbrdf_tools.scenes.kitchen import bsdf_ids, override_xml
 
     text = """<scene version="3.0.0">
       <bsdf type="twosided" id="A"><bsdf type="diffuse"/></bsdf>
@@ -155,7 +155,7 @@ def test_override_xml_replaces_only_the_named_bsdfs():
 def test_kitchen_loads_and_renders_with_nbrdf_and_merl(llvm_variant, shared, network_file, merl_table):
     """The kitchen with the described materials replaced, alternately by an NBRDF and a MERL
     table (one load and one kernel compile: the scene is large), renders without NaN or Inf."""
-    from kitchen_scene import bsdf_ids, kitchen_path, load_description, load_kitchen, override_xml
+    from nbrdf_tools.scenes.kitchen import bsdf_ids, kitchen_path, load_description, load_kitchen, override_xml
 
     path = kitchen_path(shared / "scenes" / "kitchen")
     overrides = load_description()["overrides"]
@@ -166,7 +166,8 @@ def test_kitchen_loads_and_renders_with_nbrdf_and_merl(llvm_variant, shared, net
             {"type": "merl", "filename": str(merl_table), "sampling": "phong", **PHONG}]
     replaced = {bsdf_id: ours[i % 2] for i, bsdf_id in enumerate(overrides)}
     rewritten = bsdf_ids(override_xml(path.read_text(), replaced))
-    assert {k: v for k, v in rewritten.items() if k not in overrides} == {k: v for k, v in original.items() if k not in overrides}
+    untouched_ids = set(original) - set(overrides)
+    assert {k: rewritten[k] for k in untouched_ids} == {k: original[k] for k in untouched_ids}
     for bsdf_id in overrides:
         assert rewritten[bsdf_id] == ("twosided" if original[bsdf_id] == "twosided" else replaced[bsdf_id]["type"])
     scene = load_kitchen(replaced, scene=path, resx=KITCHEN_SIZE[0], resy=KITCHEN_SIZE[1], max_depth=4)
@@ -200,15 +201,37 @@ def test_metrics_on_known_images():
     assert metrics.rmse(reference, image) == pytest.approx(np.sqrt(4.0 / 20))
     assert metrics.rmse(reference, image, mask) == pytest.approx(np.sqrt(2.0))
     assert metrics.mape(reference, image, mask) == pytest.approx(0.5 * 2.0 / 1.01)
-    assert metrics.psnr(reference, reference) == np.inf
-    assert metrics.psnr(reference, image) == pytest.approx(20 * np.log10(1 / np.sqrt(0.2)))
+    assert metrics.relmse(reference, image) == pytest.approx(3 * 4.0 / 1.01 / 60)
+    assert metrics.relative_rmse(reference, image) == pytest.approx(np.sqrt(4.0 / 20))
+    assert metrics.psnr_peak1(reference, reference) == np.inf
+    assert metrics.psnr_peak1(reference, image) == pytest.approx(20 * np.log10(1 / np.sqrt(0.2)))
+    # Two definitions, two names: the peak is 1, or the reference's maximum.
+    assert metrics.psnr_peak_ref(2 * reference, 2 * image) == pytest.approx(20 * np.log10(2 / (2 * np.sqrt(0.2))))
+    assert metrics.psnr_peak1(2 * reference, 2 * image) == pytest.approx(20 * np.log10(1 / (2 * np.sqrt(0.2))))
     assert metrics.firefly_count(reference, image * 20) == 20
     with pytest.raises(ValueError):
         metrics.rmse(reference, image[:2])
 
 
+def test_ssim_and_flip_on_images_with_known_answers():
+    """SSIM of two flat images is the luminance term (2ab + C1) / (a^2 + b^2 + C1) of their
+    tone-mapped values (no variance, no structure); HDR-FLIP is 0 for equal images and grows
+    with the difference."""
+    a, b = 0.5, 0.3
+    flat_a = np.full((32, 32, 3), a ** 2.2)
+    flat_b = np.full((32, 32, 3), b ** 2.2)
+    c1 = 0.01 ** 2
+    assert metrics.ssim(flat_a, flat_b) == pytest.approx((2 * a * b + c1) / (a * a + b * b + c1), rel=1e-6)
+    assert metrics.ssim(flat_a, flat_a) == pytest.approx(1.0)
+    rng = np.random.default_rng(0)
+    hdr = rng.uniform(0.0, 4.0, (48, 64, 3))
+    assert metrics.flip_hdr(hdr, hdr) == 0.0
+    errors = [metrics.flip_hdr(hdr, hdr * (1 + k) + 0.1 * k) for k in (0.05, 0.3, 1.0)]
+    assert 0 < errors[0] < errors[1] < errors[2] < 1, errors
+
+
 def test_ground_truth_cache_rerenders_when_inputs_change(llvm_variant, tmp_path):
-    from ground_truth import RenderCache
+    from nbrdf_tools.ground_truth import RenderCache
 
     table = tmp_path / "table.binary"
     table.write_bytes(b"one")
@@ -267,20 +290,25 @@ def test_convergence_quick_json(tmp_path):
     from conftest import SHARED
 
     help_text = subprocess.run([str(cli), "--help"], capture_output=True, text=True).stdout
-    if " train " not in help_text and not SHARED.is_dir():
+    can_train = " train " in help_text
+    if not can_train and not SHARED.is_dir():
         pytest.skip("the CLI cannot train NBRDFs and ../shared (the authors' networks) is absent")
     ae, predictor = _tiny_latent_models(cli, tmp_path)
     out = tmp_path / "result.json"
-    run = subprocess.run([sys.executable, str(REPO / "python" / "convergence.py"), "--scene", "veach", "--quick",
-                          "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli),
+    # A fresh clone: no shared data; the MERL material is synthesised and trained by the CLI.
+    env = {**os.environ, "NBRDF_SHARED": str(tmp_path / "nonexistent")} if can_train else None
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
+                          "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress",
+                          "--seeds", "2",
                           "--ae", str(ae), "--predictor", str(predictor)],
-                         capture_output=True, text=True, timeout=300)
+                         capture_output=True, text=True, timeout=300, env=env)
     assert run.returncode == 0, run.stderr[-3000:]
     report = json.loads(out.read_text())
     rows = report["results"]
     assert rows
     for row in rows:
-        assert {"scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "mape", "psnr"} <= set(row)
+        assert {"scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "relmse", "mape",
+                "psnr_peak1"} <= set(row)
         assert row["scene"] == "veach"
         assert row["strategy"] in ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
         assert row["seconds"] > 0 and np.isfinite(row["rmse"])
@@ -289,15 +317,52 @@ def test_convergence_quick_json(tmp_path):
     lobe = report["equal_time"][0]
     assert lobe["predicted_exponent"] >= 0 and 0 <= lobe["predicted_specular_weight"] <= 1
     assert report["representation"] and report["equal_time"]
+    for rep in report["representation"]:
+        assert 0 < rep["ssim"] <= 1 and 0 <= rep["flip_hdr"] < 1 and rep["relmse"] >= 0
     folder = tmp_path / "out" / "veach"
     assert (folder / "convergence.csv").is_file() and (folder / "plots" / "veach-overview.png").is_file()
+    assert (folder / "plots" / "veach-overview.pdf").is_file()
+    assert {r["seed"] for r in rows} == {0, 1}  # --seeds 2
     assert list((folder / "renders").rglob("*.exr"))
+    # --out holds the caches too.
+    assert list((tmp_path / "out" / "materials").glob("*.nbrdf.json"))
+    assert list((tmp_path / "out" / "references").glob("*.exr"))
+
+
+def test_convergence_reports_missing_inputs_before_any_work(tmp_path):
+    """Without shared data, an RGL material named from it, a missing .bsdf path or the kitchen
+    stop the run at once, naming what is missing; nothing is written."""
+    cli = _cli_or_skip()
+    env = {**os.environ, "NBRDF_SHARED": str(tmp_path / "nonexistent")}
+    out = tmp_path / "out"
+    for extra, expected in ((["--rgl", "cc_ibiza_sunset_rgb"], "cc_ibiza_sunset_rgb.bsdf"),
+                            (["--rgl", str(tmp_path / "mine.bsdf")], str(tmp_path / "mine.bsdf")),
+                            (["--scene", "kitchen"], "kitchen scene")):
+        run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--quick", "--out", str(out),
+                              "--cli", str(cli), "--no-progress", *extra],
+                             capture_output=True, text=True, timeout=120, env=env)
+        assert run.returncode == 2, run.stderr[-2000:]
+        assert "missing" in run.stderr and expected in run.stderr, run.stderr[-2000:]
+    assert not out.exists()
+
+
+def test_rgl_materials_are_accepted_as_paths(tmp_path):
+    from nbrdf_tools.materials import Artefacts
+
+    mine = tmp_path / "my_material.bsdf"
+    mine.write_bytes(b"")
+    artefacts = Artefacts(tmp_path / "out", tmp_path / "no-cli", shared=tmp_path / "nonexistent")
+    assert artefacts.is_rgl(str(mine)) and artefacts.rgl_file(str(mine)) == mine
+    assert artefacts.is_rgl("rgl:cc_ibiza_sunset_rgb") and not artefacts.is_rgl("gold-metallic-paint")
+    shared_file = tmp_path / "nonexistent" / "data" / "rgl" / "cc_ibiza_sunset_rgb.bsdf"
+    assert artefacts.rgl_file("cc_ibiza_sunset_rgb") == shared_file
+    assert "nbrdf CLI" in artefacts.missing([str(mine)])[0]
 
 
 def test_bench_rays_quick_json(tmp_path):
     cli = _cli_or_skip()
     out = tmp_path / "bench.json"
-    run = subprocess.run([sys.executable, str(REPO / "python" / "bench_rays.py"), "--quick",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_rays", "--quick", "--no-progress",
                           "--json", str(out), "--out", str(tmp_path / "bench"), "--cli", str(cli)],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
@@ -309,3 +374,18 @@ def test_bench_rays_quick_json(tmp_path):
         for name in ("nbrdf", "roughconductor", "diffuse", "principled"):
             assert run["bsdfs"][name]["mrays_per_s"] > 0 and run["bsdfs"][name]["seconds"] > 0
     assert {"nbrdf-rust", "merl"} <= set(report["runs"][1]["bsdfs"])
+    chart = tmp_path / "bench" / "rays_per_second.png"
+    assert chart.stat().st_size > 1000 and chart.with_suffix(".pdf").is_file()
+
+
+def test_command_errors_carry_the_commands_stderr(tmp_path):
+    """The scripts' one CLI wrapper: a failing command raises with its exit status and stderr."""
+    from nbrdf_tools import cli
+
+    exe = _cli_or_skip()
+    with pytest.raises(cli.CommandError) as failure:
+        cli.nbrdf(exe, "synth", "--model", "sgd", "--material", "unobtainium", "-o", tmp_path / "x.binary")
+    assert failure.value.returncode != 0 and failure.value.stderr.strip()
+    assert failure.value.stderr.strip() in str(failure.value) and "unobtainium" in str(failure.value)
+    with pytest.raises(FileNotFoundError, match="nbrdf CLI"):
+        cli.nbrdf(tmp_path / "no-cli", "--help")

@@ -1,5 +1,5 @@
-"""The Python-side comparison (python/compare_materials.py), the training report
-(python/train_report.py) and the RGL tabulation it relies on.
+"""The Python-side comparison (nbrdf_tools.compare_materials), the training report
+(nbrdf_tools.train_report) and the RGL tabulation it relies on.
 
 Short runs only: networks of 100,000 samples and a few epochs, small sphere images.
 """
@@ -10,7 +10,6 @@ import csv
 import json
 import math
 import subprocess
-import sys
 from pathlib import Path
 
 import nbrdf_mitsuba  # noqa: F401  (first: points Dr.Jit at a usable libLLVM)
@@ -18,12 +17,8 @@ import numpy as np
 import pytest
 
 from conftest import _cli, _llvm_problem
-
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "python"))
-
-import compare_materials as cm  # noqa: E402
-import train_report  # noqa: E402
+from nbrdf_tools import compare_materials as cm
+from nbrdf_tools import train_report
 
 RESOLUTION, SAMPLES = 32, 4000
 
@@ -74,18 +69,19 @@ def _tabulate_rgl_with_folds():
 
 def test_table_against_itself_has_no_error(merl_table):
     c = cm.compare(merl_table, merl_table, RESOLUTION, SAMPLES)
-    assert c.mean.mae == 0.0 and c.mean.rmse == 0.0
-    assert math.isinf(c.mean.psnr) and c.mean.ssim == pytest.approx(1.0, abs=1e-12)
+    assert c.mean.mae == 0.0 and c.mean.rmse == 0.0 and c.mean.relmse == 0.0 and c.mean.flip_hdr == 0.0
+    assert math.isinf(c.mean.psnr_peak_ref) and c.mean.ssim == pytest.approx(1.0, abs=1e-12)
     assert c.log_error_adaptive == 0.0 and c.log_error_uniform == 0.0
     doc = c.to_json()
-    assert doc["mean"]["psnr"] is None  # like serde_json: no Infinity in JSON
+    assert doc["mean"]["psnr_peak_ref"] is None  # like serde_json: no Infinity in JSON
     assert [deg for deg, _ in doc["per_light"]] == list(cm.LIGHT_THETAS_DEG)
 
 
 def test_different_materials_have_positive_errors(merl_table, chrome_table, capsys):
     c = cm.compare(merl_table, chrome_table, RESOLUTION, SAMPLES)
     assert c.mean.mae > 0 and c.mean.rmse > c.mean.mae * 0.5
-    assert 0 < c.mean.ssim < 0.999 and math.isfinite(c.mean.psnr)
+    assert 0 < c.mean.ssim < 0.999 and math.isfinite(c.mean.psnr_peak_ref)
+    assert 0 < c.mean.flip_hdr < 1 and c.mean.relmse > 0
     assert c.log_error_adaptive > 0 and c.log_error_uniform > 0
     assert cm.main([str(merl_table), str(chrome_table), "--json", "--resolution", "16", "--samples", "500"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -101,16 +97,20 @@ def test_unknown_file_type_is_a_clear_error(merl_table, tmp_path, capsys):
 
 
 def test_python_comparison_reproduces_nbrdf_compare(cli, merl_table, quick_network):
-    """Same spheres, tone map, SSIM and log-space directions as the Rust tool."""
+    """Same spheres, PSNR (peak max(reference)) and log-space directions as the Rust tool. SSIM
+    is not compared: it is scikit-image's here, which leaves the image border out where the Rust
+    tool truncates the window (on 48x48 spheres the two differ by a few hundredths); its own test
+    is test_scenes.py::test_ssim_and_flip_on_images_with_known_answers."""
     rust = json.loads(subprocess.run(
         [str(cli), "compare", str(merl_table), str(quick_network), "--json", "--resolution", "48",
          "--samples", str(SAMPLES)], check=True, capture_output=True, text=True).stdout)["comparison"]
     py = cm.compare(merl_table, quick_network, 48, SAMPLES).to_json()
     for (deg_r, er), (deg_p, ep) in zip(rust["per_light"], py["per_light"]):
         assert deg_r == deg_p
-        for k in ("mae", "rmse", "psnr"):
+        for k in ("mae", "rmse"):
             assert ep[k] == pytest.approx(er[k], rel=2e-3), (deg_r, k)
-        assert ep["ssim"] == pytest.approx(er["ssim"], abs=2e-4), deg_r
+        assert ep["psnr_peak_ref"] == pytest.approx(er.get("psnr_peak_ref", er.get("psnr")), rel=2e-3), deg_r
+        assert 0 < ep["ssim"] <= 1, deg_r
     for k in ("log_error_adaptive", "log_error_uniform"):
         assert py[k] == pytest.approx(rust[k], rel=2e-3), k
 
@@ -144,6 +144,7 @@ def test_quick_report_on_one_sgd_material_writes_csv_markdown_and_plot(cli, tmp_
     for r in rows:
         assert r["reference"] == "table" and int(r["epochs"]) == 3 and int(r["samples"]) == 100_000
         assert 0 < float(r["rmse"]) < 0.1 and 0.9 < float(r["ssim"]) <= 1.0
+        assert 0 < float(r["flip_hdr"]) < 0.5 and float(r["relmse"]) > 0 and float(r["psnr_peak_ref"]) > 10
         assert float(r["sample_epochs_per_second"]) > 0 and float(r["wall_seconds"]) > 0
     md = (out / "report.md").read_text()
     for heading in ("## Mean ± standard deviation over materials", "## Adaptive vs uniform sampling (SGD)",
@@ -165,6 +166,22 @@ def test_unknown_material_is_an_error(cli, tmp_path, capsys):
     assert train_report.main(["--set", "sgd", "--materials", "unobtainium", "--out", str(tmp_path),
                               "--cli", str(cli), "--no-progress"]) == 1
     assert "unknown material" in capsys.readouterr().err
+
+
+def test_without_shared_data_the_default_sets_run_on_embedded_fits(cli, tmp_path, capsys, monkeypatch):
+    """A fresh clone (no shared data): the default `--set all` is the SGD set alone, with a note;
+    an RGL measurement given as a path that does not exist is an error before any training."""
+    monkeypatch.setenv("NBRDF_SHARED", str(tmp_path / "nonexistent"))
+    assert train_report.main(["--materials", "unobtainium", "--out", str(tmp_path / "a"), "--cli", str(cli),
+                              "--no-progress"]) == 1
+    captured = capsys.readouterr()
+    assert "the RGL set is left out" in captured.out and "unknown material" in captured.err
+    assert train_report.main(["--set", "rgl", "--materials", str(tmp_path / "mine.bsdf"), "--out",
+                              str(tmp_path / "b"), "--cli", str(cli), "--no-progress"]) == 1
+    assert "no such RGL measurement" in capsys.readouterr().err
+    assert train_report.main(["--set", "rgl", "--out", str(tmp_path / "c"), "--cli", str(cli), "--no-progress"]) == 1
+    assert "data/rgl not found" in capsys.readouterr().err
+    assert not any((tmp_path / d).exists() for d in "abc")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -6,7 +6,10 @@ then timed over several renders; runs of the different BSDFs alternate within on
 machine load affects them alike. Modes: ``default`` (Dr.Jit's symbolic loops and calls, Mitsuba's
 megakernel) and ``wavefront`` (symbolic loops and calls off, which the Rust backend needs).
 
-    python python/bench_rays.py [--quick] [--json FILE] [--modes default,wavefront]
+    python -m nbrdf_tools.bench_rays [--quick] [--json FILE] [--modes default,wavefront] [--no-progress]
+
+The network is trained by ``nbrdf train`` (briefly: speed, not accuracy, is measured) unless the
+authors' Keras network of the material is in the shared data.
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -22,12 +24,13 @@ from pathlib import Path
 import nbrdf_mitsuba  # first: finds a libLLVM for Dr.Jit before Mitsuba starts its JIT
 import drjit as dr
 import mitsuba as mi
-from tqdm import tqdm
 
-from veach_scene import veach_scene_dict
+from nbrdf_tools import cli, progress
+from nbrdf_tools.paths import MissingDataError, default_cli, default_out, shared_path
+from nbrdf_tools.progress import bar
+from nbrdf_tools.render import sync
+from nbrdf_tools.scenes.veach import veach_scene_dict
 
-REPO = Path(__file__).resolve().parent.parent
-SHARED = REPO.parent / "shared"
 RAYS_PER_SAMPLE = 3  # camera ray, emitter (shadow) ray, BSDF ray of the MIS direct integrator
 DEFAULT_MATERIAL = "gold-metallic-paint"
 
@@ -42,23 +45,21 @@ def builtin_bsdfs() -> dict[str, dict]:
     }
 
 
-def ensure_inputs(material: str, out: Path, cli: Path) -> tuple[Path, Path]:
+def ensure_inputs(material: str, out: Path, nbrdf: Path) -> tuple[Path, Path]:
     """The NBRDF and the MERL-format table of `material`, made once under `out`."""
     out.mkdir(parents=True, exist_ok=True)
     table = out / f"{material}.sgd.binary"
     if not table.exists():
-        subprocess.run([str(cli), "synth", "--model", "sgd", "--material", material, "-o", str(table)],
-                       check=True, stdout=subprocess.DEVNULL)
+        cli.run([nbrdf, "synth", "--model", "sgd", "--material", material, "-o", table])
     network = out / f"{material}.nbrdf.json"
     if not network.exists():
-        keras = SHARED / "data" / "reference-nbrdf" / "merl" / f"{material}.h5"
+        keras = shared_path("data", "reference-nbrdf", "merl", f"{material}.h5")
         if keras.exists():
             from nbrdf_mitsuba import import_keras
 
-            import_keras.main([str(keras), "-o", str(network)])
+            import_keras.convert(keras, network)
         else:
-            subprocess.run([str(cli), "train", str(table), "-o", str(network), "--epochs", "5",
-                            "--samples", "200000", "--quiet"], check=True)
+            cli.run([nbrdf, "train", table, "-o", network, "--epochs", "5", "--samples", "200000", "--quiet"])
     return network, table
 
 
@@ -85,7 +86,7 @@ def time_render(scene, spp: int) -> float:
     start = time.perf_counter()
     image = mi.render(scene, spp=spp)
     dr.eval(image)
-    dr.sync_thread()
+    sync()
     return time.perf_counter() - start
 
 
@@ -96,7 +97,7 @@ def bench_mode(mode: str, bsdfs: dict[str, dict], resolution, spp: int, repeats:
         scenes[name] = mi.load_dict(veach_scene_dict(bsdf, integrator="mis", resolution=resolution, spp=spp))
         time_render(scenes[name], spp)  # compiles and caches the kernels
     seconds = {name: [] for name in bsdfs}
-    for _ in tqdm(range(repeats), desc=f"{mode} mode", unit="round"):
+    for _ in bar(range(repeats), desc=f"{mode} mode", unit="round"):
         for name, scene in scenes.items():
             seconds[name].append(time_render(scene, spp))
     rays = resolution[0] * resolution[1] * spp * RAYS_PER_SAMPLE
@@ -114,7 +115,38 @@ def print_table(results: list[dict]) -> None:
             print(f"{name:<16}{figures['mrays_per_s']:>10.2f}{figures['mrays_per_s'] / reference:>19.2f}x")
 
 
-def main() -> int:
+def plot(results: list[dict], path: Path) -> Path:
+    """Bar chart of Mrays/s per BSDF, one bar per mode (PNG and PDF), built-ins in grey tones."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    names = list(dict.fromkeys(name for result in results for name in result["bsdfs"]))
+    x = np.arange(len(names))
+    width = 0.8 / len(results)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.75 * len(names) + 2), 3.8))
+    for k, result in enumerate(results):
+        values = [result["bsdfs"].get(name, {}).get("mrays_per_s", 0.0) for name in names]
+        bars = ax.bar(x + (k - (len(results) - 1) / 2) * width, values, width, label=f"{result['mode']} mode")
+        ax.bar_label(bars, labels=[f"{v:.1f}" if v > 0 else "" for v in values], fontsize=6, padding=1)
+    ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("Mrays/s (higher is better)")
+    first = results[0]
+    ax.set_title(f"{first['scene']} scene, {first['variant']}, {first['resolution'][0]}x{first['resolution'][1]}, "
+                 f"{first['spp']} spp (MIS: 3 rays per sample)", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=150)
+    fig.savefig(path.with_suffix(".pdf"))
+    plt.close(fig)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--modes", default="default,wavefront", help="comma-separated: default, wavefront")
@@ -124,23 +156,36 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="small image and few repeats (CI)")
     parser.add_argument("--json", type=Path, help="write the figures as JSON")
-    parser.add_argument("--out", type=Path, default=REPO / "out" / "bench")
-    parser.add_argument("--cli", type=Path, default=REPO / "target" / "release" / "nbrdf")
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=default_out("bench"),
+                        help="folder of the table and network (default: %(default)s)")
+    parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
+    parser.add_argument("--plot", type=Path, help="bar chart (PNG, and PDF beside it; default: OUT/rays_per_second.png)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
+    args = parser.parse_args(argv)
+    progress.set_enabled(not args.no_progress)
     if args.quick:
         args.width, args.spp, args.repeats = 192, 4, 2
-
-    mi.set_variant(args.variant)
-    nbrdf_mitsuba.register()
-    network, table = ensure_inputs(args.material, args.out, args.cli)
-    resolution = (args.width, args.width * 2 // 3)
-    results = []
     for mode in args.modes.split(","):
         if mode not in ("default", "wavefront"):
             parser.error(f"unknown mode '{mode}'")
+
+    mi.set_variant(args.variant)
+    nbrdf_mitsuba.register()
+    try:
+        cli.check_cli(args.cli)
+        network, table = ensure_inputs(args.material, args.out, args.cli)
+    except (MissingDataError, cli.CommandError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    resolution = (args.width, args.width * 2 // 3)
+    results = []
+    for mode in args.modes.split(","):
         bsdfs = bench_mode(mode, candidates(network, table, mode), resolution, args.spp, args.repeats)
-        results.append({"scene": "veach", "variant": args.variant, "mode": mode, "bsdfs": bsdfs})
+        results.append({"scene": "veach", "variant": args.variant, "mode": mode, "resolution": list(resolution),
+                        "spp": args.spp, "bsdfs": bsdfs})
     print_table(results)
+    chart = plot(results, args.plot or args.out / "rays_per_second.png")
+    print(f"\nwrote {chart} and {chart.with_suffix('.pdf')}")
     if args.json:
         payload = results[0] if len(results) == 1 else {"runs": results, **results[0]}
         args.json.write_text(json.dumps(payload, indent=2))

@@ -1,4 +1,4 @@
-"""The Veach multiple-importance-sampling scene (DESIGN.md section 10) as a Mitsuba 3 dict.
+"""The Veach multiple-importance-sampling scene (docs/design.md section 10) as a Mitsuba 3 dict.
 
 Four glossy plates under four sphere lights of equal power and growing radius, a diffuse floor
 and back wall, and a fill light. The plates take the materials under test: any Mitsuba BSDF dict
@@ -14,7 +14,10 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-VEACH_XML = Path(__file__).resolve().parent.parent / "scenes" / "veach_mis.xml"
+from nbrdf_tools.paths import SCENES
+from nbrdf_tools.render import pixel_rays, write_bsdf_file
+
+VEACH_XML = SCENES / "veach_mis.xml"
 PLATE_IDS = ("plate1", "plate2", "plate3", "plate4")
 
 # (y, z) of the two long edges of each plate; the plates span x = -4 .. 4.
@@ -143,8 +146,6 @@ def load_veach_xml(
     """Loads ``scenes/veach_mis.xml`` with the given plate BSDF dicts (written as temporary plate
     files and passed as the ``plate1`` .. ``plate4`` parameters): the XML twin of
     ``mi.load_dict(veach_scene_dict(...))``."""
-    from render_utils import write_bsdf_file
-
     if isinstance(plates, dict):
         plates = [plates] * 4
     if len(plates) != 4:
@@ -157,13 +158,11 @@ def load_veach_xml(
         )
 
 
-def plate_mask(scene) -> "np.ndarray":
+def plate_mask(scene) -> np.ndarray:
     """(H, W) bool: the pixel centre's camera ray hits one of the four plates first.
 
     Found geometrically (the hit point lies on a plate rectangle), since Mitsuba merges
     rectangles that share a BSDF into one unnamed mesh. JIT variants."""
-    from render_utils import pixel_rays
-
     ray, shape = pixel_rays(scene)
     si = scene.ray_intersect(ray)
     points = np.array(si.p, dtype=np.float64).reshape(3, -1).T

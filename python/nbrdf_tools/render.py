@@ -1,5 +1,5 @@
-"""Helpers shared by the scene scripts: BSDF dicts as Mitsuba XML, averaged and timed renders,
-masks of the pixels that see given shapes, and EXR input/output.
+"""Rendering for the scripts: BSDF dicts as Mitsuba XML, the one render loop (single, timed and
+averaged renders), masks of the pixels that see given shapes, and EXR/PNG input/output.
 
 Import ``nbrdf_mitsuba`` before this module (it points Dr.Jit at a usable libLLVM).
 """
@@ -13,7 +13,7 @@ from xml.sax.saxutils import quoteattr
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from tqdm import tqdm
+from nbrdf_tools.progress import bar
 
 # ---------------------------------------------------------------------------------------------
 # BSDF dicts as XML
@@ -99,14 +99,14 @@ def warm_up(scene, spp: int = 1) -> float:
 
 
 def render_passes(scene, spp: int, spp_per_pass: int = 64, seed: int = 0, desc: str | None = None,
-                  progress: bool = True) -> np.ndarray:
+                  progress: bool = True, leave: bool = False) -> np.ndarray:
     """Average of independent renders (seeds ``seed``, ``seed + 1``, ...) totalling ``spp``
     samples per pixel: bounded memory for high sample counts, with a progress bar."""
     passes = max(1, -(-spp // spp_per_pass))
     total = None
     weight = 0
     done = 0
-    for k in tqdm(range(passes), desc=desc, unit="pass", disable=not progress, leave=False):
+    for k in bar(range(passes), desc=desc, unit="pass", disable=not progress, leave=leave):
         n = min(spp_per_pass, spp - done)
         image = render(scene, n, seed=seed + k)
         total = image * n if total is None else total + image * n

@@ -15,16 +15,15 @@ import hashlib
 import json
 import time
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
-from render_utils import read_exr, write_exr
+from nbrdf_tools.render import read_exr, write_exr
 
 HERE = Path(__file__).resolve().parent
-REPO = HERE.parent
-# Our code whose changes invalidate cached renders.
-CODE_FILES = ("ground_truth.py", "render_utils.py", "veach_scene.py", "kitchen_scene.py")
+# Our code whose changes invalidate cached renders (paths relative to this package).
+CODE_FILES = ("ground_truth.py", "render.py", "scenes/veach.py", "scenes/kitchen.py")
 
 _file_hashes: dict[tuple[str, int, int], str] = {}
 

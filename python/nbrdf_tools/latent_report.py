@@ -1,7 +1,7 @@
 """The latent-space report (issue #6): autoencoder vs PCA-32 on the test split, a t-SNE map of
 the latent space, latent vs weight interpolation strips with their measured smoothness, the
 lobes of two predictors (the default: code + the network's highlight profile; and the code
-alone, DESIGN.md section 7) scored by sampling variance and (optionally) in the Veach scene.
+alone, docs/design.md section 7) scored by sampling variance and (optionally) in the Veach scene.
 
     python python/latent_report.py [--source sgd|authors] [--train-missing] [--veach]
 
@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -33,18 +31,22 @@ from typing import NamedTuple
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
+from nbrdf_tools import cli, metrics, progress
+from nbrdf_tools.network import Layers, forward, lerp, network_input, read_layers
+from nbrdf_tools.paths import MissingDataError, default_cli, default_out, require_shared, shared_path
 
 
-def run(cmd: list, **kw) -> str:
-    return subprocess.run([str(c) for c in cmd], check=True, capture_output=True, text=True, **kw).stdout
+def run(cmd: list) -> str:
+    """stdout of a command; a failure raises cli.CommandError with the command's stderr."""
+    return cli.run(cmd).stdout
 
 
-SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
-AUTHORS_MERL = SHARED / "data" / "reference-nbrdf" / "merl"
+def authors_merl() -> Path:
+    """The authors' Keras networks of the MERL materials, in the shared data."""
+    return shared_path("data", "reference-nbrdf", "merl")
 
 
-def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
+def train_missing(nbrdf: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
     """Trains `OUT/NAME.nbrdf.json` for every MERL material not yet there, with `nbrdf train`
     from the common initialisation (seed 0), then fits its sampling lobe.
 
@@ -54,16 +56,14 @@ def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only:
     re-learning them from the common initialisation gives aligned networks of the real
     materials (needs ../shared/data/reference-nbrdf/merl/).
     """
-    names = json.loads(run([cli, "list-materials", "--json"]))
+    names = json.loads(run([nbrdf, "list-materials", "--json"]))
     if only is not None:
         names = [e for e in names if e["name"] in only]
     out.mkdir(parents=True, exist_ok=True)
     tables = out / "tables"
     tables.mkdir(exist_ok=True)
     if source == "authors":
-        if not AUTHORS_MERL.is_dir():
-            raise SystemExit(f"--source authors needs the authors' MERL networks in {AUTHORS_MERL} "
-                             "(../shared is not there; set NBRDF_SHARED to its location)")
+        require_shared("data", "reference-nbrdf", "merl", what="--source authors: the authors' MERL networks")
         from nbrdf_mitsuba.import_keras import convert
     for k, entry in enumerate(names):
         name = entry["name"]
@@ -73,22 +73,24 @@ def train_missing(cli: Path, out: Path, samples: int, source: str = "sgd", only:
         table = tables / f"{name}.binary"
         start = time.perf_counter()
         if source == "sgd":
-            run([cli, "synth", "--model", "sgd", "--material", name, "-o", table])
+            run([nbrdf, "synth", "--model", "sgd", "--material", name, "-o", table])
         else:
             keras = tables / f"{name}.authors.nbrdf.json"
-            convert(AUTHORS_MERL / f"{name}.h5", keras)
-            run([cli, "tabulate", keras, "-o", table])
+            convert(authors_merl() / f"{name}.h5", keras)
+            run([nbrdf, "tabulate", keras, "-o", table])
             keras.unlink()
-        run([cli, "train", table, "-o", net, "--samples", samples, "--name", name])
-        run([cli, "fit-phong", net])
+        run([nbrdf, "train", table, "-o", net, "--samples", samples, "--name", name])
+        run([nbrdf, "fit-phong", net])
         table.unlink()  # 35 MB each; the source regenerates it
         print(f"[{k + 1}/{len(names)}] {name}: {time.perf_counter() - start:.1f} s", flush=True)
 
 
-# --- a numpy copy of the sphere renderer (metrics::render_sphere / latent::sphere) ----------
+# --- sphere images of networks (the geometry of metrics::render_sphere / latent::sphere) ------
 
 
 def sphere_inputs(size: int, light_theta: float):
+    """Network inputs (size, size, 6) of a unit sphere seen from +z under the light
+    ``(sin t, 0, cos t)``, and the light's cosine (zero off the lit disk)."""
     light = np.array([np.sin(light_theta), 0.0, np.cos(light_theta)])
     px = (2.0 * (np.arange(size) + 0.5) / size) - 1.0
     x, y = np.meshgrid(px, -px)
@@ -101,61 +103,26 @@ def sphere_inputs(size: int, light_theta: float):
     b = np.cross(n, t)
     l_loc = np.stack([t @ light, b @ light, n @ light], -1)
     v_loc = np.stack([t[..., 2], b[..., 2], n[..., 2]], -1)
-    h = l_loc + v_loc
-    h /= np.linalg.norm(h, axis=-1, keepdims=True) + 1e-30
-    sin_th = np.hypot(h[..., 0], h[..., 1])
-    safe = sin_th > 1e-7
-    cos_ph = np.where(safe, h[..., 0] / np.where(safe, sin_th, 1.0), 1.0)
-    sin_ph = np.where(safe, h[..., 1] / np.where(safe, sin_th, 1.0), 0.0)
-    tx = cos_ph * l_loc[..., 0] + sin_ph * l_loc[..., 1]
-    ty = -sin_ph * l_loc[..., 0] + cos_ph * l_loc[..., 1]
-    dx = h[..., 2] * tx - sin_th * l_loc[..., 2]
-    dz = sin_th * tx + h[..., 2] * l_loc[..., 2]
-    inp = np.stack([sin_th, np.zeros_like(sin_th), h[..., 2], dx, ty, dz], -1)
     lit = on & (l_loc[..., 2] > 0)
-    return inp, np.where(lit, l_loc[..., 2], 0.0)
+    return network_input(v_loc, l_loc), np.where(lit, l_loc[..., 2], 0.0)
+
+
+def render_layers(layers: Layers, size: int = 64, light_deg: float = 45.0) -> np.ndarray:
+    """Linear sphere image (size, size, 3) of a network given as (W, b) pairs."""
+    inp, cos = sphere_inputs(size, np.radians(light_deg))
+    return forward(layers, inp) * cos[..., None]
 
 
 def render_network(path: Path, size: int = 64, light_deg: float = 45.0) -> np.ndarray:
-    net = json.loads(Path(path).read_text())
-    inp, cos = sphere_inputs(size, np.radians(light_deg))
-    a = inp.reshape(-1, 6)
-    for i, layer in enumerate(net["layers"]):
-        w = np.array(layer["weights"], dtype=np.float64).reshape(layer["inputs"], layer["outputs"])
-        a = a @ w + np.array(layer["bias"])
-        if i < 2:
-            a = np.maximum(a, 0.0)
-    f = np.maximum(np.expm1(np.minimum(a, 80.0)), 0.0).reshape(size, size, 3)
-    return f * cos[..., None]
+    """Linear sphere image of an ``*.nbrdf.json`` network."""
+    return render_layers(read_layers(path), size, light_deg)
 
 
 def tone(img: np.ndarray) -> np.ndarray:
-    return np.clip(np.maximum(img, 1e-12) ** (1 / 2.2), 0.0, 1.0)
+    return metrics.tone_map(img)
 
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-
-
-def render_flat(layers: list[tuple[np.ndarray, np.ndarray]], size: int = 64, light_deg: float = 45.0) -> np.ndarray:
-    """The sphere of a network given as (W, b) pairs (for weight interpolation done here)."""
-    inp, cos = sphere_inputs(size, np.radians(light_deg))
-    a = inp.reshape(-1, 6)
-    for i, (w, b) in enumerate(layers):
-        a = a @ w + b
-        if i < len(layers) - 1:
-            a = np.maximum(a, 0.0)
-    f = np.maximum(np.expm1(np.minimum(a, 80.0)), 0.0).reshape(size, size, 3)
-    return f * cos[..., None]
-
-
-def read_layers(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    net = json.loads(Path(path).read_text())
-    return [(np.array(l["weights"], dtype=np.float64).reshape(l["inputs"], l["outputs"]),
-             np.array(l["bias"], dtype=np.float64)) for l in net["layers"]]
-
-
-def lerp_layers(a, b, t: float):
-    return [((1 - t) * wa + t * wb, (1 - t) * ba + t * bb) for (wa, ba), (wb, bb) in zip(a, b)]
 
 
 def appearance(img: np.ndarray) -> dict:
@@ -202,7 +169,9 @@ def smoothness(images: list[np.ndarray]) -> dict:
 
 def markdown_table(ev: dict) -> str:
     s = ev["summary"]
-    lines = ["| method | MAE | RMSE | SSIM |", "|---|---|---|---|"]
+    # The sphere-image metrics of `nbrdf ae eval` (the Rust tool's definitions: its SSIM truncates the
+    # window at the border, unlike scikit-image's in nbrdf_tools.metrics).
+    lines = ["| method | MAE | RMSE | SSIM (nbrdf ae eval) |", "|---|---|---|---|"]
     methods = [("ae", "autoencoder (32)"), ("ae_refined", "autoencoder (32), refined codes"),
                ("pca", f"PCA-32 ({ev['pca']['tables']} tables)")]
     for key, label in methods:
@@ -223,7 +192,7 @@ class Predictor(NamedTuple):
 
 
 # The shipped predictor (code + highlight profile, the CLI's defaults) and the code-only one of
-# DESIGN.md section 7 with the settings it did best with (README).
+# docs/design.md section 7 with the settings it did best with (README).
 PREDICTORS = (
     Predictor("code+profile", "predictor.json", "predicted", "", ()),
     Predictor("code only", "predictor_code_only.json", "predicted_code_only", "_code_only",
@@ -231,9 +200,38 @@ PREDICTORS = (
 )
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    try:
+        return report(argv)
+    except (MissingDataError, cli.CommandError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+
+
+def missing_inputs(args, ae: Path) -> list[str]:
+    """What the run lacks, found before any work starts."""
+    try:
+        cli.check_cli(args.cli)
+    except MissingDataError as error:
+        return [str(error)]
+    problems = []
+    if args.source == "authors" and args.train_missing:
+        try:
+            require_shared("data", "reference-nbrdf", "merl", what="--source authors: the authors' MERL networks")
+        except MissingDataError as error:
+            problems.append(str(error))
+    has_networks = args.nbrdfs.is_dir() and any(args.nbrdfs.glob("*.nbrdf.json"))
+    if not args.train_missing and not has_networks and not (ae.exists() and (args.veach_only or args.interpolation_only)):
+        problems.append(f"no networks in {args.nbrdfs}: pass --train-missing to train them (~100 x 15 s on 2 cores), "
+                        "or --nbrdfs FOLDER")
+    if (args.veach_only or args.interpolation_only) and not ae.exists():
+        problems.append(f"{ae} is missing: --veach-only and --interpolation-only need an earlier full run")
+    return problems
+
+
+def report(argv: list[str] | None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--cli", type=Path, default=REPO / "target" / "release" / "nbrdf")
+    p.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
     p.add_argument("--source", choices=["sgd", "authors"], default="sgd",
                    help="which networks of the 100 MERL materials: trained on the SGD-synthesised tables "
                         "(default, runs anywhere) or re-learnt from the authors' networks of the real "
@@ -241,14 +239,15 @@ def main() -> int:
     p.add_argument("--nbrdfs", type=Path, help="the networks (default: OUT/nbrdfs)")
     p.add_argument("--train-missing", action="store_true", help="train the networks not yet in --nbrdfs")
     p.add_argument("--samples", type=int, default=800_000)
-    p.add_argument("--out", type=Path, help="output folder (default: out/latent/SOURCE)")
+    p.add_argument("--out", type=Path, help="output folder of everything (default: out/latent/SOURCE)")
     p.add_argument("--ae", type=Path, help="an existing AE.json (default: OUT/ae.json, trained if missing)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ae-seeds", type=int, default=3,
                    help="autoencoders trained (seeds SEED...); the one with the best refined validation "
                         "reconstructions is kept (ae train --seeds)")
     p.add_argument("--lobe-weight", type=float, default=0.0,
-                   help="ae train --lobe-weight: auxiliary loss pulling the codes towards the fitted lobes (0: the paper's loss)")
+                   help="ae train --lobe-weight: auxiliary loss pulling the codes towards the fitted lobes "
+                        "(0: the paper's loss)")
     p.add_argument("--predictor-hidden", type=int,
                    help="predictor train --hidden of the default predictor (default: the CLI's; 0 for a linear "
                         "predictor); the code-only one keeps --hidden 0 --weight-decay 0.01")
@@ -263,7 +262,7 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=7)
     p.add_argument("--interpolation-pairs", type=int, default=10,
                    help="pairs of test materials whose interpolations are measured (besides the figure's)")
-    p.add_argument("--authors", type=Path, default=AUTHORS_MERL,
+    p.add_argument("--authors", type=Path, default=authors_merl(),
                    help="the authors' Keras networks, for the independently trained row of the interpolation")
     p.add_argument("--veach", action="store_true", help="also render the Veach scene, predicted vs fitted")
     p.add_argument("--interpolation-only", action="store_true",
@@ -273,14 +272,20 @@ def main() -> int:
     p.add_argument("--veach-spp", type=int, default=16)
     p.add_argument("--veach-gt-spp", type=int, default=512, help="spp of the converged MIS render")
     p.add_argument("--veach-seeds", type=int, default=8, help="renders (seeds) averaged per strategy")
-    args = p.parse_args()
-    args.out = args.out or REPO / "out" / "latent" / args.source
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
+    args = p.parse_args(argv)
+    progress.set_enabled(not args.no_progress)
+    args.out = args.out or default_out("latent", args.source)
     args.nbrdfs = args.nbrdfs or args.out / "nbrdfs"
     args.pca_tables = args.pca_tables or ("sgd" if args.source == "sgd" else "nbrdf")
+    ae = args.ae or args.out / "ae.json"
+    problems = missing_inputs(args, ae)
+    if problems:
+        print("error: missing inputs, nothing done:\n  " + "\n  ".join(problems), file=sys.stderr)
+        return 2
     args.out.mkdir(parents=True, exist_ok=True)
     if args.train_missing:
         train_missing(args.cli, args.nbrdfs, args.samples, args.source)
-    ae = args.ae or args.out / "ae.json"
     if not ae.exists():
         print(run([args.cli, "ae", "train", "--nbrdfs", args.nbrdfs, "-o", ae, "--seed", args.seed,
                    "--seeds", args.ae_seeds, "--lobe-weight", args.lobe_weight]))
@@ -343,7 +348,7 @@ def main() -> int:
     interpolation(args, ae, a, b, plt, split)
 
     # 4. Predictors: fitted vs predicted on the test split. The default reads the code and the
-    # network's highlight profile; the code-only one is DESIGN.md section 7 to the letter.
+    # network's highlight profile; the code-only one is docs/design.md section 7 to the letter.
     for variant in PREDICTORS:
         pred = args.out / variant.file
         if not pred.exists():
@@ -415,7 +420,7 @@ def interpolation_rows(args, ae: Path, a: str, b: str, interp: Path) -> dict:
         for k in keras:
             convert(k, interp / f"authors_{k.stem}.nbrdf.json")
             layers.append(read_layers(interp / f"authors_{k.stem}.nbrdf.json"))
-        rows["weights, the authors' networks"] = [render_flat(lerp_layers(*layers, t)) for t in ts]
+        rows["weights, the authors' networks"] = [render_layers(lerp(*layers, t)) for t in ts]
     else:
         print(f"note: the authors' networks of {a} and {b} are not in {args.authors}: "
               "the independently trained row is left out", file=sys.stderr)
@@ -492,12 +497,11 @@ def veach(args, split) -> None:
     """Veach scene, pure BSDF sampling, `nbrdf` with Phong sampling from fitted vs predicted
     parameters at equal spp: RMSE against a converged MIS render of the same network, averaged
     over several seeds (single renders of this scene are heavy-tailed)."""
-    import nbrdf_mitsuba  # noqa: F401  (before mitsuba)
+    import nbrdf_mitsuba  # (before mitsuba)
     import mitsuba as mi
-    from tqdm import tqdm
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from veach_scene import plate_mask, veach_scene_dict
+    from nbrdf_tools import render as rendering
+    from nbrdf_tools.scenes.veach import plate_mask, veach_scene_dict
 
     mi.set_variant("llvm_ad_rgb")
     nbrdf_mitsuba.register()
@@ -513,7 +517,7 @@ def veach(args, split) -> None:
              + " | ".join(f"{v.label} / fitted" for v in PREDICTORS) + " |",
              "|---|---|" + "---|" * (3 * len(PREDICTORS) + 2)]
     ratios = {v.label: [] for v in PREDICTORS}
-    for n in tqdm(split["test"], desc="veach: predicted vs fitted", unit="material"):
+    for n in progress.bar(split["test"], desc="veach: predicted vs fitted", unit="material"):
         fitted = args.out / "fitted" / f"{n}.nbrdf.json"
         if not fitted.exists():
             fitted = args.nbrdfs / f"{n}.nbrdf.json"
@@ -522,12 +526,13 @@ def veach(args, split) -> None:
         def render(path, spp, seed, integrator="bsdf", sampling="phong"):
             d = veach_scene_dict({"type": "nbrdf", "filename": str(path), "sampling": sampling},
                                  integrator=integrator, resolution=(192, 128), spp=spp, seed=seed)
-            return np.array(mi.render(mi.load_dict(d), spp=spp))
+            # The seed is the sampler's (mi.render's own stays 0, as it was).
+            return rendering.render(mi.load_dict(d), spp)
 
         gt = render(fitted, args.veach_gt_spp, 10_000, "mis")
 
-        def rmse(path, sampling="phong"):
-            return float(np.mean([np.sqrt(np.mean((render(path, args.veach_spp, s, sampling=sampling) - gt)[plates] ** 2))
+        def rmse(path, sampling="phong", gt=gt):
+            return float(np.mean([metrics.rmse(gt, render(path, args.veach_spp, s, sampling=sampling), plates)
                                   for s in seeds]))
 
         r_fit, r_cos = rmse(fitted), rmse(fitted, "cosine")

@@ -5,7 +5,7 @@
   has the command, otherwise the authors' Keras network is imported from
   ``../shared/data/reference-nbrdf/merl/NAME.h5`` (trained on the real MERL measurement, not on
   our synthesised table: its error against the table is then not only the network's).
-* RGL materials (``../shared/data/rgl/NAME.bsdf``): the table is tabulated through Mitsuba's
+* RGL materials (a ``.bsdf`` file, or ``NAME`` for ``SHARED/data/rgl/NAME.bsdf``): the table is tabulated through Mitsuba's
   ``measured`` plugin (``python -m nbrdf_mitsuba.tabulate_rgl``); the NBRDF is trained on it in
   the same way (fallback: ``reference-nbrdf/rgl-isotropic/NAME.h5``).
 * The Blinn-Phong sampling lobe is fitted to the NBRDF with ``nbrdf fit-phong``, which stores it
@@ -22,16 +22,13 @@ predictor of the latent-space work must not train on them.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ground_truth import file_hash
-
-REPO = Path(__file__).resolve().parent.parent
-SHARED = Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
+from nbrdf_tools import cli
+from nbrdf_tools.ground_truth import file_hash
+from nbrdf_tools.paths import MissingDataError, shared_dir
 
 # The 100 MERL names in alphabetical order are `nbrdf list-materials`; the test set is
 # names[2::5] (fixed here so that scripts need not run the CLI to know it).
@@ -96,24 +93,18 @@ class Material:
         return self.table_bsdf("phong" if self.has_phong else None)
 
 
-def _run(command: list[str], quiet: bool = True) -> str:
-    result = subprocess.run([str(c) for c in command], check=False, capture_output=True, text=True)
-    if result.returncode != 0:
-        raise RuntimeError(f"{' '.join(map(str, command))} failed ({result.returncode}):\n{result.stderr.strip()}")
-    if not quiet and result.stdout.strip():
-        print(result.stdout.strip())
-    return result.stdout
+def _run(command: list) -> str:
+    return cli.run(command).stdout
 
 
 class Artefacts:
     """Builds and caches tables, networks and Phong fits under ``out / "materials"``."""
 
-    def __init__(self, out: Path, cli: Path, shared: Path = SHARED, train_args: list[str] | None = None,
+    def __init__(self, out: Path, cli: Path, shared: Path | None = None, train_args: list[str] | None = None,
                  log=print):
-        self.folder = Path(out) / "materials"
-        self.folder.mkdir(parents=True, exist_ok=True)
+        self.folder = Path(out) / "materials"  # made when the first material is built
         self.cli = Path(cli)
-        self.shared = Path(shared)
+        self.shared = Path(shared) if shared is not None else shared_dir()
         self.train_args = list(train_args or [])
         self.log = log
         self._commands = None
@@ -122,20 +113,7 @@ class Artefacts:
 
     def commands(self) -> set[str]:
         if self._commands is None:
-            if not self.cli.is_file():
-                raise FileNotFoundError(f"the nbrdf CLI {self.cli} is missing: build it with "
-                                        "`cargo build --release -p nbrdf-core` (or pass --cli)")
-            text = _run([self.cli, "--help"])
-            listed, names = False, set()
-            for line in text.splitlines():
-                if line.strip().startswith("Commands:"):
-                    listed = True
-                    continue
-                if listed:
-                    if not line.startswith("  "):
-                        break
-                    names.add(line.split()[0])
-            self._commands = names
+            self._commands = cli.commands(self.cli)
         return self._commands
 
     def can_train(self) -> bool:
@@ -196,8 +174,8 @@ class Artefacts:
         elif keras.is_file():
             inputs = {"source": "keras", "keras": file_hash(keras)}
         else:
-            raise RuntimeError(f"{name}: the CLI {self.cli} cannot train (no `train` command) and "
-                               f"there is no reference network {keras}")
+            raise MissingDataError(f"{name}: the CLI {self.cli} cannot train (no `train` command) and "
+                                   f"there is no reference network {keras}")
         # network_hash is the file as last written (after fit-phong stored its lobe in it).
         if network.is_file() and record.get("network_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return network, inputs["source"]
@@ -246,34 +224,64 @@ class Artefacts:
         return material
 
     def merl(self, name: str) -> Material:
+        self.folder.mkdir(parents=True, exist_ok=True)
         record = self._record(name)
         table = self._table_merl(name, record)
         keras = self.shared / "data" / "reference-nbrdf" / "merl" / f"{name}.h5"
         return self._material(name, "merl", table, keras, None, record)
 
-    def rgl(self, name: str) -> Material:
-        measured = self.shared / "data" / "rgl" / f"{name}.bsdf"
+    def rgl_file(self, spec: str) -> Path:
+        """The measurement of an RGL material given as a path to a ``.bsdf`` file or as a name in
+        the shared data (``NAME`` -> ``SHARED/data/rgl/NAME.bsdf``)."""
+        path = Path(spec)
+        if path.suffix == ".bsdf" or path.is_file():
+            return path
+        return self.shared / "data" / "rgl" / f"{spec}.bsdf"
+
+    def rgl(self, spec: str) -> Material:
+        """An RGL material: ``spec`` is a ``.bsdf`` path or a name in the shared data."""
+        measured = self.rgl_file(spec)
         if not measured.is_file():
-            raise FileNotFoundError(f"RGL material {measured} is missing")
+            raise MissingDataError(f"RGL measurement {measured} is missing (give the path of a .bsdf file, or set "
+                                   "NBRDF_SHARED to the shared data folder that holds data/rgl)")
+        name = measured.name.removesuffix(".bsdf")
+        self.folder.mkdir(parents=True, exist_ok=True)
         record = self._record(name)
         table = self._table_rgl(name, measured, record)
         keras = self.shared / "data" / "reference-nbrdf" / "rgl-isotropic" / f"{name}.h5"
         return self._material(name, "rgl", table, keras, measured, record)
 
+    def is_rgl(self, spec: str) -> bool:
+        return (spec.startswith("rgl:") or spec.endswith(".bsdf")
+                or (self.shared / "data" / "rgl" / f"{spec}.bsdf").is_file())
+
     def get(self, spec: str) -> Material:
-        """``NAME`` (MERL) or ``rgl:NAME`` / ``NAME_rgb`` (RGL)."""
-        if spec.startswith("rgl:"):
-            return self.rgl(spec[4:])
-        if (self.shared / "data" / "rgl" / f"{spec}.bsdf").is_file():
-            return self.rgl(spec)
+        """``NAME`` (MERL), ``rgl:NAME`` / ``NAME_rgb`` (RGL in the shared data) or ``PATH.bsdf``."""
+        if self.is_rgl(spec):
+            return self.rgl(spec.removeprefix("rgl:"))
         return self.merl(spec)
 
+    def missing(self, specs: list[str]) -> list[str]:
+        """What building ``specs`` would lack, checked before any work starts: the CLI, the RGL
+        measurements and, when the CLI cannot train, the authors' networks (one line each)."""
+        problems = []
+        try:
+            cli.check_cli(self.cli)
+        except MissingDataError as error:
+            return [str(error)]
+        can_train = self.can_train()
+        for spec in specs:
+            if self.is_rgl(spec):
+                measured = self.rgl_file(spec.removeprefix("rgl:"))
+                if not measured.is_file():
+                    problems.append(f"RGL measurement {measured} (give a .bsdf path or set NBRDF_SHARED)")
+                    continue
+                keras = self.shared / "data" / "reference-nbrdf" / "rgl-isotropic" / f"{measured.stem}.h5"
+            else:
+                keras = self.shared / "data" / "reference-nbrdf" / "merl" / f"{spec}.h5"
+            if not can_train and not keras.is_file():
+                problems.append(f"{spec}: the CLI cannot train and the reference network {keras} is missing")
+        return problems
 
-def default_cli() -> Path:
-    """The nbrdf CLI: $NBRDF_CLI, else target/release/nbrdf of this checkout."""
-    if os.environ.get("NBRDF_CLI"):
-        return Path(os.environ["NBRDF_CLI"])
-    return REPO / "target" / "release" / ("nbrdf.exe" if os.name == "nt" else "nbrdf")
 
-
-__all__ = ["MERL_TEST_SET", "VEACH_MERL", "VEACH_RGL", "Material", "Artefacts", "test_split", "default_cli"]
+__all__ = ["MERL_TEST_SET", "VEACH_MERL", "VEACH_RGL", "Material", "Artefacts", "test_split"]

@@ -1,4 +1,4 @@
-"""The 'Country Kitchen' scene with materials replaced by measured ones (DESIGN.md section 10).
+"""The 'Country Kitchen' scene with materials replaced by measured ones (docs/design.md section 10).
 
 'Country Kitchen' by Jay-Artist (https://www.blendswap.com/blends/view/42851), Mitsuba version
 by B. Bitterli (https://benedikt-bitterli.me/resources/), released under CC BY 3.0
@@ -13,7 +13,7 @@ replaced by the new BSDF, wrapped in ``twosided`` where the original was (our BS
 the front side only), and the result is loaded with ``mi.load_string`` with the kitchen folder on
 Mitsuba's file resolver path, so meshes and textures resolve as before.
 
-    from kitchen_scene import load_kitchen
+    from nbrdf_tools.scenes.kitchen import load_kitchen
     scene = load_kitchen({"CupboardUnitsBSDF": {"type": "nbrdf", "filename": "yellow-paint.nbrdf.json"}},
                          resx=320, resy=180, spp=16)
 """
@@ -28,10 +28,10 @@ from pathlib import Path
 
 import mitsuba as mi
 
-from render_utils import bsdf_xml
+from nbrdf_tools.paths import SCENES, MissingDataError, shared_path
+from nbrdf_tools.render import bsdf_xml
 
-REPO = Path(__file__).resolve().parent.parent
-DESCRIPTION = REPO / "scenes" / "kitchen_materials.json"
+DESCRIPTION = SCENES / "kitchen_materials.json"
 CREDIT = ("'Country Kitchen' by Jay-Artist (blendswap.com/blends/view/42851), Mitsuba version by "
           "B. Bitterli, CC BY 3.0 (creativecommons.org/licenses/by/3.0)")
 
@@ -40,8 +40,7 @@ def kitchen_path(path: str | Path | None = None) -> Path:
     """scene.xml of the kitchen: ``path`` (a file or its folder), else $NBRDF_KITCHEN, else
     ``../shared/scenes/kitchen/scene.xml`` next to the repository."""
     if path is None:
-        path = os.environ.get("NBRDF_KITCHEN") or (
-            Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared")) / "scenes" / "kitchen" / "scene.xml")
+        path = os.environ.get("NBRDF_KITCHEN") or shared_path("scenes", "kitchen", "scene.xml")
     path = Path(path)
     if path.is_dir():
         path = path / "scene.xml"
@@ -112,7 +111,8 @@ def load_kitchen(bsdfs: dict[str, dict] | None = None, scene: str | Path | None 
     parameters (``spp``, ``resx``, ``resy``, ``max_depth``; values are converted to str)."""
     path = kitchen_path(scene)
     if not path.is_file():
-        raise FileNotFoundError(f"kitchen scene {path} not found: pass its path or set NBRDF_KITCHEN")
+        raise MissingDataError(f"kitchen scene {path} not found: pass its path, set NBRDF_KITCHEN, or set "
+                               "NBRDF_SHARED to the shared data folder that holds scenes/kitchen")
     text = path.read_text()
     if bsdfs:
         text = override_xml(text, bsdfs)

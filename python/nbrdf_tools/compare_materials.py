@@ -3,21 +3,23 @@ Mitsuba can evaluate takes part: a MERL-format table (``*.binary``, the ``merl``
 BRDF (``*.nbrdf.json``, the ``nbrdf`` BSDF) or an RGL measurement (``*.bsdf``, Mitsuba's own
 ``measured`` BSDF, the ground truth of real measured materials).
 
-    python python/compare_materials.py A B [--resolution 128] [--samples 100000] [--json]
+    python -m nbrdf_tools.compare_materials A B [--resolution 128] [--samples 100000] [--json]
 
-The first material is the reference. What is computed is the Rust tool's (``nbrdf-core/src/
-metrics.rs``), reproduced here pixel for pixel:
+The first material is the reference. The images and directions are the Rust tool's
+(``nbrdf compare``), reproduced here pixel for pixel; the image metrics are those of
+:mod:`nbrdf_tools.metrics` (names say which definition):
 
 * a unit sphere seen orthographically from +z, ``resolution`` x ``resolution`` pixels (pixel
   centres, float32 geometry), lit by one directional light of unit irradiance from
   ``(sin t, 0, cos t)`` for each ``t`` in 0, 30, 45, 60, 75 degrees; a pixel's radiance is
   ``f_r(l, v) cos(theta_l)``, i.e. the BSDF's ``eval`` in the local frame of the sphere (no Monte
   Carlo: deterministic and noise-free); the background is black;
-* MAE, RMSE and PSNR (``20 log10(max(reference) / rmse)``) over all pixels and channels of the
-  linear images, SSIM (Wang et al. 2004: 11x11 Gaussian window of sigma 1.5 truncated at the
-  border and renormalised, K1 = 0.01, K2 = 0.03, data range 1) on the tone-mapped
-  ``min(max(x, 1e-12)^(1/2.2), 1)`` images, averaged over the RGB channels; the means over the
-  five lights;
+* ``mae``, ``rmse``, ``relmse`` and ``psnr_peak_ref`` (``20 log10(max(reference) / rmse)``, the
+  Rust tool's PSNR) over all pixels and channels of the linear images; ``ssim`` (scikit-image,
+  Wang et al.'s settings) of the tone-mapped ``min(max(x, 1e-12)^(1/2.2), 1)`` images, averaged
+  over the RGB channels (the Rust tool's own SSIM differs at the image border: it truncates and
+  renormalises the window where scikit-image leaves the border out); ``flip_hdr`` (NVIDIA's
+  HDR-FLIP) of the linear images; the means over the five lights;
 * the log-space BRDF error ``|ln(1 + f_A cos) - ln(1 + f_B cos)|`` averaged over the channels and
   over ``samples`` light/view pairs drawn adaptively (uniform in theta_h, theta_d, phi_d) and
   uniformly (over the hemisphere), from the same counter-based SplitMix64 stream as the Rust tool,
@@ -32,14 +34,15 @@ import argparse
 import json
 import math
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import nbrdf_mitsuba  # noqa: F401  (before mitsuba: points Dr.Jit at a usable libLLVM)
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from scipy.ndimage import correlate1d
+
+from nbrdf_tools import metrics
 
 LIGHT_THETAS_DEG = (0.0, 30.0, 45.0, 60.0, 75.0)
 DEFAULT_RESOLUTION = 128
@@ -144,47 +147,19 @@ def render_spheres(bsdf, size: int = DEFAULT_RESOLUTION, light_thetas_deg=LIGHT_
 class ImageErrors:
     mae: float
     rmse: float
-    psnr: float
+    relmse: float
+    psnr_peak_ref: float
     ssim: float
-
-
-def tone_map(image: np.ndarray) -> np.ndarray:
-    return np.minimum(np.maximum(image.astype(np.float64), 1e-12) ** (1.0 / 2.2), 1.0)
-
-
-_RADIUS, _SIGMA = 5, 1.5
-_KERNEL = np.exp(-np.arange(-_RADIUS, _RADIUS + 1) ** 2 / (2 * _SIGMA * _SIGMA))
-
-
-def _window_mean(plane: np.ndarray) -> np.ndarray:
-    """Gaussian-weighted sum over the in-image part of each pixel's window (zero padding)."""
-    out = correlate1d(plane, _KERNEL, axis=0, mode="constant", cval=0.0)
-    return correlate1d(out, _KERNEL, axis=1, mode="constant", cval=0.0)
-
-
-def ssim(a: np.ndarray, b: np.ndarray) -> float:
-    """Mean SSIM of two (size, size) planes in [0, 1], window truncated at the border and
-    renormalised."""
-    c1, c2 = 0.01 ** 2, 0.03 ** 2
-    w = _window_mean(np.ones_like(a))
-    ma, mb = _window_mean(a) / w, _window_mean(b) / w
-    va = _window_mean(a * a) / w - ma * ma
-    vb = _window_mean(b * b) / w - mb * mb
-    cov = _window_mean(a * b) / w - ma * mb
-    s = ((2 * ma * mb + c1) * (2 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
-    return float(np.mean(s))
+    flip_hdr: float
 
 
 def image_errors(reference: np.ndarray, test: np.ndarray) -> ImageErrors:
     """Errors of ``test`` against ``reference``, both (3, size, size) linear RGB."""
-    r, t = reference.astype(np.float64), test.astype(np.float64)
-    d = r - t
-    mae = float(np.mean(np.abs(d)))
-    rmse = float(np.sqrt(np.mean(d * d)))
-    peak = max(float(np.max(r)), sys.float_info.min)
-    psnr = 20.0 * math.log10(peak / rmse) if rmse > 0 else math.inf
-    s = sum(ssim(tone_map(reference[c]), tone_map(test[c])) for c in range(3)) / 3.0
-    return ImageErrors(mae, rmse, psnr, s)
+    r = np.moveaxis(reference.astype(np.float64), 0, -1)
+    t = np.moveaxis(test.astype(np.float64), 0, -1)
+    return ImageErrors(mae=metrics.mae(r, t), rmse=metrics.rmse(r, t), relmse=metrics.relmse(r, t),
+                       psnr_peak_ref=metrics.psnr_peak_ref(r, t), ssim=metrics.ssim(r, t),
+                       flip_hdr=metrics.flip_hdr(r, t))
 
 
 # --------------------------------------------------------------------------------------------
@@ -262,7 +237,8 @@ class Comparison:
     log_error_uniform: float
 
     def to_json(self) -> dict:
-        """The layout of ``nbrdf compare --json``'s "comparison" (an infinite PSNR is null)."""
+        """The layout of ``nbrdf compare --json``'s "comparison", with the metric names of
+        :class:`ImageErrors` (an infinite PSNR is null)."""
         def errors(e: ImageErrors) -> dict:
             return {k: (v if math.isfinite(v) else None) for k, v in asdict(e).items()}
         return {
@@ -289,7 +265,7 @@ def compare(reference, test, resolution: int = DEFAULT_RESOLUTION, samples: int 
     test_images = render_spheres(tst, resolution)
     per_light = [(deg, image_errors(ref_images[i], test_images[i])) for i, deg in enumerate(LIGHT_THETAS_DEG)]
     n = len(per_light)
-    mean = ImageErrors(*(sum(getattr(e, f) for _, e in per_light) / n for f in ("mae", "rmse", "psnr", "ssim")))
+    mean = ImageErrors(**{f.name: sum(getattr(e, f.name) for _, e in per_light) / n for f in fields(ImageErrors)})
     return Comparison(
         resolution=resolution,
         per_light=per_light,
@@ -307,11 +283,14 @@ def _e(x: float, width: int = 0) -> str:
 
 
 def format_text(reference: str, test: str, c: Comparison) -> str:
-    """The text report of ``nbrdf compare``."""
+    """The text report (``nbrdf compare``'s, with relMSE and HDR-FLIP; PSNR_ref: peak = max(reference))."""
     lines = [f"{reference} vs {test} (reference first), {c.resolution}x{c.resolution} spheres:",
-             f"  {'theta_l':>9}{'MAE':>12}{'RMSE':>12}{'PSNR':>9}{'SSIM':>8}"]
+             f"  {'theta_l':>9}{'MAE':>12}{'RMSE':>12}{'relMSE':>12}{'PSNR_ref':>9}{'SSIM':>8}{'FLIP':>8}"]
+
     def row(label, e):
-        return f"  {label:>9}{_e(e.mae, 12)}{_e(e.rmse, 12)}{e.psnr:>9.2f}{e.ssim:>8.4f}"
+        return (f"  {label:>9}{_e(e.mae, 12)}{_e(e.rmse, 12)}{_e(e.relmse, 12)}{e.psnr_peak_ref:>9.2f}"
+                f"{e.ssim:>8.4f}{e.flip_hdr:>8.4f}")
+
     lines += [row(f"{deg:.0f} deg", e) for deg, e in c.per_light]
     lines.append(row("mean", c.mean))
     lines.append("log-space BRDF error |ln(1+fA cos) - ln(1+fB cos)|: "
@@ -321,10 +300,11 @@ def format_text(reference: str, test: str, c: Comparison) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="compare_materials.py",
+        prog="python -m nbrdf_tools.compare_materials",
         description="Compare two materials (MERL table .binary, NBRDF .nbrdf.json or RGL measurement "
-                    ".bsdf) on rendered spheres under five light elevations (MAE, RMSE, PSNR, SSIM) "
-                    "and in log space, as `nbrdf compare` does. The first is the reference.")
+                    ".bsdf) on rendered spheres under five light elevations (MAE, RMSE, relMSE, PSNR with "
+                    "peak max(reference), SSIM, HDR-FLIP) and in log space, as `nbrdf compare` does. The first "
+                    "is the reference.")
     parser.add_argument("reference", type=Path, metavar="A", help="the reference material")
     parser.add_argument("test", type=Path, metavar="B", help="the material compared against A")
     parser.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION,

@@ -6,7 +6,7 @@ repeated with the same seed and the fastest time kept) and compared with a conve
 reference; a CSV, a JSON file, EXR renders, PNG plots (log-log, one curve per strategy) and a
 Markdown summary land in the output folder.
 
-Strategies (DESIGN.md section 6): ``uniform``, ``cosine`` and ``phong-fit`` sample our NBRDF
+Strategies (docs/design.md section 6): ``uniform``, ``cosine`` and ``phong-fit`` sample our NBRDF
 (the ``nbrdf`` BSDF) by the uniform hemisphere, the cosine lobe and the Blinn-Phong lobe fitted by
 ``nbrdf fit-phong``; ``phong-predicted`` samples the NBRDF through the lobe that the latent-space
 predictor gives (``--ae AE.json --predictor P.json``, from ``nbrdf ae train`` and ``nbrdf predictor
@@ -22,26 +22,34 @@ samples: the same integral, much less noise) at ``--gt-spp``:
 * the converged NBRDF: our network at the same sample count, with the same random numbers.
 
 The sampling error of a strategy is measured against the converged render of the *same* BSDF
-(fields ``mae``, ``rmse``, ``mape``, ``psnr``): the NBRDF for ``uniform``/``cosine``/``phong-*``,
-the measurement for ``measured``. The representation error (NBRDF against ground truth at
-``--gt-spp``) is reported separately, and the total error of every render against the ground
-truth is in the ``*_vs_ground_truth`` fields.
+(fields ``mae``, ``rmse``, ``relmse``, ``mape``, ``psnr_peak1``; see nbrdf_tools.metrics): the
+NBRDF for ``uniform``/``cosine``/``phong-*``, the measurement for ``measured``. The
+representation error (NBRDF against ground truth at ``--gt-spp``) is reported separately, with
+the same metrics plus ``ssim`` (scikit-image) and ``flip_hdr`` (NVIDIA's HDR-FLIP) over the whole
+image, and the total error of every render against the ground truth is in the
+``*_vs_ground_truth`` fields.
 
 In the Veach scene the errors are measured on the plates only (the floor and wall are diffuse);
 in the kitchen on the whole image.
 
-    python python/convergence.py --scene veach [--materials a,b] [--rgl x,y] [--integrator bsdf|mis]
-    python python/convergence.py --scene kitchen [--kitchen PATH]
-    python python/convergence.py --scene veach --quick --json out/convergence.json
+    python -m nbrdf_tools.convergence --scene veach [--materials a,b] [--rgl x,PATH.bsdf] [--integrator bsdf|mis]
+    python -m nbrdf_tools.convergence --scene kitchen [--kitchen PATH]
+    python -m nbrdf_tools.convergence --scene veach --quick --json out/convergence.json
+
+MERL materials need nothing but the CLI (tables are synthesised from the embedded fits and the
+networks trained); RGL materials need their ``.bsdf`` measurement (a path, or a name in the shared
+data; the default RGL pair is left out with a note when the shared data is absent), the kitchen
+its scene. What is missing is reported before any work starts. Everything, caches included,
+goes under ``--out`` when it is given.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import math
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -49,22 +57,17 @@ from pathlib import Path
 import nbrdf_mitsuba  # first: finds a libLLVM for Dr.Jit before Mitsuba starts its JIT
 import mitsuba as mi
 import numpy as np
-from tqdm import tqdm
 
-import metrics
-from ground_truth import RenderCache, file_hash
-from materials import VEACH_MERL, VEACH_RGL, Artefacts, Material, default_cli
-from render_utils import render_passes, timed_render, warm_up, write_exr, write_png
-
-REPO = Path(__file__).resolve().parent.parent
+from nbrdf_tools import cli, metrics, progress
+from nbrdf_tools.ground_truth import RenderCache, file_hash
+from nbrdf_tools.materials import VEACH_MERL, VEACH_RGL, Artefacts, Material
+from nbrdf_tools.paths import SCENES, MissingDataError, default_cli, default_out, shared_path
+from nbrdf_tools.progress import bar, log
+from nbrdf_tools.render import render_passes, timed_render, warm_up, write_exr, write_png
 STRATEGIES = ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
 NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong", "phong-predicted": "phong"}
 REFERENCE_SEED = 1_000_000  # references use seeds from here on; test renders stay far below
 QUICK_TRAIN_ARGS = ["--samples", "40000", "--epochs", "3", "--min-epochs", "1"]
-
-
-def log(message: str) -> None:
-    tqdm.write(message)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -75,19 +78,19 @@ class VeachSetup:
     name = "veach"
 
     def __init__(self, args):
-        from veach_scene import VEACH_XML
+        from nbrdf_tools.scenes.veach import VEACH_XML
 
         self.resolution = (args.width, args.height or round(args.width * 2 / 3))
         self.integrator = args.integrator
         self.xml = VEACH_XML
 
     def load(self, bsdf: dict, integrator: str | None = None):
-        from veach_scene import load_veach_xml
+        from nbrdf_tools.scenes.veach import load_veach_xml
 
         return load_veach_xml(bsdf, integrator=integrator or self.integrator, resolution=self.resolution)
 
     def mask(self, scene):
-        from veach_scene import plate_mask
+        from nbrdf_tools.scenes.veach import plate_mask
 
         return plate_mask(scene)
 
@@ -100,14 +103,15 @@ class KitchenSetup:
     name = "kitchen"
 
     def __init__(self, args):
-        import kitchen_scene
+        from nbrdf_tools.scenes import kitchen
 
-        self.module = kitchen_scene
-        self.path = kitchen_scene.kitchen_path(args.kitchen)
+        self.module = kitchen
+        self.path = kitchen.kitchen_path(args.kitchen)
         if not self.path.is_file():
-            raise SystemExit(f"error: kitchen scene {self.path} not found (pass --kitchen PATH or set NBRDF_KITCHEN)")
+            raise MissingDataError(f"kitchen scene {self.path} not found (pass --kitchen PATH, set NBRDF_KITCHEN, "
+                                   "or set NBRDF_SHARED to the shared data folder that holds scenes/kitchen)")
         self.description_file = Path(args.kitchen_materials)
-        self.overrides = kitchen_scene.load_description(self.description_file)
+        self.overrides = kitchen.load_description(self.description_file)
         evaluation = self.overrides.get("evaluation", {})
         width = args.width or evaluation.get("resx", 320)
         self.resolution = (width, args.height or round(width * 9 / 16))
@@ -162,44 +166,77 @@ def rmse_at_time(points: list[tuple[float, float]], seconds: float) -> float:
 
 
 def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str, save_dir: Path | None,
-            save_spp: set[int]) -> list[dict]:
-    """Renders every strategy at every spp level (interleaved, so that machine load hits them
-    alike) and measures each against its reference and against the ground truth."""
+            save_spp: set[int], seeds: int = 1) -> list[dict]:
+    """Renders every strategy at every spp level, ``seeds`` times with independent random numbers
+    (interleaved, so that machine load hits them alike), and measures each against its reference
+    and against the ground truth. Rows carry the seed's index (``seed``)."""
     rows = []
-    for name, entry in strategies.items():
+    for entry in strategies.values():
         entry["warm_up_seconds"] = warm_up(entry["scene"])
-    total = len(levels) * len(strategies)
-    with tqdm(total=total, desc=f"{label}: renders", unit="render", leave=False) as bar:
+    total = len(levels) * len(strategies) * seeds
+    with bar(total=total, desc=f"{label}: renders", unit="render", leave=False) as renders:
         for level_index, spp in enumerate(levels):
-            for strategy_index, (name, entry) in enumerate(strategies.items()):
-                seed = 1000 * (level_index + 1) + strategy_index
+            for seed_index, (strategy_index, (name, entry)) in itertools.product(range(seeds),
+                                                                                 enumerate(strategies.items())):
+                # Seed index 0 keeps the random numbers of single-seed runs.
+                seed = 1000 * (level_index + 1) + strategy_index + 100_000 * seed_index
                 image, seconds = timed_render(entry["scene"], spp, seed=seed)
                 # Short renders are timed again (same seed, same image) and the fastest run kept:
                 # other processes on the machine disturb short timings the most.
                 for _ in range(timing_repeats(spp) - 1):
                     seconds = min(seconds, timed_render(entry["scene"], spp, seed=seed)[1])
-                row = {"strategy": name, "spp": spp, "seconds": seconds,
-                       **metrics.all_metrics(entry["reference"], image, mask),
+                row = {"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds,
+                       **metrics.render_metrics(entry["reference"], image, mask),
                        "nonfinite": metrics.nonfinite_count(image)}
-                for key, value in metrics.all_metrics(ground_truth, image, mask).items():
+                for key, value in metrics.render_metrics(ground_truth, image, mask).items():
                     row[f"{key}_vs_ground_truth"] = value
                 row["reference"] = entry["reference_name"]
                 rows.append(row)
-                if save_dir is not None and spp in save_spp:
+                if save_dir is not None and spp in save_spp and seed_index == 0:
                     write_exr(save_dir / f"{name}-{spp:04d}spp.exr", image)
-                bar.update()
+                renders.update()
     return rows
+
+
+def representation_metrics(ground_truth: np.ndarray, image: np.ndarray, mask=None) -> dict:
+    """The metrics of a converged render against the ground truth: the per-render ones (over the
+    masked pixels), ``relative_rmse``, and ``ssim`` and ``flip_hdr`` over the whole image."""
+    return {**metrics.render_metrics(ground_truth, image, mask),
+            "relative_rmse": metrics.relative_rmse(ground_truth, image, mask),
+            "ssim": metrics.ssim(ground_truth, image), "flip_hdr": metrics.flip_hdr(ground_truth, image)}
+
+
+def material_specs(args) -> list[str]:
+    """The Veach materials: MERL names, then RGL ones as ``rgl:NAME`` or ``.bsdf`` paths."""
+    rgl = [m if m.endswith(".bsdf") else f"rgl:{m}" for m in (args.rgl or "").split(",") if m]
+    return [m for m in args.materials.split(",") if m] + rgl
 
 
 def timing_repeats(spp: int) -> int:
     return 3 if spp <= 8 else 2 if spp <= 32 else 1
 
 
+def series(rows: list[dict], strategy: str, metric: str = "rmse") -> dict[str, np.ndarray] | None:
+    """A strategy's curve over its seeds: per spp level the median time and the median, lowest
+    and highest error (arrays in spp order), or None when the strategy has no rows."""
+    levels = sorted({r["spp"] for r in rows if r["strategy"] == strategy})
+    if not levels:
+        return None
+    per_level = [[r for r in rows if r["strategy"] == strategy and r["spp"] == spp] for spp in levels]
+    errors = [np.array([r[metric] for r in level]) for level in per_level]
+    return {"spp": np.array(levels), "seconds": np.array([np.median([r["seconds"] for r in level])
+                                                         for level in per_level]),
+            "median": np.array([np.median(e) for e in errors]), "low": np.array([e.min() for e in errors]),
+            "high": np.array([e.max() for e in errors]), "seeds": min(len(level) for level in per_level)}
+
+
 def equal_time_summary(rows: list[dict]) -> dict:
-    """RMSE of every strategy at the longest render time that all strategies reached."""
+    """RMSE (median over seeds) of every strategy at the longest render time that all
+    strategies reached."""
     by_strategy: dict[str, list[tuple[float, float]]] = {}
-    for row in rows:
-        by_strategy.setdefault(row["strategy"], []).append((row["seconds"], row["rmse"]))
+    for strategy in dict.fromkeys(r["strategy"] for r in rows):
+        curve = series(rows, strategy)
+        by_strategy[strategy] = list(zip(curve["seconds"], curve["median"]))
     budget = min(max(t for t, _ in points) for points in by_strategy.values())
     return {"seconds": budget, "rmse": {s: rmse_at_time(p, budget) for s, p in by_strategy.items()}}
 
@@ -208,42 +245,94 @@ def equal_time_summary(rows: list[dict]) -> dict:
 # Plots
 
 
-def plot_material(path: Path, title: str, rows: list[dict], representation: float | None, metric: str = "rmse"):
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _power_of_two_axis(ax, levels) -> None:
+    """spp on a log2 axis, ticks labelled 1, 2, 4, ... (every other one when crowded)."""
+    from matplotlib.ticker import FixedLocator, NullLocator
+
+    levels = sorted(levels)
+    step = 1 if len(levels) <= 9 else 2
+    ax.set_xscale("log", base=2)
+    ax.xaxis.set_major_locator(FixedLocator(levels[::step]))
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.set_xticklabels([str(int(v)) for v in levels[::step]])
+
+
+def _log_axes(ax) -> None:
+    """Log-log axes; the x axis (render time) labelled at 1, 2, 5 x 10^k as plain numbers (the
+    default minor labels such as 2x10^-1 overlap), the y axis at the decades."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
+def _curve(ax, x, curve, colour, label, ms=4):
+    """Median over seeds (time order), with the min-max band when there are several seeds."""
+    order = np.argsort(x)
+    (line,) = ax.plot(x[order], curve["median"][order], "o-", ms=ms, color=colour, label=label)
+    if curve["seeds"] > 1:
+        ax.fill_between(x[order], curve["low"][order], curve["high"][order], color=colour, alpha=0.2, lw=0)
+    return line
+
+
+def save_figure(fig, path: Path, dpi: int = 150) -> None:
+    """PNG and PDF side by side."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    fig.savefig(path.with_suffix(".pdf"))
+
+
+def plot_material(path: Path, title: str, rows: list[dict], representation: float | None, metric: str = "rmse"):
+    """Error against spp (power-of-two axis, with a 1/sqrt(spp) guide) and against render time
+    (points in time order), one curve per strategy: the median over seeds with a min-max band."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    seeds, first = 1, []
     for i, strategy in enumerate(STRATEGIES):
-        points = sorted((r["spp"], r["seconds"], r[metric]) for r in rows if r["strategy"] == strategy)
-        if not points:
+        curve = series(rows, strategy, metric)
+        if curve is None:
             continue
-        spp, seconds, error = zip(*points)
-        axes[0].plot(spp, error, "o-", color=f"C{i}", label=strategy)
-        axes[1].plot(seconds, error, "o-", color=f"C{i}", label=strategy)
+        seeds = max(seeds, curve["seeds"])
+        _curve(axes[0], curve["spp"].astype(float), curve, f"C{i}", strategy)
+        _curve(axes[1], curve["seconds"], curve, f"C{i}", strategy)
+        first.append((curve["spp"][0], curve["median"][0]))
+    levels = sorted({r["spp"] for r in rows})
+    if first and len(levels) > 1:
+        spp0, error0 = max(first, key=lambda p: p[1])
+        guide = error0 * np.sqrt(spp0 / np.array(levels, dtype=float))
+        axes[0].plot(levels, guide, color="black", ls=":", lw=1, label=r"$\propto 1/\sqrt{\mathrm{spp}}$")
     for ax, xlabel in zip(axes, ("samples per pixel", "render time (s)")):
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        _log_axes(ax)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(f"{metric.upper()} (sampling error)")
         ax.grid(True, which="both", alpha=0.3)
         if representation is not None and representation > 0:
             ax.axhline(representation, color="grey", ls="--", lw=1, label="NBRDF vs ground truth")
+    _power_of_two_axis(axes[0], levels)
     axes[0].legend(fontsize=8)
-    fig.suptitle(title)
+    band = f"; median of {seeds} seeds, band min-max" if seeds > 1 else ""
+    fig.suptitle(title + band)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 
 def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], metric: str = "rmse"):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """Error against render time per material (small multiples)."""
+    plt = _pyplot()
     names = list(per_material)
     cols = min(4, len(names))
     rows_n = math.ceil(len(names) / cols)
@@ -252,12 +341,10 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
     handles = {}
     for ax, name in zip(axes.ravel(), names):
         for strategy in STRATEGIES:
-            points = sorted((r["spp"], r["seconds"], r[metric]) for r in per_material[name] if r["strategy"] == strategy)
-            if points:
-                _, seconds, error = zip(*points)
-                (handles[strategy],) = ax.plot(seconds, error, "o-", ms=3, color=colours[strategy], label=strategy)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+            curve = series(per_material[name], strategy, metric)
+            if curve is not None:
+                handles[strategy] = _curve(ax, curve["seconds"], curve, colours[strategy], strategy, ms=3)
+        _log_axes(ax)
         ax.set_title(name, fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         ax.tick_params(labelsize=7)
@@ -268,7 +355,7 @@ def plot_overview(path: Path, title: str, per_material: dict[str, list[dict]], m
     fig.supylabel(f"{metric.upper()} (sampling error)")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -291,8 +378,8 @@ def predicted_lobe(args, material: Material, out: Path) -> tuple[float, float] |
         return None
     target = out / "predicted" / f"{material.name}.nbrdf.json"
     target.parent.mkdir(parents=True, exist_ok=True)
-    subprocess.run([str(args.cli), "predict-phong", "--ae", str(args.ae), "--predictor", str(args.predictor),
-                    str(material.network), "-o", str(target)], check=True, capture_output=True, text=True)
+    cli.run([args.cli, "predict-phong", "--ae", args.ae, "--predictor", args.predictor, material.network,
+             "-o", target])
     sampling = json.loads(target.read_text())["sampling"]
     return float(sampling["exponent"]), float(sampling["specular_weight"])
 
@@ -300,12 +387,12 @@ def predicted_lobe(args, material: Material, out: Path) -> tuple[float, float] |
 def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: list[str]) -> dict:
     setup = VeachSetup(args)
     levels = spp_levels(args.max_spp)
-    specs = [m for m in args.materials.split(",") if m] + [f"rgl:{m}" for m in args.rgl.split(",") if m]
+    specs = material_specs(args)
     results, representation, equal_time, per_material, predicted_lobes = [], [], [], {}, {}
     tag = "" if setup.integrator == "bsdf" else f"-{setup.integrator}"  # keeps the two runs apart
     settings = {"spp": args.gt_spp, "resolution": list(setup.resolution), "integrator": "mis",
                 "seed": REFERENCE_SEED, "spp_per_pass": args.spp_per_pass}
-    for spec in tqdm(specs, desc="veach: materials", unit="material"):
+    for spec in bar(specs, desc="veach: materials", unit="material"):
         material: Material = artefacts.get(spec)
         for note in material.notes:
             notes.append(f"{material.name}: {note}")
@@ -313,27 +400,25 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
         # References: the ground truth and the converged NBRDF (same seeds: common random numbers).
         gt_bsdf = material.ground_truth_bsdf()
         ground_truth = reference(cache, f"veach-{label}-ground-truth", setup.description(gt_bsdf, "mis"),
-                                 bsdf_files(gt_bsdf), settings, lambda: setup.load(gt_bsdf, "mis"),
+                                 bsdf_files(gt_bsdf), settings, lambda bsdf=gt_bsdf: setup.load(bsdf, "mis"),
                                  args.gt_spp, args.spp_per_pass, f"{label}: ground truth")
         ref_bsdf = material.nbrdf("phong" if material.has_phong else "cosine")
         nbrdf_ref = reference(cache, f"veach-{label}-nbrdf", setup.description(ref_bsdf, "mis"), bsdf_files(ref_bsdf),
-                              settings, lambda: setup.load(ref_bsdf, "mis"), args.gt_spp, args.spp_per_pass,
+                              settings, lambda bsdf=ref_bsdf: setup.load(bsdf, "mis"), args.gt_spp, args.spp_per_pass,
                               f"{label}: converged NBRDF")
         mask_scene = setup.load({"type": "diffuse"})
         mask = setup.mask(mask_scene)
         rep = {"scene": "veach", "material": label, "kind": material.kind, "model": "nbrdf",
                "network": material.network_source, "spp": args.gt_spp, "region": "plates",
-               **metrics.all_metrics(ground_truth, nbrdf_ref, mask),
-               "relative_rmse": metrics.rmse(ground_truth, nbrdf_ref, mask) / float(np.sqrt(np.mean(ground_truth[mask] ** 2)))}
+               **representation_metrics(ground_truth, nbrdf_ref, mask)}
         representation.append(rep)
         if material.kind == "rgl":
             table_bsdf = material.table_bsdf("phong" if material.has_phong else None)
             table_ref = reference(cache, f"veach-{label}-table", setup.description(table_bsdf, "mis"),
-                                  bsdf_files(table_bsdf), settings, lambda: setup.load(table_bsdf, "mis"),
+                                  bsdf_files(table_bsdf), settings, lambda bsdf=table_bsdf: setup.load(bsdf, "mis"),
                                   args.gt_spp, args.spp_per_pass, f"{label}: tabulated")
-            representation.append({**rep, "model": "table", "network": "-", **metrics.all_metrics(ground_truth, table_ref, mask),
-                                   "relative_rmse": metrics.rmse(ground_truth, table_ref, mask)
-                                   / float(np.sqrt(np.mean(ground_truth[mask] ** 2)))})
+            representation.append({**rep, "model": "table", "network": "-",
+                                   **representation_metrics(ground_truth, table_ref, mask)})
         # Strategies.
         strategies = {}
         for strategy in STRATEGIES:
@@ -355,7 +440,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
                                         "reference_name": "measured"}
         save_dir = out / f"renders{tag}" / label
         save_spp = {levels[0], levels[len(levels) // 2], levels[-1]}
-        rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp)
+        rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp, args.seeds)
         write_exr(save_dir / "ground-truth.exr", ground_truth)
         write_exr(save_dir / "nbrdf-converged.exr", nbrdf_ref)
         write_png(save_dir / "ground-truth.png", ground_truth)
@@ -388,7 +473,7 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
     module = setup.module
     names = sorted(set(setup.overrides["overrides"].values()))
     materials = {}
-    for name in tqdm(names, desc="kitchen: materials", unit="material"):
+    for name in bar(names, desc="kitchen: materials", unit="material"):
         materials[name] = artefacts.get(name)
         for note in materials[name].notes:
             notes.append(f"{name}: {note}")
@@ -411,16 +496,14 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
                           "kitchen: converged NBRDF")
     overridden = None
     probe = setup.load(ref_bsdfs)
-    from render_utils import primary_hit_mask
+    from nbrdf_tools.render import primary_hit_mask
 
     overridden = primary_hit_mask(probe, bsdf_ids=setup.overrides["overrides"].keys())
     rep = {"scene": "kitchen", "material": "14 overrides", "kind": "merl", "model": "nbrdf",
            "network": ",".join(sorted({m.network_source for m in materials.values()})), "spp": args.gt_spp,
-           "region": "image", **metrics.all_metrics(ground_truth, nbrdf_ref),
-           "relative_rmse": metrics.rmse(ground_truth, nbrdf_ref) / float(np.sqrt(np.mean(ground_truth ** 2)))}
-    rep_overridden = {**rep, "region": "replaced materials", **metrics.all_metrics(ground_truth, nbrdf_ref, overridden),
-                      "relative_rmse": metrics.rmse(ground_truth, nbrdf_ref, overridden)
-                      / float(np.sqrt(np.mean(ground_truth[overridden] ** 2)))}
+           "region": "image", **representation_metrics(ground_truth, nbrdf_ref)}
+    rep_overridden = {**rep, "region": "replaced materials",
+                      **representation_metrics(ground_truth, nbrdf_ref, overridden)}
     strategies = {}
     for strategy in ("uniform", "cosine", "phong-fit"):
         if strategy == "phong-fit" and not has_phong:
@@ -428,7 +511,7 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
         strategies[strategy] = {"scene": setup.load(bsdfs(NBRDF_SAMPLING[strategy])), "reference": nbrdf_ref,
                                 "reference_name": "nbrdf"}
     save_dir = out / "renders" / "kitchen"
-    rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]})
+    rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]}, args.seeds)
     for row in rows:
         row.update(scene="kitchen", material="14 overrides", integrator="path", region="image")
     # Fireflies traceable to our BSDFs: the NBRDF and the table, Phong-sampled alike with the same
@@ -474,8 +557,11 @@ def markdown(report: dict) -> str:
         strategies = [s for s in STRATEGIES if any(s in e["rmse"] for e in report["equal_time"])]
         lines += [f"RMSE (sampling error{', plates only' if scene == 'veach' else ''}) at equal render time "
                   f"({report['settings']['integrator_label']}, {report['settings']['resolution'][0]}x"
-                  f"{report['settings']['resolution'][1]}):", ""]
-        header = "| material | Phong n, w | time (s) | " + " | ".join(strategies) + " | phong-fit / cosine | phong-fit / uniform |"
+                  f"{report['settings']['resolution'][1]}"
+                  + (f", median of {report['settings']['seeds']} seeds" if report["settings"].get("seeds", 1) > 1 else "")
+                  + "):", ""]
+        header = ("| material | Phong n, w | time (s) | " + " | ".join(strategies)
+                  + " | phong-fit / cosine | phong-fit / uniform |")
         predicted = "phong-predicted" in strategies
         if predicted:
             header += " predicted n, w | phong-predicted / phong-fit |"
@@ -500,11 +586,19 @@ def markdown(report: dict) -> str:
     if report["representation"]:
         lines += [f"Representation error against the ground truth ({report['settings']['gt_spp']} spp, MIS/path, "
                   "same random numbers):", "",
-                  "| material | model | network | region | MAE | RMSE | relative RMSE | MAPE | PSNR (dB) |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "| material | model | network | region | MAE | RMSE | relative RMSE | relMSE | MAPE | "
+                  "PSNR, peak 1 (dB) | SSIM (image) | HDR-FLIP (image) |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in report["representation"]:
+            # (Reports written before relMSE, SSIM and FLIP were added show "-" there on --replot;
+            # their "psnr" was the peak-1 one.)
+            ssim = f"{r['ssim']:.4f}" if "ssim" in r else "-"
+            flip = f"{r['flip_hdr']:.4f}" if "flip_hdr" in r else "-"
+            relmse = f"{r['relmse']:.4g}" if "relmse" in r else "-"
+            psnr = r.get("psnr_peak1", r.get("psnr"))
             lines.append(f"| {r['material']} | {r['model']} | {r['network']} | {r['region']} | {r['mae']:.4g} | "
-                         f"{r['rmse']:.4g} | {r['relative_rmse']:.3f} | {r['mape']:.4g} | {r['psnr']:.1f} |")
+                         f"{r['rmse']:.4g} | {r['relative_rmse']:.3f} | {relmse} | {r['mape']:.4g} | "
+                         f"{psnr:.1f} | {ssim} | {flip} |")
         lines.append("")
     if report.get("kitchen"):
         k = report["kitchen"]
@@ -545,7 +639,7 @@ def replot(report: dict, scene_out: Path) -> None:
 def write_csv(path: Path, rows: list[dict]) -> None:
     if not rows:
         return
-    keys = ["scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "mape", "psnr"]
+    keys = ["scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "relmse", "mape", "psnr_peak1"]
     keys += [k for k in rows[0] if k not in keys]
     with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
@@ -558,26 +652,33 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", choices=["veach", "kitchen"], default="veach")
     parser.add_argument("--materials", default=",".join(VEACH_MERL),
                         help="comma-separated MERL materials for the Veach scene (default: %(default)s)")
-    parser.add_argument("--rgl", default=",".join(VEACH_RGL),
-                        help="comma-separated RGL materials (../shared/data/rgl/NAME.bsdf) for the Veach scene; "
-                             "empty for none (default: %(default)s)")
+    parser.add_argument("--rgl", default=None,
+                        help="comma-separated RGL materials for the Veach scene: paths of .bsdf measurements or "
+                             "names in the shared data (SHARED/data/rgl/NAME.bsdf); empty for none (default: "
+                             f"{','.join(VEACH_RGL)} when the shared data holds them, else none)")
     parser.add_argument("--integrator", choices=["bsdf", "mis"], default="bsdf",
                         help="Veach: bsdf = pure BSDF sampling (direct, emitter_samples = 0), mis = MIS")
     parser.add_argument("--width", type=int, help="image width (Veach: 384, kitchen: from kitchen_materials.json)")
     parser.add_argument("--height", type=int, help="image height (default: 2/3 of the width, kitchen 9/16)")
     parser.add_argument("--max-spp", type=int, default=128, help="highest spp of the series 1, 2, 4, ...")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="independent renders per strategy and spp; the plots show their median and range "
+                             "(default: %(default)s)")
     parser.add_argument("--gt-spp", type=int, default=1024, help="spp of the ground truths and references")
     parser.add_argument("--spp-per-pass", type=int, default=64, help="spp per pass of the reference renders")
     parser.add_argument("--max-depth", type=int, help="kitchen: path length (default from kitchen_materials.json)")
     parser.add_argument("--kitchen", help="kitchen scene.xml or its folder (default ../shared/scenes/kitchen)")
-    parser.add_argument("--kitchen-materials", default=str(REPO / "scenes" / "kitchen_materials.json"),
+    parser.add_argument("--kitchen-materials", default=str(SCENES / "kitchen_materials.json"),
                         help="the override description")
     parser.add_argument("--train-args", default="", help="extra arguments of `nbrdf train`, e.g. '--epochs 30'")
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--quick", action="store_true",
                         help="tiny images, few samples, one material, briefly trained networks (CI, checks)")
     parser.add_argument("--json", type=Path, help="write the results as JSON here as well")
-    parser.add_argument("--out", type=Path, help="output folder (default out/convergence, quick: out/convergence-quick)")
+    parser.add_argument("--out", type=Path,
+                        help="output folder of everything, caches included (default: out/convergence with the "
+                             "materials and references cached in out/; quick: out/convergence-quick)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf command-line tool")
     parser.add_argument("--force", action="store_true", help="re-render cached references")
     parser.add_argument("--ae", type=Path, help="autoencoder (nbrdf ae train) for the phong-predicted strategy")
@@ -589,6 +690,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     train_args = args.train_args.split()
+    progress.set_enabled(not args.no_progress)
+    notes = []
+    if args.rgl is None:
+        shared_rgl = [m for m in VEACH_RGL if shared_path("data", "rgl", f"{m}.bsdf").is_file()]
+        args.rgl = "" if args.quick else ",".join(shared_rgl)
+        if not args.quick and len(shared_rgl) < len(VEACH_RGL):
+            message = (f"RGL materials {', '.join(m for m in VEACH_RGL if m not in shared_rgl)} left out: not in "
+                       f"{shared_path('data', 'rgl')} (set NBRDF_SHARED, or pass --rgl PATH.bsdf,...)")
+            print(f"note: {message}")
+            notes.append(message)
     if args.quick:
         args.max_spp = min(args.max_spp, 4)
         args.gt_spp = min(args.gt_spp, 32)
@@ -596,7 +707,6 @@ def main(argv: list[str] | None = None) -> int:
             args.width = args.width or 64
             args.height = args.height or 43
             args.materials = args.materials if args.materials != ",".join(VEACH_MERL) else "blue-metallic-paint"
-            args.rgl = args.rgl if args.rgl != ",".join(VEACH_RGL) else ""
         else:
             args.width = args.width or 48
             args.height = args.height or 27
@@ -606,9 +716,10 @@ def main(argv: list[str] | None = None) -> int:
         train_args = train_args or QUICK_TRAIN_ARGS
     if args.scene == "veach":
         args.width = args.width or 384
-    out = args.out or REPO / "out" / ("convergence-quick" if args.quick else "convergence")
+    out = args.out or default_out("convergence-quick" if args.quick else "convergence")
+    # Materials and references are shared between runs in out/ unless --out (or --quick) says where.
+    cache_root = out if (args.out or args.quick) else default_out()
     scene_out = out / args.scene
-    scene_out.mkdir(parents=True, exist_ok=True)
     suffix = "" if args.scene == "kitchen" or args.integrator == "bsdf" else "-mis"
     if args.replot:
         report = json.loads((scene_out / f"convergence{suffix}.json").read_text())
@@ -617,11 +728,26 @@ def main(argv: list[str] | None = None) -> int:
         print(markdown(report))
         return 0
 
+    # Everything the run needs is checked before any work starts.
+    artefacts = Artefacts(cache_root, args.cli, train_args=train_args, log=log)
+    try:
+        if args.scene == "kitchen":
+            KitchenSetup(args)
+            problems = artefacts.missing(sorted(set(json.loads(Path(args.kitchen_materials).read_text())
+                                                    ["overrides"].values())))
+        else:
+            problems = artefacts.missing(material_specs(args))
+        if args.ae and args.predictor and args.scene == "veach":
+            problems += [f"{path}: no such file" for path in (args.ae, args.predictor) if not path.is_file()]
+    except (MissingDataError, cli.CommandError) as error:
+        problems = [str(error)]
+    if problems:
+        print("error: missing inputs, nothing done:\n  " + "\n  ".join(problems), file=sys.stderr)
+        return 2
+    scene_out.mkdir(parents=True, exist_ok=True)
     mi.set_variant(args.variant)
     nbrdf_mitsuba.register()
-    artefacts = Artefacts(out if args.quick else REPO / "out", args.cli, train_args=train_args, log=log)
-    cache = RenderCache(out / "references" if args.quick else REPO / "out" / "references", force=args.force)
-    notes = []
+    cache = RenderCache(cache_root / "references", force=args.force)
     if artefacts.can_train():
         notes.append(f"NBRDFs trained with `nbrdf train` on the tables ({' '.join(train_args) or 'default recipe'})")
     else:
@@ -634,27 +760,28 @@ def main(argv: list[str] | None = None) -> int:
         notes.append(message)
     elif args.scene == "kitchen":
         notes.append("phong-predicted is measured in the Veach scene only")
-    else:
-        for path in (args.ae, args.predictor):
-            if not path.is_file():
-                print(f"error: {path}: no such file", file=sys.stderr)
-                return 2
 
     start = time.perf_counter()
-    if args.scene == "veach":
-        report = run_veach(args, artefacts, cache, scene_out, notes)
-        resolution = VeachSetup(args).resolution
-        integrator_label = "pure BSDF sampling" if args.integrator == "bsdf" else "MIS"
-    else:
-        report = run_kitchen(args, artefacts, cache, scene_out, notes)
-        resolution = KitchenSetup(args).resolution
-        integrator_label = "path tracing"
+    try:
+        if args.scene == "veach":
+            report = run_veach(args, artefacts, cache, scene_out, notes)
+            resolution = VeachSetup(args).resolution
+            integrator_label = "pure BSDF sampling" if args.integrator == "bsdf" else "MIS"
+        else:
+            report = run_kitchen(args, artefacts, cache, scene_out, notes)
+            resolution = KitchenSetup(args).resolution
+            integrator_label = "path tracing"
+    except (MissingDataError, cli.CommandError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
     report["notes"] = notes
     report["settings"] = {"scene": args.scene, "resolution": list(resolution), "max_spp": args.max_spp,
-                          "gt_spp": args.gt_spp, "integrator": args.integrator if args.scene == "veach" else "path",
+                          "gt_spp": args.gt_spp, "seeds": args.seeds,
+                          "integrator": args.integrator if args.scene == "veach" else "path",
                           "integrator_label": integrator_label, "variant": args.variant, "quick": args.quick,
                           "train_args": train_args, "seconds": round(time.perf_counter() - start, 1),
-                          "metrics": "MAE, RMSE, MAPE (eps 0.01), PSNR (peak 1) on linear RGB",
+                          "metrics": "MAE, RMSE, relMSE (eps 0.01), MAPE (eps 0.01), PSNR (peak 1) on linear RGB; "
+                                     "representation also SSIM (scikit-image, tone-mapped) and HDR-FLIP, whole image",
                           "cache": {"hits": cache.hits, "misses": cache.misses}}
     write_csv(scene_out / f"convergence{suffix}.csv", report["results"])
     (scene_out / f"convergence{suffix}.json").write_text(json.dumps(report, indent=2) + "\n")

@@ -1,12 +1,13 @@
 """Train an NBRDF for every table of a set and report how close the networks are.
 
-    python python/train_report.py [--set sgd|rgl|all] [--materials A,B,...] [--quick] [--out DIR]
+    python -m nbrdf_tools.train_report [--set sgd|rgl|all] [--materials A,B,...] [--quick] [--out DIR]
 
-Sets (DESIGN.md sections 5, 8, 9, 11, 12):
+Sets (docs/design.md sections 5, 8, 9, 11, 12):
 
 * ``sgd``: the 100 MERL materials as tables synthesised from their published SGD fits
   (``nbrdf synth --model sgd``); the reference of the metrics is the table.
-* ``rgl``: the real measurements ``../shared/data/rgl/*.bsdf``, tabulated onto the MERL grid with
+* ``rgl``: the real measurements ``SHARED/data/rgl/*.bsdf`` (or ``.bsdf`` paths given with
+  ``--materials``), tabulated onto the MERL grid with
   ``python -m nbrdf_mitsuba.tabulate_rgl`` (``--rgl-fold mirror`` by default: the table keeps the
   measurement's non-reciprocity, and training folds phi_d the same way); the reference of the
   metrics is Mitsuba's ``measured`` BSDF itself, the ground truth. The authors' pretrained NBRDFs
@@ -15,9 +16,13 @@ Sets (DESIGN.md sections 5, 8, 9, 11, 12):
 
 Every material is trained with adaptive and uniform sampling (``nbrdf train``, the paper's recipe
 unless ``--samples``/``--epochs`` say otherwise), one network after the other (the trainer uses
-every core). Metrics are those of ``nbrdf compare`` (python/compare_materials.py reproduces them
-for the measured ground truth): MAE, RMSE, PSNR of linear sphere images under five light
-elevations, SSIM of the tone-mapped images, and the log-space BRDF error.
+every core). Metrics (nbrdf_tools.compare_materials, the images and directions of ``nbrdf compare``
+through Mitsuba, for both sets alike): MAE, RMSE, relMSE, PSNR with peak = max(reference)
+(``psnr_peak_ref``), HDR-FLIP (``flip_hdr``) of linear sphere images under five light elevations,
+SSIM (scikit-image) of the tone-mapped images, and the log-space BRDF error.
+
+The default set, ``all``, is ``sgd`` alone when the shared data (RGL measurements) is absent:
+the SGD set runs on the fits embedded in the CLI.
 
 Outputs in ``--out`` (default out/train_report): ``results.csv`` (one row per material and
 method), ``report.md`` (means and standard deviations, adaptive against uniform, ours against the
@@ -35,8 +40,6 @@ import json
 import math
 import os
 import platform
-import shutil
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -44,7 +47,9 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+from nbrdf_tools import cli
+from nbrdf_tools.paths import MissingDataError, default_cli, default_out, shared_dir
+
 SAMPLINGS = ("adaptive", "uniform")
 METHODS = SAMPLINGS + ("authors",)
 QUICK_MATERIALS = {
@@ -52,23 +57,12 @@ QUICK_MATERIALS = {
     "rgl": ["paper_white_rgb", "colodur_napoli_4f_rgb", "cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb"],
 }
 QUICK_SAMPLES, QUICK_EPOCHS = 100_000, 10
-METRICS = ("mae", "rmse", "psnr", "ssim", "log_error_adaptive", "log_error_uniform")
+METRICS = ("mae", "rmse", "relmse", "psnr_peak_ref", "ssim", "flip_hdr", "log_error_adaptive", "log_error_uniform")
+# Stored results made with other metric definitions are recomputed.
+METRICS_VERSION = 2
 CSV_COLUMNS = ["set", "material", "method", "reference", *METRICS, "train_seconds", "wall_seconds", "epochs",
                "best_epoch", "stopped_early", "best_validation_loss", "samples", "sample_epochs_per_second",
                "phi_fold", "network"]
-
-
-def default_shared() -> Path:
-    return Path(os.environ.get("NBRDF_SHARED", REPO.parent / "shared"))
-
-
-def default_cli() -> Path:
-    if os.environ.get("NBRDF_CLI"):
-        return Path(os.environ["NBRDF_CLI"])
-    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
-    if not target.is_absolute():
-        target = REPO / target
-    return target / "release" / ("nbrdf.exe" if os.name == "nt" else "nbrdf")
 
 
 @dataclass
@@ -86,26 +80,19 @@ class Recipe:
         """What a stored result must match to be reused."""
         key = {"samples": self.samples, "epochs": self.epochs, "min_epochs": self.min_epochs,
                "patience": self.patience, "seed": self.seed,
-               "resolution": self.resolution, "metric_samples": self.metric_samples}
+               "resolution": self.resolution, "metric_samples": self.metric_samples, "metrics": METRICS_VERSION}
         if set_name == "rgl":
             key["phi_fold"] = self.rgl_fold
         return {k: v for k, v in key.items() if v is not None or k not in ("min_epochs", "patience")}
-
-
-def run(cmd: list, **kwargs) -> subprocess.CompletedProcess:
-    result = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, **kwargs)
-    if result.returncode != 0:
-        raise RuntimeError(f"{' '.join(map(str, cmd))} failed ({result.returncode}):\n{result.stderr.strip()}")
-    return result
 
 
 # --------------------------------------------------------------------------------------------
 # Materials and their tables
 
 
-def list_materials(set_name: str, cli: Path, shared: Path) -> list[str]:
+def list_materials(set_name: str, nbrdf: Path, shared: Path) -> list[str]:
     if set_name == "sgd":
-        return run([cli, "list-materials"]).stdout.split()
+        return cli.nbrdf(nbrdf, "list-materials").split()
     folder = shared / "data" / "rgl"
     names = sorted(p.name.removesuffix(".bsdf") for p in folder.glob("*.bsdf"))
     if not names:
@@ -114,27 +101,40 @@ def list_materials(set_name: str, cli: Path, shared: Path) -> list[str]:
 
 
 def measured_path(shared: Path, name: str) -> Path:
+    """An RGL measurement: ``name`` is a ``.bsdf`` path or a name in ``SHARED/data/rgl``."""
+    if name.endswith(".bsdf"):
+        return Path(name)
     return shared / "data" / "rgl" / f"{name}.bsdf"
+
+
+def material_name(name: str) -> str:
+    """The name of a material given by name or as a ``.bsdf`` path."""
+    return Path(name).name.removesuffix(".bsdf") if name.endswith(".bsdf") else name
 
 
 def table_path(out: Path, set_name: str, name: str, recipe: Recipe) -> Path:
     suffix = f".{recipe.rgl_fold}" if set_name == "rgl" else ""
-    return out / "tables" / set_name / f"{name}{suffix}.binary"
+    return out / "tables" / set_name / f"{material_name(name)}{suffix}.binary"
 
 
-def ensure_table(out: Path, set_name: str, name: str, recipe: Recipe, cli: Path, shared: Path) -> Path:
+def ensure_table(out: Path, set_name: str, name: str, recipe: Recipe, nbrdf: Path, shared: Path) -> Path:
     path = table_path(out, set_name, name, recipe)
     if path.is_file():
         return path
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".partial")
     if set_name == "sgd":
-        run([cli, "synth", "--model", "sgd", "--material", name, "-o", partial])
+        cli.run([nbrdf, "synth", "--model", "sgd", "--material", name, "-o", partial])
     else:
-        run([sys.executable, "-m", "nbrdf_mitsuba.tabulate_rgl", measured_path(shared, name), "-o", partial,
-             "--phi-fold", recipe.rgl_fold])
+        cli.run([sys.executable, "-m", "nbrdf_mitsuba.tabulate_rgl", measured_path(shared, name), "-o", partial,
+                 "--phi-fold", recipe.rgl_fold])
     partial.replace(path)
     return path
+
+
+def authors_path(shared: Path, name: str) -> Path:
+    """The authors' Keras network of an RGL material (in the shared data)."""
+    return shared / "data" / "reference-nbrdf" / "rgl-isotropic" / f"{material_name(name)}.h5"
 
 
 # --------------------------------------------------------------------------------------------
@@ -142,7 +142,7 @@ def ensure_table(out: Path, set_name: str, name: str, recipe: Recipe, cli: Path,
 
 
 def result_path(out: Path, set_name: str, name: str, method: str) -> Path:
-    return out / "results" / set_name / f"{name}.{method}.json"
+    return out / "results" / set_name / f"{material_name(name)}.{method}.json"
 
 
 def load_result(path: Path, key: dict) -> dict | None:
@@ -155,37 +155,33 @@ def load_result(path: Path, key: dict) -> dict | None:
 
 def metrics_of(comparison: dict) -> dict:
     mean = comparison["mean"]
-    psnr = mean["psnr"]
-    return {"mae": mean["mae"], "rmse": mean["rmse"], "psnr": math.inf if psnr is None else psnr,
-            "ssim": mean["ssim"], "log_error_adaptive": comparison["log_error_adaptive"],
+    values = {k: mean[k] for k in METRICS if k in mean}
+    if values["psnr_peak_ref"] is None:  # infinite (no error), null in JSON
+        values["psnr_peak_ref"] = math.inf
+    return {**values, "log_error_adaptive": comparison["log_error_adaptive"],
             "log_error_uniform": comparison["log_error_uniform"]}
 
 
 class GroundTruth:
-    """Mitsuba's measured BSDF of one RGL material and its sphere images (rendered once)."""
+    """The reference BSDF of one material (Mitsuba's measured BSDF of an RGL measurement, or the
+    ``merl`` BSDF of a table) and its sphere images (rendered once)."""
 
     def __init__(self, path: Path, resolution: int):
-        import compare_materials as cm
+        from nbrdf_tools import compare_materials as cm
 
         self.bsdf = cm.load_bsdf(path)
         self.images = cm.render_spheres(self.bsdf, resolution)
 
     def compare(self, network: Path, recipe: Recipe) -> dict:
-        import compare_materials as cm
+        from nbrdf_tools import compare_materials as cm
 
         c = cm.compare(self.bsdf, network, recipe.resolution, recipe.metric_samples, reference_images=self.images)
         return c.to_json()
 
 
-def compare_with_table(cli: Path, table: Path, network: Path, recipe: Recipe, fold: str) -> dict:
-    text = run([cli, "compare", table, network, "--json", "--resolution", recipe.resolution,
-                "--samples", recipe.metric_samples, "--phi-fold", fold]).stdout
-    return json.loads(text)["comparison"]
-
-
-def train_one(cli: Path, table: Path, network: Path, sampling: str, recipe: Recipe, fold: str,
+def train_one(nbrdf: Path, table: Path, network: Path, sampling: str, recipe: Recipe, fold: str,
               threads: int | None) -> dict:
-    cmd = [cli, "train", table, "-o", network, "--sampling", sampling, "--seed", recipe.seed,
+    cmd = [nbrdf, "train", table, "-o", network, "--sampling", sampling, "--seed", recipe.seed,
            "--phi-fold", fold, "--quiet"]
     if recipe.samples is not None:
         cmd += ["--samples", recipe.samples]
@@ -199,7 +195,7 @@ def train_one(cli: Path, table: Path, network: Path, sampling: str, recipe: Reci
         cmd += ["--threads", threads]
     network.parent.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    run(cmd)
+    cli.run(cmd)
     wall = time.perf_counter() - start
     p = json.loads(network.read_text(encoding="utf-8"))["provenance"]
     return {"train_seconds": p["seconds"], "wall_seconds": wall, "epochs": p["epochs"], "best_epoch": p["best_epoch"],
@@ -207,11 +203,12 @@ def train_one(cli: Path, table: Path, network: Path, sampling: str, recipe: Reci
             "samples": p["samples"], "sample_epochs_per_second": p["samples"] * p["epochs"] / p["seconds"]}
 
 
-def process_material(set_name: str, name: str, out: Path, recipe: Recipe, cli: Path, shared: Path,
+def process_material(set_name: str, name: str, out: Path, recipe: Recipe, nbrdf: Path, shared: Path,
                      threads: int | None, authors: bool, keep_tables: bool, progress) -> list[dict]:
     """Every method of one material; returns their result records (stored ones where valid)."""
     key = recipe.key(set_name)
-    methods = list(SAMPLINGS) + (["authors"] if set_name == "rgl" and authors else [])
+    methods = list(SAMPLINGS) + (["authors"] if set_name == "rgl" and authors and authors_path(shared, name).is_file()
+                                 else [])
     fold = recipe.rgl_fold if set_name == "rgl" else "reciprocal"
     results, truth = [], None
     for method in methods:
@@ -221,24 +218,26 @@ def process_material(set_name: str, name: str, out: Path, recipe: Recipe, cli: P
             results.append(stored)
             progress.update(1)
             continue
-        progress.set_postfix_str(f"{name} {method}")
-        record = {"set": set_name, "material": name, "method": method, "recipe": key,
+        progress.set_postfix_str(f"{material_name(name)} {method}")
+        record = {"set": set_name, "material": material_name(name), "method": method, "recipe": key,
                   "reference": "measured" if set_name == "rgl" else "table", "phi_fold": fold}
         if method == "authors":
             from nbrdf_mitsuba import import_keras
 
-            network = out / "networks" / set_name / f"{name}.authors.nbrdf.json"
-            import_keras.convert(shared / "data" / "reference-nbrdf" / "rgl-isotropic" / f"{name}.h5", network)
+            network = out / "networks" / set_name / f"{material_name(name)}.authors.nbrdf.json"
+            import_keras.convert(authors_path(shared, name), network)
             record["phi_fold"] = ""
         else:
-            table = ensure_table(out, set_name, name, recipe, cli, shared)
-            network = out / "networks" / set_name / f"{name}.{method}.nbrdf.json"
-            record.update(train_one(cli, table, network, method, recipe, fold, threads))
-        if set_name == "rgl":
-            truth = truth or GroundTruth(measured_path(shared, name), recipe.resolution)
-            comparison = truth.compare(network, recipe)
-        else:
-            comparison = compare_with_table(cli, table, network, recipe, fold)
+            table = ensure_table(out, set_name, name, recipe, nbrdf, shared)
+            network = out / "networks" / set_name / f"{material_name(name)}.{method}.nbrdf.json"
+            record.update(train_one(nbrdf, table, network, method, recipe, fold, threads))
+        if truth is None:
+            # The reference: the measurement itself (RGL) or the table (SGD; the `merl` BSDF reads
+            # it with the reciprocal fold the networks were trained with).
+            reference = (measured_path(shared, name) if set_name == "rgl"
+                         else ensure_table(out, set_name, name, recipe, nbrdf, shared))
+            truth = GroundTruth(reference, recipe.resolution)
+        comparison = truth.compare(network, recipe)
         record.update(metrics_of(comparison))
         record["per_light"] = comparison["per_light"]
         record["network"] = str(network.relative_to(out))
@@ -266,9 +265,9 @@ def write_csv(path: Path, results: list[dict]) -> None:
 def _fmt(x: float, kind: str) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "-"
-    if kind in ("psnr",):
+    if kind in ("psnr_peak_ref",):
         return f"{x:.2f}"
-    if kind in ("ssim",):
+    if kind in ("ssim", "flip_hdr"):
         return f"{x:.4f}"
     if kind in ("seconds", "epochs"):
         return f"{x:.1f}"
@@ -289,9 +288,9 @@ def _by(results, set_name, method):
 
 
 def summary_table(results: list[dict], sets: list[str]) -> list[str]:
-    lines = ["| set | method | n | image MAE | image RMSE | PSNR (dB) | SSIM | log error (adaptive dirs) "
-             "| log error (uniform dirs) | seconds | epochs |",
-             "|---|---|---:|---|---|---|---|---|---|---|---|"]
+    lines = ["| set | method | n | image MAE | image RMSE | image relMSE | PSNR, peak max(ref) (dB) | SSIM | "
+             "HDR-FLIP | log error (adaptive dirs) | log error (uniform dirs) | seconds | epochs |",
+             "|---|---|---:|---|---|---|---|---|---|---|---|---|---|"]
     for s in sets:
         for method in METHODS:
             rows = list(_by(results, s, method).values())
@@ -300,8 +299,9 @@ def summary_table(results: list[dict], sets: list[str]) -> list[str]:
             cell = {k: _mean_std([r[k] for r in rows], k) for k in METRICS}
             secs = _mean_std([r.get("wall_seconds") for r in rows], "seconds") if method != "authors" else "-"
             epochs = _mean_std([r.get("epochs") for r in rows], "epochs") if method != "authors" else "-"
-            lines.append(f"| {s} | {method} | {len(rows)} | {cell['mae']} | {cell['rmse']} | {cell['psnr']} | "
-                         f"{cell['ssim']} | {cell['log_error_adaptive']} | {cell['log_error_uniform']} | {secs} | {epochs} |")
+            lines.append(f"| {s} | {method} | {len(rows)} | {cell['mae']} | {cell['rmse']} | {cell['relmse']} | "
+                         f"{cell['psnr_peak_ref']} | {cell['ssim']} | {cell['flip_hdr']} | {cell['log_error_adaptive']} | "
+                         f"{cell['log_error_uniform']} | {secs} | {epochs} |")
     return lines
 
 
@@ -316,7 +316,7 @@ def adaptive_vs_uniform(results: list[dict], set_name: str) -> list[str]:
              "| metric | adaptive better | uniform better | mean adaptive | mean uniform |",
              "|---|---:|---:|---|---|"]
     for k in METRICS:
-        higher = k in ("psnr", "ssim")
+        higher = k in ("psnr_peak_ref", "ssim")
         wins = sum((a[m][k] > u[m][k]) if higher else (a[m][k] < u[m][k]) for m in common)
         losses = sum((a[m][k] < u[m][k]) if higher else (a[m][k] > u[m][k]) for m in common)
         ma = float(np.mean([a[m][k] for m in common if math.isfinite(a[m][k])]))
@@ -469,12 +469,14 @@ def write_report(out: Path, results: list[dict], sets: list[str], recipe: Recipe
 
 def parse_args(argv):
     p = argparse.ArgumentParser(
-        prog="train_report.py",
+        prog="python -m nbrdf_tools.train_report",
         description="Train NBRDFs on every table of a set (SGD-synthesised MERL materials, tabulated RGL "
                     "measurements) with adaptive and uniform sampling and report image-space and log-space "
                     "errors, timings, and the comparison with the authors' networks on RGL.")
-    p.add_argument("--set", choices=("sgd", "rgl", "all"), default="all", help="which set (default: all)")
-    p.add_argument("--materials", help="comma-separated subset of material names (of either set)")
+    p.add_argument("--set", choices=("sgd", "rgl", "all"), default="all",
+                   help="which set (default: all; sgd alone when the shared data has no RGL measurements)")
+    p.add_argument("--materials", help="comma-separated subset of material names (of either set); RGL materials "
+                                       "may be paths of .bsdf measurements")
     p.add_argument("--samples", type=int, help="training samples per network (default: the trainer's, 800,000)")
     p.add_argument("--epochs", type=int, help="maximum epochs (default: the trainer's, 100 with early stopping)")
     p.add_argument("--min-epochs", type=int, help="no early stopping before this epoch (default: the trainer's, 30)")
@@ -483,7 +485,8 @@ def parse_args(argv):
     p.add_argument("--quick", action="store_true",
                    help=f"a check, not a result: 5 materials per set (unless --materials), {QUICK_SAMPLES:,} samples, "
                         f"{QUICK_EPOCHS} epochs, 64x64 spheres, 20,000 metric directions (unless given)")
-    p.add_argument("--out", type=Path, default=REPO / "out" / "train_report", help="output folder (default: %(default)s)")
+    p.add_argument("--out", type=Path, default=default_out("train_report"),
+                   help="output folder of everything: results, networks, tables (default: %(default)s)")
     p.add_argument("--resolution", type=int, help="sphere image size (default: 128, nbrdf compare's)")
     p.add_argument("--metric-samples", type=int, help="directions of the log-space error (default: 100,000)")
     p.add_argument("--rgl-fold", choices=("mirror", "reciprocal"), default="mirror",
@@ -494,7 +497,7 @@ def parse_args(argv):
     p.add_argument("--no-authors", action="store_true", help="skip the authors' networks on RGL")
     p.add_argument("--keep-tables", action="store_true", help="keep the synthesised SGD tables (35 MB each)")
     p.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
-    p.add_argument("--shared", type=Path, default=default_shared(),
+    p.add_argument("--shared", type=Path, default=shared_dir(),
                    help="the shared data folder with data/rgl and data/reference-nbrdf (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p.parse_args(argv)
@@ -502,12 +505,12 @@ def parse_args(argv):
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from tqdm import tqdm
 
-    if not args.cli.is_file():
-        print(f"error: {args.cli} not found: build it with `cargo build --release -p nbrdf-core` "
-              "or pass --cli", file=sys.stderr)
+    try:
+        cli.check_cli(args.cli)
+    except MissingDataError as error:
+        print(f"error: {error}", file=sys.stderr)
         return 1
     recipe = Recipe(
         samples=args.samples if args.samples is not None else (QUICK_SAMPLES if args.quick else None),
@@ -519,15 +522,29 @@ def main(argv: list[str] | None = None) -> int:
         metric_samples=args.metric_samples or (20_000 if args.quick else 100_000),
         rgl_fold=args.rgl_fold,
     )
-    sets = ["sgd", "rgl"] if args.set == "all" else [args.set]
     wanted = [m.strip() for m in args.materials.split(",") if m.strip()] if args.materials else None
+    have_rgl = (args.shared / "data" / "rgl").is_dir()
+    sets = ["sgd", "rgl"] if args.set == "all" else [args.set]
+    if args.set == "all" and not have_rgl and not any(m.endswith(".bsdf") for m in wanted or []):
+        print(f"note: {args.shared}/data/rgl not found: the RGL set is left out (pass --shared or set NBRDF_SHARED)")
+        sets = ["sgd"]
     plan: list[tuple[str, str]] = []
     requested = {}
     for s in sets:
-        if s == "rgl" and not (args.shared / "data" / "rgl").is_dir():
-            print(f"error: {args.shared}/data/rgl not found (pass --shared or set NBRDF_SHARED)", file=sys.stderr)
+        paths = [m for m in wanted or [] if m.endswith(".bsdf")] if s == "rgl" else []
+        missing = [m for m in paths if not Path(m).is_file()]
+        if missing:
+            print(f"error: no such RGL measurement: {', '.join(missing)}", file=sys.stderr)
             return 1
-        available = list_materials(s, args.cli, args.shared)
+        if s == "rgl" and not have_rgl and not paths:
+            print(f"error: {args.shared}/data/rgl not found (pass --shared, set NBRDF_SHARED, or give .bsdf paths "
+                  "with --materials)", file=sys.stderr)
+            return 1
+        try:
+            available = (list_materials(s, args.cli, args.shared) if s == "sgd" or have_rgl else []) + paths
+        except cli.CommandError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 1
         if wanted is not None:
             names = [m for m in wanted if m in available]
         elif args.quick:
@@ -547,7 +564,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    steps = sum(len(SAMPLINGS) + (s == "rgl" and not args.no_authors) for s, _ in plan)
+    steps = sum(len(SAMPLINGS) + (s == "rgl" and not args.no_authors and authors_path(args.shared, n).is_file())
+                for s, n in plan)
     start = time.perf_counter()
     results: list[dict] = []
     with tqdm(total=steps, desc="train_report", unit="net", disable=args.no_progress) as progress:
@@ -555,7 +573,7 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 results += process_material(s, name, out, recipe, args.cli, args.shared, args.threads,
                                             not args.no_authors, args.keep_tables, progress)
-            except (RuntimeError, OSError, ValueError) as error:
+            except (RuntimeError, OSError, ValueError) as error:  # CommandError included: its stderr shown
                 print(f"error: {s} {name}: {error}", file=sys.stderr)
                 return 1
     write_csv(out / "results.csv", results)

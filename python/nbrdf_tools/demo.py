@@ -1,0 +1,107 @@
+"""The main job on the embedded default data: synthesise the MERL-format table of a default
+material from its published fit, train its neural BRDF (``nbrdf train``), fit its Blinn-Phong
+sampling lobe (``nbrdf fit-phong``), render the Veach MIS scene with the table (``merl``, the
+ground truth) and with the network (``nbrdf``, Phong-sampled) on the plates, and write EXR and
+PNG images side by side with the image error between them.
+
+    python -m nbrdf_tools.demo [--material NAME] [--spp N] [--out DIR] [--no-progress]
+
+Needs only the nbrdf CLI (the fits are embedded in it), no shared data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import nbrdf_mitsuba  # first: finds a libLLVM for Dr.Jit before Mitsuba starts its JIT
+import mitsuba as mi
+import numpy as np
+
+from nbrdf_tools import cli, metrics, progress
+from nbrdf_tools.paths import MissingDataError, default_cli, default_out
+from nbrdf_tools.render import render_passes, write_exr, write_png
+from nbrdf_tools.scenes.veach import veach_scene_dict
+
+DEFAULT_MATERIAL = "gold-metallic-paint"
+
+
+def synthesise(nbrdf: Path, model: str, material: str, out: Path) -> Path:
+    table = out / f"{material}.{model}.binary"
+    if not table.exists():
+        cli.run([nbrdf, "synth", "--model", model, "--material", material, "-o", table], capture=False)
+    return table
+
+
+def train(nbrdf: Path, table: Path, out: Path, material: str, samples: int) -> Path:
+    """The NBRDF of `table` with its fitted Blinn-Phong lobe; retrained when the table is newer."""
+    network = out / f"{material}.nbrdf.json"
+    if not network.exists() or network.stat().st_mtime < table.stat().st_mtime:
+        quiet = [] if progress.enabled() else ["--quiet"]
+        cli.run([nbrdf, "train", table, "-o", network, "--samples", samples, *quiet], capture=False)
+        cli.run([nbrdf, "fit-phong", network], capture=False)
+    return network
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--material", default=DEFAULT_MATERIAL, help="MERL material name (nbrdf list-materials)")
+    parser.add_argument("--model", default="sgd", choices=["sgd", "abc"], help="published fit to tabulate")
+    parser.add_argument("--spp", type=int, default=64, help="samples per pixel in all")
+    parser.add_argument("--samples", type=int, default=800_000, help="training samples of the NBRDF")
+    parser.add_argument("--passes", type=int, default=8, help="renders averaged (progress granularity)")
+    parser.add_argument("--width", type=int, default=384, help="image width (height is 2/3 of it)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant")
+    parser.add_argument("--out", type=Path, default=default_out("demo"), help="output folder (default: %(default)s)")
+    parser.add_argument("--cli", type=Path, default=default_cli(), help="nbrdf CLI (default: %(default)s)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
+    args = parser.parse_args(argv)
+    progress.set_enabled(not args.no_progress)
+
+    try:
+        cli.check_cli(args.cli)
+        args.out.mkdir(parents=True, exist_ok=True)
+        mi.set_variant(args.variant)
+        nbrdf_mitsuba.register()
+        start = time.perf_counter()
+        table = synthesise(args.cli, args.model, args.material, args.out)
+        print(f"table:   {table} ({time.perf_counter() - start:.1f} s)")
+        start = time.perf_counter()
+        network = train(args.cli, table, args.out, args.material, args.samples)
+        print(f"network: {network} ({time.perf_counter() - start:.1f} s, with the Phong fit)")
+    except (MissingDataError, cli.CommandError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+
+    passes = max(1, min(args.passes, args.spp))
+    resolution = (args.width, args.width * 2 // 3)
+    images = {}
+    for label, bsdf in (("table", {"type": "merl", "filename": str(table)}),
+                        ("nbrdf", {"type": "nbrdf", "filename": str(network)})):
+        scene = mi.load_dict(veach_scene_dict(bsdf, integrator="mis", resolution=resolution))
+        start = time.perf_counter()
+        images[label] = render_passes(scene, args.spp, spp_per_pass=args.spp // passes, desc=f"rendering the {label}",
+                                      leave=True)
+        print(f"render:  {label}, {args.spp} spp in {time.perf_counter() - start:.1f} s ({args.variant})")
+        if not np.all(np.isfinite(images[label])):
+            print(f"error: the {label} render contains NaN or Inf", file=sys.stderr)
+            return 1
+
+    truth, ours = images["table"], images["nbrdf"]
+    errors = metrics.render_metrics(truth, ours)
+    flip = metrics.flip_hdr(truth, ours)
+    stem = args.out / f"veach-{args.material}"
+    for label, image in images.items():
+        write_exr(Path(f"{stem}-{label}.exr"), image)
+    write_png(Path(f"{stem}.png"), np.concatenate([truth, ours], axis=1))
+    print(f"error:   NBRDF vs table, MAE {errors['mae']:.4f}, RMSE {errors['rmse']:.4f}, relMSE "
+          f"{errors['relmse']:.4f}, HDR-FLIP {flip:.4f} (linear radiance, mean pixel {float(np.mean(truth)):.4f}; "
+          f"includes Monte Carlo noise at {args.spp} spp)")
+    print(f"images:  {stem}-table.exr, {stem}-nbrdf.exr\n         {stem}.png (left: table, right: NBRDF)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
