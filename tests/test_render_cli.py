@@ -126,11 +126,15 @@ def test_default_variant_and_output(tmp_path):
     (["render", VEACH, "-o", "out.png"], "OpenEXR"),
     (["render", VEACH, "-m", "scalar_rgb", "-D", "plate=no-such-plate.xml"], "cannot load"),
     (["render", VEACH, "-m", "scalar_rgb", "--spp", "0"], "--spp 0"),
+    (["render", VEACH, "-m", "scalar_rgb", "-D", "nosuch=1"], "unused parameters"),
+    # The plugin's own error, raised in its Python constructor: Mitsuba embeds the traceback.
+    (["render", VEACH, "-m", "scalar_rgb", "-D", "plate=plates/nbrdf.xml", "-D", "nbrdf=missing.nbrdf.json"],
+     'RuntimeError: NbrdfBSDF (plugin "nbrdf"): cannot load "missing.nbrdf.json"'),
 ])
 def test_user_errors_are_one_line(tmp_path, args, message):
     result = run_cli(*args, cwd=tmp_path)
     assert result.returncode == 1
-    assert "Traceback" not in result.stderr
+    assert "Traceback" not in result.stderr and 'File "' not in result.stderr
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     errors = [line for line in lines if "error:" in line]
     assert len(errors) == 1 and message in errors[0], result.stderr

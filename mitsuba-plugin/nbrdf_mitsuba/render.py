@@ -137,8 +137,20 @@ def _set_variant(mi, requested: str | None) -> str:
 
 
 def _one_line(error: BaseException) -> str:
-    """Mitsuba's messages carry a '[file.cpp:line]' prefix and sometimes several lines."""
-    text = " ".join(str(error).split())
+    """Mitsuba's message on one line, without its '[file.cpp:line]' prefix and without the Python
+    traceback it embeds when a Python plugin's constructor raised (the exception line stays)."""
+    kept, in_traceback = [], False
+    for line in str(error).splitlines():
+        head, marker, _ = line.partition("Traceback (most recent call last):")
+        if marker:
+            kept.append(head)
+            in_traceback = True
+        elif in_traceback and line[:1].isspace():
+            continue  # a frame of the embedded traceback
+        else:
+            in_traceback = False
+            kept.append(line)
+    text = " ".join(" ".join(kept).split())
     return re.sub(r"^\[[\w.]+:\d+\]\s*", "", text) or type(error).__name__
 
 
