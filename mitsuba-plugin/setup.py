@@ -138,7 +138,8 @@ def workspace_members(workspace: Path) -> list:
     """The member crate folders of the workspace's Cargo.toml (globs expanded)."""
     manifest = tomllib.loads((workspace / "Cargo.toml").read_text(encoding="utf-8"))
     patterns = manifest.get("workspace", {}).get("members", [])
-    members = sorted({path for pattern in patterns for path in workspace.glob(pattern) if (path / "Cargo.toml").is_file()})
+    members = sorted({path for pattern in patterns for path in workspace.glob(pattern)
+                      if (path / "Cargo.toml").is_file()})
     if not members:
         _fail(f"{workspace / 'Cargo.toml'} names no member crates")
     return members

@@ -45,7 +45,8 @@ pytestmark = [
 
 def run(command, **kwargs):
     result = subprocess.run([str(c) for c in command], capture_output=True, text=True, **kwargs)
-    assert result.returncode == 0, f"{' '.join(map(str, command))} failed:\n{result.stdout[-4000:]}\n{result.stderr[-4000:]}"
+    assert result.returncode == 0, \
+        f"{' '.join(map(str, command))} failed:\n{result.stdout[-4000:]}\n{result.stderr[-4000:]}"
     return result
 
 
@@ -148,7 +149,8 @@ def test_fresh_venv_has_the_command_and_the_renderer(venv, tmp_path):
     assert where[0].startswith(str(venv)) and where[1] == VERSION
 
     result = run([python, "-m", "nbrdf_mitsuba", "render", REPO / "scenes" / "veach_mis.xml", "-o", "out.exr",
-                  "-D", "plate=plates/nbrdf.xml", "-D", "nbrdf=gold.nbrdf.json",  # relative to the working directory, as with mitsuba
+                  # the network relative to the working directory, as with `mitsuba -D`
+                  "-D", "plate=plates/nbrdf.xml", "-D", "nbrdf=gold.nbrdf.json",
                   "-D", "resx=32", "-D", "resy=24", "-D", "spp=2", "--no-progress"], env=env, cwd=tmp_path)
     assert "wrote" in result.stderr
     check = run([python, "-c", "import sys, numpy as np, nbrdf_mitsuba, mitsuba as mi; "
