@@ -10,7 +10,7 @@ LIB := target/release/libnbrdf_ffi.so
 CLI := target/release/nbrdf
 PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*') mitsuba-plugin/pyproject.toml nbrdf-ffi/include/nbrdf.h
 
-.PHONY: setup build demo test test-rust test-python bench lint clean FORCE
+.PHONY: setup build install demo test test-rust test-python bench lint clean FORCE
 
 setup: $(VENV)/.plugin-installed llvm
 
@@ -23,10 +23,11 @@ $(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e ./python
 	touch $@
 
-# One release build gives the CLI (target/release/nbrdf) and the C ABI library.
+# One release build gives the CLI (target/release/nbrdf) and the C ABI library; nbrdf-core's
+# `cli` feature as the plugin's build (mitsuba-plugin/setup.py) asks for it, so that pip reuses it.
 build: $(LIB)
 $(LIB): FORCE
-	$(CARGO) build --release --workspace
+	$(CARGO) build --release --workspace --features nbrdf-core/cli
 
 # The plugin package, bundling the library just built (no second cargo build).
 $(VENV)/.plugin-installed: $(VENV)/.deps-installed $(LIB) $(PLUGIN_SOURCES)
@@ -44,6 +45,23 @@ llvm: $(VENV)/.plugin-installed
 	  fi; \
 	  $(PY) -m nbrdf_mitsuba.llvm; \
 	fi
+
+# C users: `make install PREFIX=...` installs the nbrdf command, libnbrdf_ffi (SONAME
+# libnbrdf_ffi.so.$(SOVERSION)), nbrdf.h and a pkg-config file nbrdf.pc (see examples/c/).
+PREFIX ?= /usr/local
+LIBDIR ?= $(PREFIX)/lib
+VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n 1)
+SOVERSION := $(firstword $(subst ., ,$(VERSION)))
+install: build
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/include
+	install -m 755 $(CLI) $(DESTDIR)$(PREFIX)/bin/nbrdf
+	install -m 755 $(LIB) $(DESTDIR)$(LIBDIR)/libnbrdf_ffi.so.$(VERSION)
+	ln -sf libnbrdf_ffi.so.$(VERSION) $(DESTDIR)$(LIBDIR)/libnbrdf_ffi.so.$(SOVERSION)
+	ln -sf libnbrdf_ffi.so.$(SOVERSION) $(DESTDIR)$(LIBDIR)/libnbrdf_ffi.so
+	install -m 644 nbrdf-ffi/include/nbrdf.h $(DESTDIR)$(PREFIX)/include/nbrdf.h
+	printf '%s\n' 'prefix=$(PREFIX)' 'libdir=$(LIBDIR)' 'includedir=$${prefix}/include' '' \
+	  'Name: nbrdf' 'Description: Neural BRDFs and MERL tables (C ABI of nbrdf)' 'Version: $(VERSION)' \
+	  'Libs: -L$${libdir} -lnbrdf_ffi' 'Cflags: -I$${includedir}' > $(DESTDIR)$(LIBDIR)/pkgconfig/nbrdf.pc
 
 demo: setup
 	$(PY) -m nbrdf_tools.demo

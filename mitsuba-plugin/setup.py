@@ -1,15 +1,23 @@
-"""Build step of nbrdf-mitsuba: compiles the C ABI library and bundles it with the package.
+"""Build steps of nbrdf-mitsuba (metadata in pyproject.toml).
 
-`build_py` runs `cargo build --release -p nbrdf-ffi` in the Cargo workspace one level up (or in
-$NBRDF_WORKSPACE) and copies the shared library and the committed header `nbrdf.h` into the
-package. Environment:
+* The ``nbrdf`` command (nbrdf-core's binary, feature ``cli``) is a setuptools-rust ``RustBin``:
+  the wheel installs it into the environment's ``bin/``.
+* The C library ``libnbrdf_ffi``, which the plugin loads through cffi in ABI mode (so it is not a
+  CPython extension module), is built with ``cargo build --release -p nbrdf-ffi`` and copied into
+  the package with its header ``nbrdf.h``.
+* The Cargo workspace is the parent of this directory in a checkout; the sdist carries a copy
+  of it under ``rust/`` (only what the two crates need), so that it builds on its own.
+* The wheel is tagged ``py3-none-<platform>``: any Python 3, this platform. ``auditwheel repair``
+  turns ``linux_x86_64`` into a ``manylinux`` tag (neither file links more than glibc).
+
+Environment:
 
 * NBRDF_LIBRARY   - a prebuilt libnbrdf_ffi (.so/.dylib/.dll): copied instead of building;
 * NBRDF_HEADER    - the header to bundle (default: <workspace>/nbrdf-ffi/include/nbrdf.h, or
                     nbrdf.h next to NBRDF_LIBRARY);
-* NBRDF_WORKSPACE - the Cargo workspace (default: the parent of this directory);
+* NBRDF_WORKSPACE - the Cargo workspace (default: ./rust in an sdist, else the parent folder);
 * CARGO, CARGO_TARGET_DIR and the other Cargo variables are honoured (the output directory is
-  asked from `cargo metadata`).
+  asked from ``cargo metadata``).
 """
 
 import json
@@ -21,9 +29,21 @@ from pathlib import Path
 
 from setuptools import Distribution, setup
 from setuptools.command.build_py import build_py as _build_py
+from setuptools.command.sdist import sdist as _sdist
+from setuptools_rust import RustBin
+
+try:
+    import tomllib
+except ImportError:  # Python < 3.11
+    import tomli as tomllib
 
 HERE = Path(__file__).resolve().parent
 PACKAGE = "nbrdf_mitsuba"
+SDIST_WORKSPACE = "rust"
+# What the sdist copies of the workspace: its manifest, lock file and licence, and every member
+# crate (sources, embedded data, benches and tests, as the manifests name them) without build output.
+WORKSPACE_FILES = ["Cargo.toml", "Cargo.lock", "LICENSE"]
+IGNORED_IN_CRATES = shutil.ignore_patterns("target", "__pycache__", "*.orig", "*.rej")
 
 if sys.platform == "win32":
     LIBRARY = "nbrdf_ffi.dll"
@@ -37,16 +57,23 @@ def _fail(message):
     raise SystemExit(f"nbrdf-mitsuba build: {message}")
 
 
+def _is_workspace(root: Path) -> bool:
+    return (root / "Cargo.toml").is_file() and (root / "nbrdf-ffi").is_dir() and (root / "nbrdf-core").is_dir()
+
+
 def _workspace():
-    root = Path(os.environ.get("NBRDF_WORKSPACE", HERE.parent)).resolve()
-    if not (root / "Cargo.toml").is_file() or not (root / "nbrdf-ffi").is_dir():
-        return None
-    return root
+    if "NBRDF_WORKSPACE" in os.environ:
+        candidates = [Path(os.environ["NBRDF_WORKSPACE"])]
+    else:
+        candidates = [HERE / SDIST_WORKSPACE, HERE.parent]
+    return next((c.resolve() for c in candidates if _is_workspace(c)), None)
 
 
 def _cargo_build(workspace):
     cargo = os.environ.get("CARGO", "cargo")
-    command = [cargo, "build", "--release", "-p", "nbrdf-ffi"]
+    # With nbrdf-core's `cli` feature, as the `nbrdf` binary and `make build` have it: one
+    # compilation of nbrdf-core serves all three instead of one per feature set.
+    command = [cargo, "build", "--release", "-p", "nbrdf-ffi", "--features", "nbrdf-core/cli"]
     print(f"nbrdf-mitsuba build: running {' '.join(command)} in {workspace}", flush=True)
     try:
         subprocess.run(command, cwd=workspace, check=True)
@@ -65,6 +92,11 @@ def _cargo_build(workspace):
     return library
 
 
+def _no_workspace():
+    _fail(f"no Cargo workspace in {HERE / SDIST_WORKSPACE} or {HERE.parent} (building from a copy of "
+          f"mitsuba-plugin/ alone?): build from the nbrdf repository or its sdist, or set NBRDF_WORKSPACE")
+
+
 def native_files():
     """(library, header) to bundle."""
     workspace = _workspace()
@@ -76,8 +108,7 @@ def native_files():
     elif workspace is not None:
         library = _cargo_build(workspace)
     else:
-        _fail(f"no Cargo workspace at {HERE.parent} (building from a copy of the sources?): set NBRDF_WORKSPACE "
-              f"to the nbrdf repository or NBRDF_LIBRARY to a prebuilt {LIBRARY}")
+        _no_workspace()
     candidates = [os.environ.get("NBRDF_HEADER")]
     if workspace is not None:
         candidates.append(workspace / "nbrdf-ffi" / "include" / "nbrdf.h")
@@ -103,7 +134,36 @@ class build_py(_build_py):
             print(f"nbrdf-mitsuba build: bundled {library} and {header} into {target}", flush=True)
 
 
-cmdclass = {"build_py": build_py}
+def workspace_members(workspace: Path) -> list:
+    """The member crate folders of the workspace's Cargo.toml (globs expanded)."""
+    manifest = tomllib.loads((workspace / "Cargo.toml").read_text(encoding="utf-8"))
+    patterns = manifest.get("workspace", {}).get("members", [])
+    members = sorted({path for pattern in patterns for path in workspace.glob(pattern)
+                      if (path / "Cargo.toml").is_file()})
+    if not members:
+        _fail(f"{workspace / 'Cargo.toml'} names no member crates")
+    return members
+
+
+class sdist(_sdist):
+    """Copies the Cargo workspace (what the crates need to build) into the sdist under rust/."""
+
+    def make_release_tree(self, base_dir, files):
+        super().make_release_tree(base_dir, files)
+        workspace = _workspace()
+        if workspace is None:
+            _no_workspace()
+        target = Path(base_dir) / SDIST_WORKSPACE
+        for name in WORKSPACE_FILES:
+            if (workspace / name).is_file():
+                target.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(workspace / name, target / name)
+                if name == "LICENSE":  # the licence also belongs beside the Python metadata
+                    shutil.copyfile(workspace / name, Path(base_dir) / name)
+        for member in workspace_members(workspace):
+            shutil.copytree(member, target / member.relative_to(workspace), ignore=IGNORED_IN_CRATES)
+        print(f"nbrdf-mitsuba sdist: copied the Cargo workspace {workspace} into {target}", flush=True)
+
 
 class BinaryDistribution(Distribution):
     """The wheel carries a native library: install it as platform-specific (platlib)."""
@@ -112,20 +172,30 @@ class BinaryDistribution(Distribution):
         return True
 
 
-# ...for this platform, but any Python 3 (cffi ABI mode, no extension module).
+cmdclass = {"build_py": build_py, "sdist": sdist}
+
+# ...for this platform, but any Python 3 (cffi ABI mode and an executable: no extension module).
 try:
-    try:
-        from setuptools.command.bdist_wheel import bdist_wheel as _bdist_wheel
-    except ImportError:
-        from wheel.bdist_wheel import bdist_wheel as _bdist_wheel
-
-    class bdist_wheel(_bdist_wheel):
-        def get_tag(self):
-            _, _, platform = super().get_tag()
-            return "py3", "none", platform
-
-    cmdclass["bdist_wheel"] = bdist_wheel
+    from setuptools.command.bdist_wheel import bdist_wheel as _bdist_wheel
 except ImportError:
-    pass
+    from wheel.bdist_wheel import bdist_wheel as _bdist_wheel
 
-setup(cmdclass=cmdclass, distclass=BinaryDistribution)
+
+class bdist_wheel(_bdist_wheel):
+    def get_tag(self):
+        _, _, platform = super().get_tag()
+        return "py3", "none", platform
+
+
+cmdclass["bdist_wheel"] = bdist_wheel
+
+
+def rust_binaries():
+    workspace = _workspace()
+    if workspace is None:
+        return []  # sdist and metadata steps need no Rust; build_py reports the missing workspace
+    return [RustBin("nbrdf", path=str(workspace / "nbrdf-core" / "Cargo.toml"), features=["cli"],
+                    args=["--bin", "nbrdf"])]
+
+
+setup(cmdclass=cmdclass, distclass=BinaryDistribution, rust_extensions=rust_binaries())
