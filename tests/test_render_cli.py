@@ -129,7 +129,7 @@ def test_default_variant_and_output(tmp_path):
     (["render", VEACH, "-m", "scalar_rgb", "-D", "nosuch=1"], "unused parameters"),
     # The plugin's own error, raised in its Python constructor: Mitsuba embeds the traceback.
     (["render", VEACH, "-m", "scalar_rgb", "-D", "plate=plates/nbrdf.xml", "-D", "nbrdf=missing.nbrdf.json"],
-     'RuntimeError: NbrdfBSDF (plugin "nbrdf"): cannot load "missing.nbrdf.json"'),
+     'RuntimeError: NbrdfBSDF (plugin "nbrdf"): cannot load missing.nbrdf.json: No such file'),
 ])
 def test_user_errors_are_one_line(tmp_path, args, message):
     result = run_cli(*args, cwd=tmp_path)
