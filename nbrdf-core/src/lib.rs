@@ -21,12 +21,14 @@ pub mod analytic;
 pub mod brdf;
 pub mod coords;
 pub mod error;
+pub mod fastmath;
 pub mod latent;
 pub mod lobe_fit;
 pub mod merl;
 pub mod metrics;
 pub mod network;
 pub mod phong_fit;
+pub mod rng;
 pub mod sampling;
 pub mod train;
 

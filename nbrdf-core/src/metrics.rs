@@ -12,8 +12,8 @@ use crate::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
 use crate::merl::{MerlTable, PhiFold};
 use crate::network::Nbrdf;
+use crate::rng::{SplitMix64, Stream};
 use crate::train::dataset::{directions, AngularSampling};
-use crate::train::rng::{SplitMix64, Stream};
 use glam::Vec3;
 use serde::Serialize;
 

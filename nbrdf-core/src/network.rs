@@ -10,6 +10,10 @@
 use crate::brdf::{Brdf, Directions, RgbMut};
 use crate::coords::{network_input, network_input_components};
 use crate::error::{NbrdfError, Result};
+#[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+use crate::fastmath::Fused;
+use crate::fastmath::{expm1_with, relu, MulAdd, Unfused};
+use crate::rng::{SplitMix64, Stream};
 use crate::sampling::SamplingStrategy;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -36,19 +40,29 @@ const TASK_LANES: usize = 8192;
 /// Hidden widths up to this use stack scratch; wider networks allocate once per rayon task.
 const MAX_STACK_HIDDEN: usize = 64;
 
-/// The exp argument is clamped here so that the output can never overflow to infinity
-/// (`e^80 ~ 5.5e34`, far above any physical reflectance, far below `f32::MAX`).
-pub const EXP_ARG_MAX: f32 = 80.0;
-/// Below this `2^k` of the range reduction would leave the normal range.
-pub const EXP_ARG_MIN: f32 = -87.0;
-
-/// One dense layer, `y = x W + b` with `W` row-major `inputs x outputs`.
+/// One dense layer, `y = x W + b` with `W` row-major `inputs x outputs`: the NBRDF's layers and
+/// those of the latent-space MLPs ([`crate::latent::mlp`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Layer {
     pub inputs: usize,
     pub outputs: usize,
     pub weights: Vec<f32>,
     pub bias: Vec<f32>,
+}
+
+impl Layer {
+    /// `y = x W + b` for one input vector, the reference definition of a dense layer (the
+    /// batched kernels restate it on lanes). `y` is as long as the outputs used; the loop over
+    /// outputs is innermost, over contiguous weights.
+    #[inline(always)]
+    pub fn affine_into<M: MulAdd>(&self, x: &[f32], y: &mut [f32]) {
+        y.copy_from_slice(&self.bias[..y.len()]);
+        for (row, &xi) in self.weights.chunks_exact(self.outputs).zip(x) {
+            for (yo, &w) in y.iter_mut().zip(row) {
+                *yo = M::mul_add(w, xi, *yo);
+            }
+        }
+    }
 }
 
 /// Importance-sampling parameters stored with a network.
@@ -132,6 +146,29 @@ struct FileOut<'a> {
 
 fn empty_object() -> serde_json::Value {
     serde_json::Value::Object(serde_json::Map::new())
+}
+
+/// Half-width of the uniform weight initialisation.
+const INIT_RANGE: f32 = 0.05;
+
+/// How [`paper_init`] draws, for provenance records.
+pub const INITIALISATION: &str =
+    "uniform(-0.05, 0.05) weights in file order, zero biases, splitmix64 stream Init";
+
+/// The paper's initialisation of a `6 -> hidden -> hidden -> 3` network: weights
+/// `U(-0.05, 0.05)` drawn in file order from the seed's [`Stream::Init`] stream, biases 0. The
+/// one initialisation of the crate: `nbrdf train` starts from it, so a seed names the weights.
+pub fn paper_init(hidden: usize, seed: u64) -> [Layer; 3] {
+    let mut rng = SplitMix64::new(seed, Stream::Init, 0);
+    let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, OUTPUTS)];
+    dims.map(|(inputs, outputs)| Layer {
+        inputs,
+        outputs,
+        weights: (0..inputs * outputs)
+            .map(|_| INIT_RANGE * (2.0 * rng.next_f64() as f32 - 1.0))
+            .collect(),
+        bias: vec![0.0; outputs],
+    })
 }
 
 /// Number of parameters of a `6 -> hidden -> hidden -> 3` network.
@@ -238,35 +275,6 @@ fn value_problem(layers: &[Layer]) -> Option<String> {
         }
     }
     None
-}
-
-/// A small deterministic generator (splitmix64): reproducible initialisation without a
-/// dependency, identical on every platform.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    pub fn new(seed: u64) -> Self {
-        SplitMix64(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`, 24 bits so that every value is exactly representable.
-    pub fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-    }
-
-    /// Uniform in `[0, 1)` with 53 bits.
-    pub fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
 }
 
 impl Nbrdf {
@@ -396,30 +404,15 @@ impl Nbrdf {
         flat
     }
 
-    /// A freshly initialised network as in the paper's recipe: weights `U(-0.05, 0.05)`, biases
-    /// 0, deterministic for a seed. A `hidden` of 0 is raised to 1 (a network needs a width).
+    /// A freshly initialised network, [`paper_init`]. A `hidden` of 0 is raised to 1 (a network
+    /// needs a width).
     pub fn random(name: &str, hidden: usize, seed: u64) -> Self {
-        let hidden = hidden.max(1);
-        let mut rng = SplitMix64::new(seed);
-        let mut layer = |inputs: usize, outputs: usize| Layer {
-            inputs,
-            outputs,
-            weights: (0..inputs * outputs)
-                .map(|_| rng.next_f32() * 0.1 - 0.05)
-                .collect(),
-            bias: vec![0.0; outputs],
-        };
-        let layers = [
-            layer(INPUTS, hidden),
-            layer(hidden, hidden),
-            layer(hidden, OUTPUTS),
-        ];
         Nbrdf {
             name: name.to_string(),
-            layers,
+            layers: paper_init(hidden.max(1), seed),
             sampling: None,
             provenance: serde_json::json!({
-                "initialisation": "uniform(-0.05, 0.05) weights, zero biases, splitmix64",
+                "initialisation": INITIALISATION,
                 "seed": seed,
             }),
         }
@@ -575,13 +568,13 @@ fn eval_input_generic<M: MulAdd>(
     let [l1, l2, l3] = layers;
     let h1 = &mut h1[..l1.outputs];
     let h2 = &mut h2[..l2.outputs];
-    dense_scalar::<M>(l1, x, h1);
+    l1.affine_into::<M>(x, h1);
     h1.iter_mut().for_each(|v| *v = relu(*v));
-    dense_scalar::<M>(l2, h1, h2);
+    l2.affine_into::<M>(h1, h2);
     h2.iter_mut().for_each(|v| *v = relu(*v));
     let mut z = [0.0f32; 3];
-    dense_scalar::<M>(l3, h2, &mut z);
-    z.map(|z| relu(expm1_core::<M>(z)))
+    l3.affine_into::<M>(h2, &mut z);
+    z.map(|z| relu(expm1_with::<M>(z)))
 }
 
 /// [`eval_input_generic`] compiled with AVX2 and FMA: the loops over outputs vectorise 8 wide.
@@ -594,116 +587,6 @@ unsafe fn eval_input_avx2(
     h2: &mut [f32],
 ) -> [f32; 3] {
     eval_input_generic::<Fused>(layers, x, h1, h2)
-}
-
-/// `y = x W + b` for one input vector; the loop over outputs is innermost (contiguous weights).
-#[inline(always)]
-fn dense_scalar<M: MulAdd>(layer: &Layer, x: &[f32], y: &mut [f32]) {
-    y.copy_from_slice(&layer.bias[..y.len()]);
-    for (row, &xi) in layer.weights.chunks_exact(layer.outputs).zip(x) {
-        for (yo, &w) in y.iter_mut().zip(row) {
-            *yo = M::mul_add(w, xi, *yo);
-        }
-    }
-}
-
-/// `max(v, 0)` written as a compare-select so that it maps to one `maxps` (NaN becomes 0).
-#[inline(always)]
-fn relu(v: f32) -> f32 {
-    if v > 0.0 {
-        v
-    } else {
-        0.0
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Vectorisable exp.
-
-/// Multiply-add as the kernel uses it. The AVX2 copy fuses (one rounding, one instruction); the
-/// portable copy must not call `mul_add`, which is a slow libm call without hardware FMA.
-trait MulAdd {
-    fn mul_add(a: f32, b: f32, c: f32) -> f32;
-}
-
-struct Unfused;
-impl MulAdd for Unfused {
-    #[inline(always)]
-    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
-        a * b + c
-    }
-}
-
-#[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-struct Fused;
-#[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-impl MulAdd for Fused {
-    #[inline(always)]
-    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
-        a.mul_add(b, c)
-    }
-}
-
-/// `1.5 * 2^23`: adding it rounds a float of magnitude below `2^22` to an integer and leaves that
-/// integer in the low mantissa bits, which avoids a float-to-int conversion.
-const ROUND_MAGIC: f32 = 12_582_912.0;
-/// `ln 2` split so that `k * LN2_HI` is exact for `|k| < 2^15` (Cody-Waite reduction).
-const LN2_HI: f32 = 355.0 / 512.0;
-const LN2_LO: f32 = -2.121_944_4e-4;
-
-/// Clamps to the exp range; NaN goes to the lower end so that the result stays finite.
-#[inline(always)]
-fn clamp_exp_arg(z: f32) -> f32 {
-    let z = if z > EXP_ARG_MIN { z } else { EXP_ARG_MIN };
-    if z < EXP_ARG_MAX {
-        z
-    } else {
-        EXP_ARG_MAX
-    }
-}
-
-/// `z = k ln 2 + r` with `|r| <= ln 2 / 2`: returns `(2^k, expm1(r))`. Branch-free and
-/// integer-conversion-free so that it vectorises; `expm1(r)` (not `exp(r)`) keeps full relative
-/// accuracy for `z` near 0, where `exp(z) - 1` would cancel.
-#[inline(always)]
-fn exp_reduce<M: MulAdd>(z: f32) -> (f32, f32) {
-    let z = clamp_exp_arg(z);
-    let t = M::mul_add(z, std::f32::consts::LOG2_E, ROUND_MAGIC);
-    let k = t - ROUND_MAGIC;
-    let k_int = t.to_bits().wrapping_sub(ROUND_MAGIC.to_bits()) as i32;
-    let scale = f32::from_bits((k_int.wrapping_add(127) as u32) << 23);
-    let r = M::mul_add(-k, LN2_LO, M::mul_add(-k, LN2_HI, z));
-    // Taylor series of expm1 to degree 7: the truncation error at |r| = ln 2 / 2 is ~1e-8 of the
-    // result, below float32 rounding.
-    let mut p = 1.0 / 5040.0;
-    p = M::mul_add(p, r, 1.0 / 720.0);
-    p = M::mul_add(p, r, 1.0 / 120.0);
-    p = M::mul_add(p, r, 1.0 / 24.0);
-    p = M::mul_add(p, r, 1.0 / 6.0);
-    p = M::mul_add(p, r, 0.5);
-    let expm1_r = M::mul_add(p * r, r, r);
-    (scale, expm1_r)
-}
-
-/// `exp(z) - 1` as `2^k expm1(r) + (2^k - 1)`.
-#[inline(always)]
-fn expm1_core<M: MulAdd>(z: f32) -> f32 {
-    let (scale, expm1_r) = exp_reduce::<M>(z);
-    M::mul_add(scale, expm1_r, scale - 1.0)
-}
-
-/// `exp(z) - 1` in float32, about 1e-7 relative error, with `z` clamped to
-/// `[EXP_ARG_MIN, EXP_ARG_MAX]` (NaN to the lower end). Vectorises in loops over lanes.
-#[inline]
-pub fn fast_expm1(z: f32) -> f32 {
-    expm1_core::<Unfused>(z)
-}
-
-/// `exp(z)` in float32, about 1e-7 relative error, same clamping as [`fast_expm1`].
-#[inline]
-pub fn fast_exp(z: f32) -> f32 {
-    let (scale, expm1_r) = exp_reduce::<Unfused>(z);
-    scale * expm1_r + scale
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -961,7 +844,7 @@ fn output_chunk<M: MulAdd>(w: &[f32], b: &[f32], x: &[Row], cos: &Row, rgb: [&mu
     for ((w_row, &bias), out) in w.chunks_exact(x.len()).zip(b).zip(rgb) {
         let acc = affine_chunk::<M>(w_row, bias, x);
         for j in 0..LANES {
-            out[j] = relu(expm1_core::<M>(acc[j])) * cos[j];
+            out[j] = relu(expm1_with::<M>(acc[j])) * cos[j];
         }
     }
 }
@@ -1078,7 +961,7 @@ mod tests {
     /// A network with weights like a trained one: fan-in scaled, biases non-zero, outputs from
     /// ~1e-3 to ~10 so that exp and the clamp at 0 are both exercised.
     fn test_net(hidden: usize, seed: u64) -> Nbrdf {
-        let mut rng = SplitMix64::new(seed);
+        let mut rng = SplitMix64::from_state(seed);
         let mut net = Nbrdf::random("test", hidden, seed);
         for layer in net.layers.iter_mut() {
             let scale = 1.5 / (layer.inputs as f32).sqrt();
@@ -1104,7 +987,7 @@ mod tests {
 
     /// Random pairs over the whole hemisphere plus grazing, mirror and degenerate ones.
     fn direction_pairs(count: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
-        let mut rng = SplitMix64::new(seed);
+        let mut rng = SplitMix64::from_state(seed);
         let mut pairs = Vec::new();
         for _ in 0..count {
             let dir =
@@ -1149,33 +1032,6 @@ mod tests {
         (0..n)
             .map(|i| [out[i], out[n + i], out[2 * n + i]])
             .collect()
-    }
-
-    #[test]
-    fn fast_exp_matches_f64_over_its_range() {
-        let mut worst_exp = 0.0f64;
-        let mut worst_expm1 = 0.0f64;
-        let steps = 2_000_000;
-        for s in 0..=steps {
-            let z = (-87.0 + 167.0 * s as f64 / steps as f64) as f32;
-            let z64 = f64::from(z);
-            let e = f64::from(fast_exp(z));
-            worst_exp = worst_exp.max((e - z64.exp()).abs() / z64.exp());
-            let m = f64::from(fast_expm1(z));
-            worst_expm1 =
-                worst_expm1.max((m - z64.exp_m1()).abs() / z64.exp_m1().abs().max(1e-300));
-        }
-        // Tiny arguments, where exp(z) - 1 would lose everything.
-        for z in [1e-30f32, -1e-20, 1e-7, -3e-5, 0.01, -0.3, 0.35] {
-            let m = f64::from(fast_expm1(z));
-            let want = f64::from(z).exp_m1();
-            worst_expm1 = worst_expm1.max((m - want).abs() / want.abs());
-        }
-        assert!(worst_exp < 3e-7, "exp relative error {worst_exp:e}");
-        assert!(worst_expm1 < 3e-7, "expm1 relative error {worst_expm1:e}");
-        assert_eq!(fast_expm1(0.0), 0.0);
-        assert!(fast_exp(f32::INFINITY).is_finite() && fast_exp(f32::NAN).is_finite());
-        assert!(fast_expm1(1e30).is_finite() && fast_expm1(-1e30) >= -1.0);
     }
 
     #[test]

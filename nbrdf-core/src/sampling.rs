@@ -363,7 +363,8 @@ pub fn pdf_batch(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::network::{Nbrdf, SplitMix64};
+    use crate::network::Nbrdf;
+    use crate::rng::SplitMix64;
     use std::f64::consts::PI;
 
     const EXPONENTS: [f64; 7] = [0.0, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5];
@@ -500,7 +501,7 @@ mod tests {
 
     #[test]
     fn pdf_is_the_lobe_density_above_the_horizon_and_zero_below() {
-        let mut rng = SplitMix64::new(5);
+        let mut rng = SplitMix64::from_state(5);
         let strategy = SamplingStrategy::BlinnPhong {
             exponent: 30.0,
             specular_weight: 0.6,
@@ -525,7 +526,7 @@ mod tests {
 
     #[test]
     fn sampled_pdf_equals_pdf() {
-        let mut rng = SplitMix64::new(1);
+        let mut rng = SplitMix64::from_state(1);
         let strategies = [
             SamplingStrategy::Uniform,
             SamplingStrategy::Cosine,
@@ -584,7 +585,7 @@ mod tests {
                 }];
             for (t, g) in tests.into_iter().enumerate() {
                 let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
-                let mut rng = SplitMix64::new(17 + t as u64);
+                let mut rng = SplitMix64::from_state(17 + t as u64);
                 let mut sum = 0.0;
                 let mut sum2 = 0.0;
                 for _ in 0..samples {
@@ -679,7 +680,7 @@ mod tests {
             specular_weight: 0.7,
         };
         let n = 3 * TASK_LANES + 17;
-        let mut rng = SplitMix64::new(9);
+        let mut rng = SplitMix64::from_state(9);
         let mut view = vec![0.0f32; 3 * n];
         let mut u = vec![0.0f32; 3 * n];
         for i in 0..n {

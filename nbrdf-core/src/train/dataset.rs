@@ -11,10 +11,10 @@
 //! (counter-based [`SplitMix64`]), and blocks of candidates are merged in order, so the data set
 //! depends on the seed only, not on the thread count.
 
-use super::rng::{SplitMix64, Stream};
 use crate::coords::{from_rusinkiewicz, to_rusinkiewicz, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
 use crate::network::{INPUTS, OUTPUTS};
+use crate::rng::{SplitMix64, Stream};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
