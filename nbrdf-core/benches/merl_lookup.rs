@@ -54,7 +54,7 @@ fn bench_lookup(c: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0.0f32;
             for i in 0..PAIRS {
-                acc += black_box(&table).eval(l.get(i), v.get(i))[1];
+                acc += black_box(&table).eval(v.get(i), l.get(i))[1];
             }
             acc
         })

@@ -95,7 +95,7 @@ fn network_eval(c: &mut Criterion) {
         b.iter(|| {
             let mut sum = 0.0f32;
             for i in 0..SCALAR_BATCH {
-                sum += net.eval(black_box(l.get(i)), black_box(v.get(i)))[0];
+                sum += net.eval(black_box(v.get(i)), black_box(l.get(i)))[0];
             }
             sum
         })

@@ -13,9 +13,15 @@
 //! * [`brdf`]     – the [`brdf::Brdf`] trait shared by tables and networks, SoA batch types.
 //! * [`error`]    – the crate's error type.
 //!
-//! Conventions (see DESIGN.md section 2): local shading frame with z = normal; `light` is the
-//! direction towards the light (Mitsuba's `wo`), `view` towards the viewer (Mitsuba's `si.wi`).
-//! Batches are structure-of-arrays: x, y and z (or r, g and b) each in their own slice.
+//! Conventions: local shading frame with z = normal; `view` is the direction towards the viewer
+//! (Mitsuba's `si.wi`), `light` towards the light (Mitsuba's `wo`). Every function that takes or
+//! returns both directions does so in Mitsuba's order, **view first, then light**:
+//! [`Brdf::eval`]`(view, light)`, [`Brdf::eval_cos_batch`]`(view, light, out)`,
+//! [`coords::to_rusinkiewicz`]`(view, light)`, [`coords::from_rusinkiewicz`] returns
+//! `(view, light)`, [`sampling::SamplingStrategy::pdf`]`(view, light)`, and the C ABI's
+//! `*_eval(handle, view, light, ...)`. Both are plain vectors, so a swap compiles: name
+//! arguments `view`/`light` (or `v`/`l`) at call sites. Batches are structure-of-arrays: x, y
+//! and z (or r, g and b) each in their own slice.
 
 pub mod analytic;
 pub mod brdf;

@@ -212,8 +212,8 @@ fn lerp_wrapped(t: f64, n: usize) -> (usize, usize, f64) {
 
 /// [`coords::to_rusinkiewicz`] without `phi_h` (an isotropic table ignores it; its `atan2` is a
 /// measurable share of a lookup).
-fn isotropic_angles(light: DVec3, view: DVec3) -> RusinkiewiczAngles {
-    let coords::HalfDiff { half, diff } = coords::half_diff(light, view);
+fn isotropic_angles(view: DVec3, light: DVec3) -> RusinkiewiczAngles {
+    let coords::HalfDiff { half, diff } = coords::half_diff(view, light);
     RusinkiewiczAngles {
         theta_h: half.z.clamp(-1.0, 1.0).acos(),
         phi_h: 0.0,
@@ -239,7 +239,7 @@ pub(crate) fn to_f32_rgb(f: [f64; 3]) -> [f32; 3] {
     })
 }
 
-/// Shared rayon loop behind the `eval_cos_batch` overrides: `f(light, view) * cos(theta_l)` for
+/// Shared rayon loop behind the `eval_cos_batch` overrides: `f(view, light) * cos(theta_l)` for
 /// every pair. Mismatched slice lengths are not a reason to panic in a renderer callback: only
 /// the common prefix is evaluated.
 pub(crate) fn parallel_eval_cos<F>(
@@ -269,7 +269,7 @@ pub(crate) fn parallel_eval_cos<F>(
                 let l = DVec3::new(light.x[i] as f64, light.y[i] as f64, light.z[i] as f64);
                 let v = DVec3::new(view.x[i] as f64, view.y[i] as f64, view.z[i] as f64);
                 let cos = unit(l).map_or(0.0, |l| l.z.max(0.0));
-                let rgb = to_f32_rgb(f(l, v).map(|x| x * cos));
+                let rgb = to_f32_rgb(f(v, l).map(|x| x * cos));
                 r[j] = rgb[0];
                 g[j] = rgb[1];
                 b[j] = rgb[2];
@@ -547,16 +547,16 @@ impl MerlTable {
         any_valid.then(|| self.trilinear(index))
     }
 
-    /// `f_r(light, view)`, zero at or below the horizon.
+    /// `f_r(view, light)`, zero at or below the horizon.
     pub fn eval_f64(
         &self,
-        light: glam::DVec3,
         view: glam::DVec3,
+        light: glam::DVec3,
         interpolation: Interpolation,
     ) -> [f64; 3] {
         match (unit(light), unit(view)) {
             (Some(l), Some(v)) if l.z > 0.0 && v.z > 0.0 => {
-                self.lookup(&isotropic_angles(l, v), interpolation)
+                self.lookup(&isotropic_angles(v, l), interpolation)
             }
             _ => [0.0; 3],
         }
@@ -600,13 +600,13 @@ impl fmt::Debug for MerlTable {
 }
 
 impl Brdf for MerlTable {
-    fn eval(&self, light: Vec3, view: Vec3) -> [f32; 3] {
-        to_f32_rgb(self.eval_f64(light.as_dvec3(), view.as_dvec3(), Interpolation::Trilinear))
+    fn eval(&self, view: Vec3, light: Vec3) -> [f32; 3] {
+        to_f32_rgb(self.eval_f64(view.as_dvec3(), light.as_dvec3(), Interpolation::Trilinear))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        parallel_eval_cos(view, light, out, |l, v| {
-            self.eval_f64(l, v, Interpolation::Trilinear)
+        parallel_eval_cos(view, light, out, |v, l| {
+            self.eval_f64(v, l, Interpolation::Trilinear)
         });
     }
 }
@@ -975,10 +975,10 @@ mod tests {
             let t = shared_table().clone().with_phi_fold(PhiFold::Mirror);
             let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
             let flip = DVec3::new(1.0, -1.0, 1.0);
-            let a = t.eval_f64(l, v, Interpolation::Trilinear);
-            let b = t.eval_f64(l * flip, v * flip, Interpolation::Trilinear);
+            let a = t.eval_f64(v, l, Interpolation::Trilinear);
+            let b = t.eval_f64(v * flip, l * flip, Interpolation::Trilinear);
             let rot = glam::DMat3::from_rotation_z(0.77);
-            let c = t.eval_f64(rot * l, rot * v, Interpolation::Trilinear);
+            let c = t.eval_f64(rot * v, rot * l, Interpolation::Trilinear);
             prop_assert!((0..3).all(|k| (a[k] - b[k]).abs() <= 1e-6 * (1.0 + a[k])), "{a:?} vs {b:?}");
             prop_assert!((0..3).all(|k| (a[k] - c[k]).abs() <= 1e-6 * (1.0 + a[k])), "{a:?} vs {c:?}");
         }
@@ -1042,12 +1042,12 @@ mod tests {
         ];
         for (l, v) in cases {
             assert_eq!(
-                t.eval_f64(l, v, Interpolation::Trilinear),
+                t.eval_f64(v, l, Interpolation::Trilinear),
                 [0.0; 3],
                 "{l} {v}"
             );
-            assert_eq!(t.eval_f64(l, v, Interpolation::Nearest), [0.0; 3]);
-            assert_eq!(t.eval(l.as_vec3(), v.as_vec3()), [0.0; 3]);
+            assert_eq!(t.eval_f64(v, l, Interpolation::Nearest), [0.0; 3]);
+            assert_eq!(t.eval(v.as_vec3(), l.as_vec3()), [0.0; 3]);
         }
         // Grazing but above, and l = v (phi_d undefined): finite.
         for (l, v) in [
@@ -1055,7 +1055,7 @@ mod tests {
             (up, up),
             (DVec3::Z, DVec3::Z),
         ] {
-            let f = t.eval_f64(l, v, Interpolation::Trilinear);
+            let f = t.eval_f64(v, l, Interpolation::Trilinear);
             assert!(f.iter().all(|x| x.is_finite() && *x >= 0.0));
         }
         // Non-unit input: the same as unit input.
@@ -1064,8 +1064,8 @@ mod tests {
             (up, hemisphere(1.0, -2.0)),
         ] {
             let (a, b) = (
-                t.eval_f64(3.0 * l, 0.5 * v, Interpolation::Trilinear),
-                t.eval_f64(l, v, Interpolation::Trilinear),
+                t.eval_f64(0.5 * v, 3.0 * l, Interpolation::Trilinear),
+                t.eval_f64(v, l, Interpolation::Trilinear),
             );
             assert!((0..3).all(|c| close(a[c], b[c])), "{a:?} vs {b:?}");
         }
@@ -1075,14 +1075,14 @@ mod tests {
     fn eval_matches_lookup_of_the_angles() {
         let t = shared_table();
         let (l, v) = (hemisphere(0.5, 0.2), hemisphere(1.1, 2.9));
-        let a = coords::to_rusinkiewicz(l, v);
+        let a = coords::to_rusinkiewicz(v, l);
         for mode in [Interpolation::Nearest, Interpolation::Trilinear] {
-            assert_eq!(t.eval_f64(l, v, mode), t.lookup(&a, mode));
+            assert_eq!(t.eval_f64(v, l, mode), t.lookup(&a, mode));
         }
         // Rotating both directions about the normal changes nothing for an isotropic table.
         let rot = glam::DMat3::from_rotation_z(1.234);
-        let a = t.eval_f64(l, v, Interpolation::Trilinear);
-        let b = t.eval_f64(rot * l, rot * v, Interpolation::Trilinear);
+        let a = t.eval_f64(v, l, Interpolation::Trilinear);
+        let b = t.eval_f64(rot * v, rot * l, Interpolation::Trilinear);
         assert!((0..3).all(|c| close(a[c], b[c])));
     }
 
@@ -1096,8 +1096,8 @@ mod tests {
         ] {
             let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
             assert_eq!(
-                t.eval_f64(l, v, Interpolation::Nearest),
-                t.eval_f64(v, l, Interpolation::Nearest)
+                t.eval_f64(v, l, Interpolation::Nearest),
+                t.eval_f64(l, v, Interpolation::Nearest)
             );
         }
     }
@@ -1110,8 +1110,8 @@ mod tests {
         ) {
             let t = shared_table();
             let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
-            let a = t.eval_f64(l, v, Interpolation::Trilinear);
-            let b = t.eval_f64(v, l, Interpolation::Trilinear);
+            let a = t.eval_f64(v, l, Interpolation::Trilinear);
+            let b = t.eval_f64(l, v, Interpolation::Trilinear);
             prop_assert!((0..3).all(|c| close(a[c], b[c])), "{a:?} vs {b:?}");
             prop_assert!(a.iter().all(|x| x.is_finite() && *x >= 0.0));
         }
@@ -1148,7 +1148,7 @@ mod tests {
                 Vec3::new(light[i], light[n + i], light[2 * n + i]),
                 Vec3::new(view[i], view[n + i], view[2 * n + i]),
             );
-            let f = t.eval(l, v);
+            let f = t.eval(v, l);
             let cos = crate::brdf::cos_theta_light(l);
             for c in 0..3 {
                 let expect = f[c] * cos;

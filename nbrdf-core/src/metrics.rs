@@ -59,9 +59,9 @@ impl Material {
         match self {
             Material::Table(t) => t.lookup_valid(angles),
             Material::Network(n) => {
-                let (l, v) = from_rusinkiewicz(angles);
+                let (v, l) = from_rusinkiewicz(angles);
                 Some(
-                    n.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                    n.eval_input(network_input(v.as_vec3(), l.as_vec3()))
                         .map(f64::from),
                 )
             }
@@ -281,7 +281,7 @@ pub fn log_error(
             rng.next_f64(),
             rng.next_f64(),
         ];
-        let (light, view, angles) = directions(sampling, u);
+        let (view, light, angles) = directions(sampling, u);
         if light.z <= 0.0 || view.z <= 0.0 {
             continue;
         }

@@ -443,7 +443,7 @@ impl Nbrdf {
     /// `nbrdf train` can learn again, e.g. from the common initialisation of the latent space.
     pub fn tabulate(&self) -> crate::merl::MerlTable {
         crate::merl::MerlTable::tabulate(|angles| {
-            let (light, view) = crate::coords::from_rusinkiewicz(angles);
+            let (view, light) = crate::coords::from_rusinkiewicz(angles);
             if light.z <= 0.0 || view.z <= 0.0 {
                 return [f64::NAN; 3];
             }
@@ -534,7 +534,7 @@ impl Nbrdf {
 }
 
 impl Brdf for Nbrdf {
-    fn eval(&self, light: Vec3, view: Vec3) -> [f32; 3] {
+    fn eval(&self, view: Vec3, light: Vec3) -> [f32; 3] {
         // Normalise in float64 so that very long or very short vectors keep their direction.
         let (Some(l), Some(v)) = (normalized(light.as_dvec3()), normalized(view.as_dvec3())) else {
             return [0.0; 3];
@@ -542,7 +542,7 @@ impl Brdf for Nbrdf {
         if l.z <= 0.0 || v.z <= 0.0 {
             return [0.0; 3];
         }
-        self.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+        self.eval_input(network_input(v.as_vec3(), l.as_vec3()))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
@@ -774,7 +774,7 @@ fn build_inputs(dirs: [&Row; 6], x: &mut [Row; 5], cos: &mut Row) -> bool {
     let mut out_of_range = 0u32;
     for j in 0..LANES {
         let [lx, ly, lz, vx, vy, vz] = dirs.map(|row| row[j]);
-        let input = network_input_components(lx, ly, lz, vx, vy, vz);
+        let input = network_input_components(vx, vy, vz, lx, ly, lz);
         for (row, value) in x.iter_mut().zip(USED_INPUTS.map(|k| input[k])) {
             row[j] = value;
         }
@@ -946,7 +946,7 @@ mod tests {
 
     /// Reference `f_r cos` of a direction pair: float64 normalisation and cosine, network input
     /// from the documented encoding (whose float32 accuracy `coords` tests).
-    fn reference_cos(net: &Nbrdf, l: Vec3, v: Vec3) -> Reference {
+    fn reference_cos(net: &Nbrdf, v: Vec3, l: Vec3) -> Reference {
         let (l64, v64) = (l.as_dvec3(), v.as_dvec3());
         let (ln, vn) = (l64 / l64.length(), v64 / v64.length());
         if !(ln.z > 0.0 && vn.z > 0.0) {
@@ -955,7 +955,7 @@ mod tests {
                 rounding: [0.0; 3],
             };
         }
-        reference_f64(net, network_input(l, v)).scaled(ln.z)
+        reference_f64(net, network_input(v, l)).scaled(ln.z)
     }
 
     /// A network with weights like a trained one: fan-in scaled, biases non-zero, outputs from
@@ -1040,7 +1040,7 @@ mod tests {
             let net = test_net(hidden, 7 + hidden as u64);
             let mut tally = Tally::default();
             for (l, v) in direction_pairs(300, hidden as u64) {
-                let x = network_input(l, v);
+                let x = network_input(v, l);
                 if !x.iter().all(|c| c.is_finite()) {
                     // Non-finite directions are rejected before the network (tested below).
                     continue;
@@ -1065,7 +1065,7 @@ mod tests {
         for cell in (0..crate::merl::CELLS).step_by(997) {
             let (h, d, p) = crate::merl::cell_coordinates(cell);
             let angles = crate::merl::cell_centre_angles(h, d, p);
-            let (l, v) = crate::coords::from_rusinkiewicz(&angles);
+            let (v, l) = crate::coords::from_rusinkiewicz(&angles);
             match table.cell(cell) {
                 None => {
                     assert!(
@@ -1111,9 +1111,9 @@ mod tests {
             let mut nonzero = 0;
             let (mut tally, mut tally_single) = (Tally::default(), Tally::default());
             for ((l, v), g) in pairs.iter().zip(&got) {
-                let want = reference_cos(&net, *l, *v);
+                let want = reference_cos(&net, *v, *l);
                 // Same input vector: the scalar path must agree with the batched one.
-                let single = net.eval_input(network_input(*l, *v));
+                let single = net.eval_input(network_input(*v, *l));
                 let cos = crate::brdf::cos_theta_light(*l);
                 let context = format!("width {hidden} l={l} v={v}: {g:?} vs {:?}", want.value);
                 for c in 0..3 {
@@ -1168,7 +1168,7 @@ mod tests {
                 let context = format!("width {hidden} l={l} v={v}");
                 if i + 1 == n {
                     // Extreme lengths: rescaled, so compare with the normalising scalar eval.
-                    let want = net.eval(*l, *v).map(|f| f64::from(f) * 2.0 / 5f64.sqrt());
+                    let want = net.eval(*v, *l).map(|f| f64::from(f) * 2.0 / 5f64.sqrt());
                     let got = [r[i], g[i], b[i]].map(f64::from);
                     assert!(
                         (0..3).all(|c| (got[c] - want[c]).abs() <= 1e-4 * want[c] + 1e-7),
@@ -1176,11 +1176,11 @@ mod tests {
                     );
                     continue;
                 }
-                let want = reference_cos(&net, *l, *v);
+                let want = reference_cos(&net, *v, *l);
                 for (c, got) in [r[i], g[i], b[i]].into_iter().enumerate() {
                     tally.check(got, &want, c, &context);
                 }
-                let x = network_input(*l, *v);
+                let x = network_input(*v, *l);
                 if x.iter().all(|c| c.is_finite()) {
                     let single = eval_input_generic::<Unfused>(&net.layers, &x, &mut h1, &mut h2);
                     let want = reference_f64(&net, x);
@@ -1205,7 +1205,7 @@ mod tests {
             (Vec3::Z, Vec3::new(0.0, 0.0, f32::INFINITY)),
         ];
         for (l, v) in cases {
-            assert_eq!(net.eval(l, v), [0.0; 3], "{l} {v}");
+            assert_eq!(net.eval(v, l), [0.0; 3], "{l} {v}");
         }
         for g in eval_batch(&net, &cases) {
             assert_eq!(g, [0.0; 3]);
@@ -1223,7 +1223,7 @@ mod tests {
     fn extreme_lengths_are_normalised_like_unit_vectors() {
         let net = test_net(21, 4);
         let (l, v) = (hemisphere(0.7, 0.3), hemisphere(0.4, 2.5));
-        let want = net.eval(l, v).map(|f| f64::from(f) * f64::from(l.z));
+        let want = net.eval(v, l).map(|f| f64::from(f) * f64::from(l.z));
         assert!(want.iter().any(|&f| f > 1e-3));
         let scales = [1e-25f32, 1e-18, 1e-3, 1.0, 7.0, 1e18, 1e25];
         let pairs: Vec<_> = scales
@@ -1232,7 +1232,7 @@ mod tests {
             .collect();
         for (pair, g) in pairs.iter().zip(eval_batch(&net, &pairs)) {
             let single = net
-                .eval(pair.0, pair.1)
+                .eval(pair.1, pair.0)
                 .map(|f| f64::from(f) * f64::from(l.z));
             for c in 0..3 {
                 let tol = 1e-4 * want[c] + 1e-7;
@@ -1438,7 +1438,7 @@ mod tests {
         let net = test_net(MAX_STACK_HIDDEN + 1, 9);
         let pairs = direction_pairs(20, 1);
         for ((l, v), g) in pairs.iter().zip(eval_batch(&net, &pairs)) {
-            let want = reference_cos(&net, *l, *v);
+            let want = reference_cos(&net, *v, *l);
             (0..3).for_each(|c| Tally::default().check(g[c], &want, c, &"wide"));
         }
         let mut uneven = test_net(5, 2);
@@ -1452,7 +1452,7 @@ mod tests {
         uneven.layers[2] = other.layers[2].clone();
         uneven.validate().unwrap();
         for ((l, v), g) in pairs.iter().zip(eval_batch(&uneven, &pairs)) {
-            let want = reference_cos(&uneven, *l, *v);
+            let want = reference_cos(&uneven, *v, *l);
             (0..3).for_each(|c| Tally::default().check(g[c], &want, c, &"uneven"));
         }
     }

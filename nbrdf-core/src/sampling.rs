@@ -719,7 +719,7 @@ mod tests {
             let s = strategy.sample(v, [u[i], u[n + i], u[2 * n + i]]);
             assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
             assert_eq!(s.pdf, pdf[i]);
-            let f = net.eval(s.light, v);
+            let f = net.eval(v, s.light);
             let cos = crate::brdf::cos_theta_light(s.light);
             for c in 0..3 {
                 let want = if s.pdf > 0.0 { f[c] * cos / s.pdf } else { 0.0 };

@@ -96,18 +96,18 @@ impl AnalyticBrdf {
         }
     }
 
-    /// `f_r(light, view)` in float64, zero at or below the horizon.
-    pub fn eval_f64(&self, light: glam::DVec3, view: glam::DVec3) -> [f64; 3] {
+    /// `f_r(view, light)` in float64, zero at or below the horizon.
+    pub fn eval_f64(&self, view: glam::DVec3, light: glam::DVec3) -> [f64; 3] {
         match self {
-            AnalyticBrdf::Sgd(p) => p.eval_f64(light, view),
-            AnalyticBrdf::Abc(p) => p.eval_f64(light, view),
+            AnalyticBrdf::Sgd(p) => p.eval_f64(view, light),
+            AnalyticBrdf::Abc(p) => p.eval_f64(view, light),
         }
     }
 
     /// The MERL-format table of this fit at cell-centre angles.
     pub fn tabulate(&self) -> MerlTable {
         MerlTable::tabulate(|angles| {
-            let (light, view) = crate::coords::from_rusinkiewicz(angles);
+            let (view, light) = crate::coords::from_rusinkiewicz(angles);
             // A centre with a direction below the horizon has no reflectance: MerlTable::tabulate
             // stores non-finite values as not measured (as real MERL files and RGL tabulations
             // do), so trilinear lookups near grazing angles leave those cells out instead of
@@ -115,22 +115,22 @@ impl AnalyticBrdf {
             if light.z <= 0.0 || view.z <= 0.0 {
                 return [f64::NAN; 3];
             }
-            self.eval_f64(light, view)
+            self.eval_f64(view, light)
         })
     }
 }
 
 impl Brdf for AnalyticBrdf {
-    fn eval(&self, light: glam::Vec3, view: glam::Vec3) -> [f32; 3] {
-        merl::to_f32_rgb(self.eval_f64(light.as_dvec3(), view.as_dvec3()))
+    fn eval(&self, view: glam::Vec3, light: glam::Vec3) -> [f32; 3] {
+        merl::to_f32_rgb(self.eval_f64(view.as_dvec3(), light.as_dvec3()))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        merl::parallel_eval_cos(view, light, out, |l, v| self.eval_f64(l, v));
+        merl::parallel_eval_cos(view, light, out, |v, l| self.eval_f64(v, l));
     }
 }
 
-/// The unit light, view and half vectors of a pair above the horizon, and `c = l . h`.
+/// The unit view, light and half vectors of a pair above the horizon, and `c = l . h`.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Geometry {
     pub l: DVec3,
@@ -147,7 +147,7 @@ impl Geometry {
 }
 
 /// `None` when either direction is at or below the horizon, zero-length or not finite.
-pub(crate) fn geometry(light: DVec3, view: DVec3) -> Option<Geometry> {
+pub(crate) fn geometry(view: DVec3, light: DVec3) -> Option<Geometry> {
     let l = light.try_normalize()?;
     let v = view.try_normalize()?;
     if l.z <= 0.0 || v.z <= 0.0 {
@@ -311,7 +311,7 @@ mod tests {
         ];
         for (model, name, expect) in cases {
             assert_close(
-                fit(model, name).eval_f64(l, v),
+                fit(model, name).eval_f64(v, l),
                 expect,
                 &format!("{model} {name}"),
             );
@@ -325,8 +325,8 @@ mod tests {
         assert!(err.to_string().contains("list-materials"));
         let (l, v) = (hemisphere(0.5, 0.3), hemisphere(0.7, 2.9));
         for model in ModelKind::ALL {
-            let a = fit(model, "metallic-gold").eval_f64(l, v);
-            assert_eq!(a, fit(model, "gold-metallic-paint").eval_f64(l, v));
+            let a = fit(model, "metallic-gold").eval_f64(v, l);
+            assert_eq!(a, fit(model, "gold-metallic-paint").eval_f64(v, l));
             assert_eq!(fit(model, "alum-bronze").model(), model);
         }
         assert_eq!("SGD".parse::<ModelKind>().unwrap(), ModelKind::Sgd);
@@ -361,12 +361,12 @@ mod tests {
                 let brdf = fit(model, name);
                 for &l in &dirs {
                     for &v in &dirs {
-                        let f = brdf.eval_f64(l, v);
+                        let f = brdf.eval_f64(v, l);
                         assert!(
                             f.iter().all(|x| x.is_finite() && *x >= 0.0),
                             "{model} {name} {l} {v}: {f:?}"
                         );
-                        let f32 = brdf.eval(l.as_vec3(), v.as_vec3());
+                        let f32 = brdf.eval(v.as_vec3(), l.as_vec3());
                         assert!(
                             f32.iter().all(|x| x.is_finite() && *x >= 0.0),
                             "{model} {name}: {f32:?}"
@@ -390,12 +390,12 @@ mod tests {
         for model in ModelKind::ALL {
             let brdf = fit(model, "silver-paint");
             for b in bad {
-                assert_eq!(brdf.eval_f64(b, up), [0.0; 3], "{model} {b}");
                 assert_eq!(brdf.eval_f64(up, b), [0.0; 3], "{model} {b}");
+                assert_eq!(brdf.eval_f64(b, up), [0.0; 3], "{model} {b}");
             }
             // Non-unit input is normalised.
-            let f = brdf.eval_f64(3.0 * up, 0.1 * hemisphere(0.9, 2.0));
-            assert_close(f, brdf.eval_f64(up, hemisphere(0.9, 2.0)), "scaled input");
+            let f = brdf.eval_f64(0.1 * hemisphere(0.9, 2.0), 3.0 * up);
+            assert_close(f, brdf.eval_f64(hemisphere(0.9, 2.0), up), "scaled input");
         }
     }
 
@@ -409,7 +409,7 @@ mod tests {
             let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
             for model in ModelKind::ALL {
                 let brdf = fit(model, name);
-                let (a, b) = (brdf.eval_f64(l, v), brdf.eval_f64(v, l));
+                let (a, b) = (brdf.eval_f64(v, l), brdf.eval_f64(l, v));
                 for c in 0..3 {
                     prop_assert!((a[c] - b[c]).abs() <= 1e-9 * a[c].abs().max(1e-300), "{model} {name}: {a:?} vs {b:?}");
                 }
@@ -428,7 +428,7 @@ mod tests {
         {
             let (h, d, p) = crate::merl::cell_coordinates(index);
             let angles = cell_centre_angles(h, d, p);
-            let (l, v) = crate::coords::from_rusinkiewicz(&angles);
+            let (v, l) = crate::coords::from_rusinkiewicz(&angles);
             if l.z <= 0.0 || v.z <= 0.0 {
                 assert_eq!(
                     table.cell(index),
@@ -437,7 +437,7 @@ mod tests {
                 );
                 continue;
             }
-            let expect = brdf.eval_f64(l, v);
+            let expect = brdf.eval_f64(v, l);
             let cell = table
                 .cell(index)
                 .expect("cells above the horizon are valid");
@@ -462,7 +462,7 @@ mod tests {
         assert!(checked > 1000);
         // Cells whose light direction is below the horizon are not measured.
         let below = cell_index(89, 89, 0);
-        let (l, _) = crate::coords::from_rusinkiewicz(&cell_centre_angles(89, 89, 0));
+        let (_, l) = crate::coords::from_rusinkiewicz(&cell_centre_angles(89, 89, 0));
         assert!(l.z < 0.0);
         assert_eq!(table.cell(below), None);
         assert_eq!(table.stored()[below], crate::merl::NOT_MEASURED);

@@ -84,7 +84,7 @@ impl SphereRenderer {
                 continue;
             }
             pixels.push(p.index);
-            inputs.push(network_input(p.light, p.view));
+            inputs.push(network_input(p.view, p.light));
             cos.push(p.light.z);
         }
         let layout = Layout::new(hidden);
