@@ -354,7 +354,7 @@ fn run_compare(args: &CompareArgs) -> Result<()> {
     let row = |label: String, e: &metrics::ImageErrors| {
         format!(
             "  {label:>9}{:>12.4e}{:>12.4e}{:>9.2}{:>8.4}\n",
-            e.mae, e.rmse, e.psnr, e.ssim
+            e.mae, e.rmse, e.psnr_peak_reference, e.ssim
         )
     };
     for (deg, e) in &c.per_light {

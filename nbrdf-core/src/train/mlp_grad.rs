@@ -9,6 +9,10 @@
 //! are 0 forward and get 0 gradient backward, and Adam leaves zero-gradient parameters at 0.
 //! A chunk's gradient depends only on its samples, which is what makes training independent of
 //! the thread count (see [`crate::train`]).
+//!
+//! The forward pass here is a deliberate second copy of the network's definition (the reference
+//! is [`crate::network::Layer::affine_into`] with [`crate::fastmath`]'s `relu` and `expm1`), laid
+//! out for gradients; `tests::outputs_match_the_network_evaluator` holds the two together.
 
 use super::dataset::Sample;
 use super::gemm::{column_sums, gemm, Init, Post, Strided, VEC};

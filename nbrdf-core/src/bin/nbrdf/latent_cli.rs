@@ -496,7 +496,7 @@ pub struct AeEvalArgs {
 }
 
 fn errors_json(e: &nbrdf_core::metrics::ImageErrors) -> serde_json::Value {
-    serde_json::json!({"mae": e.mae, "rmse": e.rmse, "ssim": e.ssim, "psnr": e.psnr})
+    serde_json::json!({"mae": e.mae, "rmse": e.rmse, "ssim": e.ssim, "psnr": e.psnr_peak_reference})
 }
 
 /// `nbrdf ae eval`: AE and PCA reconstructions of the test split in image space (64 x 64 sphere,
