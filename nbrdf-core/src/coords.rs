@@ -106,6 +106,13 @@ pub fn from_rusinkiewicz(angles: &RusinkiewiczAngles) -> (DVec3, DVec3) {
     (view, light)
 }
 
+/// The unit direction at polar angle `theta` (radians from the normal) and azimuth `phi`.
+pub fn spherical_direction(theta: f64, phi: f64) -> DVec3 {
+    let (sin_t, cos_t) = theta.sin_cos();
+    let (sin_p, cos_p) = phi.sin_cos();
+    DVec3::new(sin_t * cos_p, sin_t * sin_p, cos_t)
+}
+
 /// `cos(theta_l)` from the angles: `cos td cos th - sin td cos pd sin th`.
 pub fn cos_theta_light(angles: &RusinkiewiczAngles) -> f64 {
     angles.theta_d.cos() * angles.theta_h.cos()
@@ -182,20 +189,12 @@ mod tests {
     use proptest::prelude::*;
     use std::f64::consts::{FRAC_PI_2, PI};
 
-    fn hemisphere(theta: f64, phi: f64) -> DVec3 {
-        DVec3::new(
-            theta.sin() * phi.cos(),
-            theta.sin() * phi.sin(),
-            theta.cos(),
-        )
-    }
-
     proptest! {
         #[test]
         fn roundtrip_recovers_directions(
             tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
         ) {
-            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
             let angles = to_rusinkiewicz(v, l);
             let (v2, l2) = from_rusinkiewicz(&angles);
             prop_assert!((l - l2).length() < 1e-9, "{l} vs {l2}");
@@ -207,7 +206,7 @@ mod tests {
         fn f32_input_matches_f64_angles(
             tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
         ) {
-            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
             let hd = half_diff(v, l);
             let x = network_input(v.as_vec3(), l.as_vec3());
             let sin_th = (hd.half.x.powi(2) + hd.half.y.powi(2)).sqrt();
@@ -232,10 +231,10 @@ mod tests {
     #[test]
     fn degenerate_cases_are_finite() {
         let cases = [
-            (DVec3::Z, DVec3::Z),                         // l = v = n: theta_h = theta_d = 0
-            (hemisphere(0.3, 0.2), hemisphere(0.3, 0.2)), // l = v
-            (DVec3::X, -DVec3::X),                        // l + v = 0
-            (DVec3::ZERO, DVec3::Z),                      // zero vector
+            (DVec3::Z, DVec3::Z), // l = v = n: theta_h = theta_d = 0
+            (spherical_direction(0.3, 0.2), spherical_direction(0.3, 0.2)), // l = v
+            (DVec3::X, -DVec3::X), // l + v = 0
+            (DVec3::ZERO, DVec3::Z), // zero vector
             (DVec3::new(0.0, 0.0, 3.0), DVec3::new(1.0, 0.0, 1.0)), // not unit length
             (DVec3::new(f64::NAN, 0.0, 1.0), DVec3::Z),
         ];
@@ -256,7 +255,7 @@ mod tests {
 
     #[test]
     fn mirror_configuration_has_zero_theta_h() {
-        let l = hemisphere(0.7, 1.0);
+        let l = spherical_direction(0.7, 1.0);
         let v = DVec3::new(-l.x, -l.y, l.z);
         let a = to_rusinkiewicz(v, l);
         assert!(a.theta_h.abs() < 1e-7);

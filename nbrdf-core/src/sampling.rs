@@ -370,8 +370,7 @@ mod tests {
     const EXPONENTS: [f64; 7] = [0.0, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5];
 
     fn dir(theta_deg: f64, phi: f64) -> DVec3 {
-        let t = theta_deg.to_radians();
-        DVec3::new(t.sin() * phi.cos(), t.sin() * phi.sin(), t.cos())
+        crate::coords::spherical_direction(theta_deg.to_radians(), phi)
     }
 
     fn mirror(v: DVec3) -> DVec3 {

@@ -176,17 +176,10 @@ pub(crate) fn finite_non_negative(x: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::coords::spherical_direction;
     use crate::merl::{cell_centre_angles, cell_index, Interpolation, CELLS, SCALE};
     use proptest::prelude::*;
     use std::f64::consts::{FRAC_PI_2, PI};
-
-    fn hemisphere(theta: f64, phi: f64) -> DVec3 {
-        DVec3::new(
-            theta.sin() * phi.cos(),
-            theta.sin() * phi.sin(),
-            theta.cos(),
-        )
-    }
 
     fn assert_close(got: [f64; 3], expect: [f64; 3], what: &str) {
         for c in 0..3 {
@@ -268,7 +261,7 @@ mod tests {
     fn off_axis_values_match_an_independent_reference() {
         // l at (theta 0.5, phi 0.3), v at (theta 0.7, phi 2.9): theta_h = 0.2041, c = 0.8386.
         // Reference values computed in Python from the formulas of DESIGN.md section 8.
-        let (l, v) = (hemisphere(0.5, 0.3), hemisphere(0.7, 2.9));
+        let (l, v) = (spherical_direction(0.5, 0.3), spherical_direction(0.7, 2.9));
         let cases = [
             (
                 ModelKind::Sgd,
@@ -323,7 +316,7 @@ mod tests {
         let err = AnalyticBrdf::from_catalogue(ModelKind::Abc, "unobtainium").unwrap_err();
         assert!(matches!(err, NbrdfError::UnknownMaterial { ref name } if name == "unobtainium"));
         assert!(err.to_string().contains("list-materials"));
-        let (l, v) = (hemisphere(0.5, 0.3), hemisphere(0.7, 2.9));
+        let (l, v) = (spherical_direction(0.5, 0.3), spherical_direction(0.7, 2.9));
         for model in ModelKind::ALL {
             let a = fit(model, "metallic-gold").eval_f64(v, l);
             assert_eq!(a, fit(model, "gold-metallic-paint").eval_f64(v, l));
@@ -349,7 +342,7 @@ mod tests {
         let phis = [0.0, 0.9, 2.0, PI, 4.4];
         thetas
             .iter()
-            .flat_map(|&t| phis.iter().map(move |&p| hemisphere(t, p)))
+            .flat_map(|&t| phis.iter().map(move |&p| spherical_direction(t, p)))
             .collect()
     }
 
@@ -379,7 +372,7 @@ mod tests {
 
     #[test]
     fn zero_below_the_horizon_and_on_degenerate_input() {
-        let up = hemisphere(0.4, 1.0);
+        let up = spherical_direction(0.4, 1.0);
         let bad = [
             DVec3::new(0.5, 0.5, -0.1),
             DVec3::X,
@@ -394,8 +387,12 @@ mod tests {
                 assert_eq!(brdf.eval_f64(b, up), [0.0; 3], "{model} {b}");
             }
             // Non-unit input is normalised.
-            let f = brdf.eval_f64(0.1 * hemisphere(0.9, 2.0), 3.0 * up);
-            assert_close(f, brdf.eval_f64(hemisphere(0.9, 2.0), up), "scaled input");
+            let f = brdf.eval_f64(0.1 * spherical_direction(0.9, 2.0), 3.0 * up);
+            assert_close(
+                f,
+                brdf.eval_f64(spherical_direction(0.9, 2.0), up),
+                "scaled input",
+            );
         }
     }
 
@@ -406,7 +403,7 @@ mod tests {
             material in 0usize..100, tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
         ) {
             let name = catalogue::material_names()[material];
-            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
             for model in ModelKind::ALL {
                 let brdf = fit(model, name);
                 let (a, b) = (brdf.eval_f64(v, l), brdf.eval_f64(l, v));

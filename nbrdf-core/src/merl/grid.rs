@@ -12,7 +12,7 @@ pub const N_PHI_D: usize = 180;
 pub const CELLS: usize = N_THETA_H * N_THETA_D * N_PHI_D;
 /// Stored value times scale = reflectance, per channel.
 pub const SCALE: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
-/// The stored value [`MerlTable::tabulate`] writes for cells it cannot fill (MERL's own marker).
+/// The stored value [`super::MerlTable::tabulate`] writes for cells it cannot fill (MERL's own marker).
 pub const NOT_MEASURED: f64 = -1.0;
 
 /// Flat index of a cell (channel 0): `i_phi_d + 180 (i_theta_d + 90 i_theta_h)`.

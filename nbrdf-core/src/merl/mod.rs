@@ -1,4 +1,4 @@
-//! MERL-format BRDF tables (design notes section 3).
+//! MERL-format BRDF tables (DESIGN.md section 3).
 //!
 //! Grid convention: cell `i` covers the continuous index interval `[i, i + 1)`, so its value is
 //! the BRDF at the cell centre, continuous index `i + 0.5` ("cell-centre angles", see
@@ -9,7 +9,7 @@
 //! * this file: the [`MerlTable`] type, tabulation, statistics and the [`Brdf`] implementation;
 //! * [`grid`]: grid dimensions, [`SCALE`], cell indices and angles;
 //! * [`io`]: reading, validating and writing files;
-//! * [`lookup`]: nearest and trilinear lookup.
+//! * `lookup.rs`: nearest and trilinear lookup ([`MerlTable::lookup`], [`MerlTable::eval_f64`]).
 
 pub mod grid;
 pub mod io;

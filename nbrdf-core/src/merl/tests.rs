@@ -2,7 +2,7 @@
 //! against closed forms, and the symmetries of the folds.
 
 use super::*;
-use crate::coords;
+use crate::coords::{self, spherical_direction};
 use crate::error::NbrdfError;
 use proptest::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -34,14 +34,6 @@ fn temp_path(name: &str) -> std::path::PathBuf {
 
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()))
-}
-
-fn hemisphere(theta: f64, phi: f64) -> DVec3 {
-    DVec3::new(
-        theta.sin() * phi.cos(),
-        theta.sin() * phi.sin(),
-        theta.cos(),
-    )
 }
 
 #[test]
@@ -363,7 +355,7 @@ proptest! {
         tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
     ) {
         let t = shared_table().clone().with_phi_fold(PhiFold::Mirror);
-        let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+        let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
         let flip = DVec3::new(1.0, -1.0, 1.0);
         let a = t.eval_f64(v, l, Interpolation::Trilinear);
         let b = t.eval_f64(v * flip, l * flip, Interpolation::Trilinear);
@@ -421,7 +413,7 @@ fn invalid_neighbours_are_left_out() {
 #[test]
 fn eval_is_zero_below_the_horizon_and_total() {
     let t = shared_table();
-    let up = hemisphere(0.4, 0.3);
+    let up = spherical_direction(0.4, 0.3);
     let cases = [
         (DVec3::new(1.0, 0.0, 0.0), up),
         (up, DVec3::new(0.3, 0.1, -0.2)),
@@ -451,7 +443,7 @@ fn eval_is_zero_below_the_horizon_and_total() {
     // Non-unit input: the same as unit input.
     for (l, v) in [
         (DVec3::new(1.0, 0.0, 1e-3), up),
-        (up, hemisphere(1.0, -2.0)),
+        (up, spherical_direction(1.0, -2.0)),
     ] {
         let (a, b) = (
             t.eval_f64(0.5 * v, 3.0 * l, Interpolation::Trilinear),
@@ -464,7 +456,7 @@ fn eval_is_zero_below_the_horizon_and_total() {
 #[test]
 fn eval_matches_lookup_of_the_angles() {
     let t = shared_table();
-    let (l, v) = (hemisphere(0.5, 0.2), hemisphere(1.1, 2.9));
+    let (l, v) = (spherical_direction(0.5, 0.2), spherical_direction(1.1, 2.9));
     let a = coords::to_rusinkiewicz(v, l);
     for mode in [Interpolation::Nearest, Interpolation::Trilinear] {
         assert_eq!(t.eval_f64(v, l, mode), t.lookup(&a, mode));
@@ -484,7 +476,7 @@ fn nearest_is_reciprocal_on_generic_directions() {
         (1.4, -2.0, 0.2, 0.5),
         (0.9, 3.0, 0.7, -1.0),
     ] {
-        let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+        let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
         assert_eq!(
             t.eval_f64(v, l, Interpolation::Nearest),
             t.eval_f64(l, v, Interpolation::Nearest)
@@ -499,7 +491,7 @@ proptest! {
         tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
     ) {
         let t = shared_table();
-        let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+        let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
         let a = t.eval_f64(v, l, Interpolation::Trilinear);
         let b = t.eval_f64(l, v, Interpolation::Trilinear);
         prop_assert!((0..3).all(|c| close(a[c], b[c])), "{a:?} vs {b:?}");
@@ -520,8 +512,8 @@ fn batch_matches_single_evaluation() {
     let mut light = vec![0.0f32; 3 * n];
     let mut view = vec![0.0f32; 3 * n];
     for i in 0..n {
-        let l = hemisphere(1.7 * (i as f64 / n as f64) - 0.05, i as f64);
-        let v = hemisphere(1.5 * ((i * 7 % n) as f64 / n as f64), -(i as f64) * 0.3);
+        let l = spherical_direction(1.7 * (i as f64 / n as f64) - 0.05, i as f64);
+        let v = spherical_direction(1.5 * ((i * 7 % n) as f64 / n as f64), -(i as f64) * 0.3);
         for k in 0..3 {
             light[k * n + i] = l[k] as f32;
             view[k * n + i] = v[k] as f32;

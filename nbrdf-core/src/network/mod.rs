@@ -1,11 +1,11 @@
-//! The NBRDF network (design notes section 4): `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1`,
+//! The NBRDF network (DESIGN.md section 4): `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1`,
 //! clamped at 0, with `x` the isotropic Rusinkiewicz input of [`crate::coords::network_input`].
 //! Any hidden width.
 //!
 //! * this file: the [`Nbrdf`] type, its [`Layer`]s (the one dense-layer definition of the crate,
 //!   [`Layer::affine_into`]), [`paper_init`], flat parameter vectors and single evaluation;
-//! * [`format`]: the versioned `*.nbrdf.json` file format, reading, writing and validation;
-//! * [`kernel`]: the batched, vectorised and threaded evaluation, the renderer's hot loop.
+//! * `format.rs`: the versioned `*.nbrdf.json` file format, reading, writing and validation;
+//! * `kernel.rs`: the batched, vectorised and threaded evaluation, the renderer's hot loop.
 
 mod format;
 mod kernel;

@@ -129,12 +129,7 @@ fn test_net(hidden: usize, seed: u64) -> Nbrdf {
 }
 
 fn hemisphere(theta: f64, phi: f64) -> Vec3 {
-    DVec3::new(
-        theta.sin() * phi.cos(),
-        theta.sin() * phi.sin(),
-        theta.cos(),
-    )
-    .as_vec3()
+    crate::coords::spherical_direction(theta, phi).as_vec3()
 }
 
 /// Random pairs over the whole hemisphere plus grazing, mirror and degenerate ones.

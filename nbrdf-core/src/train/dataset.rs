@@ -193,7 +193,9 @@ pub fn directions(sampling: AngularSampling, u: [f64; 4]) -> (DVec3, DVec3, Rusi
     }
 }
 
-/// Uniform on the upper hemisphere: `cos theta` is uniform (Archimedes).
+/// Uniform on the upper hemisphere: `cos theta` is uniform (Archimedes). Not
+/// [`crate::sampling::uniform_hemisphere`]: that one rounds `sin theta` differently, and a seed's
+/// training samples must not change.
 fn uniform_hemisphere(u_cos: f64, u_phi: f64) -> DVec3 {
     let cos = u_cos;
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
