@@ -1,7 +1,18 @@
 """Independent NumPy references and helpers for the plugin tests.
 
 Everything here is written from DESIGN.md (sections 2-4 and 6) in float64 NumPy, without
-calling the Rust code, so that the tests compare two implementations.
+calling the Rust code, so that the tests compare two implementations. These are the deliberate
+second copies of the Rust formulas; their twins in ``nbrdf-core``:
+
+* ``to_angles`` / ``from_angles``: ``coords::to_rusinkiewicz`` / ``coords::from_rusinkiewicz``
+  (held together by ``test_merl_bsdf.py``). Unlike the Rust API,
+  which takes and returns ``(view, light)``, these keep their historical ``(light, view)`` order;
+  the Mitsuba wrappers below (``bsdf_eval`` and friends) take ``(view, light)``.
+* ``SCALE``, ``CELLS``, ``continuous_index``, ``merl_trilinear``: ``merl::grid`` and
+  ``merl/lookup.rs`` (``test_merl_bsdf.py``).
+* ``network_input`` / ``nbrdf_reference``: ``coords::network_input`` and the network's
+  ``Layer::affine_into`` forward pass and batched kernel (``test_nbrdf_eval.py``).
+* ``phong_pdf``: ``sampling::SamplingStrategy::pdf`` (``test_sampling.py``).
 """
 
 from __future__ import annotations

@@ -4,36 +4,25 @@
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nbrdf_core::analytic::{AnalyticBrdf, ModelKind};
+use nbrdf_core::rng::SplitMix64;
 use nbrdf_core::{Brdf, Directions, MerlTable, RgbMut};
 
 const PAIRS: usize = 1 << 16;
 
-/// SplitMix64: a fixed, dependency-free stream so every run looks up the same directions.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_f32(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform over the hemisphere (z uniform in [0, 1) by Archimedes).
-    fn hemisphere(&mut self) -> [f32; 3] {
-        let z = self.next_f32();
-        let phi = std::f32::consts::TAU * self.next_f32();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        [r * phi.cos(), r * phi.sin(), z]
-    }
+/// Uniform over the hemisphere (z uniform in [0, 1) by Archimedes), from a fixed stream so every
+/// run looks up the same directions.
+fn hemisphere(rng: &mut SplitMix64) -> [f32; 3] {
+    let z = rng.next_f32();
+    let phi = std::f32::consts::TAU * rng.next_f32();
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    [r * phi.cos(), r * phi.sin(), z]
 }
 
 /// `n` directions, planar `[x.., y.., z..]`.
-fn planar_directions(rng: &mut SplitMix, n: usize) -> Vec<f32> {
+fn planar_directions(rng: &mut SplitMix64, n: usize) -> Vec<f32> {
     let mut out = vec![0.0; 3 * n];
     for i in 0..n {
-        let d = rng.hemisphere();
+        let d = hemisphere(rng);
         for k in 0..3 {
             out[k * n + i] = d[k];
         }
@@ -49,7 +38,7 @@ fn table() -> MerlTable {
 
 fn bench_lookup(c: &mut Criterion) {
     let table = table();
-    let mut rng = SplitMix(7);
+    let mut rng = SplitMix64::from_state(7);
     let light = planar_directions(&mut rng, PAIRS);
     let view = planar_directions(&mut rng, PAIRS);
     let (l, v) = (
@@ -65,7 +54,7 @@ fn bench_lookup(c: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0.0f32;
             for i in 0..PAIRS {
-                acc += black_box(&table).eval(l.get(i), v.get(i))[1];
+                acc += black_box(&table).eval(v.get(i), l.get(i))[1];
             }
             acc
         })

@@ -5,7 +5,7 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
-use nbrdf_core::network::SplitMix64;
+use nbrdf_core::rng::SplitMix64;
 use nbrdf_core::sampling::{pdf_batch, sample_batch, SamplingStrategy};
 use nbrdf_core::{Brdf, Directions, DirectionsMut, Nbrdf, RgbMut};
 
@@ -14,7 +14,7 @@ const SCALAR_BATCH: usize = 1 << 14;
 
 /// Planar `[x.., y.., z..]` directions, uniform on the upper hemisphere.
 fn hemisphere_directions(n: usize, seed: u64) -> Vec<f32> {
-    let mut rng = SplitMix64::new(seed);
+    let mut rng = SplitMix64::from_state(seed);
     let mut planar = vec![0.0f32; 3 * n];
     for i in 0..n {
         let z = rng.next_f64();
@@ -28,7 +28,7 @@ fn hemisphere_directions(n: usize, seed: u64) -> Vec<f32> {
 }
 
 fn uniforms(n: usize, seed: u64) -> Vec<f32> {
-    let mut rng = SplitMix64::new(seed);
+    let mut rng = SplitMix64::from_state(seed);
     (0..3 * n).map(|_| rng.next_f32()).collect()
 }
 
@@ -95,7 +95,7 @@ fn network_eval(c: &mut Criterion) {
         b.iter(|| {
             let mut sum = 0.0f32;
             for i in 0..SCALAR_BATCH {
-                sum += net.eval(black_box(l.get(i)), black_box(v.get(i)))[0];
+                sum += net.eval(black_box(v.get(i)), black_box(l.get(i)))[0];
             }
             sum
         })

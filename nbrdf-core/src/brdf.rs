@@ -115,13 +115,13 @@ impl<'a> RgbMut<'a> {
     }
 }
 
-/// An isotropic reflectance function `f_r(light, view)` in linear RGB.
+/// An isotropic reflectance function `f_r(view, light)` in linear RGB.
 pub trait Brdf: Send + Sync {
-    /// `f_r(light, view)` (not cosine weighted). Zero when either direction is at or below the
+    /// `f_r(view, light)` (not cosine weighted). Zero when either direction is at or below the
     /// horizon; finite and non-negative for every input, unit length or not.
-    fn eval(&self, light: Vec3, view: Vec3) -> [f32; 3];
+    fn eval(&self, view: Vec3, light: Vec3) -> [f32; 3];
 
-    /// `f_r(light, view) * cos(theta_light)` for a batch (what Mitsuba's `BSDF.eval` returns).
+    /// `f_r(view, light) * cos(theta_light)` for a batch (what Mitsuba's `BSDF.eval` returns).
     /// `view`, `light` and `out` have the same length (the caller checks). Implementations
     /// override this with a vectorised, multi-threaded version.
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
@@ -129,7 +129,7 @@ pub trait Brdf: Send + Sync {
         for i in 0..view.len() {
             let l = light.get(i);
             let cos = cos_theta_light(l);
-            let f = self.eval(l, view.get(i));
+            let f = self.eval(view.get(i), l);
             out.set(i, [f[0] * cos, f[1] * cos, f[2] * cos]);
         }
     }

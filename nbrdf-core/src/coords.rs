@@ -1,5 +1,6 @@
 //! Rusinkiewicz's half/difference parameterisation (DESIGN.md section 2).
 //!
+//! Directions come in Mitsuba's order, view then light (see the crate's conventions).
 //! `h = normalize(l + v)`, `d = R_y(-theta_h) R_z(-phi_h) l`. Every function here is total: unit
 //! length is not assumed, and the degenerate configurations (`l = v`, `theta_h = 0`, `l + v = 0`,
 //! zero vectors) give finite angles instead of NaN.
@@ -37,8 +38,8 @@ fn normalize_or_normal(v: DVec3) -> DVec3 {
     }
 }
 
-/// The half and difference vectors of a light/view pair.
-pub fn half_diff(light: DVec3, view: DVec3) -> HalfDiff {
+/// The half and difference vectors of a view/light pair.
+pub fn half_diff(view: DVec3, light: DVec3) -> HalfDiff {
     let l = normalize_or_normal(light);
     let v = normalize_or_normal(view);
     // l + v = 0 only happens with one direction below the horizon, where every BRDF is 0; the
@@ -63,9 +64,9 @@ pub fn half_diff(light: DVec3, view: DVec3) -> HalfDiff {
     HalfDiff { half, diff }
 }
 
-/// Rusinkiewicz angles of a light/view pair.
-pub fn to_rusinkiewicz(light: DVec3, view: DVec3) -> RusinkiewiczAngles {
-    let HalfDiff { half, diff } = half_diff(light, view);
+/// Rusinkiewicz angles of a view/light pair.
+pub fn to_rusinkiewicz(view: DVec3, light: DVec3) -> RusinkiewiczAngles {
+    let HalfDiff { half, diff } = half_diff(view, light);
     let sin_theta_h = (half.x * half.x + half.y * half.y).sqrt();
     let phi_h = if sin_theta_h > SIN_THETA_H_EPS {
         half.y.atan2(half.x)
@@ -80,7 +81,7 @@ pub fn to_rusinkiewicz(light: DVec3, view: DVec3) -> RusinkiewiczAngles {
     }
 }
 
-/// Light and view directions of a set of angles: `l = R_z(phi_h) R_y(theta_h) d`,
+/// View and light directions of a set of angles, in that order: `l = R_z(phi_h) R_y(theta_h) d`,
 /// `v = 2 (l . h) h - l`.
 pub fn from_rusinkiewicz(angles: &RusinkiewiczAngles) -> (DVec3, DVec3) {
     let (sin_td, cos_td) = angles.theta_d.sin_cos();
@@ -102,7 +103,14 @@ pub fn from_rusinkiewicz(angles: &RusinkiewiczAngles) -> (DVec3, DVec3) {
     );
     let half = DVec3::new(sin_th * cos_ph, sin_th * sin_ph, cos_th);
     let view = 2.0 * light.dot(half) * half - light;
-    (light, view)
+    (view, light)
+}
+
+/// The unit direction at polar angle `theta` (radians from the normal) and azimuth `phi`.
+pub fn spherical_direction(theta: f64, phi: f64) -> DVec3 {
+    let (sin_t, cos_t) = theta.sin_cos();
+    let (sin_p, cos_p) = phi.sin_cos();
+    DVec3::new(sin_t * cos_p, sin_t * sin_p, cos_t)
 }
 
 /// `cos(theta_l)` from the angles: `cos td cos th - sin td cos pd sin th`.
@@ -111,11 +119,11 @@ pub fn cos_theta_light(angles: &RusinkiewiczAngles) -> f64 {
         - angles.theta_d.sin() * angles.phi_d.cos() * angles.theta_h.sin()
 }
 
-/// The isotropic network input `[sin th, 0, cos th, d.x, d.y, d.z]` of one light/view pair, from
+/// The isotropic network input `[sin th, 0, cos th, d.x, d.y, d.z]` of one view/light pair, from
 /// scalar components so that batched loops over structure-of-arrays data vectorise (square roots
 /// and selects only, no trigonometry, no branches the compiler cannot turn into blends).
 #[inline(always)]
-pub fn network_input_components(lx: f32, ly: f32, lz: f32, vx: f32, vy: f32, vz: f32) -> [f32; 6] {
+pub fn network_input_components(vx: f32, vy: f32, vz: f32, lx: f32, ly: f32, lz: f32) -> [f32; 6] {
     let (lx, ly, lz) = normalize_or_normal_f32(lx, ly, lz);
     let (vx, vy, vz) = normalize_or_normal_f32(vx, vy, vz);
     let (hx, hy, hz) = (lx + vx, ly + vy, lz + vz);
@@ -171,8 +179,8 @@ fn normalize_or_normal_f32(x: f32, y: f32, z: f32) -> (f32, f32, f32) {
 
 /// [`network_input_components`] for `glam` vectors.
 #[inline]
-pub fn network_input(light: Vec3, view: Vec3) -> [f32; 6] {
-    network_input_components(light.x, light.y, light.z, view.x, view.y, view.z)
+pub fn network_input(view: Vec3, light: Vec3) -> [f32; 6] {
+    network_input_components(view.x, view.y, view.z, light.x, light.y, light.z)
 }
 
 #[cfg(test)]
@@ -181,22 +189,14 @@ mod tests {
     use proptest::prelude::*;
     use std::f64::consts::{FRAC_PI_2, PI};
 
-    fn hemisphere(theta: f64, phi: f64) -> DVec3 {
-        DVec3::new(
-            theta.sin() * phi.cos(),
-            theta.sin() * phi.sin(),
-            theta.cos(),
-        )
-    }
-
     proptest! {
         #[test]
         fn roundtrip_recovers_directions(
             tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
         ) {
-            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
-            let angles = to_rusinkiewicz(l, v);
-            let (l2, v2) = from_rusinkiewicz(&angles);
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
+            let angles = to_rusinkiewicz(v, l);
+            let (v2, l2) = from_rusinkiewicz(&angles);
             prop_assert!((l - l2).length() < 1e-9, "{l} vs {l2}");
             prop_assert!((v - v2).length() < 1e-9, "{v} vs {v2}");
             prop_assert!((cos_theta_light(&angles) - l.z).abs() < 1e-9);
@@ -206,9 +206,9 @@ mod tests {
         fn f32_input_matches_f64_angles(
             tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
         ) {
-            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
-            let hd = half_diff(l, v);
-            let x = network_input(l.as_vec3(), v.as_vec3());
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
+            let hd = half_diff(v, l);
+            let x = network_input(v.as_vec3(), l.as_vec3());
             let sin_th = (hd.half.x.powi(2) + hd.half.y.powi(2)).sqrt();
             let expect = [sin_th, 0.0, hd.half.z, hd.diff.x, hd.diff.y, hd.diff.z];
             for k in 0..6 {
@@ -220,10 +220,10 @@ mod tests {
         fn any_input_gives_finite_angles(
             l in proptest::array::uniform3(-2.0f64..2.0), v in proptest::array::uniform3(-2.0f64..2.0)
         ) {
-            let a = to_rusinkiewicz(DVec3::from(l), DVec3::from(v));
+            let a = to_rusinkiewicz(DVec3::from(v), DVec3::from(l));
             prop_assert!(a.theta_h.is_finite() && a.phi_h.is_finite());
             prop_assert!(a.theta_d.is_finite() && a.phi_d.is_finite());
-            let x = network_input(DVec3::from(l).as_vec3(), DVec3::from(v).as_vec3());
+            let x = network_input(DVec3::from(v).as_vec3(), DVec3::from(l).as_vec3());
             prop_assert!(x.iter().all(|c| c.is_finite()));
         }
     }
@@ -231,22 +231,22 @@ mod tests {
     #[test]
     fn degenerate_cases_are_finite() {
         let cases = [
-            (DVec3::Z, DVec3::Z),                         // l = v = n: theta_h = theta_d = 0
-            (hemisphere(0.3, 0.2), hemisphere(0.3, 0.2)), // l = v
-            (DVec3::X, -DVec3::X),                        // l + v = 0
-            (DVec3::ZERO, DVec3::Z),                      // zero vector
+            (DVec3::Z, DVec3::Z), // l = v = n: theta_h = theta_d = 0
+            (spherical_direction(0.3, 0.2), spherical_direction(0.3, 0.2)), // l = v
+            (DVec3::X, -DVec3::X), // l + v = 0
+            (DVec3::ZERO, DVec3::Z), // zero vector
             (DVec3::new(0.0, 0.0, 3.0), DVec3::new(1.0, 0.0, 1.0)), // not unit length
             (DVec3::new(f64::NAN, 0.0, 1.0), DVec3::Z),
         ];
         for (l, v) in cases {
-            let a = to_rusinkiewicz(l, v);
+            let a = to_rusinkiewicz(v, l);
             assert!(
                 [a.theta_h, a.phi_h, a.theta_d, a.phi_d]
                     .iter()
                     .all(|x| x.is_finite()),
                 "{l} {v} -> {a:?}"
             );
-            let x = network_input(l.as_vec3(), v.as_vec3());
+            let x = network_input(v.as_vec3(), l.as_vec3());
             assert!(x.iter().all(|c| c.is_finite()), "{l} {v} -> {x:?}");
         }
         let a = to_rusinkiewicz(DVec3::Z, DVec3::Z);
@@ -255,9 +255,9 @@ mod tests {
 
     #[test]
     fn mirror_configuration_has_zero_theta_h() {
-        let l = hemisphere(0.7, 1.0);
+        let l = spherical_direction(0.7, 1.0);
         let v = DVec3::new(-l.x, -l.y, l.z);
-        let a = to_rusinkiewicz(l, v);
+        let a = to_rusinkiewicz(v, l);
         assert!(a.theta_h.abs() < 1e-7);
         assert!((a.theta_d - 0.7).abs() < 1e-9);
     }

@@ -13,20 +13,28 @@
 //! * [`brdf`]     – the [`brdf::Brdf`] trait shared by tables and networks, SoA batch types.
 //! * [`error`]    – the crate's error type.
 //!
-//! Conventions (see DESIGN.md section 2): local shading frame with z = normal; `light` is the
-//! direction towards the light (Mitsuba's `wo`), `view` towards the viewer (Mitsuba's `si.wi`).
-//! Batches are structure-of-arrays: x, y and z (or r, g and b) each in their own slice.
+//! Conventions: local shading frame with z = normal; `view` is the direction towards the viewer
+//! (Mitsuba's `si.wi`), `light` towards the light (Mitsuba's `wo`). Every function that takes or
+//! returns both directions does so in Mitsuba's order, **view first, then light**:
+//! [`Brdf::eval`]`(view, light)`, [`Brdf::eval_cos_batch`]`(view, light, out)`,
+//! [`coords::to_rusinkiewicz`]`(view, light)`, [`coords::from_rusinkiewicz`] returns
+//! `(view, light)`, [`sampling::SamplingStrategy::pdf`]`(view, light)`, and the C ABI's
+//! `*_eval(handle, view, light, ...)`. Both are plain vectors, so a swap compiles: name
+//! arguments `view`/`light` (or `v`/`l`) at call sites. Batches are structure-of-arrays: x, y
+//! and z (or r, g and b) each in their own slice.
 
 pub mod analytic;
 pub mod brdf;
 pub mod coords;
 pub mod error;
+pub mod fastmath;
 pub mod latent;
 pub mod lobe_fit;
 pub mod merl;
 pub mod metrics;
 pub mod network;
 pub mod phong_fit;
+pub mod rng;
 pub mod sampling;
 pub mod train;
 

@@ -129,7 +129,7 @@ fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) ->
             if light.z <= 0.0 {
                 continue;
             }
-            let f = target(&to_rusinkiewicz(light, view)).unwrap_or([0.0; 3]);
+            let f = target(&to_rusinkiewicz(view, light)).unwrap_or([0.0; 3]);
             let f_mean = f.iter().map(|x| x.max(0.0)).sum::<f64>() / 3.0;
             let g = f_mean * light.z;
             if !(g.is_finite() && g > 0.0) {
@@ -317,8 +317,8 @@ mod tests {
                 continue;
             }
             let (l, v) = (s.light.as_dvec3(), view.as_dvec3());
-            let a = to_rusinkiewicz(l, v);
-            let (l2, _) = from_rusinkiewicz(&a);
+            let a = to_rusinkiewicz(v, l);
+            let (_, l2) = from_rusinkiewicz(&a);
             let g = target(&a).unwrap()[0] * l2.z;
             let ratio = g / s.pdf as f64;
             m1 += ratio;

@@ -8,12 +8,12 @@
 //! do; the first material is the reference.
 
 use crate::brdf::{Brdf, Directions, RgbMut};
-use crate::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
+use crate::coords::RusinkiewiczAngles;
 use crate::error::{NbrdfError, Result};
 use crate::merl::{MerlTable, PhiFold};
 use crate::network::Nbrdf;
+use crate::rng::{SplitMix64, Stream};
 use crate::train::dataset::{directions, AngularSampling};
-use crate::train::rng::{SplitMix64, Stream};
 use glam::Vec3;
 use serde::Serialize;
 
@@ -58,13 +58,7 @@ impl Material {
     pub fn value_at(&self, angles: &RusinkiewiczAngles) -> Option<[f64; 3]> {
         match self {
             Material::Table(t) => t.lookup_valid(angles),
-            Material::Network(n) => {
-                let (l, v) = from_rusinkiewicz(angles);
-                Some(
-                    n.eval_input(network_input(l.as_vec3(), v.as_vec3()))
-                        .map(f64::from),
-                )
-            }
+            Material::Network(n) => Some(n.eval_at_angles(angles)),
         }
     }
 }
@@ -163,8 +157,11 @@ pub fn render_sphere(brdf: &dyn Brdf, size: usize, light_theta: f64) -> Image {
 pub struct ImageErrors {
     pub mae: f64,
     pub rmse: f64,
-    /// `20 log10(max(reference) / rmse)`; infinite for identical images.
-    pub psnr: f64,
+    /// PSNR with the reference image's maximum as the peak, `20 log10(max(reference) / rmse)`;
+    /// infinite for identical images. (Not the `psnr` of `python/metrics.py`, whose peak is 1.)
+    /// Serialised as `psnr`, the key the JSON reports and their readers use.
+    #[serde(rename = "psnr")]
+    pub psnr_peak_reference: f64,
     /// Mean SSIM over the RGB channels of the tone-mapped images.
     pub ssim: f64,
 }
@@ -182,7 +179,7 @@ pub fn image_errors(reference: &Image, test: &Image) -> ImageErrors {
     }
     let n = count.max(1) as f64;
     let rmse = (sq / n).sqrt();
-    let psnr = if rmse > 0.0 {
+    let psnr_peak_reference = if rmse > 0.0 {
         20.0 * (peak.max(f64::MIN_POSITIVE) / rmse).log10()
     } else {
         f64::INFINITY
@@ -200,7 +197,7 @@ pub fn image_errors(reference: &Image, test: &Image) -> ImageErrors {
     ImageErrors {
         mae: abs / n,
         rmse,
-        psnr,
+        psnr_peak_reference,
         ssim,
     }
 }
@@ -281,7 +278,7 @@ pub fn log_error(
             rng.next_f64(),
             rng.next_f64(),
         ];
-        let (light, view, angles) = directions(sampling, u);
+        let (view, light, angles) = directions(sampling, u);
         if light.z <= 0.0 || view.z <= 0.0 {
             continue;
         }
@@ -335,7 +332,7 @@ pub fn compare(
     let mean = ImageErrors {
         mae: mean_of(|e| e.mae),
         rmse: mean_of(|e| e.rmse),
-        psnr: mean_of(|e| e.psnr),
+        psnr_peak_reference: mean_of(|e| e.psnr_peak_reference),
         ssim: mean_of(|e| e.ssim),
     };
     Ok(Comparison {
@@ -362,7 +359,7 @@ mod tests {
         let a = lambert(0.5);
         let c = compare(&a, &a, 16, 200).unwrap();
         assert_eq!(c.mean.mae, 0.0);
-        assert!(c.mean.psnr.is_infinite() && (c.mean.ssim - 1.0).abs() < 1e-12);
+        assert!(c.mean.psnr_peak_reference.is_infinite() && (c.mean.ssim - 1.0).abs() < 1e-12);
         assert_eq!(c.log_error_adaptive, 0.0);
     }
 

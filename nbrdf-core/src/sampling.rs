@@ -363,14 +363,14 @@ pub fn pdf_batch(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::network::{Nbrdf, SplitMix64};
+    use crate::network::Nbrdf;
+    use crate::rng::SplitMix64;
     use std::f64::consts::PI;
 
     const EXPONENTS: [f64; 7] = [0.0, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5];
 
     fn dir(theta_deg: f64, phi: f64) -> DVec3 {
-        let t = theta_deg.to_radians();
-        DVec3::new(t.sin() * phi.cos(), t.sin() * phi.sin(), t.cos())
+        crate::coords::spherical_direction(theta_deg.to_radians(), phi)
     }
 
     fn mirror(v: DVec3) -> DVec3 {
@@ -500,7 +500,7 @@ mod tests {
 
     #[test]
     fn pdf_is_the_lobe_density_above_the_horizon_and_zero_below() {
-        let mut rng = SplitMix64::new(5);
+        let mut rng = SplitMix64::from_state(5);
         let strategy = SamplingStrategy::BlinnPhong {
             exponent: 30.0,
             specular_weight: 0.6,
@@ -525,7 +525,7 @@ mod tests {
 
     #[test]
     fn sampled_pdf_equals_pdf() {
-        let mut rng = SplitMix64::new(1);
+        let mut rng = SplitMix64::from_state(1);
         let strategies = [
             SamplingStrategy::Uniform,
             SamplingStrategy::Cosine,
@@ -584,7 +584,7 @@ mod tests {
                 }];
             for (t, g) in tests.into_iter().enumerate() {
                 let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
-                let mut rng = SplitMix64::new(17 + t as u64);
+                let mut rng = SplitMix64::from_state(17 + t as u64);
                 let mut sum = 0.0;
                 let mut sum2 = 0.0;
                 for _ in 0..samples {
@@ -679,7 +679,7 @@ mod tests {
             specular_weight: 0.7,
         };
         let n = 3 * TASK_LANES + 17;
-        let mut rng = SplitMix64::new(9);
+        let mut rng = SplitMix64::from_state(9);
         let mut view = vec![0.0f32; 3 * n];
         let mut u = vec![0.0f32; 3 * n];
         for i in 0..n {
@@ -718,7 +718,7 @@ mod tests {
             let s = strategy.sample(v, [u[i], u[n + i], u[2 * n + i]]);
             assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
             assert_eq!(s.pdf, pdf[i]);
-            let f = net.eval(s.light, v);
+            let f = net.eval(v, s.light);
             let cos = crate::brdf::cos_theta_light(s.light);
             for c in 0..3 {
                 let want = if s.pdf > 0.0 { f[c] * cos / s.pdf } else { 0.0 };

@@ -116,7 +116,7 @@ int32_t nbrdf_network_info(const struct NbrdfNetwork *network,
 int32_t nbrdf_network_name(const struct NbrdfNetwork *network,
                            const char **out_name);
 
-// Evaluates `f_r(light, view) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
+// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
 // direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 // `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon.
 //
@@ -161,7 +161,7 @@ int32_t nbrdf_merl_load(const char *path,
 // `merl` is null or a handle from `nbrdf_merl_load` that was not freed yet.
 void nbrdf_merl_free(struct NbrdfMerl *merl);
 
-// Evaluates `f_r(light, view) * cos(theta_light)` of a table (trilinear lookup) for `n`
+// Evaluates `f_r(view, light) * cos(theta_light)` of a table (trilinear lookup) for `n`
 // direction pairs; the layout is that of `nbrdf_network_eval`.
 //
 // # Safety

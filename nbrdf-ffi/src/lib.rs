@@ -573,7 +573,7 @@ pub unsafe extern "C" fn nbrdf_network_name(
     })
 }
 
-/// Evaluates `f_r(light, view) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
+/// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
 /// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 /// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon.
 ///
@@ -655,7 +655,7 @@ pub unsafe extern "C" fn nbrdf_merl_free(merl: *mut NbrdfMerl) {
     unsafe { free_impl(merl) }
 }
 
-/// Evaluates `f_r(light, view) * cos(theta_light)` of a table (trilinear lookup) for `n`
+/// Evaluates `f_r(view, light) * cos(theta_light)` of a table (trilinear lookup) for `n`
 /// direction pairs; the layout is that of `nbrdf_network_eval`.
 ///
 /// # Safety

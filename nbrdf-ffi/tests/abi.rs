@@ -428,7 +428,7 @@ fn check_layouts(brdf: &dyn Brdf, eval: EvalFn<'_>, sample: SampleFn<'_>) {
     let mut rgb = vec![f32::NAN; 3 * n];
     assert_eq!(eval(&view, &light, n, &mut rgb), OK, "{}", last_error());
     for (i, &(v, l)) in pairs.iter().enumerate() {
-        let f = brdf.eval(l, v);
+        let f = brdf.eval(v, l);
         let cos = nbrdf_core::brdf::cos_theta_light(l);
         for c in 0..3 {
             assert_close(
@@ -502,7 +502,7 @@ fn check_layouts(brdf: &dyn Brdf, eval: EvalFn<'_>, sample: SampleFn<'_>) {
                     expected.light
                 );
                 assert_close(pdf_again[i], strategy.pdf(v, l), &what);
-                let f = brdf.eval(l, v);
+                let f = brdf.eval(v, l);
                 let cos = nbrdf_core::brdf::cos_theta_light(l);
                 for c in 0..3 {
                     assert_close(

@@ -18,9 +18,9 @@ pub struct AbcParams {
 }
 
 impl AbcParams {
-    /// `f_r(light, view)`, zero at or below the horizon, finite and non-negative.
-    pub fn eval_f64(&self, light: DVec3, view: DVec3) -> [f64; 3] {
-        let Some(g) = geometry(light, view) else {
+    /// `f_r(view, light)`, zero at or below the horizon, finite and non-negative.
+    pub fn eval_f64(&self, view: DVec3, light: DVec3) -> [f64; 3] {
+        let Some(g) = geometry(view, light) else {
             return [0.0; 3];
         };
         // Everything but A and kd is shared by the channels.

@@ -96,18 +96,18 @@ impl AnalyticBrdf {
         }
     }
 
-    /// `f_r(light, view)` in float64, zero at or below the horizon.
-    pub fn eval_f64(&self, light: glam::DVec3, view: glam::DVec3) -> [f64; 3] {
+    /// `f_r(view, light)` in float64, zero at or below the horizon.
+    pub fn eval_f64(&self, view: glam::DVec3, light: glam::DVec3) -> [f64; 3] {
         match self {
-            AnalyticBrdf::Sgd(p) => p.eval_f64(light, view),
-            AnalyticBrdf::Abc(p) => p.eval_f64(light, view),
+            AnalyticBrdf::Sgd(p) => p.eval_f64(view, light),
+            AnalyticBrdf::Abc(p) => p.eval_f64(view, light),
         }
     }
 
     /// The MERL-format table of this fit at cell-centre angles.
     pub fn tabulate(&self) -> MerlTable {
         MerlTable::tabulate(|angles| {
-            let (light, view) = crate::coords::from_rusinkiewicz(angles);
+            let (view, light) = crate::coords::from_rusinkiewicz(angles);
             // A centre with a direction below the horizon has no reflectance: MerlTable::tabulate
             // stores non-finite values as not measured (as real MERL files and RGL tabulations
             // do), so trilinear lookups near grazing angles leave those cells out instead of
@@ -115,22 +115,22 @@ impl AnalyticBrdf {
             if light.z <= 0.0 || view.z <= 0.0 {
                 return [f64::NAN; 3];
             }
-            self.eval_f64(light, view)
+            self.eval_f64(view, light)
         })
     }
 }
 
 impl Brdf for AnalyticBrdf {
-    fn eval(&self, light: glam::Vec3, view: glam::Vec3) -> [f32; 3] {
-        merl::to_f32_rgb(self.eval_f64(light.as_dvec3(), view.as_dvec3()))
+    fn eval(&self, view: glam::Vec3, light: glam::Vec3) -> [f32; 3] {
+        merl::to_f32_rgb(self.eval_f64(view.as_dvec3(), light.as_dvec3()))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        merl::parallel_eval_cos(view, light, out, |l, v| self.eval_f64(l, v));
+        merl::parallel_eval_cos(view, light, out, |v, l| self.eval_f64(v, l));
     }
 }
 
-/// The unit light, view and half vectors of a pair above the horizon, and `c = l . h`.
+/// The unit view, light and half vectors of a pair above the horizon, and `c = l . h`.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Geometry {
     pub l: DVec3,
@@ -147,7 +147,7 @@ impl Geometry {
 }
 
 /// `None` when either direction is at or below the horizon, zero-length or not finite.
-pub(crate) fn geometry(light: DVec3, view: DVec3) -> Option<Geometry> {
+pub(crate) fn geometry(view: DVec3, light: DVec3) -> Option<Geometry> {
     let l = light.try_normalize()?;
     let v = view.try_normalize()?;
     if l.z <= 0.0 || v.z <= 0.0 {
@@ -176,17 +176,10 @@ pub(crate) fn finite_non_negative(x: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::coords::spherical_direction;
     use crate::merl::{cell_centre_angles, cell_index, Interpolation, CELLS, SCALE};
     use proptest::prelude::*;
     use std::f64::consts::{FRAC_PI_2, PI};
-
-    fn hemisphere(theta: f64, phi: f64) -> DVec3 {
-        DVec3::new(
-            theta.sin() * phi.cos(),
-            theta.sin() * phi.sin(),
-            theta.cos(),
-        )
-    }
 
     fn assert_close(got: [f64; 3], expect: [f64; 3], what: &str) {
         for c in 0..3 {
@@ -268,7 +261,7 @@ mod tests {
     fn off_axis_values_match_an_independent_reference() {
         // l at (theta 0.5, phi 0.3), v at (theta 0.7, phi 2.9): theta_h = 0.2041, c = 0.8386.
         // Reference values computed in Python from the formulas of DESIGN.md section 8.
-        let (l, v) = (hemisphere(0.5, 0.3), hemisphere(0.7, 2.9));
+        let (l, v) = (spherical_direction(0.5, 0.3), spherical_direction(0.7, 2.9));
         let cases = [
             (
                 ModelKind::Sgd,
@@ -311,7 +304,7 @@ mod tests {
         ];
         for (model, name, expect) in cases {
             assert_close(
-                fit(model, name).eval_f64(l, v),
+                fit(model, name).eval_f64(v, l),
                 expect,
                 &format!("{model} {name}"),
             );
@@ -323,10 +316,10 @@ mod tests {
         let err = AnalyticBrdf::from_catalogue(ModelKind::Abc, "unobtainium").unwrap_err();
         assert!(matches!(err, NbrdfError::UnknownMaterial { ref name } if name == "unobtainium"));
         assert!(err.to_string().contains("list-materials"));
-        let (l, v) = (hemisphere(0.5, 0.3), hemisphere(0.7, 2.9));
+        let (l, v) = (spherical_direction(0.5, 0.3), spherical_direction(0.7, 2.9));
         for model in ModelKind::ALL {
-            let a = fit(model, "metallic-gold").eval_f64(l, v);
-            assert_eq!(a, fit(model, "gold-metallic-paint").eval_f64(l, v));
+            let a = fit(model, "metallic-gold").eval_f64(v, l);
+            assert_eq!(a, fit(model, "gold-metallic-paint").eval_f64(v, l));
             assert_eq!(fit(model, "alum-bronze").model(), model);
         }
         assert_eq!("SGD".parse::<ModelKind>().unwrap(), ModelKind::Sgd);
@@ -349,7 +342,7 @@ mod tests {
         let phis = [0.0, 0.9, 2.0, PI, 4.4];
         thetas
             .iter()
-            .flat_map(|&t| phis.iter().map(move |&p| hemisphere(t, p)))
+            .flat_map(|&t| phis.iter().map(move |&p| spherical_direction(t, p)))
             .collect()
     }
 
@@ -361,12 +354,12 @@ mod tests {
                 let brdf = fit(model, name);
                 for &l in &dirs {
                     for &v in &dirs {
-                        let f = brdf.eval_f64(l, v);
+                        let f = brdf.eval_f64(v, l);
                         assert!(
                             f.iter().all(|x| x.is_finite() && *x >= 0.0),
                             "{model} {name} {l} {v}: {f:?}"
                         );
-                        let f32 = brdf.eval(l.as_vec3(), v.as_vec3());
+                        let f32 = brdf.eval(v.as_vec3(), l.as_vec3());
                         assert!(
                             f32.iter().all(|x| x.is_finite() && *x >= 0.0),
                             "{model} {name}: {f32:?}"
@@ -379,7 +372,7 @@ mod tests {
 
     #[test]
     fn zero_below_the_horizon_and_on_degenerate_input() {
-        let up = hemisphere(0.4, 1.0);
+        let up = spherical_direction(0.4, 1.0);
         let bad = [
             DVec3::new(0.5, 0.5, -0.1),
             DVec3::X,
@@ -390,12 +383,16 @@ mod tests {
         for model in ModelKind::ALL {
             let brdf = fit(model, "silver-paint");
             for b in bad {
-                assert_eq!(brdf.eval_f64(b, up), [0.0; 3], "{model} {b}");
                 assert_eq!(brdf.eval_f64(up, b), [0.0; 3], "{model} {b}");
+                assert_eq!(brdf.eval_f64(b, up), [0.0; 3], "{model} {b}");
             }
             // Non-unit input is normalised.
-            let f = brdf.eval_f64(3.0 * up, 0.1 * hemisphere(0.9, 2.0));
-            assert_close(f, brdf.eval_f64(up, hemisphere(0.9, 2.0)), "scaled input");
+            let f = brdf.eval_f64(0.1 * spherical_direction(0.9, 2.0), 3.0 * up);
+            assert_close(
+                f,
+                brdf.eval_f64(spherical_direction(0.9, 2.0), up),
+                "scaled input",
+            );
         }
     }
 
@@ -406,10 +403,10 @@ mod tests {
             material in 0usize..100, tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
         ) {
             let name = catalogue::material_names()[material];
-            let (l, v) = (hemisphere(tl, pl), hemisphere(tv, pv));
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
             for model in ModelKind::ALL {
                 let brdf = fit(model, name);
-                let (a, b) = (brdf.eval_f64(l, v), brdf.eval_f64(v, l));
+                let (a, b) = (brdf.eval_f64(v, l), brdf.eval_f64(l, v));
                 for c in 0..3 {
                     prop_assert!((a[c] - b[c]).abs() <= 1e-9 * a[c].abs().max(1e-300), "{model} {name}: {a:?} vs {b:?}");
                 }
@@ -428,7 +425,7 @@ mod tests {
         {
             let (h, d, p) = crate::merl::cell_coordinates(index);
             let angles = cell_centre_angles(h, d, p);
-            let (l, v) = crate::coords::from_rusinkiewicz(&angles);
+            let (v, l) = crate::coords::from_rusinkiewicz(&angles);
             if l.z <= 0.0 || v.z <= 0.0 {
                 assert_eq!(
                     table.cell(index),
@@ -437,7 +434,7 @@ mod tests {
                 );
                 continue;
             }
-            let expect = brdf.eval_f64(l, v);
+            let expect = brdf.eval_f64(v, l);
             let cell = table
                 .cell(index)
                 .expect("cells above the horizon are valid");
@@ -462,7 +459,7 @@ mod tests {
         assert!(checked > 1000);
         // Cells whose light direction is below the horizon are not measured.
         let below = cell_index(89, 89, 0);
-        let (l, _) = crate::coords::from_rusinkiewicz(&cell_centre_angles(89, 89, 0));
+        let (_, l) = crate::coords::from_rusinkiewicz(&cell_centre_angles(89, 89, 0));
         assert!(l.z < 0.0);
         assert_eq!(table.cell(below), None);
         assert_eq!(table.stored()[below], crate::merl::NOT_MEASURED);

@@ -26,9 +26,9 @@ pub struct SgdParams {
 }
 
 impl SgdParams {
-    /// `f_r(light, view)`, zero at or below the horizon, finite and non-negative.
-    pub fn eval_f64(&self, light: DVec3, view: DVec3) -> [f64; 3] {
-        match geometry(light, view) {
+    /// `f_r(view, light)`, zero at or below the horizon, finite and non-negative.
+    pub fn eval_f64(&self, view: DVec3, light: DVec3) -> [f64; 3] {
+        match geometry(view, light) {
             Some(g) => std::array::from_fn(|ch| self.channel(ch, &g)),
             None => [0.0; 3],
         }

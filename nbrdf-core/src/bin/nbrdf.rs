@@ -354,7 +354,7 @@ fn run_compare(args: &CompareArgs) -> Result<()> {
     let row = |label: String, e: &metrics::ImageErrors| {
         format!(
             "  {label:>9}{:>12.4e}{:>12.4e}{:>9.2}{:>8.4}\n",
-            e.mae, e.rmse, e.psnr, e.ssim
+            e.mae, e.rmse, e.psnr_peak_reference, e.ssim
         )
     };
     for (deg, e) in &c.per_light {
@@ -501,9 +501,9 @@ impl FitSource {
         match self {
             FitSource::Table(table) => Box::new(train::table_target(table)),
             FitSource::Network(net) => Box::new(move |a: &RusinkiewiczAngles| {
-                let (l, v) = from_rusinkiewicz(a);
+                let (v, l) = from_rusinkiewicz(a);
                 Some(
-                    net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                    net.eval_input(network_input(v.as_vec3(), l.as_vec3()))
                         .map(f64::from),
                 )
             }),

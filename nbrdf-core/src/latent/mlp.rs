@@ -1,21 +1,16 @@
 //! A small fully connected network in `f32` for the autoencoder and the predictor: `tanh`
 //! hidden layers, a linear output layer, `y = x W + b` with `W` row-major `inputs x outputs`.
 //! One sample at a time (the batches are small and parallelised over samples by the callers).
+//! The layers are the NBRDF's [`Layer`], evaluated by its [`Layer::affine_into`].
 
-use crate::train::rng::{SplitMix64, Stream};
+use crate::fastmath::Unfused;
+use crate::network::Layer;
+use crate::rng::{SplitMix64, Stream};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Dense {
-    pub inputs: usize,
-    pub outputs: usize,
-    pub weights: Vec<f32>,
-    pub bias: Vec<f32>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Mlp {
-    pub layers: Vec<Dense>,
+    pub layers: Vec<Layer>,
 }
 
 /// The activations of one forward pass: `acts[0]` is the input, `acts[i + 1]` the output of
@@ -30,7 +25,7 @@ impl Mlp {
             .windows(2)
             .map(|w| {
                 let a = (6.0 / (w[0] + w[1]) as f64).sqrt();
-                Dense {
+                Layer {
                     inputs: w[0],
                     outputs: w[1],
                     weights: (0..w[0] * w[1])
@@ -62,17 +57,8 @@ impl Mlp {
         let mut acts = vec![x.to_vec()];
         let last = self.layers.len().saturating_sub(1);
         for (i, l) in self.layers.iter().enumerate() {
-            let input = &acts[i];
-            let mut y = l.bias.clone();
-            for (k, &xk) in input.iter().enumerate() {
-                if xk == 0.0 {
-                    continue;
-                }
-                let row = &l.weights[k * l.outputs..(k + 1) * l.outputs];
-                for (yo, &w) in y.iter_mut().zip(row) {
-                    *yo += xk * w;
-                }
-            }
+            let mut y = vec![0.0f32; l.outputs];
+            l.affine_into::<Unfused>(&acts[i], &mut y);
             if i < last {
                 y.iter_mut().for_each(|v| *v = v.tanh());
             }

@@ -38,7 +38,7 @@ fn sphere_pixels(size: usize, light_theta: f64) -> Vec<Pixel> {
         .filter(|p| p.light.z > 0.0 && p.view.z > 0.0)
         .map(|p| {
             let idx =
-                merl::continuous_index(&to_rusinkiewicz(p.light.as_dvec3(), p.view.as_dvec3()));
+                merl::continuous_index(&to_rusinkiewicz(p.view.as_dvec3(), p.light.as_dvec3()));
             let cell = merl::cell_index(
                 (idx[0].floor().max(0.0) as usize).min(N_THETA_H - 1),
                 (idx[1].floor().max(0.0) as usize).min(N_THETA_D - 1),
@@ -56,7 +56,7 @@ fn sphere_pixels(size: usize, light_theta: f64) -> Vec<Pixel> {
 /// `cos_l cos_v` at a cell centre, `None` below the horizon.
 fn cell_cos_product(cell: usize) -> Option<f64> {
     let (h, d, p) = merl::cell_coordinates(cell);
-    let (l, v) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
+    let (v, l) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
     (l.z > 0.0 && v.z > 0.0).then_some(l.z * v.z)
 }
 

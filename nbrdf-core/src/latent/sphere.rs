@@ -84,7 +84,7 @@ impl SphereRenderer {
                 continue;
             }
             pixels.push(p.index);
-            inputs.push(network_input(p.light, p.view));
+            inputs.push(network_input(p.view, p.light));
             cos.push(p.light.z);
         }
         let layout = Layout::new(hidden);
@@ -151,7 +151,8 @@ impl SphereRenderer {
             for lane in 0..chunk.len() {
                 let i = c * LANES + lane;
                 for k in 0..OUTPUTS {
-                    let y = network::fast_expm1(s.chunk.output_pre_activation(lane, k)).max(0.0);
+                    let y = crate::fastmath::fast_expm1(s.chunk.output_pre_activation(lane, k))
+                        .max(0.0);
                     out[k * n + self.pixels[i]] = y * self.cos[i];
                 }
             }
@@ -215,13 +216,14 @@ impl SphereRenderer {
                     }
                     let i = c * LANES + lane;
                     let z = s.chunk.output_pre_activation(lane, k);
-                    let y_raw = network::fast_expm1(z);
+                    let y_raw = crate::fastmath::fast_expm1(z);
                     let cos = self.cos[i];
                     let r = y_raw.max(0.0) * cos;
                     let t = tone(r);
                     let d = t - target[k * n + self.pixels[i]];
                     chunk_loss += (d as f64) * (d as f64);
-                    let in_range = z > network::EXP_ARG_MIN && z < network::EXP_ARG_MAX;
+                    let in_range =
+                        z > crate::fastmath::EXP_ARG_MIN && z < crate::fastmath::EXP_ARG_MAX;
                     let g = if self.surrogate_floor > 0.0 {
                         // Surrogate: the tone map's slope taken at `max(r, r0)` and the
                         // clamp of `expm1` at 0 passed through, so that pixels decoded too dark
@@ -355,7 +357,7 @@ mod tests {
         assert!(loss > 1e-4, "{loss}");
         // Directional derivatives along a few random directions (central differences; the
         // loss is piecewise smooth, so a small step stays mostly within one piece).
-        let mut rng = crate::train::rng::SplitMix64::new(1, crate::train::rng::Stream::Latent, 0);
+        let mut rng = crate::rng::SplitMix64::new(1, crate::rng::Stream::Latent, 0);
         for trial in 0..4 {
             let dir: Vec<f32> = (0..flat.len())
                 .map(|_| rng.next_f64() as f32 * 2.0 - 1.0)

@@ -11,10 +11,10 @@
 //! (counter-based [`SplitMix64`]), and blocks of candidates are merged in order, so the data set
 //! depends on the seed only, not on the thread count.
 
-use super::rng::{SplitMix64, Stream};
 use crate::coords::{from_rusinkiewicz, to_rusinkiewicz, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
 use crate::network::{INPUTS, OUTPUTS};
+use crate::rng::{SplitMix64, Stream};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -172,7 +172,7 @@ fn draw_block(
     (samples, outcomes)
 }
 
-/// The light/view pair and angles of four uniforms.
+/// The view/light pair and angles of four uniforms.
 pub fn directions(sampling: AngularSampling, u: [f64; 4]) -> (DVec3, DVec3, RusinkiewiczAngles) {
     match sampling {
         AngularSampling::Adaptive => {
@@ -182,18 +182,20 @@ pub fn directions(sampling: AngularSampling, u: [f64; 4]) -> (DVec3, DVec3, Rusi
                 theta_d: u[1] * FRAC_PI_2,
                 phi_d: u[2] * 2.0 * PI,
             };
-            let (light, view) = from_rusinkiewicz(&angles);
-            (light, view, angles)
+            let (view, light) = from_rusinkiewicz(&angles);
+            (view, light, angles)
         }
         AngularSampling::Uniform => {
             let light = uniform_hemisphere(u[0], u[1]);
             let view = uniform_hemisphere(u[2], u[3]);
-            (light, view, to_rusinkiewicz(light, view))
+            (view, light, to_rusinkiewicz(view, light))
         }
     }
 }
 
-/// Uniform on the upper hemisphere: `cos theta` is uniform (Archimedes).
+/// Uniform on the upper hemisphere: `cos theta` is uniform (Archimedes). Not
+/// [`crate::sampling::uniform_hemisphere`]: that one rounds `sin theta` differently, and a seed's
+/// training samples must not change.
 fn uniform_hemisphere(u_cos: f64, u_phi: f64) -> DVec3 {
     let cos = u_cos;
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
@@ -206,7 +208,7 @@ fn candidate(
     sampling: AngularSampling,
     u: [f64; 4],
 ) -> std::result::Result<Sample, Outcome> {
-    let (light, view, angles) = directions(sampling, u);
+    let (view, light, angles) = directions(sampling, u);
     let (l, v) = (light.as_vec3(), view.as_vec3());
     // The f32 directions are what a renderer hands the network, so they decide the horizon.
     if l.z <= 0.0 || v.z <= 0.0 {
@@ -219,7 +221,7 @@ fn candidate(
     let cos_light = l.z;
     let log_target = f.map(|c| (c * cos_light as f64).ln_1p() as f32);
     Ok(Sample {
-        x: crate::coords::network_input(l, v),
+        x: crate::coords::network_input(v, l),
         log_target,
         cos_light,
     })

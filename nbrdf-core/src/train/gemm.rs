@@ -7,7 +7,7 @@
 //! in registers while each step of `k` loads one row of `B` and broadcasts 4 elements of `A`.
 //! The sum over `k` runs in order, so results do not depend on how rows are grouped.
 
-use super::fastmath::MulAdd;
+use crate::fastmath::MulAdd;
 
 /// Width of one column block: the `f32` lanes of an AVX register.
 pub const VEC: usize = 8;
@@ -192,8 +192,8 @@ fn block<M: MulAdd, const MR: usize, const NB: usize>(
 
 #[cfg(test)]
 mod tests {
-    use super::super::fastmath::Unfused;
     use super::*;
+    use crate::fastmath::Unfused;
 
     #[test]
     fn matches_naive_product_with_strides_and_bias() {

@@ -9,11 +9,15 @@
 //! are 0 forward and get 0 gradient backward, and Adam leaves zero-gradient parameters at 0.
 //! A chunk's gradient depends only on its samples, which is what makes training independent of
 //! the thread count (see [`crate::train`]).
+//!
+//! The forward pass here is a deliberate second copy of the network's definition (the reference
+//! is [`crate::network::Layer::affine_into`] with [`crate::fastmath`]'s `relu` and `expm1`), laid
+//! out for gradients; `tests::outputs_match_the_network_evaluator` holds the two together.
 
 use super::dataset::Sample;
-use super::fastmath::{self, Fused, MulAdd, Unfused};
 use super::gemm::{column_sums, gemm, Init, Post, Strided, VEC};
-use crate::network::{self, Layer, INPUTS, OUTPUTS};
+use crate::fastmath::{self, Fused, MulAdd, Unfused};
+use crate::network::{Layer, INPUTS, OUTPUTS};
 
 /// Samples per chunk, the unit of parallel work and of deterministic gradient summation.
 pub const LANES: usize = 64;
@@ -459,7 +463,7 @@ fn loss_and_output_gradient(
         for lane in 0..LANES {
             let (z, t, c) = (z[lane], t[lane], c[lane]);
             // The evaluator's activation, so that the loss measures the network as saved.
-            let y_raw = network::fast_expm1(z);
+            let y_raw = fastmath::fast_expm1(z);
             let y = if clamp_output { y_raw.max(0.0) } else { y_raw };
             let u = y * c;
             let d = fastmath::ln_1p(u) - t;
@@ -467,7 +471,7 @@ fn loss_and_output_gradient(
             if with_gradient {
                 let sign = (d > 0.0) as i32 as f32 - (d < 0.0) as i32 as f32;
                 let slope = (c * (y_raw + 1.0) / (1.0 + u).max(1e-30)).min(1.0);
-                let live = z > network::EXP_ARG_MIN && z < network::EXP_ARG_MAX;
+                let live = z > fastmath::EXP_ARG_MIN && z < fastmath::EXP_ARG_MAX;
                 g[lane] = if live { sign * slope * scale } else { 0.0 };
             }
         }
@@ -571,16 +575,16 @@ fn transposed(m: &[f32], ld: usize) -> Strided<'_> {
 pub fn outputs(w: &Weights, s: &mut ChunkScratch) -> [[f32; OUTPUTS]; LANES] {
     forward::<Unfused>(w, s);
     std::array::from_fn(|lane| {
-        std::array::from_fn(|k| network::fast_expm1(s.z3[lane * YW + k]).max(0.0))
+        std::array::from_fn(|k| fastmath::fast_expm1(s.z3[lane * YW + k]).max(0.0))
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::adam::AdamConfig;
-    use super::super::rng::{SplitMix64, Stream};
     use super::super::Trainer;
     use super::*;
+    use crate::rng::{SplitMix64, Stream};
 
     fn random_layers(hidden: usize, seed: u64) -> [Layer; 3] {
         let mut rng = SplitMix64::new(seed, Stream::Init, 0);

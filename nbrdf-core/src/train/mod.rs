@@ -11,27 +11,24 @@
 
 pub mod adam;
 pub mod dataset;
-pub mod fastmath;
 pub mod gemm;
 pub mod mlp_grad;
-pub mod rng;
+/// Kept under `train` for existing callers: the RNG and fast math are crate-wide modules now.
+pub use crate::{fastmath, rng};
 
 use crate::coords::RusinkiewiczAngles;
 use crate::error::{NbrdfError, Result};
 use crate::merl::MerlTable;
-use crate::network::{Layer, Nbrdf, INPUTS, OUTPUTS};
+use crate::network::{paper_init, Layer, Nbrdf, OUTPUTS};
+use crate::rng::{SplitMix64, Stream};
 use adam::{Adam, AdamConfig};
 use dataset::{AngularSampling, DataSet, Sample, TargetFn};
 use mlp_grad::{ChunkScratch, Kernel, Layout, Weights, LANES};
 use rayon::prelude::*;
-use rng::{SplitMix64, Stream};
 use std::time::Instant;
 
 /// Names this trainer in the provenance of the networks it writes.
 pub const TRAINER_VERSION: &str = concat!("nbrdf-core ", env!("CARGO_PKG_VERSION"), " trainer 1");
-
-/// Half-width of the uniform weight initialisation.
-const INIT_RANGE: f32 = 0.05;
 
 /// Everything that decides a training run.
 ///
@@ -281,19 +278,9 @@ pub struct Trainer {
 }
 
 impl Trainer {
-    /// Weights `U(-0.05, 0.05)` drawn in file order (independent of padding), biases 0.
+    /// Starts from [`crate::network::paper_init`].
     pub fn new(hidden: usize, batch: usize, adam: AdamConfig, seed: u64) -> Self {
-        let mut rng = SplitMix64::new(seed, Stream::Init, 0);
-        let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, OUTPUTS)];
-        let layers = dims.map(|(inputs, outputs)| Layer {
-            inputs,
-            outputs,
-            weights: (0..inputs * outputs)
-                .map(|_| INIT_RANGE * (2.0 * rng.next_f64() as f32 - 1.0))
-                .collect(),
-            bias: vec![0.0; outputs],
-        });
-        Self::from_layers(&layers, batch, adam)
+        Self::from_layers(&paper_init(hidden, seed), batch, adam)
     }
 
     /// Starts from given weights (shapes `6 -> h -> h -> 3`, checked by the caller).

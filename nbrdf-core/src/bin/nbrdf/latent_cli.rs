@@ -496,7 +496,7 @@ pub struct AeEvalArgs {
 }
 
 fn errors_json(e: &nbrdf_core::metrics::ImageErrors) -> serde_json::Value {
-    serde_json::json!({"mae": e.mae, "rmse": e.rmse, "ssim": e.ssim, "psnr": e.psnr})
+    serde_json::json!({"mae": e.mae, "rmse": e.rmse, "ssim": e.ssim, "psnr": e.psnr_peak_reference})
 }
 
 /// `nbrdf ae eval`: AE and PCA reconstructions of the test split in image space (64 x 64 sphere,
@@ -554,16 +554,16 @@ pub fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
                     let brdf = AnalyticBrdf::from_catalogue(ModelKind::Sgd, name)?;
                     Ok(Box::new(move |cell: usize| {
                         let (h, d, p) = merl::cell_coordinates(cell);
-                        let (l, v) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
-                        brdf.eval_f64(l, v)
+                        let (v, l) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
+                        brdf.eval_f64(v, l)
                     }))
                 }
                 PcaTables::Nbrdf => {
                     let net = get(name)?;
                     Ok(Box::new(move |cell: usize| {
                         let (h, d, p) = merl::cell_coordinates(cell);
-                        let (l, v) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
-                        net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+                        let (v, l) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
+                        net.eval_input(network_input(v.as_vec3(), l.as_vec3()))
                             .map(f64::from)
                     }))
                 }
@@ -707,9 +707,9 @@ fn phong_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
         }
     }
     let target = |a: &RusinkiewiczAngles| {
-        let (l, v) = from_rusinkiewicz(a);
+        let (v, l) = from_rusinkiewicz(a);
         Some(
-            net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+            net.eval_input(network_input(v.as_vec3(), l.as_vec3()))
                 .map(f64::from),
         )
     };
@@ -804,9 +804,9 @@ fn network_quadrature(net: &Nbrdf) -> Result<LobeQuadrature> {
     use nbrdf_core::coords::{from_rusinkiewicz, network_input, RusinkiewiczAngles};
     use nbrdf_core::lobe_fit::LobeFitConfig;
     let target = |a: &RusinkiewiczAngles| {
-        let (l, v) = from_rusinkiewicz(a);
+        let (v, l) = from_rusinkiewicz(a);
         Some(
-            net.eval_input(network_input(l.as_vec3(), v.as_vec3()))
+            net.eval_input(network_input(v.as_vec3(), l.as_vec3()))
                 .map(f64::from),
         )
     };

@@ -1,8 +1,11 @@
-//! A small counter-based random number generator (SplitMix64, Steele, Lea and Flood 2014).
+//! The crate's one random number generator: SplitMix64 (Steele, Lea and Flood 2014), small,
+//! dependency-free and identical on every platform.
 //!
-//! Training must be reproducible for a seed whatever the thread count, so every random draw is
-//! addressed by `(seed, stream, counter)` instead of coming from a shared sequential generator:
-//! sample `k` of the data set, say, always sees the same uniforms, whichever thread draws it.
+//! Training must be reproducible for a seed whatever the thread count, so its draws are
+//! addressed by `(seed, stream, counter)` ([`SplitMix64::new`]) instead of coming from a shared
+//! sequential generator: sample `k` of the data set, say, always sees the same uniforms, whichever
+//! thread draws it. Tests and benchmarks that only need a fixed stream start from a raw state
+//! ([`SplitMix64::from_state`]).
 
 const GOLDEN_GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
 
@@ -38,15 +41,24 @@ impl SplitMix64 {
     /// The generator of `stream` under `seed`, positioned at `counter` draws from its start.
     pub fn new(seed: u64, stream: Stream, counter: u64) -> Self {
         let base = mix64(seed ^ mix64(stream as u64 + 1));
-        SplitMix64 {
-            state: base.wrapping_add(counter.wrapping_mul(GOLDEN_GAMMA)),
-        }
+        Self::from_state(base.wrapping_add(counter.wrapping_mul(GOLDEN_GAMMA)))
+    }
+
+    /// The plain generator whose state starts at `state` (the textbook SplitMix64 seeding).
+    pub fn from_state(state: u64) -> Self {
+        SplitMix64 { state }
     }
 
     #[inline]
     pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(GOLDEN_GAMMA);
         mix64(self.state)
+    }
+
+    /// Uniform in `[0, 1)`, 24 bits so that every value is exactly representable.
+    #[inline]
+    pub fn next_f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
     }
 
     /// Uniform in `[0, 1)` with 53 random bits.
@@ -96,6 +108,20 @@ mod tests {
             .sum::<f64>()
             / 1e4;
         assert!((mean - 0.5).abs() < 0.02);
+    }
+
+    /// The published reference output of SplitMix64 seeded with 1234567 (Vigna's splitmix64.c).
+    #[test]
+    fn matches_the_reference_sequence() {
+        let mut rng = SplitMix64::from_state(1_234_567);
+        let want = [
+            6_457_827_717_110_365_317u64,
+            3_203_168_211_198_807_973,
+            9_817_491_932_198_370_423,
+        ];
+        for w in want {
+            assert_eq!(rng.next_u64(), w);
+        }
     }
 
     #[test]

@@ -1,0 +1,209 @@
+//! The versioned `*.nbrdf.json` file format of a network: reading with the checks that make a
+//! bad file an error naming the file and the problem, writing, and in-memory validation.
+
+use super::{empty_object, Layer, Nbrdf, SamplingParams, INPUTS, OUTPUTS};
+use crate::error::{NbrdfError, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+pub const FORMAT_NAME: &str = "nbrdf";
+pub const FORMAT_VERSION: u32 = 1;
+
+/// What is read from a file once `format` and `version` have been checked.
+#[derive(Deserialize)]
+struct FileIn {
+    name: String,
+    layers: Vec<Layer>,
+    #[serde(default)]
+    sampling: Option<SamplingParams>,
+    #[serde(default)]
+    provenance: serde_json::Value,
+}
+
+#[derive(Serialize)]
+struct FileOut<'a> {
+    format: &'a str,
+    version: u32,
+    name: &'a str,
+    layers: &'a [Layer; 3],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sampling: &'a Option<SamplingParams>,
+    provenance: &'a serde_json::Value,
+}
+
+/// Checks the `format` and `version` fields before anything else, so that a file of another
+/// kind or version is reported as such rather than as a missing field further in.
+fn check_header(root: &serde_json::Value) -> std::result::Result<(), String> {
+    let object = root
+        .as_object()
+        .ok_or("the top level is not a JSON object")?;
+    match object.get("format") {
+        None => {
+            return Err(format!(
+                "missing field \"format\" (expected \"{FORMAT_NAME}\")"
+            ))
+        }
+        Some(serde_json::Value::String(s)) if s == FORMAT_NAME => {}
+        Some(other) => return Err(format!("format is {other}, expected \"{FORMAT_NAME}\"")),
+    }
+    match object.get("version") {
+        None => Err("missing field \"version\"".to_string()),
+        Some(v) if v.as_u64() == Some(u64::from(FORMAT_VERSION)) => Ok(()),
+        Some(v) => Err(format!(
+            "unsupported version {v} (this build reads version {FORMAT_VERSION})"
+        )),
+    }
+}
+
+/// The first structural problem of a layer stack (counts, dimensions, lengths), if any.
+pub(super) fn shape_problem(layers: &[Layer]) -> Option<String> {
+    if layers.len() != 3 {
+        return Some(format!("expected 3 layers, found {}", layers.len()));
+    }
+    if layers[0].inputs != INPUTS {
+        return Some(format!(
+            "layer 1 has {} inputs, expected {INPUTS} (the Rusinkiewicz input)",
+            layers[0].inputs
+        ));
+    }
+    if layers[2].outputs != OUTPUTS {
+        return Some(format!(
+            "layer 3 has {} outputs, expected {OUTPUTS} (RGB)",
+            layers[2].outputs
+        ));
+    }
+    for k in 1..3 {
+        if layers[k].inputs != layers[k - 1].outputs {
+            return Some(format!(
+                "layer dimensions do not chain: layer {} has {} outputs but layer {} has {} inputs",
+                k,
+                layers[k - 1].outputs,
+                k + 1,
+                layers[k].inputs
+            ));
+        }
+    }
+    for (k, layer) in layers.iter().enumerate() {
+        if layer.outputs == 0 {
+            return Some(format!("layer {} has 0 outputs", k + 1));
+        }
+        let expected = layer.inputs.checked_mul(layer.outputs);
+        if expected != Some(layer.weights.len()) {
+            return Some(format!(
+                "layer {} has {} weights, expected inputs * outputs = {} * {}",
+                k + 1,
+                layer.weights.len(),
+                layer.inputs,
+                layer.outputs
+            ));
+        }
+        if layer.bias.len() != layer.outputs {
+            return Some(format!(
+                "layer {} has {} bias values, expected {} (its outputs)",
+                k + 1,
+                layer.bias.len(),
+                layer.outputs
+            ));
+        }
+    }
+    None
+}
+
+/// The first non-finite parameter, if any.
+fn value_problem(layers: &[Layer]) -> Option<String> {
+    for (k, layer) in layers.iter().enumerate() {
+        if let Some(i) = layer.weights.iter().position(|w| !w.is_finite()) {
+            return Some(format!(
+                "layer {} weight {} is not finite ({}); values must fit in float32",
+                k + 1,
+                i,
+                layer.weights[i]
+            ));
+        }
+        if let Some(i) = layer.bias.iter().position(|b| !b.is_finite()) {
+            return Some(format!(
+                "layer {} bias {} is not finite ({}); values must fit in float32",
+                k + 1,
+                i,
+                layer.bias[i]
+            ));
+        }
+    }
+    None
+}
+
+impl Nbrdf {
+    /// Loads and validates an `*.nbrdf.json` file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| NbrdfError::io(path, e))?;
+        Self::from_json_str(&text, path)
+    }
+
+    /// Parses and validates the JSON text of a network; `origin` names the source in errors.
+    pub fn from_json_str(text: &str, origin: &Path) -> Result<Self> {
+        let fail = |message: String| NbrdfError::format(origin, message);
+        let root: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| fail(format!("not valid JSON (truncated or corrupt?): {e}")))?;
+        check_header(&root).map_err(fail)?;
+        let file: FileIn = serde_json::from_value(root)
+            .map_err(|e| fail(format!("not a valid NBRDF network: {e}")))?;
+        if let Some(message) = shape_problem(&file.layers) {
+            return Err(fail(message));
+        }
+        if let Some(message) = file.sampling.as_ref().and_then(SamplingParams::problem) {
+            return Err(fail(message));
+        }
+        let layers: [Layer; 3] = file
+            .layers
+            .try_into()
+            .map_err(|_| fail("expected 3 layers".to_string()))?;
+        let net = Nbrdf {
+            name: file.name,
+            layers,
+            sampling: file.sampling,
+            provenance: if file.provenance.is_null() {
+                empty_object()
+            } else {
+                file.provenance
+            },
+        };
+        if let Some(message) = value_problem(&net.layers) {
+            return Err(fail(message));
+        }
+        Ok(net)
+    }
+
+    pub fn to_json_string(&self) -> String {
+        let out = FileOut {
+            format: FORMAT_NAME,
+            version: FORMAT_VERSION,
+            name: &self.name,
+            layers: &self.layers,
+            sampling: &self.sampling,
+            provenance: &self.provenance,
+        };
+        // Plain structs and a JSON value with string keys: serde_json cannot fail on these.
+        serde_json::to_string_pretty(&out).expect("serialising an NBRDF cannot fail")
+    }
+
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        std::fs::write(path, self.to_json_string()).map_err(|e| NbrdfError::io(path, e))
+    }
+
+    /// Checks an in-memory network (shapes, finite values, sampling parameters), e.g. after
+    /// training or decoding; files are checked by [`Nbrdf::load`] already.
+    pub fn validate(&self) -> Result<()> {
+        let problem = shape_problem(&self.layers)
+            .or_else(|| value_problem(&self.layers))
+            .or_else(|| self.sampling.as_ref().and_then(SamplingParams::problem));
+        match problem {
+            Some(message) => Err(NbrdfError::InvalidArgument(format!(
+                "network '{}': {message}",
+                self.name
+            ))),
+            None => Ok(()),
+        }
+    }
+}

@@ -1,0 +1,280 @@
+//! The NBRDF network (DESIGN.md section 4): `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1`,
+//! clamped at 0, with `x` the isotropic Rusinkiewicz input of [`crate::coords::network_input`].
+//! Any hidden width.
+//!
+//! * this file: the [`Nbrdf`] type, its [`Layer`]s (the one dense-layer definition of the crate,
+//!   [`Layer::affine_into`]), [`paper_init`], flat parameter vectors and single evaluation;
+//! * `format.rs`: the versioned `*.nbrdf.json` file format, reading, writing and validation;
+//! * `kernel.rs`: the batched, vectorised and threaded evaluation, the renderer's hot loop.
+
+mod format;
+mod kernel;
+#[cfg(test)]
+mod tests;
+
+pub use format::{FORMAT_NAME, FORMAT_VERSION};
+pub use kernel::LANES;
+
+use crate::brdf::{Brdf, Directions, RgbMut};
+use crate::coords::network_input;
+use crate::error::{NbrdfError, Result};
+use crate::fastmath::MulAdd;
+use crate::rng::{SplitMix64, Stream};
+use crate::sampling::SamplingStrategy;
+use glam::{DVec3, Vec3};
+use serde::{Deserialize, Serialize};
+
+pub const INPUTS: usize = 6;
+pub const OUTPUTS: usize = 3;
+pub const DEFAULT_HIDDEN: usize = 21;
+
+/// The only importance-sampling model the file format defines.
+pub const SAMPLING_MODEL_BLINN_PHONG: &str = "blinn-phong";
+
+/// One dense layer, `y = x W + b` with `W` row-major `inputs x outputs`: the NBRDF's layers and
+/// those of the latent-space MLPs ([`crate::latent::mlp`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Layer {
+    pub inputs: usize,
+    pub outputs: usize,
+    pub weights: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+impl Layer {
+    /// `y = x W + b` for one input vector, the reference definition of a dense layer (the
+    /// batched kernels restate it on lanes). `y` is as long as the outputs used; the loop over
+    /// outputs is innermost, over contiguous weights.
+    #[inline(always)]
+    pub fn affine_into<M: MulAdd>(&self, x: &[f32], y: &mut [f32]) {
+        y.copy_from_slice(&self.bias[..y.len()]);
+        for (row, &xi) in self.weights.chunks_exact(self.outputs).zip(x) {
+            for (yo, &w) in y.iter_mut().zip(row) {
+                *yo = M::mul_add(w, xi, *yo);
+            }
+        }
+    }
+}
+
+/// Importance-sampling parameters stored with a network.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SamplingParams {
+    /// Only "blinn-phong" is defined.
+    pub model: String,
+    pub exponent: f32,
+    pub specular_weight: f32,
+    /// Where the figures come from: "fit", "predicted" or "manual".
+    pub source: String,
+}
+
+impl SamplingParams {
+    /// The first reason these parameters are unusable, if any.
+    fn problem(&self) -> Option<String> {
+        if self.model != SAMPLING_MODEL_BLINN_PHONG {
+            return Some(format!(
+                "unknown sampling model '{}' (only '{SAMPLING_MODEL_BLINN_PHONG}' is defined)",
+                self.model
+            ));
+        }
+        if !(self.exponent.is_finite() && self.exponent >= 0.0) {
+            return Some(format!(
+                "sampling exponent {} must be finite and >= 0",
+                self.exponent
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.specular_weight) {
+            return Some(format!(
+                "sampling specular_weight {} must be in [0, 1]",
+                self.specular_weight
+            ));
+        }
+        None
+    }
+
+    /// The sampling strategy these parameters describe.
+    pub fn strategy(&self) -> Result<SamplingStrategy> {
+        if let Some(message) = self.problem() {
+            return Err(NbrdfError::InvalidArgument(message));
+        }
+        SamplingStrategy::BlinnPhong {
+            exponent: f64::from(self.exponent),
+            specular_weight: f64::from(self.specular_weight),
+        }
+        .validated()
+    }
+}
+
+/// A neural BRDF: three dense layers plus optional sampling parameters and provenance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Nbrdf {
+    pub name: String,
+    pub layers: [Layer; 3],
+    pub sampling: Option<SamplingParams>,
+    pub provenance: serde_json::Value,
+}
+
+fn empty_object() -> serde_json::Value {
+    serde_json::Value::Object(serde_json::Map::new())
+}
+
+/// Half-width of the uniform weight initialisation.
+const INIT_RANGE: f32 = 0.05;
+
+/// How [`paper_init`] draws, for provenance records.
+pub const INITIALISATION: &str =
+    "uniform(-0.05, 0.05) weights in file order, zero biases, splitmix64 stream Init";
+
+/// The paper's initialisation of a `6 -> hidden -> hidden -> 3` network: weights
+/// `U(-0.05, 0.05)` drawn in file order from the seed's [`Stream::Init`] stream, biases 0. The
+/// one initialisation of the crate: `nbrdf train` starts from it, so a seed names the weights.
+pub fn paper_init(hidden: usize, seed: u64) -> [Layer; 3] {
+    let mut rng = SplitMix64::new(seed, Stream::Init, 0);
+    let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, OUTPUTS)];
+    dims.map(|(inputs, outputs)| Layer {
+        inputs,
+        outputs,
+        weights: (0..inputs * outputs)
+            .map(|_| INIT_RANGE * (2.0 * rng.next_f64() as f32 - 1.0))
+            .collect(),
+        bias: vec![0.0; outputs],
+    })
+}
+
+/// Number of parameters of a `6 -> hidden -> hidden -> 3` network.
+pub fn parameter_count_for(hidden: usize) -> usize {
+    hidden * hidden + 11 * hidden + 3
+}
+
+impl Nbrdf {
+    /// Builds a `6 -> hidden -> hidden -> 3` network from the flat parameter vector
+    /// `W1, b1, W2, b2, W3, b3` (each `W` row-major `inputs x outputs`).
+    pub fn from_flat(name: &str, hidden: usize, params: &[f32]) -> Result<Self> {
+        if hidden == 0 {
+            return Err(NbrdfError::InvalidArgument(
+                "hidden width must be at least 1".into(),
+            ));
+        }
+        let expected = parameter_count_for(hidden);
+        if params.len() != expected {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "expected {expected} parameters for hidden width {hidden}, got {}",
+                params.len()
+            )));
+        }
+        let mut rest = params;
+        let mut take = |n: usize| {
+            let (head, tail) = rest.split_at(n);
+            rest = tail;
+            head.to_vec()
+        };
+        let mut layer = |inputs: usize, outputs: usize| Layer {
+            inputs,
+            outputs,
+            weights: take(inputs * outputs),
+            bias: take(outputs),
+        };
+        let layers = [
+            layer(INPUTS, hidden),
+            layer(hidden, hidden),
+            layer(hidden, OUTPUTS),
+        ];
+        let net = Nbrdf {
+            name: name.to_string(),
+            layers,
+            sampling: None,
+            provenance: empty_object(),
+        };
+        net.validate()?;
+        Ok(net)
+    }
+
+    /// The parameters as `W1, b1, W2, b2, W3, b3` (the autoencoder's view of a network).
+    pub fn to_flat(&self) -> Vec<f32> {
+        let mut flat = Vec::with_capacity(self.parameter_count());
+        for layer in &self.layers {
+            flat.extend_from_slice(&layer.weights);
+            flat.extend_from_slice(&layer.bias);
+        }
+        flat
+    }
+
+    /// A freshly initialised network, [`paper_init`]. A `hidden` of 0 is raised to 1 (a network
+    /// needs a width).
+    pub fn random(name: &str, hidden: usize, seed: u64) -> Self {
+        Nbrdf {
+            name: name.to_string(),
+            layers: paper_init(hidden.max(1), seed),
+            sampling: None,
+            provenance: serde_json::json!({
+                "initialisation": INITIALISATION,
+                "seed": seed,
+            }),
+        }
+    }
+
+    /// Width of the two hidden layers.
+    pub fn hidden_width(&self) -> usize {
+        self.layers[0].outputs
+    }
+
+    /// Number of weights and biases (675 for width 21).
+    pub fn parameter_count(&self) -> usize {
+        self.layers
+            .iter()
+            .map(|l| l.weights.len() + l.bias.len())
+            .sum()
+    }
+
+    /// `f_r` at a set of angles (`phi_h` ignored) through the float32 directions a renderer would
+    /// hand the network, so that it equals [`Brdf::eval`] there. (Tabulation uses
+    /// [`crate::coords::network_input_from_angles`] instead, exact where `theta_h` is tiny.)
+    pub fn eval_at_angles(&self, angles: &crate::coords::RusinkiewiczAngles) -> [f64; 3] {
+        let (view, light) = crate::coords::from_rusinkiewicz(angles);
+        self.eval_input(network_input(view.as_vec3(), light.as_vec3()))
+            .map(f64::from)
+    }
+
+    /// The stored sampling strategy, if the file has one and it is valid.
+    pub fn sampling_strategy(&self) -> Option<SamplingStrategy> {
+        self.sampling.as_ref().and_then(|s| s.strategy().ok())
+    }
+
+    /// The MERL-format table of this network at cell-centre angles: cells whose centre has a
+    /// direction at or below the horizon are marked not measured, as in the tables synthesised
+    /// from analytic fits, so a network trained on the result never learns from them. This is
+    /// how a network of another origin (the authors' Keras files) is distilled into a table that
+    /// `nbrdf train` can learn again, e.g. from the common initialisation of the latent space.
+    pub fn tabulate(&self) -> crate::merl::MerlTable {
+        crate::merl::MerlTable::tabulate(|angles| {
+            let (view, light) = crate::coords::from_rusinkiewicz(angles);
+            if light.z <= 0.0 || view.z <= 0.0 {
+                return [f64::NAN; 3];
+            }
+            self.eval_input(crate::coords::network_input_from_angles(angles))
+                .map(f64::from)
+        })
+    }
+}
+
+impl Brdf for Nbrdf {
+    fn eval(&self, view: Vec3, light: Vec3) -> [f32; 3] {
+        // Normalise in float64 so that very long or very short vectors keep their direction.
+        let (Some(l), Some(v)) = (normalized(light.as_dvec3()), normalized(view.as_dvec3())) else {
+            return [0.0; 3];
+        };
+        if l.z <= 0.0 || v.z <= 0.0 {
+            return [0.0; 3];
+        }
+        self.eval_input(network_input(v.as_vec3(), l.as_vec3()))
+    }
+
+    fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
+        self.eval_cos_batch_impl(view, light, out)
+    }
+}
+
+/// Unit vector of a finite, non-zero vector.
+fn normalized(v: DVec3) -> Option<DVec3> {
+    let len = v.length();
+    (v.is_finite() && len > 0.0 && len.is_finite()).then(|| v / len)
+}
