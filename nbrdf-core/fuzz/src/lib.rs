@@ -50,7 +50,7 @@ pub fn check_evaluations(
     let single: Vec<[f32; 3]> = pairs
         .iter()
         .map(|&(light, view)| {
-            let f = brdf.eval(light, view);
+            let f = brdf.eval(view, light);
             assert!(
                 f.iter().all(|&x| in_range(x)),
                 "eval(light {light}, view {view}) = {f:?} (bound {max:?})"
