@@ -1,12 +1,13 @@
 //! The latent-space subcommands: `ae train|encode|decode`, `interpolate`, `predict-phong`,
 //! `predictor train`, `pca`.
 
-use super::{emit, with_threads};
+use super::emit;
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nbrdf_core::latent::autoencoder::{AeConfig, AeEpoch, AutoEncoder, Split};
 use nbrdf_core::latent::predictor::{PredictorConfig, VarianceGrid};
 use nbrdf_core::lobe_fit::LobeQuadrature;
+use nbrdf_core::ops::with_threads;
 use nbrdf_core::{Nbrdf, NbrdfError, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
