@@ -2,21 +2,21 @@
 //! returning a report (`#[derive(Serialize)]` for the commands that print JSON, [`Display`] for
 //! their text), so that the command-line tool only parses, calls and prints.
 //!
-//! * [`catalogue`]: `list-materials`, `synth`.
-//! * [`table`]: `info`, `tabulate`.
-//! * [`train_network`]: `train`.
-//! * [`fit_phong`]: `fit-phong`.
-//! * [`compare`]: `compare`.
-//! * [`autoencoder`]: `ae train|encode|decode|eval`, `interpolate`.
-//! * [`predictor`]: `predictor train|eval`, `predict-phong`.
+//! * `list-materials`, `synth`: [`catalogue`].
+//! * `info`, `tabulate`: [`table`].
+//! * `train`: [`train_network`].
+//! * `fit-phong`: [`fit_phong`].
+//! * `compare`: [`compare`].
+//! * `ae train|encode|decode|eval`, `interpolate`: [`autoencoder`].
+//! * `predictor train|eval`, `predict-phong`: [`predictor`].
 //!
 //! [`Display`]: std::fmt::Display
 
-// pub mod autoencoder;
+pub mod autoencoder;
 pub mod catalogue;
 pub mod compare;
 pub mod fit_phong;
-// pub mod predictor;
+pub mod predictor;
 pub mod table;
 pub mod train_network;
 

@@ -16,7 +16,8 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-mod latent_cmd;
+mod ae_cmd;
+mod predictor_cmd;
 mod progress;
 #[cfg(test)]
 mod tests;
@@ -51,14 +52,14 @@ enum Command {
     Compare(CompareArgs),
     /// The NBRDF autoencoder: train, encode, decode.
     #[command(subcommand)]
-    Ae(latent_cmd::AeCommand),
+    Ae(ae_cmd::AeCommand),
     /// Interpolate two networks in the autoencoder's latent space and in weight space.
-    Interpolate(latent_cmd::InterpolateArgs),
+    Interpolate(ae_cmd::InterpolateArgs),
     /// The predictor of Blinn-Phong sampling parameters from autoencoder codes.
     #[command(subcommand)]
-    Predictor(latent_cmd::PredictorCommand),
+    Predictor(predictor_cmd::PredictorCommand),
     /// Predict a network's Blinn-Phong sampling parameters from its code (source "predicted").
-    PredictPhong(latent_cmd::PredictPhongArgs),
+    PredictPhong(predictor_cmd::PredictPhongArgs),
 }
 
 #[derive(Args)]
@@ -240,10 +241,10 @@ fn run(command: Command) -> Result<()> {
         Command::Train(args) => train_cmd::run_train(&args),
         Command::FitPhong(args) => run_fit_phong(&args),
         Command::Compare(args) => run_compare(&args),
-        Command::Ae(command) => latent_cmd::run_ae(command),
-        Command::Interpolate(args) => latent_cmd::run_interpolate(&args),
-        Command::Predictor(command) => latent_cmd::run_predictor(command),
-        Command::PredictPhong(args) => latent_cmd::run_predict_phong(&args),
+        Command::Ae(command) => ae_cmd::run_ae(command),
+        Command::Interpolate(args) => ae_cmd::run_interpolate(&args),
+        Command::Predictor(command) => predictor_cmd::run_predictor(command),
+        Command::PredictPhong(args) => predictor_cmd::run_predict_phong(&args),
     }
 }
 
