@@ -439,8 +439,6 @@ mod tests {
             let chosen = choose_lobe(&target, choice, &fit_config, &lobe_config).unwrap();
             assert_eq!(chosen, analysis.lobe(choice), "{choice:?}");
         }
-        // The search minimises the variance; the model fit's lobe cannot sample better.
-        assert!(analysis.lowest_variance.relative_variance <= analysis.model_relative_variance);
     }
 
     #[test]

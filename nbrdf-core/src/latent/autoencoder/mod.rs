@@ -16,12 +16,11 @@
 //! validation subset of the training split (identity permutation), keeping the best epoch.
 //! Deterministic per seed: per-sample gradients are computed in parallel and summed in sample
 //! order.
-
 //!
 //! Where each part lives: the model, its file and its use (this module); the training data
-//! ([`data`]: examples, augmentation, target images, the initial autoencoder); the training
-//! phases ([`phases`]: the weight-space warm start, the image phase, mixup, early stopping);
-//! code refinement and the refined validation loss ([`refine`]).
+//! (`data`: examples, augmentation, target images, the initial autoencoder); the training
+//! phases (`phases`: the weight-space warm start, the image phase, mixup, early stopping);
+//! code refinement and the refined validation loss (`refine`).
 
 mod data;
 mod phases;
