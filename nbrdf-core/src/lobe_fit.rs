@@ -1,7 +1,7 @@
 //! Choosing the Blinn-Phong sampling lobe `(n, w)` of a material for the lowest variance of
 //! BSDF sampling.
 //!
-//! The 7-parameter model fit of [`crate::phong_fit`] (DESIGN.md section 6) matches the BRDF's
+//! The 7-parameter model fit of [`crate::phong_fit`] (docs/design.md section 6) matches the BRDF's
 //! shape in log space, which is the right label for a predictor but often a poor sampling
 //! density: on materials with a weak, very sharp spike over a diffuse base it returns
 //! `n ~ 1e4..1e5` with `w ~ 0.01`, so almost no samples go where most of the reflected energy is,
@@ -244,7 +244,7 @@ pub enum LobeChoice {
     #[default]
     LowestVariance,
     /// `n` and `w = mean(ks) / (mean(kd) + mean(ks))` of the 7-parameter model fit
-    /// ([`crate::phong_fit`], DESIGN.md section 6): the shape of the BRDF in log space, which can
+    /// ([`crate::phong_fit`], docs/design.md section 6): the shape of the BRDF in log space, which can
     /// be a poor sampler for weak sharp spikes but needs no quadrature.
     Model,
 }

@@ -1,4 +1,4 @@
-//! The Blinn-Phong parameter predictor (DESIGN.md section 7): a shallow MLP from the 32-value
+//! The Blinn-Phong parameter predictor (docs/design.md section 7): a shallow MLP from the 32-value
 //! code to the sampling parameters `(n, w)`, supervised by Blinn-Phong fits of the training
 //! split.
 //!

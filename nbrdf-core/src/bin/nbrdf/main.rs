@@ -166,7 +166,7 @@ struct FitPhongArgs {
     json: bool,
     /// Which lobe is stored for sampling: `variance` (default) searches (n, w) for the lowest
     /// variance of BSDF sampling; `model` takes n and w = mean(ks) / (mean(kd) + mean(ks)) of the
-    /// 7-parameter fit (DESIGN.md section 6), which can be a poor sampler for weak sharp spikes.
+    /// 7-parameter fit (docs/design.md section 6), which can be a poor sampler for weak sharp spikes.
     #[arg(long, value_enum, default_value_t = LobeArg::Variance)]
     lobe: LobeArg,
     /// How the table folds phi_d: reciprocal for MERL tables, mirror for non-reciprocal ones

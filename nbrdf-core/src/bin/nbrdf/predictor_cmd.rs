@@ -67,7 +67,7 @@ pub struct PredictorTrainArgs {
     /// looking at the test split. 0: off.
     #[arg(long, default_value_t = 0, value_name = "K")]
     cross_validate: usize,
-    /// Predict from the 32-value code alone (DESIGN.md section 7), without the network's
+    /// Predict from the 32-value code alone (docs/design.md section 7), without the network's
     /// highlight profile (27 evaluations along theta_h). The code cannot hold peaks sharper
     /// than the autoencoder's 64 x 64 sphere resolves (README); the settings the code alone
     /// did best with were `--hidden 0 --weight-decay 0.01`.

@@ -1,4 +1,4 @@
-//! The NBRDF autoencoder (DESIGN.md section 7): flattened networks (675 values at width 21)
+//! The NBRDF autoencoder (docs/design.md section 7): flattened networks (675 values at width 21)
 //! `-> 32 -> 675`, trained with the image loss of [`super::sphere`].
 //!
 //! Architecture: encoder `675 -> 96 (tanh) -> 32`, decoder `32 -> 96 (tanh) -> 675`, linear code
