@@ -27,6 +27,7 @@ pub mod merl;
 pub mod metrics;
 pub mod network;
 pub mod phong_fit;
+pub mod rgl;
 pub mod sampling;
 pub mod train;
 
