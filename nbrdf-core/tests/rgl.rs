@@ -375,3 +375,39 @@ fn spectral_measurements_are_refused_as_mitsuba_rgb_variants_do() {
     ));
     refused(Fields(fields).bytes(), &["spectral", "_rgb.bsdf"]);
 }
+
+#[test]
+fn batches_match_single_evaluations() {
+    use nbrdf_core::brdf::{Directions, RgbMut};
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let pairs: Vec<(Vec3, Vec3)> = (0..3000)
+        .map(|i| directions()[i % directions().len()])
+        .collect();
+    let planar = |pick: fn(&(Vec3, Vec3)) -> Vec3| -> Vec<f32> {
+        let v: Vec<Vec3> = pairs.iter().map(pick).collect();
+        v.iter()
+            .map(|d| d.x)
+            .chain(v.iter().map(|d| d.y))
+            .chain(v.iter().map(|d| d.z))
+            .collect()
+    };
+    let (views, lights) = (planar(|p| p.0), planar(|p| p.1));
+    let (view, light) = (
+        Directions::from_planar(&views).unwrap(),
+        Directions::from_planar(&lights).unwrap(),
+    );
+    let mut raw = vec![f32::NAN; 3 * pairs.len()];
+    let mut clamped = vec![f32::NAN; 3 * pairs.len()];
+    m.eval_cos_batch_f32(view, light, RgbMut::from_planar(&mut raw).unwrap());
+    Brdf::eval_cos_batch(&m, view, light, RgbMut::from_planar(&mut clamped).unwrap());
+    let n = pairs.len();
+    for (i, (v, l)) in pairs.iter().enumerate() {
+        let single = m.eval_cos_f32(*v, *l);
+        assert_eq!([raw[i], raw[n + i], raw[2 * n + i]], single);
+        let normalised = m.eval_cos_f32(v.normalize_or_zero(), l.normalize_or_zero());
+        assert_eq!(
+            [clamped[i], clamped[n + i], clamped[2 * n + i]],
+            normalised.map(|x| x.max(0.0))
+        );
+    }
+}

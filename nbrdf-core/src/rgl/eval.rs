@@ -201,29 +201,38 @@ impl RglMeasurement {
         }
     }
 
-    /// [`RglMeasurement::eval_cos_f32`] for a batch, in parallel (`out` as long as the inputs).
+    /// [`RglMeasurement::eval_cos_f32`] for a batch, in parallel (`view`, `light` and `out` of
+    /// the same length; extra outputs are left untouched).
     pub fn eval_cos_batch_f32(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        let n = view.len();
-        assert!(light.len() == n && out.len() == n, "batch lengths differ");
-        out.r
-            .par_chunks_mut(BATCH_CHUNK)
-            .zip(out.g.par_chunks_mut(BATCH_CHUNK))
-            .zip(out.b.par_chunks_mut(BATCH_CHUNK))
-            .enumerate()
-            .for_each(|(chunk, ((r, g), b))| {
-                let start = chunk * BATCH_CHUNK;
-                for i in 0..r.len() {
-                    let value = self.eval_cos_f32(view.get(start + i), light.get(start + i));
-                    r[i] = value[0];
-                    g[i] = value[1];
-                    b[i] = value[2];
-                }
-            });
+        for_each_pair(view, light, out, |v, l| self.eval_cos_f32(v, l));
     }
 }
 
+/// Fills `out[i]` with `eval(view[i], light[i])` on all cores.
+fn for_each_pair(
+    view: Directions<'_>,
+    light: Directions<'_>,
+    out: RgbMut<'_>,
+    eval: impl Fn(Vec3, Vec3) -> [f32; 3] + Sync,
+) {
+    let n = view.len().min(light.len());
+    out.r
+        .par_chunks_mut(BATCH_CHUNK)
+        .zip(out.g.par_chunks_mut(BATCH_CHUNK))
+        .zip(out.b.par_chunks_mut(BATCH_CHUNK))
+        .enumerate()
+        .for_each(|(chunk, ((r, g), b))| {
+            let start = chunk * BATCH_CHUNK;
+            for i in 0..r.len().min(n.saturating_sub(start)) {
+                let value = eval(view.get(start + i), light.get(start + i));
+                (r[i], g[i], b[i]) = (value[0], value[1], value[2]);
+            }
+        });
+}
+
 /// The measurement as a reflectance function: directions are normalised first and negative
-/// (out-of-gamut) values clamped to zero, as the trait requires.
+/// (out-of-gamut) values clamped to zero, as the trait requires. Note the trait's argument order
+/// `(light, view)`, the reverse of [`RglMeasurement::eval`]'s Mitsuba order `(view, light)`.
 impl Brdf for RglMeasurement {
     fn eval(&self, light: Vec3, view: Vec3) -> [f32; 3] {
         let (light, view) = (light.normalize_or_zero(), view.normalize_or_zero());
@@ -231,24 +240,9 @@ impl Brdf for RglMeasurement {
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        let n = view.len();
-        out.r
-            .par_chunks_mut(BATCH_CHUNK)
-            .zip(out.g.par_chunks_mut(BATCH_CHUNK))
-            .zip(out.b.par_chunks_mut(BATCH_CHUNK))
-            .enumerate()
-            .for_each(|(chunk, ((r, g), b))| {
-                let start = chunk * BATCH_CHUNK;
-                for i in 0..r.len().min(n - start) {
-                    let (v, l) = (
-                        view.get(start + i).normalize_or_zero(),
-                        light.get(start + i).normalize_or_zero(),
-                    );
-                    let value = self.eval_cos_f32(v, l);
-                    r[i] = value[0].max(0.0);
-                    g[i] = value[1].max(0.0);
-                    b[i] = value[2].max(0.0);
-                }
-            });
+        for_each_pair(view, light, out, |v, l| {
+            self.eval_cos_f32(v.normalize_or_zero(), l.normalize_or_zero())
+                .map(|x| x.max(0.0))
+        });
     }
 }
