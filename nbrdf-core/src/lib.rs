@@ -11,6 +11,8 @@
 //!   evaluation kernel (scalar and AVX2).
 //! * [`rng`], [`fastmath`] – the seeded SplitMix64 streams and the `exp`/`ln` approximations
 //!   shared by evaluation and training.
+//! * [`rgl`]      – RGL `.bsdf` measurements (Dupuy and Jakob 2018): the tensor file, the
+//!   Marginal2D warp and `f_r` evaluated exactly as Mitsuba's `measured` plugin does.
 //! * [`sampling`] – cosine, uniform and Blinn-Phong-mixture importance sampling with pdfs.
 //! * [`error`]    – the crate's error type.
 //!
@@ -45,6 +47,7 @@ pub mod error;
 pub mod fastmath;
 pub mod merl;
 pub mod network;
+pub mod rgl;
 pub mod rng;
 pub mod sampling;
 
