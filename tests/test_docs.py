@@ -296,6 +296,20 @@ def test_documented_python_names_exist():
     assert not missing, "documented Python names that do not exist:\n" + "\n".join(missing)
 
 
+def test_results_pages_open_with_their_command():
+    """docs/results/*.md: a shell block with a checked command comes before the first section."""
+    pages = sorted((REPO / "docs" / "results").glob("*.md"))
+    assert pages
+    for page in pages:
+        text = page.read_text()
+        first_section = text.find("\n## ")
+        fence = next((f for f in FENCE.finditer(text) if f.group(1) in SHELL_LANGUAGES), None)
+        assert fence is not None and (first_section < 0 or fence.start() < first_section), \
+            f"{_relative(page)} does not open with the command that regenerates it"
+        commands = [line for _, line in _shell_lines(fence.group(2))]
+        assert any(_checked(Command(_relative(page), line)) for line in commands), _relative(page)
+
+
 # -- the README's five-minute path, run literally -------------------------------------------------
 
 # Appended to the README's render command: a tiny image (the scene's resx/resy parameters).
