@@ -64,6 +64,8 @@ install: build
 	  'Name: nbrdf' 'Description: Neural BRDFs and MERL tables (C ABI of nbrdf)' 'Version: $(VERSION)' \
 	  'Libs: -L$${libdir} -lnbrdf_ffi' 'Cflags: -I$${includedir}' > $(DESTDIR)$(LIBDIR)/pkgconfig/nbrdf.pc
 
+# The main job on embedded data (about a minute): table, network and Phong lobe of one material,
+# the Veach scene rendered with both; writes the README's picture docs/images/demo.png and out/demo/.
 demo: setup
 	$(PY) -m nbrdf_tools.demo
 
