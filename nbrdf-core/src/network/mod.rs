@@ -76,9 +76,9 @@ impl SamplingParams {
                 self.model
             ));
         }
-        if !(self.exponent.is_finite() && self.exponent >= 0.0) {
+        if !crate::sampling::exponent_in_range(f64::from(self.exponent)) {
             return Some(format!(
-                "sampling exponent {} must be finite and >= 0",
+                "sampling exponent {} must be in [0, 1e6] (MAX_EXPONENT)",
                 self.exponent
             ));
         }

@@ -61,6 +61,7 @@ pub fn compare(
     samples: usize,
     threads: Option<usize>,
 ) -> Result<CompareReport> {
+    super::limits::check_compare(resolution, samples)?;
     let a = Material::read_folded(reference, fold)?;
     let b = Material::read_folded(test, fold)?;
     let comparison = with_threads(threads, || metrics::compare(&a, &b, resolution, samples))??;

@@ -83,9 +83,10 @@ impl fmt::Display for FitPhongReport {
 /// Fits the model and searches the lowest-variance lobe of the input; a network gets the lobe
 /// of `request.lobe` as its "fit" sampling.
 pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
+    super::limits::check_fit_samples(request.fit.samples)?;
     let material = Material::read_folded(&request.input, request.phi_fold)?;
     if request.output.is_some() && matches!(material, Material::Table(_)) {
-        return Err(NbrdfError::InvalidArgument(
+        return Err(NbrdfError::Usage(
             "-o/--output applies to networks; for a table the fit is printed".into(),
         ));
     }

@@ -53,6 +53,7 @@ pub fn train_network(
     request: &TrainRequest,
     on_epoch: &mut (dyn FnMut(&EpochStats) + Send),
 ) -> Result<TrainNetworkReport> {
+    super::limits::check_train(&request.config)?;
     let table = MerlTable::read(&request.table)?.with_phi_fold(request.phi_fold);
     let name = request
         .name
