@@ -1,9 +1,7 @@
 //! Reading, validating and writing MERL-format files (a 12-byte header, then three channels of
 //! float64 cell values, channel-major).
 
-use super::{
-    cell_coordinates, MerlTable, PhiFold, CELLS, N_PHI_D, N_THETA_D, N_THETA_H, SCALE,
-};
+use super::{cell_coordinates, MerlTable, PhiFold, CELLS, N_PHI_D, N_THETA_D, N_THETA_H, SCALE};
 use crate::error::{regular_file_size, NbrdfError, Result};
 use std::io::Read;
 use std::path::Path;

@@ -162,7 +162,11 @@ impl Nbrdf {
     /// Loads and validates an `*.nbrdf.json` file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        crate::error::regular_file_size(path, crate::error::MAX_JSON_BYTES, "an NBRDF network (.nbrdf.json)")?;
+        crate::error::regular_file_size(
+            path,
+            crate::error::MAX_JSON_BYTES,
+            "an NBRDF network (.nbrdf.json)",
+        )?;
         let bytes = std::fs::read(path).map_err(|e| NbrdfError::io(path, e))?;
         if crate::merl::io::has_merl_header(&bytes) {
             return Err(NbrdfError::format(
@@ -183,8 +187,8 @@ impl Nbrdf {
     /// Parses and validates the JSON text of a network; `origin` names the source in errors.
     pub fn from_json_str(text: &str, origin: &Path) -> Result<Self> {
         let fail = |message: String| NbrdfError::format(origin, message);
-        let root: serde_json::Value = serde_json::from_str(text)
-            .map_err(|e| fail(describe_json_error(text, &e)))?;
+        let root: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| fail(describe_json_error(text, &e)))?;
         check_header(&root).map_err(fail)?;
         let file: FileIn = serde_json::from_value(root)
             .map_err(|e| fail(format!("not a valid NBRDF network: {e}")))?;

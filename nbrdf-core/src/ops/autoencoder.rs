@@ -140,7 +140,12 @@ pub fn train_autoencoder(
     limits::check_range("--batch", c.batch, 1, limits::MAX_BATCH)?;
     limits::check_range("--mixup", c.mixup, 0, limits::MAX_ITERATIONS)?;
     limits::check_range("--image-size", c.image_size, 1, limits::MAX_RESOLUTION)?;
-    limits::check_range("--select-refine", request.select_refine, 0, limits::MAX_ITERATIONS)?;
+    limits::check_range(
+        "--select-refine",
+        request.select_refine,
+        0,
+        limits::MAX_ITERATIONS,
+    )?;
     let seeds = usize::try_from(request.seeds).unwrap_or(usize::MAX);
     limits::check_range("--seeds", seeds, 1, limits::MAX_ITERATIONS)?;
     let nets = read_nbrdf_dir(&request.nbrdfs)?;

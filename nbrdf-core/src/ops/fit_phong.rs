@@ -93,7 +93,8 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
     let lobe_config = LobeFitConfig::default();
     let analysis = with_threads(request.threads, || {
         LobeAnalysis::new(&*material_target(&material), &request.fit, &lobe_config)
-    })??;
+    })?
+    .map_err(super::about_data(&request.input.display().to_string()))?;
     let (exponent, specular_weight) = analysis.lobe(request.lobe);
     let sampling = SamplingParams {
         model: SAMPLING_MODEL_BLINN_PHONG.to_string(),

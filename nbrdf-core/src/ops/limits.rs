@@ -86,7 +86,10 @@ pub fn check_compare(resolution: usize, samples: usize) -> Result<()> {
     check_range("--resolution", resolution, 1, MAX_RESOLUTION)?;
     check_range("--samples", samples, 1, MAX_SAMPLES)?;
     let pixels = (resolution as u64).pow(2);
-    check_memory("the comparison images", pixels.checked_mul(4 * 3 * 4 + 2 * 3 * 8))
+    check_memory(
+        "the comparison images",
+        pixels.checked_mul(4 * 3 * 4 + 2 * 3 * 8),
+    )
 }
 
 #[cfg(test)]

@@ -68,6 +68,18 @@ pub fn to_json_pretty<T: Serialize>(report: &T) -> Result<String> {
     Ok(format!("{text}\n"))
 }
 
+/// Puts the file the data came from in front of an error about the data ("no valid
+/// directions"), which the numerical code raising it cannot name; other errors name their
+/// file already.
+pub(crate) fn about_data(source: &str) -> impl Fn(NbrdfError) -> NbrdfError + '_ {
+    move |error| match error {
+        NbrdfError::InvalidArgument(message) => {
+            NbrdfError::InvalidArgument(format!("{source}: {message}"))
+        }
+        other => other,
+    }
+}
+
 fn invalid(message: String) -> NbrdfError {
     NbrdfError::InvalidArgument(message)
 }

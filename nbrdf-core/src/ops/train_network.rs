@@ -67,7 +67,8 @@ pub fn train_network(
     let target = train::table_target(&table);
     let outcome = with_threads(request.threads, || {
         train::train(&target, config, &name, on_epoch)
-    })??;
+    })?
+    .map_err(super::about_data(&request.table.display().to_string()))?;
     let mut network = outcome.network;
     network.provenance = train::provenance(
         config,

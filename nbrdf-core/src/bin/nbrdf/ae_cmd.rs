@@ -1,6 +1,5 @@
 //! `nbrdf ae train|encode|decode|eval` and `nbrdf interpolate`.
 
-use nbrdf_core::ops::limits::{MAX_EPOCHS, MAX_HIDDEN};
 use super::{emit, progress};
 use clap::{Args, Subcommand};
 use indicatif::ProgressBar;
@@ -8,6 +7,7 @@ use nbrdf_core::latent::autoencoder::{AeConfig, AeEpoch};
 use nbrdf_core::ops::autoencoder::{
     self as ops_ae, AeEvalRequest, AeTrainObserver, AeTrainRequest, PcaTables as Tables, SplitPart,
 };
+use nbrdf_core::ops::limits::{MAX_EPOCHS, MAX_HIDDEN};
 use nbrdf_core::ops::to_json_pretty;
 use nbrdf_core::{NbrdfError, Result};
 use std::path::PathBuf;

@@ -1,8 +1,8 @@
 //! `nbrdf train`.
 
 use super::{count_in, emit, progress, PhiFoldArg};
-use nbrdf_core::ops::limits::{MAX_BATCH, MAX_EPOCHS, MAX_HIDDEN, MAX_SAMPLES};
 use clap::{Args, ValueEnum};
+use nbrdf_core::ops::limits::{MAX_BATCH, MAX_EPOCHS, MAX_HIDDEN, MAX_SAMPLES};
 use nbrdf_core::ops::train_network::{train_network, TrainRequest};
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
