@@ -50,8 +50,12 @@ fn core_accepts(s: &NbrdfSampler) -> bool {
 /// Pdfs of a fixed set of direction pairs under `sampler`, with the status.
 fn pdfs(sampler: &NbrdfSampler) -> (i32, Vec<f32>) {
     let n = 4;
-    let view = [0.0, 0.3, -0.2, 0.5, 0.0, 0.1, 0.2, 0.0, 1.0, 0.95, 0.97, 0.86];
-    let light = [0.0, -0.3, 0.2, 0.1, 0.0, -0.1, -0.2, 0.3, 1.0, 0.95, 0.97, 0.95];
+    let view = [
+        0.0, 0.3, -0.2, 0.5, 0.0, 0.1, 0.2, 0.0, 1.0, 0.95, 0.97, 0.86,
+    ];
+    let light = [
+        0.0, -0.3, 0.2, 0.1, 0.0, -0.1, -0.2, 0.3, 1.0, 0.95, 0.97, 0.95,
+    ];
     let mut out = vec![-7.0f32; n];
     // SAFETY: the arrays hold 3 n and n floats and do not overlap.
     let status =

@@ -43,17 +43,17 @@ pub(crate) fn looks_like_json(bytes: &[u8]) -> bool {
 /// a value whose reflectance (stored x [`SCALE`]) overflows float32, the precision the
 /// renderer reads it in, or a table without a single cell valid in all three channels.
 fn value_problem(stored_at: impl Fn(usize) -> f64) -> Option<String> {
-    for c in 0..3 {
+    for (c, scale) in SCALE.iter().enumerate() {
         for i in 0..CELLS {
             let flat = c * CELLS + i;
             let value = stored_at(flat);
-            if value * SCALE[c] > f64::from(f32::MAX) {
+            if value * scale > f64::from(f32::MAX) {
                 return Some(format!(
                     "value {value:e} at byte offset {} ({}) is {:e} once scaled, beyond the \
                      float32 range (3.4e38) the table is rendered in",
                     HEADER_SIZE + 8 * flat,
                     describe_position(flat),
-                    value * SCALE[c]
+                    value * scale
                 ));
             }
         }
