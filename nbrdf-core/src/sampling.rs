@@ -18,6 +18,15 @@ use std::f64::consts::{FRAC_1_PI, TAU};
 /// Lanes per rayon task in the batched functions.
 const TASK_LANES: usize = 4096;
 
+/// The largest Blinn-Phong exponent accepted (docs/design.md promises stable sampling up to
+/// here; docs/hardening.md). The plugin's `jit.py`/`bsdf.py` use the same figure.
+pub const MAX_EXPONENT: f64 = 1e6;
+
+/// Whether `n` is a usable Blinn-Phong exponent: finite, in `[0, MAX_EXPONENT]`.
+pub fn exponent_in_range(n: f64) -> bool {
+    (0.0..=MAX_EXPONENT).contains(&n)
+}
+
 /// A sampling strategy for the light direction given the view direction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SamplingStrategy {
@@ -38,16 +47,16 @@ pub struct DirectionSample {
 }
 
 impl SamplingStrategy {
-    /// Checks the parameters (finite exponent >= 0, weight in [0, 1]).
+    /// Checks the parameters (exponent in [0, [`MAX_EXPONENT`]], weight in [0, 1]).
     pub fn validated(self) -> Result<Self> {
         if let SamplingStrategy::BlinnPhong {
             exponent,
             specular_weight,
         } = self
         {
-            if !(exponent.is_finite() && exponent >= 0.0) {
+            if !exponent_in_range(exponent) {
                 return Err(NbrdfError::InvalidArgument(format!(
-                    "Blinn-Phong exponent {exponent} must be finite and >= 0"
+                    "Blinn-Phong exponent {exponent} must be in [0, 1e6] (MAX_EXPONENT)"
                 )));
             }
             if !(0.0..=1.0).contains(&specular_weight) {
@@ -65,7 +74,7 @@ impl SamplingStrategy {
             SamplingStrategy::BlinnPhong {
                 exponent,
                 specular_weight,
-            } => exponent.is_finite() && exponent >= 0.0 && (0.0..=1.0).contains(&specular_weight),
+            } => exponent_in_range(exponent) && (0.0..=1.0).contains(&specular_weight),
             _ => true,
         }
     }
@@ -450,6 +459,8 @@ mod tests {
             bp(-1.0, 0.5),
             bp(f64::NAN, 0.5),
             bp(f64::INFINITY, 0.5),
+            bp(MAX_EXPONENT * (1.0 + 1e-12), 0.5),
+            bp(3.4e38, 0.5),
             bp(1.0, -0.1),
             bp(1.0, 1.5),
             bp(1.0, f64::NAN),

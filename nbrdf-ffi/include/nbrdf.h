@@ -67,7 +67,7 @@ typedef struct NbrdfNetworkInfo {
   float specular_weight;
 } NbrdfNetworkInfo;
 
-// An importance-sampling strategy. `exponent` (finite, >= 0) and `specular_weight` (in [0, 1])
+// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
 // are read only for `NBRDF_SAMPLING_PHONG`.
 typedef struct NbrdfSampler {
   enum NbrdfSamplingKind kind;
@@ -199,7 +199,7 @@ int32_t nbrdf_sampler_pdf(const struct NbrdfSampler *sampler,
                           size_t n,
                           float *out_pdf);
 
-// Checks a sampler's kind and parameters (finite exponent >= 0, specular weight in [0, 1] for
+// Checks a sampler's kind and parameters (exponent in [0, 1e6], specular weight in [0, 1] for
 // `NBRDF_SAMPLING_PHONG`): `NBRDF_OK` or `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
 //
 // # Safety

@@ -56,7 +56,7 @@ pub enum NbrdfSamplingKind {
     NBRDF_SAMPLING_PHONG = 2,
 }
 
-/// An importance-sampling strategy. `exponent` (finite, >= 0) and `specular_weight` (in [0, 1])
+/// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
 /// are read only for `NBRDF_SAMPLING_PHONG`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -738,7 +738,7 @@ pub unsafe extern "C" fn nbrdf_sampler_pdf(
     })
 }
 
-/// Checks a sampler's kind and parameters (finite exponent >= 0, specular weight in [0, 1] for
+/// Checks a sampler's kind and parameters (exponent in [0, 1e6], specular weight in [0, 1] for
 /// `NBRDF_SAMPLING_PHONG`): `NBRDF_OK` or `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
 ///
 /// # Safety

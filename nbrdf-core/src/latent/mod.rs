@@ -35,6 +35,7 @@ fn column_mean_std<R: AsRef<[f32]>>(rows: &[R], floor: f32) -> (Vec<f32>, Vec<f3
 fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
     let named =
         |e: &dyn std::fmt::Display| NbrdfError::InvalidArgument(format!("{}: {e}", path.display()));
+    crate::error::regular_file_size(path, crate::error::MAX_JSON_BYTES, "a JSON model")?;
     let text = std::fs::read_to_string(path).map_err(|e| named(&e))?;
     serde_json::from_str(&text).map_err(|e| named(&e))
 }

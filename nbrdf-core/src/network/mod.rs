@@ -76,9 +76,9 @@ impl SamplingParams {
                 self.model
             ));
         }
-        if !(self.exponent.is_finite() && self.exponent >= 0.0) {
+        if !crate::sampling::exponent_in_range(f64::from(self.exponent)) {
             return Some(format!(
-                "sampling exponent {} must be finite and >= 0",
+                "sampling exponent {} must be in [0, 1e6] (MAX_EXPONENT)",
                 self.exponent
             ));
         }
@@ -262,10 +262,13 @@ impl Brdf for Nbrdf {
         let (Some(l), Some(v)) = (normalized(light.as_dvec3()), normalized(view.as_dvec3())) else {
             return [0.0; 3];
         };
+        // The horizon test in float32, the precision the batched kernel tests it in: a z that
+        // underflows there (a grazing direction with huge x, y) is at the horizon in both.
+        let (v, l) = (v.as_vec3(), l.as_vec3());
         if l.z <= 0.0 || v.z <= 0.0 {
             return [0.0; 3];
         }
-        self.eval_input(network_input(v.as_vec3(), l.as_vec3()))
+        self.eval_input(network_input(v, l))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {

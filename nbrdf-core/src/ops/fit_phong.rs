@@ -83,16 +83,18 @@ impl fmt::Display for FitPhongReport {
 /// Fits the model and searches the lowest-variance lobe of the input; a network gets the lobe
 /// of `request.lobe` as its "fit" sampling.
 pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
+    super::limits::check_fit_samples(request.fit.samples)?;
     let material = Material::read_folded(&request.input, request.phi_fold)?;
     if request.output.is_some() && matches!(material, Material::Table(_)) {
-        return Err(NbrdfError::InvalidArgument(
+        return Err(NbrdfError::Usage(
             "-o/--output applies to networks; for a table the fit is printed".into(),
         ));
     }
     let lobe_config = LobeFitConfig::default();
     let analysis = with_threads(request.threads, || {
         LobeAnalysis::new(&*material_target(&material), &request.fit, &lobe_config)
-    })??;
+    })?
+    .map_err(super::about_data(&request.input.display().to_string()))?;
     let (exponent, specular_weight) = analysis.lobe(request.lobe);
     let sampling = SamplingParams {
         model: SAMPLING_MODEL_BLINN_PHONG.to_string(),

@@ -53,6 +53,7 @@ pub fn train_network(
     request: &TrainRequest,
     on_epoch: &mut (dyn FnMut(&EpochStats) + Send),
 ) -> Result<TrainNetworkReport> {
+    super::limits::check_train(&request.config)?;
     let table = MerlTable::read(&request.table)?.with_phi_fold(request.phi_fold);
     let name = request
         .name
@@ -66,7 +67,8 @@ pub fn train_network(
     let target = train::table_target(&table);
     let outcome = with_threads(request.threads, || {
         train::train(&target, config, &name, on_epoch)
-    })??;
+    })?
+    .map_err(super::about_data(&request.table.display().to_string()))?;
     let mut network = outcome.network;
     network.provenance = train::provenance(
         config,

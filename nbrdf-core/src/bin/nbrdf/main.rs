@@ -3,13 +3,15 @@
 //! One variant of [`Command`] per subcommand, each with its own argument struct and `run_*`
 //! function: it turns the arguments into the settings of one library function of
 //! [`nbrdf_core::ops`], calls it and prints its report. `main` alone turns errors into
-//! `error: ...` on stderr and exit status 1.
+//! `error: ...` on stderr and an exit status: 2 for usage errors (clap's convention: bad or
+//! missing arguments, options out of their range, [`NbrdfError::Usage`]), 1 for failures (I/O,
+//! file formats, data).
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use nbrdf_core::analytic::ModelKind;
 use nbrdf_core::lobe_fit::LobeChoice;
 use nbrdf_core::merl::PhiFold;
-use nbrdf_core::ops::{self, catalogue, compare, fit_phong, table};
+use nbrdf_core::ops::{self, catalogue, compare, fit_phong, limits, table};
 use nbrdf_core::phong_fit::FitConfig;
 use nbrdf_core::{NbrdfError, Result};
 use std::io::Write;
@@ -173,8 +175,9 @@ struct FitPhongArgs {
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     phi_fold: PhiFoldArg,
-    /// Directions sampled (adaptively) for the fit.
-    #[arg(long, default_value_t = FitConfig::default().samples)]
+    /// Directions sampled (adaptively) for the fit, at most 1e8.
+    #[arg(long, default_value_t = FitConfig::default().samples,
+          value_parser = count_in::<1, { limits::MAX_SAMPLES }>)]
     samples: usize,
     /// Random seed of the sampled directions.
     #[arg(long, default_value_t = 0)]
@@ -196,11 +199,12 @@ struct CompareArgs {
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     phi_fold: PhiFoldArg,
-    /// Width and height of the sphere images, pixels.
-    #[arg(long, default_value_t = 128)]
+    /// Width and height of the sphere images, pixels (at most 4096).
+    #[arg(long, default_value_t = 128, value_parser = count_in::<1, { limits::MAX_RESOLUTION }>)]
     resolution: usize,
-    /// Directions sampled for the log-space error (each of adaptive and uniform sampling).
-    #[arg(long, default_value_t = 100_000)]
+    /// Directions sampled for the log-space error (each of adaptive and uniform sampling), at
+    /// most 1e8.
+    #[arg(long, default_value_t = 100_000, value_parser = count_in::<1, { limits::MAX_SAMPLES }>)]
     samples: usize,
     /// Print the comparison as JSON.
     #[arg(long)]
@@ -217,7 +221,7 @@ fn main() -> ExitCode {
             // --help and --version come through here too and are not failures.
             let _ = e.print();
             return if e.use_stderr() {
-                ExitCode::from(1)
+                ExitCode::from(EXIT_USAGE)
             } else {
                 ExitCode::SUCCESS
             };
@@ -227,8 +231,37 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(1)
+            ExitCode::from(exit_status(&e))
         }
+    }
+}
+
+/// Exit status of a usage error (clap's own for bad arguments).
+const EXIT_USAGE: u8 = 2;
+/// Exit status of a failure: I/O, a bad file, data the command cannot work with.
+const EXIT_FAILURE: u8 = 1;
+
+fn exit_status(error: &NbrdfError) -> u8 {
+    match error {
+        NbrdfError::Usage(_) => EXIT_USAGE,
+        _ => EXIT_FAILURE,
+    }
+}
+
+/// A clap value parser for a count in `[MIN, MAX]` (the ranges of [`ops::limits`], which the
+/// library checks again for its other callers).
+pub(crate) fn count_in<const MIN: usize, const MAX: usize>(
+    text: &str,
+) -> std::result::Result<usize, String> {
+    let value: usize = text
+        .parse()
+        .map_err(|e| format!("{e} (a whole number in [{MIN}, {MAX}])"))?;
+    if (MIN..=MAX).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value} is out of range: it must be in [{MIN}, {MAX}] (docs/hardening.md)"
+        ))
     }
 }
 

@@ -1,7 +1,8 @@
 //! `nbrdf train`.
 
-use super::{emit, progress, PhiFoldArg};
+use super::{count_in, emit, progress, PhiFoldArg};
 use clap::{Args, ValueEnum};
+use nbrdf_core::ops::limits::{MAX_BATCH, MAX_EPOCHS, MAX_HIDDEN, MAX_SAMPLES};
 use nbrdf_core::ops::train_network::{train_network, TrainRequest};
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
@@ -43,20 +44,25 @@ pub struct TrainArgs {
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     pub phi_fold: PhiFoldArg,
     /// Training samples (invalid cells and directions below the horizon are not counted);
-    /// 10% more are drawn for validation.
-    #[arg(long, default_value_t = TrainConfig::default().samples)]
+    /// 10% more are drawn for validation. At most 1e8.
+    #[arg(long, default_value_t = TrainConfig::default().samples,
+          value_parser = count_in::<1, MAX_SAMPLES>)]
     pub samples: usize,
-    /// Maximum number of epochs.
-    #[arg(long, default_value_t = TrainConfig::default().max_epochs)]
+    /// Maximum number of epochs (at most 1e6).
+    #[arg(long, default_value_t = TrainConfig::default().max_epochs,
+          value_parser = count_in::<1, MAX_EPOCHS>)]
     pub epochs: usize,
-    /// Width of the two hidden layers.
-    #[arg(long, default_value_t = TrainConfig::default().hidden)]
+    /// Width of the two hidden layers (at most 4096; the traced Mitsuba backend is slow beyond a
+    /// few hundred).
+    #[arg(long, default_value_t = TrainConfig::default().hidden,
+          value_parser = count_in::<1, MAX_HIDDEN>)]
     pub hidden: usize,
     /// Adam learning rate.
     #[arg(long, default_value_t = AdamConfig::default().learning_rate)]
     pub lr: f32,
-    /// Mini-batch size.
-    #[arg(long, default_value_t = TrainConfig::default().batch)]
+    /// Mini-batch size (at most 2^20; with the width, within the 8 GiB memory estimate).
+    #[arg(long, default_value_t = TrainConfig::default().batch,
+          value_parser = count_in::<1, MAX_BATCH>)]
     pub batch: usize,
     /// Stop after this many epochs without a 0.1% improvement of the validation loss (the best
     /// weights are kept).
