@@ -740,7 +740,7 @@ mod tests {
     #[test]
     fn two_lobes_are_never_worse_than_one() {
         let config = LobeFitConfig::default();
-        let materials: Vec<Box<dyn Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> + Sync>> = vec![
+        let materials: Vec<Box<TargetFn<'static>>> = vec![
             Box::new(blinn_phong(0.7, 0.0, 1.0)),
             Box::new(blinn_phong(0.05, 0.9, 300.0)),
             Box::new(blinn_phong(0.3, 0.2, 20_000.0)),

@@ -608,7 +608,7 @@ fn two_lobe_samplers_go_through_the_mixture_functions() {
     };
     let core = SamplingStrategy::TwoLobe {
         exponent1: 2000.0,
-        weight1: 0.4,
+        weight1: f64::from(0.4f32),
         exponent2: 20.0,
         weight2: f64::from(0.35f32),
     };
