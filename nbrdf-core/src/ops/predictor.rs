@@ -499,6 +499,8 @@ pub fn predict_phong(
         exponent: n,
         specular_weight: w,
         source: "predicted".to_string(),
+        second_lobe: None,
+        relative_variance: None,
     });
     net.validate()?;
     let out = output.unwrap_or(input);

@@ -155,6 +155,25 @@ impl From<LobeArg> for LobeChoice {
     }
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum LobesArg {
+    Auto,
+    #[value(name = "1")]
+    One,
+    #[value(name = "2")]
+    Two,
+}
+
+impl From<LobesArg> for fit_phong::LobeCount {
+    fn from(l: LobesArg) -> Self {
+        match l {
+            LobesArg::Auto => fit_phong::LobeCount::Auto,
+            LobesArg::One => fit_phong::LobeCount::One,
+            LobesArg::Two => fit_phong::LobeCount::Two,
+        }
+    }
+}
+
 #[derive(Args)]
 struct FitPhongArgs {
     /// A MERL-format table (.binary) or a network (.nbrdf.json, updated with the fit).
@@ -171,6 +190,11 @@ struct FitPhongArgs {
     /// 7-parameter fit (docs/design.md section 6), which can be a poor sampler for weak sharp spikes.
     #[arg(long, value_enum, default_value_t = LobeArg::Variance)]
     lobe: LobeArg,
+    /// How many Blinn-Phong lobes the sampling mixture has: `auto` (default) searches one and
+    /// two lobes on the same quadrature and stores two where they lower the relative variance
+    /// (by more than 2 %); `1` or `2` force the count (`2` needs `--lobe variance`).
+    #[arg(long, value_enum, default_value_t = LobesArg::Auto)]
+    lobes: LobesArg,
     /// How the table folds phi_d: reciprocal for MERL tables, mirror for non-reciprocal ones
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
@@ -314,6 +338,7 @@ fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
         input: args.input.clone(),
         output: args.output.clone(),
         lobe: args.lobe.into(),
+        lobes: args.lobes.into(),
         phi_fold: args.phi_fold.into(),
         fit: FitConfig {
             samples: args.samples,
