@@ -28,8 +28,10 @@ impl From<SamplingArg> for AngularSampling {
 
 #[derive(Args)]
 pub struct TrainArgs {
-    /// The MERL-format table to learn.
-    #[arg(value_name = "TABLE.binary")]
+    /// What to learn: a MERL-format table or an RGL .bsdf measurement (told apart by content).
+    /// A measurement is learnt as Mitsuba's `measured` plugin evaluates it, at the trainer's
+    /// sample directions.
+    #[arg(value_name = "TABLE.binary|MEASUREMENT.bsdf")]
     pub table: PathBuf,
     /// Where to write the network; defaults to TABLE's name with .nbrdf.json in the current
     /// directory.
@@ -111,8 +113,9 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
     let bar = progress::epoch_bar(config.max_epochs, args.quiet)?;
     bar.set_message("drawing samples");
     let request = TrainRequest {
-        table: args.table.clone(),
+        source: args.table.clone(),
         phi_fold: args.phi_fold.into(),
+        rgl_fold: Default::default(),
         output: args.output.clone(),
         name: args.name.clone(),
         config,
