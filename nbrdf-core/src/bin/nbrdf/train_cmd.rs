@@ -3,6 +3,7 @@
 use super::{emit, progress, PhiFoldArg};
 use clap::{Args, ValueEnum};
 use nbrdf_core::ops::train_network::{train_network, TrainRequest};
+use nbrdf_core::source::RglFold;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
 use nbrdf_core::train::{EpochStats, TrainConfig};
@@ -26,6 +27,23 @@ impl From<SamplingArg> for AngularSampling {
     }
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+pub enum RglFoldArg {
+    /// f(view, light) as Mitsuba's `measured` evaluates it (RGL data is not reciprocal).
+    AsMeasured,
+    /// The mean of f(view, light) and f(light, view): a reciprocal network.
+    ReciprocalMean,
+}
+
+impl From<RglFoldArg> for RglFold {
+    fn from(f: RglFoldArg) -> Self {
+        match f {
+            RglFoldArg::AsMeasured => RglFold::AsMeasured,
+            RglFoldArg::ReciprocalMean => RglFold::ReciprocalMean,
+        }
+    }
+}
+
 #[derive(Args)]
 pub struct TrainArgs {
     /// What to learn: a MERL-format table or an RGL .bsdf measurement (told apart by content).
@@ -44,6 +62,9 @@ pub struct TrainArgs {
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     pub phi_fold: PhiFoldArg,
+    /// How an RGL measurement's non-reciprocity enters the target (measurements only).
+    #[arg(long, value_enum, default_value_t = RglFoldArg::AsMeasured)]
+    pub rgl_fold: RglFoldArg,
     /// Training samples (invalid cells and directions below the horizon are not counted);
     /// 10% more are drawn for validation.
     #[arg(long, default_value_t = TrainConfig::default().samples)]
@@ -115,7 +136,7 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
     let request = TrainRequest {
         source: args.table.clone(),
         phi_fold: args.phi_fold.into(),
-        rgl_fold: Default::default(),
+        rgl_fold: args.rgl_fold.into(),
         output: args.output.clone(),
         name: args.name.clone(),
         config,
