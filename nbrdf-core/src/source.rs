@@ -45,7 +45,7 @@ impl RglFold {
 /// A training source read from a file.
 pub enum TrainingSource {
     Table { path: PathBuf, table: MerlTable },
-    Rgl(RglMeasurement),
+    Rgl(Box<RglMeasurement>),
 }
 
 const TENSOR_MAGIC: &[u8] = b"tensor_file\0";
@@ -62,7 +62,7 @@ impl TrainingSource {
             .and_then(|f| f.take(12).read_to_end(&mut head))
             .map_err(|e| NbrdfError::io(path, e))?;
         if head.as_slice() == TENSOR_MAGIC {
-            Ok(TrainingSource::Rgl(RglMeasurement::load(path)?))
+            Ok(TrainingSource::Rgl(Box::new(RglMeasurement::load(path)?)))
         } else if head.as_slice() == MERL_HEADER {
             Ok(TrainingSource::Table {
                 path: path.to_path_buf(),
