@@ -14,7 +14,7 @@ reference). Its twins, and the tests that hold the two together:
   (``clamp_exp_arg``), so that no finite weights give NaN or infinity; directions normalised
   like ``rescale_out_of_range`` (zero and non-finite vectors give 0);
 * :func:`mixture_pdf`, :func:`sample`, :func:`blinn_phong_half_vector` -
-  ``nbrdf-core/src/sampling.rs`` (``SamplingStrategy::sample``/``pdf``, ``cos_power``,
+  ``nbrdf-core/src/sampling.rs`` (``SamplingStrategy::sample``/``pdf``, ``cos_power_from_one_minus``,
   ``blinn_phong_half_vector``; uniforms clamped like ``unit_interval``);
 * :func:`two_lobe_pdf` and the ``two_lobe`` branch of :func:`sample` - ``sampling.rs``
   ``SamplingStrategy::TwoLobe`` (``two_lobe_mixture_density``, ``two_lobe_component``);
@@ -216,7 +216,7 @@ def _log1m(x):
 
 
 def _cos_power_from_one_minus(one_minus_cos, exponent):
-    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling.rs`` ``cos_power``), with
+    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling.rs`` ``cos_power_from_one_minus``), with
     n = 0 -> 1 and cos <= 0 -> 0 (never NaN)."""
     positive = one_minus_cos < 1.0
     value = dr.exp(exponent * _log1m(dr.select(positive, dr.maximum(one_minus_cos, 0.0), 0.0)))

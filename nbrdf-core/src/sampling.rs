@@ -303,15 +303,24 @@ pub fn blinn_phong_half_vector(exponent: f64, u1: f64, u2: f64) -> DVec3 {
     spherical(cos, sin, u2)
 }
 
-/// `c^n` for `c` in `[0, 1]`, with `c^0 = 1` (also for `c = 0`) and no NaN for any `n >= 0`.
-fn cos_power(c: f64, n: f64) -> f64 {
+/// `cos^n` from `1 - cos` in `[0, 1]`, with `cos^0 = 1` (also for `cos = 0`) and no NaN for any
+/// `n >= 0`. Taking `1 - cos` rather than `cos` keeps sharp lobes exact: near the mirror
+/// direction `cos` rounds to 1 while `1 - cos` (from `|h_xy|^2`) keeps its relative precision.
+/// Twin: `jit.py` `_cos_power_from_one_minus` (held together by `tests/test_backends.py`).
+fn cos_power_from_one_minus(one_minus_cos: f64, n: f64) -> f64 {
     if n == 0.0 {
         1.0
-    } else if c <= 0.0 {
+    } else if one_minus_cos >= 1.0 {
         0.0
     } else {
-        (n * c.min(1.0).ln()).exp()
+        (n * (-one_minus_cos.max(0.0)).ln_1p()).exp()
     }
+}
+
+/// `1 - cos(theta_h)` of a unit half vector from its tangential part, `|h_xy|^2 / (1 + |h.z|)`,
+/// which does not cancel as `1 - h.z` does.
+fn one_minus_cos_theta(h: DVec3) -> f64 {
+    (h.x * h.x + h.y * h.y) / (1.0 + h.z.abs())
 }
 
 /// Density of the reflected direction when the half vector has density
@@ -326,7 +335,8 @@ fn specular_density(v: DVec3, l: DVec3, n: f64) -> f64 {
     if v_dot_h <= 0.0 {
         return 0.0;
     }
-    (n + 1.0) * 0.5 * FRAC_1_PI * cos_power(h.z.abs(), n) / (4.0 * v_dot_h)
+    (n + 1.0) * 0.5 * FRAC_1_PI * cos_power_from_one_minus(one_minus_cos_theta(h), n)
+        / (4.0 * v_dot_h)
 }
 
 fn mixture_density(v: DVec3, l: DVec3, n: f64, w: f64) -> f64 {
