@@ -545,3 +545,58 @@ mod train_from_source {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
+
+/// Tables whose evaluation would leave the float32 range are refused (found by the rgl fuzz
+/// targets: an infinite Jacobian scale gave NaN where the reflectance was zero, and huge
+/// reflectances gave infinities).
+#[test]
+fn tables_beyond_the_float32_range_are_refused() {
+    let tiny_sigma = Fields::valid(true)
+        .set("ndf", DType::Float32, vec![2, 16], f32_bytes(&[1.8e25; 32]))
+        .set(
+            "sigma",
+            DType::Float32,
+            vec![2, 16],
+            f32_bytes(&[2.35e-38; 32]),
+        );
+    refused(tiny_sigma.bytes(), &["rgb", "float32 range"]);
+    let cells = N_THETA * 3 * RES * RES;
+    // The Jacobian scale is 30 / (4 * 0.75) = 10 here.
+    let huge_rgb = Fields::valid(true)
+        .set("ndf", DType::Float32, vec![2, 16], f32_bytes(&[30.0; 32]))
+        .set(
+            "rgb",
+            DType::Float32,
+            vec![1, N_THETA, 3, RES, RES],
+            f32_bytes(&vec![1e38; cells]),
+        );
+    refused(huge_rgb.bytes(), &["rgb", "float32 range"]);
+    // Without the Jacobian the scale is 1: the largest float32 reflectance still evaluates.
+    let largest = Fields::valid(false).set(
+        "rgb",
+        DType::Float32,
+        vec![1, N_THETA, 3, RES, RES],
+        f32_bytes(&vec![3e38; cells]),
+    );
+    let m = parse(largest.bytes()).unwrap();
+    let value = m.eval_cos_f32(direction(0.3, 0.0), direction(0.4, 2.0));
+    assert!(
+        value.iter().all(|v| v.is_finite() && *v > 1e38),
+        "{value:?}"
+    );
+}
+
+/// `f = f cos / cos` saturates at the largest float instead of overflowing as the light reaches
+/// the horizon, where float32 cosines go down to 1e-45.
+#[test]
+fn reflectance_at_the_horizon_saturates_instead_of_overflowing() {
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let view = direction(0.5, 0.3);
+    for z in [1e-7f32, 1e-30, 1e-38, 1e-45] {
+        let light = Vec3::new(1.0, 0.0, z);
+        let f = Brdf::eval(&m, view, light);
+        assert!(f.iter().all(|v| v.is_finite() && *v >= 0.0), "z {z}: {f:?}");
+    }
+    let f = Brdf::eval(&m, view, Vec3::new(1.0, 0.0, 1e-45));
+    assert!(f[1] == f32::MAX, "{f:?}");
+}
