@@ -560,6 +560,14 @@ fn tables_beyond_the_float32_range_are_refused() {
             f32_bytes(&[2.35e-38; 32]),
         );
     refused(tiny_sigma.bytes(), &["rgb", "float32 range"]);
+    // A subnormal area interpolates to 0 (a NaN at normal incidence, found by rgl_structured).
+    let subnormal_sigma = Fields::valid(true).set(
+        "sigma",
+        DType::Float32,
+        vec![2, 16],
+        f32_bytes(&[1e-45; 32]),
+    );
+    refused(subnormal_sigma.bytes(), &["sigma", "smallest normal"]);
     let cells = N_THETA * 3 * RES * RES;
     // The Jacobian scale is 30 / (4 * 0.75) = 10 here.
     let huge_rgb = Fields::valid(true)
@@ -599,4 +607,24 @@ fn reflectance_at_the_horizon_saturates_instead_of_overflowing() {
     }
     let f = Brdf::eval(&m, view, Vec3::new(1.0, 0.0, 1e-45));
     assert!(f[1] == f32::MAX, "{f:?}");
+}
+
+/// A VNDF row without density makes the inverse warp divide by zero (NaN at normal incidence in
+/// Mitsuba too; found by rgl_reader): refused.
+#[test]
+fn a_vndf_row_without_density_is_refused() {
+    let mut vndf: Vec<f32> = (0..N_THETA * RES * RES)
+        .map(|i| 1.0 + (i % 7) as f32)
+        .collect();
+    vndf[..RES].fill(0.0);
+    let zero_row = Fields::valid(true).set(
+        "vndf",
+        DType::Float32,
+        vec![1, N_THETA, RES, RES],
+        f32_bytes(&vndf),
+    );
+    refused(
+        zero_row.bytes(),
+        &["vndf", "row 0 of slice 0", "inverse warp"],
+    );
 }

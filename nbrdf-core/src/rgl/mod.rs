@@ -69,6 +69,8 @@ fn float32_range_problem(rgb: &[f32], jacobian: Option<(&[f32], &[f32])>) -> Opt
         }
         None => 1.0,
     };
+    // With a margin for the rounding of the interpolation weights.
+    let scale = scale * (1.0 + 1e-5);
     let bound = rgb_max * scale;
     // The scale is a float32 product of its own (an infinite one turns a zero reflectance NaN).
     let limit = f64::from(f32::MAX);
@@ -183,10 +185,15 @@ impl RglMeasurement {
             if let Some(v) = ndf.iter().find(|v| **v < 0.0) {
                 return fail("ndf", format!("holds the negative density {v}"));
             }
-            if let Some(v) = sigma.iter().find(|v| **v <= 0.0) {
+            // Subnormal areas interpolate to 0 (and the Jacobian to infinity or NaN).
+            if let Some(v) = sigma.iter().find(|v| **v < f32::MIN_POSITIVE) {
                 return fail(
                     "sigma",
-                    format!("holds {v}; the projected area must be positive"),
+                    format!(
+                        "holds {v}; the projected area must be positive and at least {:e} \
+                         (float32's smallest normal number)",
+                        f32::MIN_POSITIVE
+                    ),
                 );
             }
         }

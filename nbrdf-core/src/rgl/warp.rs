@@ -124,6 +124,23 @@ impl Marginal2D {
                 }
                 cond_cdf[cond_start..].iter_mut().for_each(|v| *v *= norm);
                 marg_cdf[marg_start..].iter_mut().for_each(|v| *v *= norm);
+                // The inversion divides by each row's total (interpolated between two rows): a
+                // zero one, or one so small that interpolating it rounds to zero, is a NaN
+                // (Mitsuba's too).
+                // (An all-zero slice is reported below, as one that cannot be normalised.)
+                let rows = cond_cdf[cond_start..].chunks_exact(w - 1);
+                let rows = rows.take(if norm.is_finite() { h } else { 0 });
+                if let Some((y, row)) = rows
+                    .enumerate()
+                    .find(|(_, row)| !(row[w - 2] >= f32::MIN_POSITIVE))
+                {
+                    return invalid(format!(
+                        "row {y} of slice {} integrates to {:e}, below float32's normal range: \
+                         the inverse warp is undefined there",
+                        data_out.len() / n_data,
+                        row[w - 2]
+                    ));
+                }
                 debug_assert_eq!(cond_cdf.len() - cond_start, n_cond);
                 debug_assert_eq!(marg_cdf.len() - marg_start, n_marg);
             } else if normalize {
