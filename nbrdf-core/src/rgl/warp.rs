@@ -132,7 +132,7 @@ impl Marginal2D {
                 let rows = rows.take(if norm.is_finite() { h } else { 0 });
                 if let Some((y, row)) = rows
                     .enumerate()
-                    .find(|(_, row)| !(row[w - 2] >= f32::MIN_POSITIVE))
+                    .find(|(_, row)| row[w - 2].is_nan() || row[w - 2] < f32::MIN_POSITIVE)
                 {
                     return invalid(format!(
                         "row {y} of slice {} integrates to {:e}, below float32's normal range: \
