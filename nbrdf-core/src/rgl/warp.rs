@@ -124,23 +124,6 @@ impl Marginal2D {
                 }
                 cond_cdf[cond_start..].iter_mut().for_each(|v| *v *= norm);
                 marg_cdf[marg_start..].iter_mut().for_each(|v| *v *= norm);
-                // The inversion divides by each row's total (interpolated between two rows): a
-                // zero one, or one so small that interpolating it rounds to zero, is a NaN
-                // (Mitsuba's too).
-                // (An all-zero slice is reported below, as one that cannot be normalised.)
-                let rows = cond_cdf[cond_start..].chunks_exact(w - 1);
-                let rows = rows.take(if norm.is_finite() { h } else { 0 });
-                if let Some((y, row)) = rows
-                    .enumerate()
-                    .find(|(_, row)| row[w - 2].is_nan() || row[w - 2] < f32::MIN_POSITIVE)
-                {
-                    return invalid(format!(
-                        "row {y} of slice {} integrates to {:e}, below float32's normal range: \
-                         the inverse warp is undefined there",
-                        data_out.len() / n_data,
-                        row[w - 2]
-                    ));
-                }
                 debug_assert_eq!(cond_cdf.len() - cond_start, n_cond);
                 debug_assert_eq!(marg_cdf.len() - marg_start, n_marg);
             } else if normalize {
@@ -296,7 +279,10 @@ impl Marginal2D {
         sx = invert_segment(sx, self.patch_size[0], c0, c1) + prev;
         let r0 = self.lookup(&self.cond_cdf, offset_cond + (width - 1) - 1, n_cond, w);
         let r1 = self.lookup(&self.cond_cdf, offset_cond + 2 * (width - 1) - 1, n_cond, w);
-        sx /= lerp(r0, r1, sy);
+        // Real measurements have VNDF rows without density (cc_ibiza_sunset_rgb); where the
+        // interpolated row total is zero, Mitsuba divides 0 by 0 (NaN) and the position within
+        // the row is taken as 0 here.
+        sx = divide_or_zero(sx, lerp(r0, r1, sy));
 
         let offset_marg = w.offset * n_marg;
         let mut prev = 0.0;
@@ -305,9 +291,22 @@ impl Marginal2D {
         }
         sy = invert_segment(sy, self.patch_size[1], r0, r1) + prev;
         if !self.normalized {
-            sy /= self.lookup(&self.marg_cdf, offset_marg + n_marg - 1, n_marg, w);
+            sy = divide_or_zero(
+                sy,
+                self.lookup(&self.marg_cdf, offset_marg + n_marg - 1, n_marg, w),
+            );
         }
         ([sx, sy], pdf)
+    }
+}
+
+/// `x / total`, or 0 where the total is not positive (a region without density).
+#[inline(always)]
+fn divide_or_zero(x: f32, total: f32) -> f32 {
+    if total > 0.0 {
+        x / total
+    } else {
+        0.0
     }
 }
 
