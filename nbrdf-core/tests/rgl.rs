@@ -447,7 +447,7 @@ mod train_from_source {
                 max_epochs: 80,
                 batch: 64,
                 seed: 1,
-                ..TrainConfig::default()
+                ..TrainConfig::fixed_budget()
             },
             threads: None,
         };

@@ -78,7 +78,7 @@ fn train_and_fit_phong_arguments_parse() {
     assert!(matches!(args.sampling, SamplingArg::Uniform));
     assert_eq!(
         (args.samples, args.epochs, args.threads, args.seed),
-        (1000, 3, Some(2), 9)
+        (1000, Some(3), Some(2), 9)
     );
     assert_eq!((args.hidden, args.batch), (21, 512));
     assert!(matches!(args.phi_fold, PhiFoldArg::Reciprocal));
@@ -90,7 +90,39 @@ fn train_and_fit_phong_arguments_parse() {
     };
     assert_eq!(PhiFold::from(args.phi_fold), PhiFold::Mirror);
     assert!(Cli::try_parse_from(["nbrdf", "train", "t.binary", "--phi-fold", "odd"]).is_err());
-    assert!((args.lr - 5e-4).abs() < 1e-9);
+    let config = train_cmd::train_config(&args);
+    assert_eq!(
+        (
+            config.adam.learning_rate,
+            config.max_epochs,
+            config.lr_decays
+        ),
+        (1e-3, 300, 2)
+    );
+    assert_eq!(config.target_loss, 2e-4);
+    let Ok(Cli {
+        command: Command::Train(fixed),
+    }) = Cli::try_parse_from([
+        "nbrdf",
+        "train",
+        "t.binary",
+        "--fixed-budget",
+        "--epochs",
+        "50",
+    ])
+    else {
+        panic!("train --fixed-budget must parse")
+    };
+    let config = train_cmd::train_config(&fixed);
+    assert_eq!(
+        (
+            config.adam.learning_rate,
+            config.max_epochs,
+            config.patience
+        ),
+        (5e-4, 50, 10)
+    );
+    assert_eq!((config.lr_decays, config.target_loss), (0, 0.0));
     assert!(Cli::try_parse_from(["nbrdf", "train", "t.binary", "--sampling", "random"]).is_err());
     assert!(Cli::try_parse_from(["nbrdf", "train", "t.binary", "--samples", "-5"]).is_err());
     let Ok(Cli {
