@@ -1,0 +1,230 @@
+//! Which networks an autoencoder can encode as they are, and re-learning the others.
+//!
+//! The autoencoder reads a network's weights. It was trained on networks that `nbrdf train`
+//! learnt from one common initialisation ([`crate::network::paper_init`] with one seed), which
+//! is what aligns their hidden units; a network trained from another initialisation (the
+//! authors' Keras files, another seed) computes the same kind of function with its units in
+//! another order and scale, and its code is meaningless (an autoencoder fed the authors' 100
+//! networks as given reconstructs at tone-mapped MAE 0.13, docs/results/latent.md). Such a
+//! network is re-learnt first: tabulated on the MERL grid and trained from the common
+//! initialisation, as the networks of the autoencoder's training set were.
+
+use super::autoencoder::{AutoEncoder, FORMAT_NAME};
+use crate::error::Result;
+use crate::network::Nbrdf;
+use crate::train::{self, EpochStats, TrainConfig, TrainReport};
+
+/// The networks an autoencoder encodes: width and seed of their common initialisation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Family {
+    pub hidden: usize,
+    pub seed: u64,
+}
+
+/// Prefix of [`train::TRAINER_VERSION`], the same for every version of the trainer.
+const TRAINER_PREFIX: &str = "nbrdf-core ";
+
+impl Family {
+    /// The family of `ae`'s training networks: `provenance.networks.seed` where the file records
+    /// it, else seed 0, the default of `nbrdf train` that every autoencoder of this project was
+    /// trained with.
+    pub fn of(ae: &AutoEncoder) -> Family {
+        Family::recorded(ae.nbrdf_hidden, &ae.provenance)
+    }
+
+    /// The family of an autoencoder of networks of width `hidden` with this provenance.
+    fn recorded(hidden: usize, provenance: &serde_json::Value) -> Family {
+        Family {
+            hidden,
+            seed: provenance["networks"]["seed"].as_u64().unwrap_or(0),
+        }
+    }
+
+    /// Why `net` is not of this family, read from its provenance; `None` when it is: trained by
+    /// `nbrdf train` from this family's seed, or decoded or interpolated by the latent tools.
+    /// A network without a recognised provenance is taken as foreign (re-learning it costs
+    /// seconds; encoding a misaligned one gives a wrong code without any warning).
+    pub fn foreign_reason(&self, net: &Nbrdf) -> Option<String> {
+        let hidden = net.hidden_width();
+        if hidden != self.hidden {
+            return Some(format!(
+                "hidden width {hidden}, the autoencoder's networks have {}",
+                self.hidden
+            ));
+        }
+        let p = &net.provenance;
+        if p["decoded_by"].as_str() == Some(FORMAT_NAME) || p["interpolation"].is_string() {
+            return None;
+        }
+        if let Some(trainer) = p["trainer"].as_str() {
+            if !trainer.starts_with(TRAINER_PREFIX) {
+                return Some(format!("trained by '{trainer}', not `nbrdf train`"));
+            }
+            return match p["seed"].as_u64() {
+                Some(seed) if seed == self.seed => None,
+                Some(seed) => Some(format!(
+                    "trained from seed {seed}, not the common initialisation (seed {})",
+                    self.seed
+                )),
+                None => Some("its provenance names no training seed".to_string()),
+            };
+        }
+        if let Some(method) = p["method"].as_str() {
+            return Some(format!(
+                "{method}: initialised independently of the autoencoder's networks"
+            ));
+        }
+        Some("no provenance of `nbrdf train`".to_string())
+    }
+
+    /// The training settings of a re-learn: `nbrdf train`'s defaults from this family's
+    /// initialisation.
+    pub fn train_config(&self) -> TrainConfig {
+        TrainConfig {
+            hidden: self.hidden,
+            seed: self.seed,
+            ..TrainConfig::default()
+        }
+    }
+
+    /// `net` re-learnt in this family: tabulated on the MERL grid ([`Nbrdf::tabulate`], as
+    /// `nbrdf tabulate`) and trained from the common initialisation ([`train::train`], as
+    /// `nbrdf train`). The result keeps `net`'s name and sampling; its provenance is the
+    /// trainer's, with `net`'s own under `relearnt_from`. Runs on the current rayon pool.
+    pub fn relearn(
+        &self,
+        net: &Nbrdf,
+        on_epoch: &mut dyn FnMut(&EpochStats),
+    ) -> Result<(Nbrdf, TrainReport)> {
+        self.relearn_with(net, &self.train_config(), on_epoch)
+    }
+
+    /// [`Family::relearn`] with other training settings (their width and seed are this
+    /// family's whatever `config` says).
+    pub fn relearn_with(
+        &self,
+        net: &Nbrdf,
+        config: &TrainConfig,
+        on_epoch: &mut dyn FnMut(&EpochStats),
+    ) -> Result<(Nbrdf, TrainReport)> {
+        let table = net.tabulate();
+        let config = TrainConfig {
+            hidden: self.hidden,
+            seed: self.seed,
+            ..config.clone()
+        };
+        let target = train::table_target(&table);
+        let outcome = train::train(&target, &config, &net.name, on_epoch)?;
+        let mut relearnt = outcome.network;
+        let mut provenance = train::provenance(
+            &config,
+            &outcome.report,
+            &format!("tabulation of network '{}'", net.name),
+        );
+        provenance["relearnt_from"] = net.provenance.clone();
+        relearnt.provenance = provenance;
+        relearnt.sampling = net.sampling.clone();
+        relearnt.validate()?;
+        Ok((relearnt, outcome.report))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn family() -> Family {
+        Family {
+            hidden: crate::network::DEFAULT_HIDDEN,
+            seed: 0,
+        }
+    }
+
+    fn with_provenance(p: serde_json::Value) -> Nbrdf {
+        let mut net = Nbrdf::random("n", crate::network::DEFAULT_HIDDEN, 3);
+        net.provenance = p;
+        net
+    }
+
+    #[test]
+    fn provenance_decides_the_family() {
+        let f = family();
+        let trained = |seed: u64| {
+            with_provenance(serde_json::json!({"trainer": train::TRAINER_VERSION, "seed": seed}))
+        };
+        assert_eq!(f.foreign_reason(&trained(0)), None);
+        assert!(f.foreign_reason(&trained(7)).unwrap().contains("seed 7"));
+        let keras = with_provenance(serde_json::json!({"method": "imported from Keras"}));
+        assert!(f.foreign_reason(&keras).unwrap().contains("Keras"));
+        assert!(f
+            .foreign_reason(&with_provenance(serde_json::json!({})))
+            .is_some());
+        assert!(f
+            .foreign_reason(&with_provenance(serde_json::json!({"trainer": "keras"})))
+            .is_some());
+        let decoded = with_provenance(serde_json::json!({"decoded_by": FORMAT_NAME}));
+        assert_eq!(f.foreign_reason(&decoded), None);
+        let narrow = Nbrdf::random("n", 8, 0);
+        assert!(f
+            .foreign_reason(&narrow)
+            .unwrap()
+            .contains("hidden width 8"));
+        let other = Family { seed: 7, ..f };
+        assert_eq!(other.foreign_reason(&trained(7)), None);
+    }
+
+    #[test]
+    fn the_family_seed_is_read_from_the_autoencoder_provenance() {
+        let f = |p: serde_json::Value| Family::recorded(21, &p);
+        assert_eq!(
+            f(serde_json::Value::Null),
+            Family {
+                hidden: 21,
+                seed: 0
+            }
+        );
+        assert_eq!(f(serde_json::json!({"networks": {"seed": 5}})).seed, 5);
+    }
+
+    /// A re-learnt network is a fresh `nbrdf train` run on the tabulation, i.e. the weights of
+    /// training from the family's initialisation on that table, whatever the source's width.
+    #[test]
+    fn relearn_is_train_from_the_common_initialisation_on_the_tabulation() {
+        let f = Family { hidden: 4, seed: 2 };
+        let mut source = Nbrdf::random("m", 6, 9);
+        source.provenance = serde_json::json!({"method": "imported from Keras"});
+        let config = TrainConfig {
+            samples: 4_000,
+            max_epochs: 2,
+            ..TrainConfig::default()
+        };
+        let (relearnt, report) = f.relearn_with(&source, &config, &mut |_| {}).unwrap();
+        let direct_config = TrainConfig {
+            hidden: 4,
+            seed: 2,
+            ..config
+        };
+        let table = source.tabulate();
+        let direct = train::train(
+            &train::table_target(&table),
+            &direct_config,
+            "m",
+            &mut |_| {},
+        )
+        .unwrap()
+        .network;
+        assert_eq!(relearnt.layers, direct.layers);
+        assert_eq!(report.epochs_run, 2);
+        assert_eq!(
+            relearnt.provenance["relearnt_from"]["method"],
+            "imported from Keras"
+        );
+        assert_eq!(relearnt.provenance["seed"], 2);
+        assert_eq!(
+            f.foreign_reason(&source)
+                .map(|r| r.contains("hidden width 6")),
+            Some(true)
+        );
+        assert_eq!(f.foreign_reason(&relearnt), None);
+    }
+}
