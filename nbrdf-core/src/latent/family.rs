@@ -7,7 +7,9 @@
 //! another order and scale, and its code is meaningless (an autoencoder fed the authors' 100
 //! networks as given reconstructs at tone-mapped MAE 0.13, docs/results/latent.md). Such a
 //! network is re-learnt first: tabulated on the MERL grid and trained from the common
-//! initialisation, as the networks of the autoencoder's training set were.
+//! initialisation, as the networks of the autoencoder's training set were. That needs the
+//! autoencoder to record its networks' family (`provenance.networks`, [`Family::record`]); one
+//! trained on networks of mixed or unknown origin records none, and nothing is re-learnt for it.
 
 use super::autoencoder::{AutoEncoder, FORMAT_NAME};
 use crate::error::Result;
@@ -24,19 +26,60 @@ pub struct Family {
 /// Prefix of [`train::TRAINER_VERSION`], the same for every version of the trainer.
 const TRAINER_PREFIX: &str = "nbrdf-core ";
 
+/// `provenance.networks.initialisation` of an autoencoder whose training networks form a family.
+const COMMON: &str = "common: nbrdf train from one seed";
+
 impl Family {
-    /// The family of `ae`'s training networks: `provenance.networks.seed` where the file records
-    /// it, else seed 0, the default of `nbrdf train` that every autoencoder of this project was
-    /// trained with.
-    pub fn of(ae: &AutoEncoder) -> Family {
+    /// The family an autoencoder records for its training networks (`provenance.networks`,
+    /// written by `nbrdf ae train` when they share one initialisation of `nbrdf train`); `None`
+    /// when it records none (an autoencoder of networks of mixed or unknown origin: re-learning
+    /// a network would not bring it closer to those).
+    pub fn of(ae: &AutoEncoder) -> Option<Family> {
         Family::recorded(ae.nbrdf_hidden, &ae.provenance)
     }
 
-    /// The family of an autoencoder of networks of width `hidden` with this provenance.
-    fn recorded(hidden: usize, provenance: &serde_json::Value) -> Family {
-        Family {
+    fn recorded(hidden: usize, provenance: &serde_json::Value) -> Option<Family> {
+        let networks = &provenance["networks"];
+        if networks["initialisation"].as_str() != Some(COMMON) {
+            return None;
+        }
+        Some(Family {
             hidden,
-            seed: provenance["networks"]["seed"].as_u64().unwrap_or(0),
+            seed: networks["seed"].as_u64()?,
+        })
+    }
+
+    /// The family of a training set: `Some` when every network was trained by `nbrdf train`
+    /// from the same seed at the same width.
+    pub fn common<'a>(nets: impl IntoIterator<Item = &'a Nbrdf>) -> Option<Family> {
+        let mut family = None;
+        for net in nets {
+            let p = &net.provenance;
+            if !p["trainer"].as_str()?.starts_with(TRAINER_PREFIX) {
+                return None;
+            }
+            let this = Family {
+                hidden: net.hidden_width(),
+                seed: p["seed"].as_u64()?,
+            };
+            if *family.get_or_insert(this) != this {
+                return None;
+            }
+        }
+        family
+    }
+
+    /// What an autoencoder records of its training networks (`provenance.networks`), which
+    /// [`Family::of`] reads back: this family, or (`None`) that they share no initialisation.
+    pub fn record(family: Option<Family>) -> serde_json::Value {
+        match family {
+            Some(f) => serde_json::json!({
+                "initialisation": COMMON,
+                "seed": f.seed,
+                "hidden": f.hidden,
+                "weights": crate::network::INITIALISATION,
+            }),
+            None => serde_json::json!({"initialisation": "mixed or unknown"}),
         }
     }
 
@@ -174,16 +217,30 @@ mod tests {
     }
 
     #[test]
-    fn the_family_seed_is_read_from_the_autoencoder_provenance() {
-        let f = |p: serde_json::Value| Family::recorded(21, &p);
+    fn an_autoencoder_records_the_family_of_its_training_networks() {
+        let trained = |seed: u64, hidden: usize| {
+            let mut net = Nbrdf::random("n", hidden, 1);
+            net.provenance = serde_json::json!({"trainer": train::TRAINER_VERSION, "seed": seed});
+            net
+        };
+        let same = [trained(3, 21), trained(3, 21)];
+        let f = Family::common(&same).unwrap();
         assert_eq!(
-            f(serde_json::Value::Null),
+            f,
             Family {
                 hidden: 21,
-                seed: 0
+                seed: 3
             }
         );
-        assert_eq!(f(serde_json::json!({"networks": {"seed": 5}})).seed, 5);
+        let provenance = serde_json::json!({"networks": Family::record(Some(f))});
+        assert_eq!(Family::recorded(21, &provenance), Some(f));
+        assert_eq!(Family::common(&[trained(3, 21), trained(4, 21)]), None);
+        assert_eq!(Family::common(&[trained(3, 21), trained(3, 8)]), None);
+        let keras = with_provenance(serde_json::json!({"method": "imported from Keras"}));
+        assert_eq!(Family::common([&same[0], &keras]), None);
+        let mixed = serde_json::json!({"networks": Family::record(None)});
+        assert_eq!(Family::recorded(21, &mixed), None);
+        assert_eq!(Family::recorded(21, &serde_json::Value::Null), None);
     }
 
     /// A re-learnt network is a fresh `nbrdf train` run on the tabulation, i.e. the weights of
