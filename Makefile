@@ -23,11 +23,12 @@ $(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e ./python
 	touch $@
 
-# One release build gives the CLI (target/release/nbrdf) and the C ABI library; nbrdf-core's
-# `cli` feature as the plugin's build (mitsuba-plugin/setup.py) asks for it, so that pip reuses it.
+# Two release builds: the C ABI library without nbrdf-core's training stack and CLI dependencies
+# (as mitsuba-plugin/setup.py builds it), and the CLI (target/release/nbrdf, feature `cli`).
 build: $(LIB)
 $(LIB): FORCE
-	$(CARGO) build --release --workspace --features nbrdf-core/cli
+	$(CARGO) build --release -p nbrdf-ffi
+	$(CARGO) build --release -p nbrdf-core --features cli --bin nbrdf
 
 # The plugin package, bundling the library just built (no second cargo build).
 $(VENV)/.plugin-installed: $(VENV)/.deps-installed $(LIB) $(PLUGIN_SOURCES)
@@ -63,13 +64,15 @@ install: build
 	  'Name: nbrdf' 'Description: Neural BRDFs and MERL tables (C ABI of nbrdf)' 'Version: $(VERSION)' \
 	  'Libs: -L$${libdir} -lnbrdf_ffi' 'Cflags: -I$${includedir}' > $(DESTDIR)$(LIBDIR)/pkgconfig/nbrdf.pc
 
+# The main job on embedded data (about a minute): table, network and Phong lobe of one material,
+# the Veach scene rendered with both; writes the README's picture docs/images/demo.png and out/demo/.
 demo: setup
 	$(PY) -m nbrdf_tools.demo
 
 test: setup test-rust test-python
 
 test-rust:
-	$(CARGO) test --workspace --release
+	$(CARGO) test --workspace --release --all-features
 
 test-python: setup
 	$(PY) -m pytest tests -q
@@ -80,7 +83,7 @@ bench:
 
 lint:
 	$(CARGO) fmt --all --check
-	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	$(CARGO) clippy --workspace --all-targets --all-features -- -D warnings
 	$(VENV)/bin/ruff check python tests
 
 clean:

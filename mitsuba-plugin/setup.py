@@ -71,9 +71,9 @@ def _workspace():
 
 def _cargo_build(workspace):
     cargo = os.environ.get("CARGO", "cargo")
-    # With nbrdf-core's `cli` feature, as the `nbrdf` binary and `make build` have it: one
-    # compilation of nbrdf-core serves all three instead of one per feature set.
-    command = [cargo, "build", "--release", "-p", "nbrdf-ffi", "--features", "nbrdf-core/cli"]
+    # Without nbrdf-core's `cli` (or `train`) feature: the library the renderer loads carries
+    # neither the command line's dependencies nor the training stack.
+    command = [cargo, "build", "--release", "-p", "nbrdf-ffi"]
     print(f"nbrdf-mitsuba build: running {' '.join(command)} in {workspace}", flush=True)
     try:
         subprocess.run(command, cwd=workspace, check=True)

@@ -1,6 +1,6 @@
 """Independent NumPy references and helpers for the plugin tests.
 
-Everything here is written from DESIGN.md (sections 2-4 and 6) in float64 NumPy, without
+Everything here is written from docs/design.md (sections 2-4 and 6) in float64 NumPy, without
 calling the Rust code, so that the tests compare two implementations. These are the deliberate
 second copies of the Rust formulas; their twins in ``nbrdf-core``:
 
@@ -79,7 +79,7 @@ def f32(a: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-# Rusinkiewicz coordinates (DESIGN.md section 2), with trigonometry and rotation matrices
+# Rusinkiewicz coordinates (docs/design.md section 2), with trigonometry and rotation matrices
 
 
 def rot_z(angle):
@@ -121,7 +121,7 @@ def from_angles(theta_h, phi_h, theta_d, phi_d):
 
 
 # ---------------------------------------------------------------------------------------------
-# MERL tables (DESIGN.md section 3)
+# MERL tables (docs/design.md section 3)
 
 
 def write_merl(path: Path, stored: np.ndarray | None = None, analytic: bool = False) -> Path:
@@ -204,7 +204,7 @@ def merl_trilinear(stored: np.ndarray, light: np.ndarray, view: np.ndarray) -> n
 
 
 # ---------------------------------------------------------------------------------------------
-# The NBRDF network (DESIGN.md section 4), read from the Keras file with h5py
+# The NBRDF network (docs/design.md section 4), read from the Keras file with h5py
 
 
 def random_layers(hidden: int = 21, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -219,7 +219,7 @@ def random_layers(hidden: int = 21, seed: int = 0) -> list[tuple[np.ndarray, np.
 
 
 def write_network(path: Path, layers=None, sampling: dict | None = None, name: str = "synthetic") -> Path:
-    """Writes an ``*.nbrdf.json`` file (DESIGN.md section 4)."""
+    """Writes an ``*.nbrdf.json`` file (docs/design.md section 4)."""
     import json
 
     layers = random_layers() if layers is None else layers
@@ -273,7 +273,7 @@ def nbrdf_reference(layers, light: np.ndarray, view: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-# Blinn-Phong mixture pdf (DESIGN.md section 6)
+# Blinn-Phong mixture pdf (docs/design.md section 6)
 
 
 def phong_pdf(view: np.ndarray, light: np.ndarray, exponent: float, weight: float) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The ``merl`` plugin reads MERL-format tables like a NumPy implementation of DESIGN.md
+"""The ``merl`` plugin reads MERL-format tables like a NumPy implementation of docs/design.md
 section 3 (read with NumPy from the same file)."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The ``nbrdf`` plugin evaluates the authors' Keras NBRDFs like an independent float64 NumPy
-implementation of DESIGN.md sections 2 and 4 reading the same ``.h5`` weights."""
+implementation of docs/design.md sections 2 and 4 reading the same ``.h5`` weights."""
 
 from __future__ import annotations
 

@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 VERSION = re.search(r'^version = "(.+)"', (REPO / "mitsuba-plugin" / "pyproject.toml").read_text(), re.M).group(1)
 SDIST_MUST_HOLD = ["setup.py", "pyproject.toml", "README.md", "nbrdf_mitsuba/__init__.py", "nbrdf_mitsuba/render.py",
                    "rust/Cargo.toml", "rust/Cargo.lock", "rust/nbrdf-core/Cargo.toml", "rust/nbrdf-core/src/lib.rs",
-                   "rust/nbrdf-core/src/bin/nbrdf.rs", "rust/nbrdf-core/data/merl_fits.json",
+                   "rust/nbrdf-core/src/bin/nbrdf/main.rs", "rust/nbrdf-core/data/merl_fits.json",
                    "rust/nbrdf-ffi/Cargo.toml", "rust/nbrdf-ffi/build.rs", "rust/nbrdf-ffi/src/lib.rs",
                    "rust/nbrdf-ffi/include/nbrdf.h"]
 

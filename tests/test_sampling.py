@@ -1,5 +1,5 @@
 """Importance sampling through the plugins: Mitsuba's chi^2 test, the Blinn-Phong pdf against
-DESIGN.md section 6 and by quadrature, and the consistency of sample/eval/pdf."""
+docs/design.md section 6 and by quadrature, and the consistency of sample/eval/pdf."""
 
 from __future__ import annotations
 

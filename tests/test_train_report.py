@@ -34,7 +34,7 @@ def _llvm():
 def cli() -> Path:
     exe = _cli()
     if exe is None:
-        pytest.skip("target/release/nbrdf is not built (cargo build --release -p nbrdf-core)")
+        pytest.skip("target/release/nbrdf is not built (make build, or cargo build --release -p nbrdf-core --features cli)")
     return exe
 
 

@@ -6,7 +6,7 @@
 The Keras files hold a Sequential model Dense(6 -> h, relu) -> Dense(h -> h, relu) ->
 Dense(h -> 3) -> Lambda(exp(x) - 1); the datasets ``dense_k/dense_k/kernel:0`` (inputs x
 outputs, ``y = x W + b``) and ``dense_k/dense_k/bias:0`` for k = 1, 2, 3. The kernels are
-written row-major as they are, which is the layout of the JSON format (DESIGN.md section 4).
+written row-major as they are, which is the layout of the JSON format (docs/design.md section 4).
 Weights are written as the exact decimal value of each float32, so a round trip is lossless.
 Needs h5py (``pip install 'nbrdf-mitsuba[keras]'``).
 """

@@ -44,7 +44,7 @@ import numpy as np
 EXP_ARGUMENT_MAX = 80.0
 EXP_ARGUMENT_MIN = -87.0
 SIN_THETA_H_EPS = 1e-7
-#: The largest Blinn-Phong exponent the plugins accept (DESIGN.md promises stable sampling up to
+#: The largest Blinn-Phong exponent the plugins accept (docs/design.md promises stable sampling up to
 #: 1e6; beyond it float32 directions cannot resolve the lobe and the backends would disagree).
 MAX_EXPONENT = 1e6
 
@@ -89,7 +89,7 @@ def _unit_or_normal(x, y, z):
 
 
 def network_input(view: mi.Vector3f, light: mi.Vector3f) -> list:
-    """``[sin th, 0, cos th, d.x, d.y, d.z]`` (DESIGN.md section 2), branch-free like the Rust code."""
+    """``[sin th, 0, cos th, d.x, d.y, d.z]`` (docs/design.md section 2), branch-free like the Rust code."""
     lx, ly, lz = _unit_or_normal(light.x, light.y, light.z)
     vx, vy, vz = _unit_or_normal(view.x, view.y, view.z)
     hx, hy, hz = lx + vx, ly + vy, lz + vz
@@ -293,7 +293,7 @@ def _half_vector_terms(view: mi.Vector3f, light: mi.Vector3f):
 
 
 def mixture_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight):
-    """The Blinn-Phong mixture pdf per unit solid angle of ``light`` (DESIGN.md section 6),
+    """The Blinn-Phong mixture pdf per unit solid angle of ``light`` (docs/design.md section 6),
     zero unless both directions are above the horizon."""
     v, v_ok = _unit(view)
     l, l_ok = _unit(light)
@@ -341,7 +341,7 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
     return light, pdf(strategy, view, light, exponent, specular_weight)
 
 
-# MERL grid (DESIGN.md section 3), as in nbrdf-core's merl.rs.
+# MERL grid (docs/design.md section 3), as in nbrdf-core's merl.rs.
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
 MERL_SCALE = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
 

@@ -1,5 +1,5 @@
 """Tabulate a real RGL measurement (``*.bsdf``, read by Mitsuba's ``measured`` plugin) onto the
-MERL grid, giving a MERL-format table of measured data (DESIGN.md sections 3 and 9).
+MERL grid, giving a MERL-format table of measured data (docs/design.md sections 3 and 9).
 
     python -m nbrdf_mitsuba.tabulate_rgl IN.bsdf -o OUT.binary [--phi-fold reciprocal|mirror]
 

@@ -1,4 +1,4 @@
-//! Rusinkiewicz's half/difference parameterisation (DESIGN.md section 2).
+//! Rusinkiewicz's half/difference parameterisation (docs/design.md section 2).
 //!
 //! Directions come in Mitsuba's order, view then light (see the crate's conventions).
 //! `h = normalize(l + v)`, `d = R_y(-theta_h) R_z(-phi_h) l`. Every function here is total: unit

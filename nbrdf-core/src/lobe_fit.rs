@@ -1,7 +1,7 @@
 //! Choosing the Blinn-Phong sampling lobe `(n, w)` of a material for the lowest variance of
 //! BSDF sampling.
 //!
-//! The 7-parameter model fit of [`crate::phong_fit`] (DESIGN.md section 6) matches the BRDF's
+//! The 7-parameter model fit of [`crate::phong_fit`] (docs/design.md section 6) matches the BRDF's
 //! shape in log space, which is the right label for a predictor but often a poor sampling
 //! density: on materials with a weak, very sharp spike over a diffuse base it returns
 //! `n ~ 1e4..1e5` with `w ~ 0.01`, so almost no samples go where most of the reflected energy is,
@@ -15,9 +15,13 @@
 //! direction. `R` is computed by quadrature over the half vector (`theta_h = pi/2 s^2`, dense
 //! near the normal like the MERL grid, so lobes of `n ~ 1e5` are resolved), averaged over view
 //! elevations, and minimised over a grid of `(n, w)`.
+//!
+//! [`LobeChoice`] names the two candidates (this search and the model fit's lobe);
+//! [`choose_lobe`] and [`LobeAnalysis::lobe`] are where one of them is picked.
 
 use crate::coords::to_rusinkiewicz;
 use crate::error::{NbrdfError, Result};
+use crate::phong_fit::{self, FitConfig, PhongFit, PhongParams};
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -232,6 +236,94 @@ pub fn fit_lobe(target: &TargetFn<'_>, config: &LobeFitConfig) -> Result<LobeFit
     LobeQuadrature::new(target, config)?.fit(config)
 }
 
+/// Which Blinn-Phong lobe `(n, w)` a material is sampled with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LobeChoice {
+    /// The candidate of lowest variance of BSDF sampling ([`LobeQuadrature::fit`]): what
+    /// `nbrdf fit-phong` stores by default.
+    #[default]
+    LowestVariance,
+    /// `n` and `w = mean(ks) / (mean(kd) + mean(ks))` of the 7-parameter model fit
+    /// ([`crate::phong_fit`], docs/design.md section 6): the shape of the BRDF in log space, which can
+    /// be a poor sampler for weak sharp spikes but needs no quadrature.
+    Model,
+}
+
+impl LobeChoice {
+    /// The name `nbrdf fit-phong --lobe` takes and its JSON reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LobeChoice::LowestVariance => "variance",
+            LobeChoice::Model => "model",
+        }
+    }
+}
+
+/// The lobe `(n, w)` of the model fit: its exponent and `mean(ks) / (mean(kd) + mean(ks))`.
+pub fn model_lobe(params: &PhongParams) -> (f64, f64) {
+    (params.exponent, params.specular_weight())
+}
+
+impl LobeFit {
+    /// The chosen lobe `(n, w)`.
+    pub fn lobe(&self) -> (f64, f64) {
+        (self.exponent, self.specular_weight)
+    }
+}
+
+/// Both candidate lobes of a material, and how well each samples it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LobeAnalysis {
+    /// The 7-parameter model fit.
+    pub model: PhongFit,
+    /// The lowest-variance search.
+    pub lowest_variance: LobeFit,
+    /// Mean `R - 1` of sampling with the model fit's lobe.
+    pub model_relative_variance: f64,
+}
+
+impl LobeAnalysis {
+    /// Fits the model and searches the lowest-variance lobe of `target`.
+    pub fn new(
+        target: &TargetFn<'_>,
+        fit_config: &FitConfig,
+        lobe_config: &LobeFitConfig,
+    ) -> Result<Self> {
+        let model = phong_fit::fit(target, fit_config)?;
+        let quadrature = LobeQuadrature::new(target, lobe_config)?;
+        let lowest_variance = quadrature.fit(lobe_config)?;
+        let model_relative_variance =
+            quadrature.relative_variance(model.params.exponent, model.params.specular_weight());
+        Ok(LobeAnalysis {
+            model,
+            lowest_variance,
+            model_relative_variance,
+        })
+    }
+
+    /// The lobe `(n, w)` of `choice` (as [`choose_lobe`] would compute it).
+    pub fn lobe(&self, choice: LobeChoice) -> (f64, f64) {
+        match choice {
+            LobeChoice::LowestVariance => self.lowest_variance.lobe(),
+            LobeChoice::Model => model_lobe(&self.model.params),
+        }
+    }
+}
+
+/// The lobe `(n, w)` of `choice` for `target`, computing only that candidate: the
+/// lowest-variance search with `lobe_config`, or the model fit with `fit_config`.
+pub fn choose_lobe(
+    target: &TargetFn<'_>,
+    choice: LobeChoice,
+    fit_config: &FitConfig,
+    lobe_config: &LobeFitConfig,
+) -> Result<(f64, f64)> {
+    match choice {
+        LobeChoice::LowestVariance => Ok(fit_lobe(target, lobe_config)?.lobe()),
+        LobeChoice::Model => Ok(model_lobe(&phong_fit::fit(target, fit_config)?.params)),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -332,6 +424,21 @@ mod tests {
         );
         // And the integral itself: the mean of g/p is int g.
         assert!((m1 - q.integral_sq.sqrt()).abs() < 0.01 * m1);
+    }
+
+    #[test]
+    fn both_choices_agree_with_the_analysis() {
+        let target = blinn_phong(0.3, 0.4, 200.0);
+        let fit_config = FitConfig {
+            samples: 2000,
+            ..FitConfig::default()
+        };
+        let lobe_config = LobeFitConfig::default();
+        let analysis = LobeAnalysis::new(&target, &fit_config, &lobe_config).unwrap();
+        for choice in [LobeChoice::LowestVariance, LobeChoice::Model] {
+            let chosen = choose_lobe(&target, choice, &fit_config, &lobe_config).unwrap();
+            assert_eq!(chosen, analysis.lobe(choice), "{choice:?}");
+        }
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Comparing two reflectances (DESIGN.md section 11): images of a sphere under directional
+//! Comparing two reflectances (docs/design.md section 11): images of a sphere under directional
 //! lights (MAE, RMSE, PSNR on linear HDR pixels, SSIM on tone-mapped ones) and the log-space BRDF
 //! error that training minimises.
 //!
@@ -202,7 +202,7 @@ pub fn image_errors(reference: &Image, test: &Image) -> ImageErrors {
     }
 }
 
-/// DESIGN.md's display transform `max(x, 1e-12)^(1/2.2)`, clipped to `[0, 1]` for SSIM's range.
+/// docs/design.md's display transform `max(x, 1e-12)^(1/2.2)`, clipped to `[0, 1]` for SSIM's range.
 fn tone_map(plane: &[f32]) -> Vec<f64> {
     plane
         .iter()

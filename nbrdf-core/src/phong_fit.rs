@@ -1,4 +1,4 @@
-//! Fitting the 7-parameter Blinn-Phong model (DESIGN.md section 6) that labels a material's
+//! Fitting the 7-parameter Blinn-Phong model (docs/design.md section 6) that labels a material's
 //! importance-sampling lobe:
 //!
 //! `f = kd / pi + ks (n + 2) / (2 pi) cos(theta_h)^n`, RGB `kd`, `ks`, scalar `n` in `[0, 1e6]`,

@@ -1,4 +1,4 @@
-//! Importance sampling of the reflected direction (DESIGN.md section 6): uniform hemisphere,
+//! Importance sampling of the reflected direction (docs/design.md section 6): uniform hemisphere,
 //! cosine hemisphere and the Blinn-Phong mixture
 //! `pdf(l) = w (n + 1)/(2 pi) cos(theta_h)^n / (4 |v . h|) + (1 - w) max(l.z, 0)/pi`.
 //!

@@ -42,8 +42,8 @@ def nbrdf(cli: Path, *args) -> str:
 def check_cli(cli: Path) -> Path:
     """``cli`` when it is a file, else :class:`MissingDataError` saying how to build it."""
     if not Path(cli).is_file():
-        raise MissingDataError(f"the nbrdf CLI {cli} is missing: build it with `cargo build --release` "
-                               "(or `make build`), or pass --cli / set NBRDF_CLI")
+        raise MissingDataError(f"the nbrdf CLI {cli} is missing: build it with `make build` "
+                               "(or `cargo build --release -p nbrdf-core --features cli`), or pass --cli / set NBRDF_CLI")
     return Path(cli)
 
 

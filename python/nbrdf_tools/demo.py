@@ -1,10 +1,11 @@
 """The main job on the embedded default data: synthesise the MERL-format table of a default
 material from its published fit, train its neural BRDF (``nbrdf train``), fit its Blinn-Phong
 sampling lobe (``nbrdf fit-phong``), render the Veach MIS scene with the table (``merl``, the
-ground truth) and with the network (``nbrdf``, Phong-sampled) on the plates, and write EXR and
-PNG images side by side with the image error between them.
+ground truth) and with the network (``nbrdf``, Phong-sampled) on the plates, print the image
+error between them, and write the EXR renders, a plain side-by-side PNG and the README's
+labelled picture (``--figure``, default docs/images/demo.png).
 
-    python -m nbrdf_tools.demo [--material NAME] [--spp N] [--out DIR] [--no-progress]
+    python -m nbrdf_tools.demo [--material NAME] [--spp N] [--out DIR] [--figure PNG] [--no-progress]
 
 Needs only the nbrdf CLI (the fits are embedded in it), no shared data.
 """
@@ -21,11 +22,12 @@ import mitsuba as mi
 import numpy as np
 
 from nbrdf_tools import cli, metrics, progress
-from nbrdf_tools.paths import MissingDataError, default_cli, default_out
+from nbrdf_tools.paths import REPO, MissingDataError, default_cli, default_out
 from nbrdf_tools.render import render_passes, write_exr, write_png
 from nbrdf_tools.scenes.veach import veach_scene_dict
 
 DEFAULT_MATERIAL = "gold-metallic-paint"
+DEFAULT_FIGURE = REPO / "docs" / "images" / "demo.png"
 
 
 def synthesise(nbrdf: Path, model: str, material: str, out: Path) -> Path:
@@ -45,6 +47,43 @@ def train(nbrdf: Path, table: Path, out: Path, material: str, samples: int) -> P
     return network
 
 
+def labelled_figure(panels: dict[str, np.ndarray], caption: str, path: Path) -> Path:
+    """The linear images of ``panels`` side by side at one image pixel per screen pixel, each
+    under its label, with ``caption`` below; sRGB-encoded and stored with a 256-colour palette
+    (the README's picture stays small)."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    height, width = next(iter(panels.values())).shape[:2]
+    dpi, gap, top, bottom = 100, 8, 26, 22
+    figure = plt.figure(figsize=((len(panels) * (width + gap) - gap) / dpi, (height + top + bottom) / dpi), dpi=dpi)
+    for i, (label, image) in enumerate(panels.items()):
+        left = i * (width + gap) / figure.bbox.width
+        axes = figure.add_axes((left, bottom / figure.bbox.height, width / figure.bbox.width,
+                                height / figure.bbox.height))
+        axes.imshow(srgb(image), interpolation="nearest")
+        axes.set_axis_off()
+        axes.set_title(label, fontsize=9, pad=4)
+    figure.text(0.5, 4 / figure.bbox.height, caption, ha="center", va="bottom", fontsize=7.5, color="0.25")
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi, facecolor="white")
+    plt.close(figure)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.open(buffer).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
+    return path
+
+
+def srgb(linear: np.ndarray) -> np.ndarray:
+    """Clamped sRGB encoding (IEC 61966-2-1) of a linear RGB image, in [0, 1]."""
+    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--material", default=DEFAULT_MATERIAL, help="MERL material name (nbrdf list-materials)")
@@ -55,6 +94,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, default=384, help="image width (height is 2/3 of it)")
     parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant")
     parser.add_argument("--out", type=Path, default=default_out("demo"), help="output folder (default: %(default)s)")
+    parser.add_argument("--figure", type=Path, default=DEFAULT_FIGURE,
+                        help="the labelled side-by-side PNG (default: %(default)s)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="nbrdf CLI (default: %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
     args = parser.parse_args(argv)
@@ -99,7 +140,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"error:   NBRDF vs table, MAE {errors['mae']:.4f}, RMSE {errors['rmse']:.4f}, relMSE "
           f"{errors['relmse']:.4f}, HDR-FLIP {flip:.4f} (linear radiance, mean pixel {float(np.mean(truth)):.4f}; "
           f"includes Monte Carlo noise at {args.spp} spp)")
-    print(f"images:  {stem}-table.exr, {stem}-nbrdf.exr\n         {stem}.png (left: table, right: NBRDF)")
+    caption = (f"Veach MIS scene, {args.material}, {args.spp} spp ({args.variant}). NBRDF vs table: "
+               f"relMSE {errors['relmse']:.1e}, HDR-FLIP {flip:.3f} (Monte Carlo noise included)")
+    figure = labelled_figure({"MERL-format table (merl BSDF)": truth,
+                              "its neural BRDF (nbrdf BSDF, Phong-sampled)": ours}, caption, args.figure)
+    print(f"images:  {stem}-table.exr, {stem}-nbrdf.exr\n         {stem}.png (left: table, right: NBRDF)\n"
+          f"         {figure} (labelled, {figure.stat().st_size // 1024} KB)")
     return 0
 
 

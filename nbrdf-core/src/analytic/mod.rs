@@ -1,4 +1,4 @@
-//! Published analytic fits of the 100 MERL materials (DESIGN.md section 8), used to synthesise
+//! Published analytic fits of the 100 MERL materials (docs/design.md section 8), used to synthesise
 //! MERL-format tables where the MERL database itself cannot be redistributed.
 //!
 //! * SGD: Bagher, Soler, Holzschuch, "Accurate fitting of measured reflectances using a Shifted
@@ -222,7 +222,7 @@ mod tests {
         ];
         assert_close(p.eval_f64(DVec3::Z, DVec3::Z), expect, "literal SGD");
         // The same for a catalogue material, against a value computed independently (Python,
-        // straight from the formula in DESIGN.md section 8).
+        // straight from the formula in docs/design.md section 8).
         let gold = fit(ModelKind::Sgd, "gold-metallic-paint");
         let expect = [0.4546033027531401, 0.3258174854525016, 0.10925637224999782];
         assert_close(
@@ -260,7 +260,7 @@ mod tests {
     #[test]
     fn off_axis_values_match_an_independent_reference() {
         // l at (theta 0.5, phi 0.3), v at (theta 0.7, phi 2.9): theta_h = 0.2041, c = 0.8386.
-        // Reference values computed in Python from the formulas of DESIGN.md section 8.
+        // Reference values computed in Python from the formulas of docs/design.md section 8.
         let (l, v) = (spherical_direction(0.5, 0.3), spherical_direction(0.7, 2.9));
         let cases = [
             (

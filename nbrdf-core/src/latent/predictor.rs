@@ -1,4 +1,4 @@
-//! The Blinn-Phong parameter predictor (DESIGN.md section 7): a shallow MLP from the 32-value
+//! The Blinn-Phong parameter predictor (docs/design.md section 7): a shallow MLP from the 32-value
 //! code to the sampling parameters `(n, w)`, supervised by Blinn-Phong fits of the training
 //! split.
 //!
@@ -21,8 +21,10 @@
 use super::mlp::Mlp;
 use crate::coords::{network_input_from_angles, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
+use crate::lobe_fit::{choose_lobe, LobeChoice, LobeFitConfig};
 use crate::network::Nbrdf;
-use crate::phong_fit::MAX_EXPONENT;
+use crate::phong_fit::{FitConfig, MAX_EXPONENT};
+use crate::target::network_target;
 use crate::train::adam::{Adam, AdamConfig};
 use serde::{Deserialize, Serialize};
 
@@ -95,6 +97,33 @@ pub fn highlight_profile(net: &Nbrdf) -> Vec<f32> {
         out.extend(PROFILE_THETA_H_DEG.iter().map(|&t| value(t) - reference));
     }
     out
+}
+
+/// The fitted lobe `(n, w)` that labels a network: its own "fit" sampling (what `nbrdf
+/// fit-phong` stored, the lowest-variance lobe unless run with `--lobe model`), or, for a network
+/// without one or with `refit`, the lobe [`LobeChoice::Model`] of a fresh 7-parameter fit.
+///
+/// Why the model lobe there: it needs no quadrature (the lowest-variance search evaluates each
+/// network ~10^6 times), and it is what these labels have been since the predictor was written,
+/// so refitted label sets and the predictors trained on them stay as they were. The networks of
+/// the latent-space report all carry fit-phong's lowest-variance lobe, so there the labels are
+/// that lobe. The labels are the regression target of `--loss labels`, the small pull towards
+/// the label of `--loss variance` (whose main term is the variance objective of
+/// [`crate::lobe_fit`] itself, through a [`VarianceGrid`], whatever the label), the reference
+/// lobe of the RMSE ratios of `predictor eval` and the cross-validation, and the targets of the
+/// autoencoder's auxiliary lobe loss (`ae train --lobe-weight`).
+pub fn lobe_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
+    if let Some(s) = &net.sampling {
+        if s.source == "fit" && !refit {
+            return Ok((s.exponent as f64, s.specular_weight as f64));
+        }
+    }
+    choose_lobe(
+        &network_target(net),
+        LobeChoice::Model,
+        &FitConfig::default(),
+        &LobeFitConfig::default(),
+    )
 }
 
 /// A training example: code, fitted exponent, fitted specular weight.

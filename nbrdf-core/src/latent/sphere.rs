@@ -1,4 +1,4 @@
-//! The differentiable sphere renderer of the autoencoder's image loss (DESIGN.md section 7).
+//! The differentiable sphere renderer of the autoencoder's image loss (docs/design.md section 7).
 //!
 //! A `size x size` orthographic sphere seen from `+z`, lit by a directional light of unit
 //! irradiance at `theta_l` (45 degrees by default) in the `xz` plane, exactly the geometry of

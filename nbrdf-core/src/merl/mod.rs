@@ -1,4 +1,4 @@
-//! MERL-format BRDF tables (DESIGN.md section 3).
+//! MERL-format BRDF tables (docs/design.md section 3).
 //!
 //! Grid convention: cell `i` covers the continuous index interval `[i, i + 1)`, so its value is
 //! the BRDF at the cell centre, continuous index `i + 0.5` ("cell-centre angles", see

@@ -1,4 +1,4 @@
-//! The NBRDF network (DESIGN.md section 4): `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1`,
+//! The NBRDF network (docs/design.md section 4): `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1`,
 //! clamped at 0, with `x` the isotropic Rusinkiewicz input of [`crate::coords::network_input`].
 //! Any hidden width.
 //!

@@ -1,5 +1,5 @@
 //! Training samples: angular sampling of light/view pairs, their network inputs and the
-//! log-space targets (DESIGN.md section 5).
+//! log-space targets (docs/design.md section 5).
 //!
 //! * Adaptive: `theta_h, theta_d ~ U[0, pi/2]`, `phi_d ~ U[0, 2 pi)`, `phi_h = 0`, uniform in
 //!   the angles, which puts many samples near the specular peak (`theta_h` small).

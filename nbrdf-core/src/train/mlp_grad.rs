@@ -1,6 +1,6 @@
 //! Batched forward and backward passes of the NBRDF network for training.
 //!
-//! The network is `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1` (DESIGN.md section 4),
+//! The network is `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1` (docs/design.md section 4),
 //! trained on `|ln(1 + f_true cos) - ln(1 + y cos)|` averaged over samples and channels.
 //!
 //! Work is done on chunks of [`LANES`] samples, sample-major (`[lane][feature]`), with the
@@ -27,7 +27,7 @@ const XW: usize = VEC;
 const YW: usize = VEC;
 
 /// Offsets of the padded parameters `W1 [6][hp], b1 [hp], W2 [hp][hp], b2 [hp], W3 [hp][8],
-/// b3 [8]` in one flat vector (the order of DESIGN.md section 7).
+/// b3 [8]` in one flat vector (the order of docs/design.md section 7).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Layout {
     pub hidden: usize,

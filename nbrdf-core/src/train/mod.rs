@@ -1,4 +1,4 @@
-//! Training an NBRDF on a reflectance target (DESIGN.md section 5).
+//! Training an NBRDF on a reflectance target (docs/design.md section 5).
 //!
 //! Recipe: samples drawn once ([`dataset`]), Adam on mini-batches of a shuffled order each
 //! epoch, early stopping on a held-out validation set with the best weights kept.

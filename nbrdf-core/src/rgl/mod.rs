@@ -1,0 +1,226 @@
+//! RGL material database measurements (`.bsdf`, Dupuy & Jakob 2018, "An Adaptive
+//! Parameterization for Efficient Material Acquisition and Rendering"), read and evaluated as
+//! Mitsuba 3's `measured` BSDF does in an RGB variant.
+//!
+//! * [`tensor`] – the tensor file container (`TensorFile`).
+//! * [`warp`]   – the `Marginal2D` interpolant and inverse warp the tables are read through.
+//! * [`eval`]   – the BSDF evaluation (`measured.cpp`'s `eval`).
+//!
+//! Only the RGB files (`*_rgb.bsdf`, a field `rgb`) can be evaluated: Mitsuba's RGB variants
+//! refuse the spectral ones (`*_spec.bsdf`, fields `spectra` and `wavelengths`) too.
+
+pub mod eval;
+pub mod tensor;
+pub mod warp;
+
+use crate::error::{NbrdfError, Result};
+use std::path::{Path, PathBuf};
+use tensor::TensorFile;
+use warp::Marginal2D;
+
+/// The azimuthal reduction applied to isotropic measurements. Mitsuba 3.9's `measured` leaves
+/// `m_reduction` unset for them, and its builds behave as if it were 2: both directions are
+/// rotated by pi when the view's y is non-negative. For an isotropic material that is a symmetry,
+/// except at the half vector `m = n` exactly (mirror configurations), where `phi_m` is taken as 0
+/// and the rotation changes `phi_m - phi_i`: the tables' `theta_m = 0` column is not constant in
+/// `phi`, so reproducing Mitsuba there needs the same rotation (`tests/test_rgl_reader.py`
+/// evaluates exact mirror pairs).
+const ISOTROPIC_REDUCTION: i32 = 2;
+
+/// A loaded RGL measurement, ready to evaluate (the interpolants are built at load).
+#[derive(Clone, Debug)]
+pub struct RglMeasurement {
+    path: PathBuf,
+    description: String,
+    theta_i: Vec<f32>,
+    phi_i: Vec<f32>,
+    /// The microfacet normal distribution over `(u(theta_m), u(phi_m))`, unnormalised.
+    ndf: Marginal2D,
+    /// The projected microfacet area over `(u(theta_i), u(phi_i))`, unnormalised.
+    sigma: Marginal2D,
+    /// The visible normal distribution per incident direction, the adaptive parameterisation
+    /// the reflectance tables are stored in.
+    vndf: Marginal2D,
+    /// Reflectance per incident direction and channel, over the VNDF's sample space.
+    rgb: Marginal2D,
+    /// Whether the stored values are divided by the parameterisation's Jacobian (then multiplied
+    /// by `D(m) / (4 sigma(wi))` at evaluation).
+    jacobian: bool,
+    isotropic: bool,
+    /// Anisotropic files measured over a half (2) or a quarter (4) of the azimuths: the
+    /// directions are mirrored into the measured range.
+    reduction: i32,
+}
+
+impl RglMeasurement {
+    /// Reads and validates the RGL measurement at `path`.
+    pub fn load(path: impl AsRef<Path>) -> Result<RglMeasurement> {
+        let file = TensorFile::read(path)?;
+        RglMeasurement::from_tensor_file(&file)
+    }
+
+    /// Builds the measurement from a parsed tensor file, validating every field Mitsuba's
+    /// `measured` plugin reads (presence, dtype, shape, finite values) and the preconditions of
+    /// its interpolants that Mitsuba leaves unchecked (sorted angles, positive normalisations).
+    pub fn from_tensor_file(file: &TensorFile) -> Result<RglMeasurement> {
+        let path = file.path().to_path_buf();
+        let fail = |name: &str, message: String| Err(file.error(name, message));
+
+        if !file.has_field("rgb") {
+            let message = if file.has_field("wavelengths") {
+                "this is a spectral measurement (*_spec.bsdf); only the RGB files (*_rgb.bsdf) can be evaluated, as in Mitsuba's RGB variants"
+            } else {
+                "missing (not an RGL measurement?)"
+            };
+            return fail("rgb", message.into());
+        }
+        let (_, description) = file.u8_array("description", 1)?;
+        let description = String::from_utf8_lossy(&description).into_owned();
+        let (_, theta_i) = file.f32_array("theta_i", 1)?;
+        let (_, phi_i) = file.f32_array("phi_i", 1)?;
+        for (name, values) in [("theta_i", &theta_i), ("phi_i", &phi_i)] {
+            if values.is_empty() {
+                return fail(name, "is empty".into());
+            }
+            if !values.windows(2).all(|w| w[0] < w[1]) {
+                return fail(
+                    name,
+                    format!("angles {values:?} are not strictly increasing"),
+                );
+            }
+        }
+        let (ndf_shape, ndf) = file.f32_array("ndf", 2)?;
+        let (sigma_shape, sigma) = file.f32_array("sigma", 2)?;
+        let (vndf_shape, vndf) = file.f32_array("vndf", 4)?;
+        let (luminance_shape, _) = file.f32_array("luminance", 4)?;
+        let (rgb_shape, rgb) = file.f32_array("rgb", 5)?;
+        let (jacobian_shape, jacobian) = file.u8_array("jacobian", 1)?;
+
+        let (n_phi, n_theta) = (phi_i.len(), theta_i.len());
+        let expect = |name: &str, shape: &[usize], ok: bool, expected: String| {
+            if ok {
+                Ok(())
+            } else {
+                Err(file.error(name, format!("shape {shape:?}, expected {expected}")))
+            }
+        };
+        let grid_ok = |h: usize, w: usize| h >= 2 && w >= 2;
+        expect(
+            "ndf",
+            &ndf_shape,
+            grid_ok(ndf_shape[0], ndf_shape[1]),
+            "at least [2, 2]".into(),
+        )?;
+        expect(
+            "sigma",
+            &sigma_shape,
+            grid_ok(sigma_shape[0], sigma_shape[1]),
+            "at least [2, 2]".into(),
+        )?;
+        expect(
+            "vndf",
+            &vndf_shape,
+            vndf_shape[..2] == [n_phi, n_theta] && grid_ok(vndf_shape[2], vndf_shape[3]),
+            format!("[{n_phi} (phi_i), {n_theta} (theta_i), >= 2, >= 2]"),
+        )?;
+        let (res_y, res_x) = (rgb_shape[3], rgb_shape[4]);
+        expect(
+            "rgb",
+            &rgb_shape,
+            rgb_shape[..3] == [n_phi, n_theta, 3] && res_y == res_x && res_x >= 2,
+            format!("[{n_phi} (phi_i), {n_theta} (theta_i), 3, n, n] with n >= 2"),
+        )?;
+        expect(
+            "luminance",
+            &luminance_shape,
+            luminance_shape[..] == [n_phi, n_theta, res_y, res_x],
+            format!("[{n_phi}, {n_theta}, {res_y}, {res_x}] (as phi_i, theta_i and rgb)"),
+        )?;
+        expect(
+            "jacobian",
+            &jacobian_shape,
+            jacobian_shape[..] == [1],
+            "[1]".into(),
+        )?;
+        let jacobian = match jacobian[0] {
+            0 => false,
+            1 => true,
+            other => return fail("jacobian", format!("flag is {other}, expected 0 or 1")),
+        };
+        if let Some(v) = vndf.iter().find(|v| **v < 0.0) {
+            return fail("vndf", format!("holds the negative density {v}"));
+        }
+        if jacobian {
+            if let Some(v) = ndf.iter().find(|v| **v < 0.0) {
+                return fail("ndf", format!("holds the negative density {v}"));
+            }
+            if let Some(v) = sigma.iter().find(|v| **v <= 0.0) {
+                return fail(
+                    "sigma",
+                    format!("holds {v}; the projected area must be positive"),
+                );
+            }
+        }
+
+        let isotropic = n_phi <= 2;
+        let reduction = if isotropic {
+            ISOTROPIC_REDUCTION
+        } else {
+            let span = phi_i[n_phi - 1] - phi_i[0];
+            (2.0 * std::f32::consts::PI / span).round_ties_even() as i32
+        };
+        let structure = |name: &str, e: NbrdfError| match e {
+            NbrdfError::InvalidArgument(message) => file.error(name, message),
+            other => other,
+        };
+        let angles = vec![phi_i.clone(), theta_i.clone()];
+        // Arguments as measured.cpp constructs its Marginal2D tables.
+        let ndf = Marginal2D::new(&ndf, ndf_shape[1], ndf_shape[0], vec![], false, false)
+            .map_err(|e| structure("ndf", e))?;
+        let sigma = Marginal2D::new(&sigma, sigma_shape[1], sigma_shape[0], vec![], false, false)
+            .map_err(|e| structure("sigma", e))?;
+        let vndf = Marginal2D::new(&vndf, vndf_shape[3], vndf_shape[2], angles, true, true)
+            .map_err(|e| structure("vndf", e))?;
+        let mut rgb_params = vec![phi_i.clone(), theta_i.clone()];
+        rgb_params.push(vec![0.0, 1.0, 2.0]);
+        let rgb = Marginal2D::new(&rgb, res_x, res_y, rgb_params, false, false)
+            .map_err(|e| structure("rgb", e))?;
+
+        Ok(RglMeasurement {
+            path,
+            description,
+            theta_i,
+            phi_i,
+            ndf,
+            sigma,
+            vndf,
+            rgb,
+            jacobian,
+            isotropic,
+            reduction,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The file's description of the material (e.g. "White A4 paper (160 gsm)").
+    pub fn description(&self) -> &str {
+        &self.description
+    }
+
+    pub fn is_isotropic(&self) -> bool {
+        self.isotropic
+    }
+
+    /// The incident elevations the measurement was taken at (radians).
+    pub fn theta_i(&self) -> &[f32] {
+        &self.theta_i
+    }
+
+    /// The incident azimuths the measurement was taken at (one value for isotropic materials).
+    pub fn phi_i(&self) -> &[f32] {
+        &self.phi_i
+    }
+}

@@ -1,0 +1,413 @@
+//! The RGL `.bsdf` reader on synthetic tensor files written by the tests: a valid measurement
+//! whose tables are constant (so Mitsuba's `measured` evaluates to a closed form whatever the
+//! warps do), and malformed variants that must be refused with an error naming file and field.
+//! Agreement with Mitsuba itself on the real measurements is `tests/test_rgl_reader.py`.
+
+use glam::Vec3;
+use nbrdf_core::rgl::tensor::{write_tensor_file, DType, TensorFile};
+use nbrdf_core::rgl::RglMeasurement;
+use nbrdf_core::{Brdf, NbrdfError};
+use std::path::PathBuf;
+
+const N_THETA: usize = 4;
+const RES: usize = 8;
+const RGB: [f32; 3] = [0.2, 0.5, -0.01];
+const NDF: f32 = 3.0;
+const SIGMA: f32 = 0.75;
+
+fn f32_bytes(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+/// The fields of a small isotropic measurement with constant tables, as (name, dtype, shape,
+/// data); `edit` may change them before they are written.
+struct Fields(Vec<(String, DType, Vec<usize>, Vec<u8>)>);
+
+impl Fields {
+    fn valid(jacobian: bool) -> Fields {
+        let theta: Vec<f32> = (0..N_THETA)
+            .map(|i| i as f32 / (N_THETA - 1) as f32 * std::f32::consts::FRAC_PI_2)
+            .collect();
+        // A non-constant VNDF, so that the inverse warp does real work.
+        let vndf: Vec<f32> = (0..N_THETA * RES * RES)
+            .map(|i| 1.0 + (i % 7) as f32)
+            .collect();
+        let rgb: Vec<f32> = (0..N_THETA)
+            .flat_map(|_| {
+                RGB.iter()
+                    .flat_map(|&c| std::iter::repeat(c).take(RES * RES))
+            })
+            .collect();
+        Fields(vec![
+            (
+                "version".into(),
+                DType::UInt32,
+                vec![2],
+                [1u32, 0].iter().flat_map(|v| v.to_le_bytes()).collect(),
+            ),
+            (
+                "description".into(),
+                DType::UInt8,
+                vec![9],
+                b"synthetic".to_vec(),
+            ),
+            ("phi_i".into(), DType::Float32, vec![1], f32_bytes(&[0.0])),
+            (
+                "theta_i".into(),
+                DType::Float32,
+                vec![N_THETA],
+                f32_bytes(&theta),
+            ),
+            (
+                "sigma".into(),
+                DType::Float32,
+                vec![2, 16],
+                f32_bytes(&[SIGMA; 32]),
+            ),
+            (
+                "ndf".into(),
+                DType::Float32,
+                vec![2, 16],
+                f32_bytes(&[NDF; 32]),
+            ),
+            (
+                "vndf".into(),
+                DType::Float32,
+                vec![1, N_THETA, RES, RES],
+                f32_bytes(&vndf),
+            ),
+            (
+                "luminance".into(),
+                DType::Float32,
+                vec![1, N_THETA, RES, RES],
+                f32_bytes(&vec![1.0; N_THETA * RES * RES]),
+            ),
+            (
+                "rgb".into(),
+                DType::Float32,
+                vec![1, N_THETA, 3, RES, RES],
+                f32_bytes(&rgb),
+            ),
+            (
+                "jacobian".into(),
+                DType::UInt8,
+                vec![1],
+                vec![jacobian as u8],
+            ),
+        ])
+    }
+
+    fn set(mut self, name: &str, dtype: DType, shape: Vec<usize>, data: Vec<u8>) -> Fields {
+        let field = self.0.iter_mut().find(|f| f.0 == name).expect("field");
+        *field = (name.into(), dtype, shape, data);
+        self
+    }
+
+    fn without(mut self, name: &str) -> Fields {
+        self.0.retain(|f| f.0 != name);
+        self
+    }
+
+    fn bytes(&self) -> Vec<u8> {
+        let refs: Vec<(&str, DType, &[usize], &[u8])> = self
+            .0
+            .iter()
+            .map(|(n, d, s, b)| (n.as_str(), *d, s.as_slice(), b.as_slice()))
+            .collect();
+        write_tensor_file(&refs)
+    }
+}
+
+fn parse(bytes: Vec<u8>) -> Result<RglMeasurement, NbrdfError> {
+    let file = TensorFile::parse(bytes, PathBuf::from("synthetic.bsdf"))?;
+    RglMeasurement::from_tensor_file(&file)
+}
+
+/// The error of loading `bytes`, which must name the file and contain every one of `needles`.
+fn refused(bytes: Vec<u8>, needles: &[&str]) {
+    let message = match parse(bytes) {
+        Ok(_) => panic!("accepted a malformed file (expected an error with {needles:?})"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        message.contains("synthetic.bsdf"),
+        "error does not name the file: {message}"
+    );
+    for needle in needles {
+        assert!(
+            message.contains(needle),
+            "error lacks '{needle}': {message}"
+        );
+    }
+}
+
+fn direction(theta: f32, phi: f32) -> Vec3 {
+    Vec3::new(
+        theta.sin() * phi.cos(),
+        theta.sin() * phi.sin(),
+        theta.cos(),
+    )
+}
+
+fn directions() -> Vec<(Vec3, Vec3)> {
+    let mut pairs = Vec::new();
+    for i in 0..9 {
+        for j in 0..9 {
+            let view = direction(0.05 + 0.17 * i as f32, 0.7 * i as f32 - 2.0);
+            let light = direction(0.02 + 0.173 * j as f32, 1.3 * j as f32 + 0.4);
+            pairs.push((view, light));
+        }
+    }
+    // Exact mirror directions (half vector = normal) and grazing ones.
+    pairs.push((
+        direction(0.6, 0.3),
+        direction(0.6, 0.3 + std::f32::consts::PI),
+    ));
+    pairs.push((direction(1.56, -1.0), direction(1.5, 2.0)));
+    pairs
+}
+
+#[test]
+fn constant_tables_evaluate_to_the_closed_form() {
+    for jacobian in [false, true] {
+        let m = parse(Fields::valid(jacobian).bytes()).expect("valid file");
+        assert_eq!(m.description(), "synthetic");
+        assert!(m.is_isotropic());
+        let scale = if jacobian { NDF / (4.0 * SIGMA) } else { 1.0 };
+        for (view, light) in directions() {
+            let cosine_weighted = m.eval_cos_f32(view, light);
+            let f_r = m.eval(view, light);
+            for c in 0..3 {
+                let expected = RGB[c] * scale;
+                assert!(
+                    (cosine_weighted[c] - expected).abs() <= 1e-6 * expected.abs(),
+                    "{view} {light}: {cosine_weighted:?}"
+                );
+                let expected_f = expected as f64 / light.z as f64;
+                assert!(
+                    (f_r[c] - expected_f).abs() <= 1e-6 * expected_f.abs(),
+                    "{f_r:?} vs {expected_f}"
+                );
+            }
+            // The Brdf trait clamps the out-of-gamut channel and accepts directions that are
+            // not unit length.
+            let trait_value = Brdf::eval(&m, 3.0 * view, 2.0 * light);
+            assert!((trait_value[0] as f64 - f_r[0]).abs() <= 1e-5 * f_r[0]);
+            assert_eq!(trait_value[2], 0.0);
+        }
+    }
+}
+
+#[test]
+fn below_the_horizon_is_zero() {
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let up = direction(0.4, 0.2);
+    let down = Vec3::new(0.3, 0.1, -0.9).normalize();
+    let horizon = Vec3::new(1.0, 0.0, 0.0);
+    for (view, light) in [
+        (up, down),
+        (down, up),
+        (horizon, up),
+        (up, horizon),
+        (Vec3::ZERO, up),
+    ] {
+        assert_eq!(m.eval_cos_f32(view, light), [0.0; 3]);
+        assert_eq!(m.eval(view, light), [0.0; 3]);
+        assert_eq!(Brdf::eval(&m, view, light), [0.0; 3]);
+    }
+    assert_eq!(Brdf::eval(&m, Vec3::new(f32::NAN, 0.0, 1.0), up), [0.0; 3]);
+    assert_eq!(
+        Brdf::eval(&m, Vec3::new(f32::INFINITY, 0.0, 1.0), up),
+        [0.0; 3]
+    );
+}
+
+#[test]
+fn load_reads_a_file_and_names_it_in_errors() {
+    let dir = std::env::temp_dir().join(format!("nbrdf-rgl-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("constant.bsdf");
+    std::fs::write(&path, Fields::valid(true).bytes()).unwrap();
+    assert!(RglMeasurement::load(&path).is_ok());
+    let missing = dir.join("absent.bsdf");
+    let message = RglMeasurement::load(&missing).unwrap_err().to_string();
+    assert!(message.contains("absent.bsdf"), "{message}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn truncated_files_are_refused() {
+    let bytes = Fields::valid(true).bytes();
+    for len in [0, 5, 17, 40, 200, bytes.len() / 2, bytes.len() - 1] {
+        refused(bytes[..len].to_vec(), &[]);
+    }
+    refused(
+        bytes[..bytes.len() - 1].to_vec(),
+        &["jacobian", "past the end"],
+    );
+}
+
+#[test]
+fn bad_headers_are_refused() {
+    let mut bytes = Fields::valid(true).bytes();
+    bytes[0] = b'T';
+    refused(bytes, &["tensor_file"]);
+    // A field count the file cannot hold: refused before anything is allocated for it.
+    let mut bytes = Fields::valid(true).bytes();
+    bytes[14..18].copy_from_slice(&u32::MAX.to_le_bytes());
+    refused(bytes, &["fields"]);
+    let mut bytes = Fields::valid(true).bytes();
+    bytes[13] = 3;
+    refused(bytes, &["version"]);
+}
+
+#[test]
+fn oversized_shapes_are_refused_without_allocating() {
+    // Shapes whose byte size overflows, or merely exceeds the file: both checked up front.
+    for shape in [
+        vec![1usize << 40, 1 << 40, 1 << 40],
+        vec![usize::MAX / 2, 3],
+        vec![1 << 30],
+    ] {
+        let fields = Fields::valid(true).set("ndf", DType::Float32, shape, f32_bytes(&[NDF; 32]));
+        refused(fields.bytes(), &["ndf", "past the end"]);
+    }
+}
+
+#[test]
+fn wrong_dtypes_shapes_and_values_are_refused() {
+    let cases: Vec<(Fields, &[&str])> = vec![
+        (
+            Fields::valid(true).set("ndf", DType::Float64, vec![2, 16], vec![0; 256]),
+            &["ndf", "float64", "float32"],
+        ),
+        (
+            Fields::valid(true).set("jacobian", DType::Float32, vec![1], f32_bytes(&[1.0])),
+            &["jacobian", "uint8"],
+        ),
+        (
+            Fields::valid(true).set(
+                "rgb",
+                DType::Float32,
+                vec![1, N_THETA, 3, RES, RES - 1],
+                vec![0; 4 * N_THETA * 3 * RES * (RES - 1)],
+            ),
+            &["rgb", "shape"],
+        ),
+        (
+            Fields::valid(true).set(
+                "vndf",
+                DType::Float32,
+                vec![1, N_THETA - 1, RES, RES],
+                vec![0; 4 * (N_THETA - 1) * RES * RES],
+            ),
+            &["vndf", "shape"],
+        ),
+        (
+            Fields::valid(true).set(
+                "luminance",
+                DType::Float32,
+                vec![1, N_THETA, RES],
+                vec![0; 4 * N_THETA * RES],
+            ),
+            &["luminance", "dimensions"],
+        ),
+        (
+            Fields::valid(true).set(
+                "sigma",
+                DType::Float32,
+                vec![1, 16],
+                f32_bytes(&[SIGMA; 16]),
+            ),
+            &["sigma", "shape"],
+        ),
+        (
+            Fields::valid(true).set(
+                "theta_i",
+                DType::Float32,
+                vec![N_THETA],
+                f32_bytes(&[0.0, 0.5, 0.4, 1.5]),
+            ),
+            &["theta_i", "increasing"],
+        ),
+        (
+            Fields::valid(true).set("sigma", DType::Float32, vec![2, 16], f32_bytes(&[0.0; 32])),
+            &["sigma", "positive"],
+        ),
+        (
+            Fields::valid(true).set("jacobian", DType::UInt8, vec![1], vec![7]),
+            &["jacobian", "0 or 1"],
+        ),
+        (
+            Fields::valid(true).set(
+                "vndf",
+                DType::Float32,
+                vec![1, N_THETA, RES, RES],
+                vec![0; 4 * N_THETA * RES * RES],
+            ),
+            &["vndf", "integrates to zero"],
+        ),
+        (Fields::valid(true).without("vndf"), &["vndf", "missing"]),
+        (Fields::valid(true).without("rgb"), &["rgb", "missing"]),
+    ];
+    for (fields, needles) in cases {
+        refused(fields.bytes(), needles);
+    }
+    let mut ndf = vec![NDF; 32];
+    ndf[5] = f32::NAN;
+    refused(
+        Fields::valid(true)
+            .set("ndf", DType::Float32, vec![2, 16], f32_bytes(&ndf))
+            .bytes(),
+        &["ndf", "finite"],
+    );
+}
+
+#[test]
+fn spectral_measurements_are_refused_as_mitsuba_rgb_variants_do() {
+    let fields = Fields::valid(true).without("rgb");
+    let mut fields = fields.0;
+    fields.push((
+        "wavelengths".into(),
+        DType::Float32,
+        vec![2],
+        f32_bytes(&[400.0, 700.0]),
+    ));
+    refused(Fields(fields).bytes(), &["spectral", "_rgb.bsdf"]);
+}
+
+#[test]
+fn batches_match_single_evaluations() {
+    use nbrdf_core::brdf::{Directions, RgbMut};
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let pairs: Vec<(Vec3, Vec3)> = (0..3000)
+        .map(|i| directions()[i % directions().len()])
+        .collect();
+    let planar = |pick: fn(&(Vec3, Vec3)) -> Vec3| -> Vec<f32> {
+        let v: Vec<Vec3> = pairs.iter().map(pick).collect();
+        v.iter()
+            .map(|d| d.x)
+            .chain(v.iter().map(|d| d.y))
+            .chain(v.iter().map(|d| d.z))
+            .collect()
+    };
+    let (views, lights) = (planar(|p| p.0), planar(|p| p.1));
+    let (view, light) = (
+        Directions::from_planar(&views).unwrap(),
+        Directions::from_planar(&lights).unwrap(),
+    );
+    let mut raw = vec![f32::NAN; 3 * pairs.len()];
+    let mut clamped = vec![f32::NAN; 3 * pairs.len()];
+    m.eval_cos_batch_f32(view, light, RgbMut::from_planar(&mut raw).unwrap());
+    Brdf::eval_cos_batch(&m, view, light, RgbMut::from_planar(&mut clamped).unwrap());
+    let n = pairs.len();
+    for (i, (v, l)) in pairs.iter().enumerate() {
+        let single = m.eval_cos_f32(*v, *l);
+        assert_eq!([raw[i], raw[n + i], raw[2 * n + i]], single);
+        let normalised = m.eval_cos_f32(v.normalize_or_zero(), l.normalize_or_zero());
+        assert_eq!(
+            [clamped[i], clamped[n + i], clamped[2 * n + i]],
+            normalised.map(|x| x.max(0.0))
+        );
+    }
+}
