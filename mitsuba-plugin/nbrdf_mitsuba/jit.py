@@ -14,8 +14,10 @@ reference). Its twins, and the tests that hold the two together:
   (``clamp_exp_arg``), so that no finite weights give NaN or infinity; directions normalised
   like ``rescale_out_of_range`` (zero and non-finite vectors give 0);
 * :func:`mixture_pdf`, :func:`sample`, :func:`blinn_phong_half_vector` -
-  ``nbrdf-core/src/sampling.rs`` (``SamplingStrategy::sample``/``pdf``, ``cos_power``,
+  ``nbrdf-core/src/sampling.rs`` (``SamplingStrategy::sample``/``pdf``, ``cos_power_from_one_minus``,
   ``blinn_phong_half_vector``; uniforms clamped like ``unit_interval``);
+* :func:`two_lobe_pdf` and the ``two_lobe`` branch of :func:`sample` - ``sampling.rs``
+  ``SamplingStrategy::TwoLobe`` (``two_lobe_mixture_density``, ``two_lobe_component``);
 * :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``.
 
 Tests: ``tests/test_backends.py`` (eval, pdf, samples and renders of both backends, and a
@@ -214,7 +216,7 @@ def _log1m(x):
 
 
 def _cos_power_from_one_minus(one_minus_cos, exponent):
-    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling.rs`` ``cos_power``), with
+    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling.rs`` ``cos_power_from_one_minus``), with
     n = 0 -> 1 and cos <= 0 -> 0 (never NaN)."""
     positive = one_minus_cos < 1.0
     value = dr.exp(exponent * _log1m(dr.select(positive, dr.maximum(one_minus_cos, 0.0), 0.0)))
@@ -305,20 +307,43 @@ def mixture_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight
     return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
-STRATEGIES = ("uniform", "cosine", "phong")
+def two_lobe_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight, exponent2,
+                 specular_weight2):
+    """``w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine`` per unit solid angle of ``light``
+    (``sampling.rs`` ``two_lobe_mixture_density``; the cosine weight clamped at 0), zero unless
+    both directions are above the horizon."""
+    v, v_ok = _unit(view)
+    l, l_ok = _unit(light)
+    one_minus_cos, v_dot_h, h_ok = _half_vector_terms(view, light)
+    h_ok = h_ok & (v_dot_h > 0)
+    pdf = mi.Float(0.0)
+    for n, w in ((exponent, specular_weight), (exponent2, specular_weight2)):
+        lobe = (n + 1.0) * (0.5 / math.pi) * _cos_power_from_one_minus(one_minus_cos, n)
+        specular = dr.select(h_ok, lobe / (4.0 * v_dot_h), 0.0)
+        pdf += dr.select(w > 0, w * specular, 0.0)
+    cosine_weight = dr.maximum(1.0 - specular_weight - specular_weight2, 0.0)
+    pdf += cosine_weight * dr.maximum(l.z, 0.0) / math.pi
+    return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
-def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0):
+STRATEGIES = ("uniform", "cosine", "phong", "two_lobe")
+
+
+def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0, exponent2=0.0,
+        specular_weight2=0.0):
     """Density of ``light`` given ``view`` for a strategy of ``STRATEGIES``."""
     if strategy == "phong":
         return mixture_pdf(view, light, exponent, specular_weight)
+    if strategy == "two_lobe":
+        return two_lobe_pdf(view, light, exponent, specular_weight, exponent2, specular_weight2)
     v, v_ok = _unit(view)
     l, l_ok = _unit(light)
     density = 0.5 / math.pi if strategy == "uniform" else l.z / math.pi
     return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), density, 0.0)
 
 
-def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
+def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0, exponent2=0.0,
+           specular_weight2=0.0):
     """Draws a light direction like ``SamplingStrategy::sample``: ``(light, pdf)`` with pdf 0
     for invalid samples (a specular reflection below the horizon, a view below it)."""
     u0, u1, u2 = unit_interval(u0), unit_interval(u1), unit_interval(u2)
@@ -332,13 +357,25 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0):
         reflected = 2.0 * dr.dot(v, h) * h - v
         specular = (u0 < specular_weight) | (specular_weight >= 1.0)
         light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
+    elif strategy == "two_lobe":
+        # The component choice of sampling.rs two_lobe_component.
+        v, _ = _unit(view)
+        total = specular_weight + specular_weight2
+        first = u0 < specular_weight
+        second = ~first & (u0 < total)
+        rest = ~first & ~second & (total >= 1.0)
+        first |= rest & ~(specular_weight2 > 0)
+        second |= rest & (specular_weight2 > 0)
+        h = blinn_phong_half_vector(dr.select(first, exponent, exponent2), u1, u2)
+        reflected = 2.0 * dr.dot(v, h) * h - v
+        light = dr.select(first | second, reflected, cosine_hemisphere(u1, u2))
     else:
         raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
     _, view_ok = _unit(view)
     light, light_ok = _unit(light)
     # As SamplingStrategy::sample: +z (with pdf 0) when there is no direction to return.
     light = dr.select(view_ok & light_ok, light, mi.Vector3f(0.0, 0.0, 1.0))
-    return light, pdf(strategy, view, light, exponent, specular_weight)
+    return light, pdf(strategy, view, light, exponent, specular_weight, exponent2, specular_weight2)
 
 
 # MERL grid (docs/design.md section 3), as in nbrdf-core's merl.rs.

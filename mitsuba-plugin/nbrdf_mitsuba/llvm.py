@@ -14,7 +14,7 @@ from ._llvm import (ENV, INSTRUCTION, MIN_MAJOR, SEARCH_PATTERNS, backend_versio
                     configure, describe, find_libllvm, main, parse_version, problem)
 
 __all__ = ["ENV", "INSTRUCTION", "MIN_MAJOR", "SEARCH_PATTERNS", "backend_version", "candidates", "check_backend",
-           "configure", "describe", "find_libllvm", "main", "parse_version", "problem", "status", "chosen"]
+           "configure", "describe", "find_libllvm", "main", "parse_version", "problem", "status", "chosen"]  # noqa: F822 (module __getattr__)
 
 
 def __getattr__(name):

@@ -14,21 +14,24 @@ seconds=${1:-300}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(merl_reader merl_structured network_json network_structured)
+    targets=(merl_reader merl_structured network_json network_structured rgl_reader rgl_structured)
 fi
 nice_cmd=(nice -n "${NICE:-10}")
 
 if ! "${nice_cmd[@]}" ./seed.sh; then
     echo "run.sh: no full-size MERL seeds; merl_reader will only reach the header checks" >&2
+    echo "        (rgl_reader still has its small synthetic seeds)" >&2
 fi
 "${nice_cmd[@]}" cargo +nightly fuzz build -O || exit 1
 
 # Largest input per target: a full MERL table plus some trailing bytes; the structured targets
-# decode their input with `arbitrary`, a few KB is plenty; JSON seeds are up to 71 KB.
+# decode their input with `arbitrary`, a few KB is plenty; JSON seeds are up to 71 KB; real RGL
+# measurements about 660 KB.
 max_len() {
     case $1 in
         merl_reader) echo 34992100 ;;
-        merl_structured | network_structured) echo 8192 ;;
+        merl_structured | network_structured | rgl_structured) echo 8192 ;;
+        rgl_reader) echo 700000 ;;
         network_json) echo 262144 ;;
         *) echo 4096 ;;
     esac

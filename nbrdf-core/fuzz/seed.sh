@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Adds full-size MERL tables to the merl_reader corpus. A valid table is 34,992,012 bytes, too
-# big to commit, and byte mutation never grows a small seed into one, so without these files the
-# fuzzer only ever reaches the header and size checks. The tables are written by the `nbrdf` CLI
+# Adds RGL measurements to the rgl_reader corpus, and full-size MERL tables to the merl_reader
+# corpus. A valid MERL table is 34,992,012 bytes, too big to commit, and byte mutation never
+# grows a small seed into one, so without these files the fuzzer only ever reaches the header
+# and size checks. The tables are written by the `nbrdf` CLI
 # (analytic fits tabulated on the MERL grid) as corpus/merl_reader/generated-*.binary, which
 # .gitignore leaves out. Idempotent: existing tables are kept.
 #
@@ -9,6 +10,18 @@
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
+
+# RGL seeds: the small synthetic measurements (committed; rewritten identically) and, where the
+# shared data is present, the real measurements (git-ignored as generated-*).
+python3 "$here/make_rgl_seeds.py" "$here/corpus/rgl_reader"
+shared=${NBRDF_SHARED:-$root/../shared}
+for real in "$shared"/data/rgl/*_rgb.bsdf; do
+    seed=$here/corpus/rgl_reader/generated-$(basename "$real")
+    if [ -f "$real" ] && [ ! -s "$seed" ]; then
+        cp "$real" "$seed"
+    fi
+done
+
 nbrdf=${NBRDF:-$root/target/release/nbrdf}
 if [ ! -x "$nbrdf" ]; then
     echo "seed.sh: no nbrdf CLI at $nbrdf: build it first (make setup, or cargo build --release" \

@@ -50,6 +50,7 @@ pub mod network;
 pub mod rgl;
 pub mod rng;
 pub mod sampling;
+pub mod source;
 
 #[cfg(feature = "train")]
 pub mod analytic;

@@ -18,10 +18,18 @@
 //!
 //! [`LobeChoice`] names the two candidates (this search and the model fit's lobe);
 //! [`choose_lobe`] and [`LobeAnalysis::lobe`] are where one of them is picked.
+//!
+//! Two lobes ([`LobeQuadrature::fit_two_lobes`]): `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2)
+//! cosine` on the same quadrature and objective, for a sharp peak over a broader halo or a
+//! diffuse base. A coarse grid over both exponents and weights (each exponent pair's lobe
+//! densities computed once, the weights only rescale them), then a pattern search with halving
+//! steps from the better of the grid's best and the one-lobe lobe (a candidate with `w2 = 0`):
+//! never worse than one lobe on the quadrature.
 
 use crate::coords::to_rusinkiewicz;
 use crate::error::{NbrdfError, Result};
 use crate::phong_fit::{self, FitConfig, PhongFit, PhongParams};
+use crate::sampling::{SamplingStrategy, MAX_EXPONENT};
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -231,6 +239,253 @@ impl LobeQuadrature {
     }
 }
 
+/// The two-lobe sampling mixture `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine` chosen
+/// for the lowest mean relative variance on the same quadrature as the one-lobe search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TwoLobeFit {
+    /// `[n1, n2]` with `n1 >= n2` (the sharp lobe first).
+    pub exponents: [f64; 2],
+    pub weights: [f64; 2],
+    /// Mean `R - 1` with the two lobes; never above `one_lobe.relative_variance`.
+    pub relative_variance: f64,
+    /// The one-lobe search the two-lobe one starts from (its candidate with `w2 = 0`).
+    pub one_lobe: LobeFit,
+}
+
+impl TwoLobeFit {
+    /// The sampling strategy of this fit.
+    pub fn strategy(&self) -> SamplingStrategy {
+        SamplingStrategy::TwoLobe {
+            exponent1: self.exponents[0],
+            weight1: self.weights[0],
+            exponent2: self.exponents[1],
+            weight2: self.weights[1],
+        }
+    }
+}
+
+/// Exponents of the coarse two-lobe grid: 0 and `10^(k/4)` up to 1e5 (every other exponent of
+/// the one-lobe grid).
+fn two_lobe_grid_exponents() -> Vec<f64> {
+    std::iter::once(0.0)
+        .chain((0..=20).map(|k| 10f64.powf(k as f64 / 4.0)))
+        .collect()
+}
+
+/// Weights of the coarse two-lobe grid (pairs with `w1 + w2 <= 1` are used).
+const TWO_LOBE_GRID_WEIGHTS: [f64; 12] =
+    [0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.0];
+
+/// Halvings of the pattern search's steps after the grid.
+const TWO_LOBE_REFINE_LEVELS: usize = 7;
+
+/// Relative second moment `R` of a mixture of Blinn-Phong lobes `(n, w)` and cosine (weight
+/// `1 - sum w`, at least 0) for a view: [`second_moment`] with more lobes. Lobes of weight 0
+/// are skipped, so a second lobe of weight 0 scores exactly as the one-lobe mixture.
+fn mixture_second_moment(q: &ViewQuadrature, lobes: &[(f64, f64)]) -> f64 {
+    if q.integral_sq <= 0.0 {
+        return 1.0;
+    }
+    let cosine_weight = (1.0 - lobes.iter().map(|l| l.1).sum::<f64>()).max(0.0);
+    let mut sum = 0.0;
+    for i in 0..q.g2_dw.len() {
+        let mut pdf = 0.0;
+        for &(n, w) in lobes {
+            if w > 0.0 {
+                let norm = (n + 1.0) * 0.5 * FRAC_1_PI;
+                pdf += w * (norm * (n * q.ln_cos_h[i]).exp() * q.inv_jacobian[i]);
+            }
+        }
+        pdf += cosine_weight * q.cosine_pdf[i];
+        if pdf <= 0.0 {
+            return f64::INFINITY;
+        }
+        sum += q.g2_dw[i] / pdf;
+    }
+    sum / q.integral_sq
+}
+
+/// The light densities of one Blinn-Phong lobe at every quadrature point of a view.
+fn lobe_densities(q: &ViewQuadrature, n: f64) -> Vec<f64> {
+    let norm = (n + 1.0) * 0.5 * FRAC_1_PI;
+    q.ln_cos_h
+        .iter()
+        .zip(&q.inv_jacobian)
+        .map(|(&ln_cos, &inv_j)| norm * (n * ln_cos).exp() * inv_j)
+        .collect()
+}
+
+/// A candidate of the two-lobe search: `(R - 1, [n1, n2], [w1, w2])`.
+type TwoLobeCandidate = (f64, [f64; 2], [f64; 2]);
+
+fn better(a: TwoLobeCandidate, b: TwoLobeCandidate) -> TwoLobeCandidate {
+    if b.0 < a.0 {
+        b
+    } else {
+        a
+    }
+}
+
+impl LobeQuadrature {
+    /// Mean relative variance `R - 1` over the views of the two-lobe mixture.
+    pub fn two_lobe_relative_variance(&self, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
+        let lobes = [(exponents[0], weights[0]), (exponents[1], weights[1])];
+        self.views
+            .iter()
+            .map(|q| mixture_second_moment(q, &lobes))
+            .sum::<f64>()
+            / self.views.len() as f64
+            - 1.0
+    }
+
+    /// The best weights of the coarse grid for each exponent pair: the lobe densities are
+    /// computed once per pair, the weights only rescale them.
+    fn two_lobe_grid(&self) -> Option<TwoLobeCandidate> {
+        let exponents = two_lobe_grid_exponents();
+        let pairs: Vec<[f64; 2]> = exponents
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &n1)| exponents[..i].iter().map(move |&n2| [n1, n2]))
+            .collect();
+        let weight_pairs: Vec<[f64; 2]> = TWO_LOBE_GRID_WEIGHTS
+            .iter()
+            .flat_map(|&w1| TWO_LOBE_GRID_WEIGHTS.iter().map(move |&w2| [w1, w2]))
+            .filter(|w| w[0] + w[1] <= 1.0 + 1e-12)
+            .collect();
+        pairs
+            .par_iter()
+            .map(|&pair| {
+                let mut sums = vec![0.0; weight_pairs.len()];
+                for q in &self.views {
+                    if q.integral_sq <= 0.0 {
+                        sums.iter_mut().for_each(|s| *s += 1.0);
+                        continue;
+                    }
+                    let (d1, d2) = (lobe_densities(q, pair[0]), lobe_densities(q, pair[1]));
+                    for (sum, w) in sums.iter_mut().zip(&weight_pairs) {
+                        let cosine_weight = (1.0 - w[0] - w[1]).max(0.0);
+                        let mut total = 0.0;
+                        for i in 0..q.g2_dw.len() {
+                            let pdf = w[0] * d1[i] + w[1] * d2[i] + cosine_weight * q.cosine_pdf[i];
+                            total += if pdf > 0.0 {
+                                q.g2_dw[i] / pdf
+                            } else {
+                                f64::INFINITY
+                            };
+                        }
+                        *sum += total / q.integral_sq;
+                    }
+                }
+                let views = self.views.len() as f64;
+                sums.iter()
+                    .zip(&weight_pairs)
+                    .map(|(s, &w)| (s / views - 1.0, pair, w))
+                    .filter(|c| c.0.is_finite())
+                    .reduce(better)
+            })
+            .flatten()
+            .reduce_with(better)
+    }
+
+    /// The two-lobe mixture of lowest mean relative variance: the one-lobe search of `config`
+    /// (its lobe with `w2 = 0` is a candidate, so the result is never worse), a coarse grid over
+    /// both exponents and weights, then a pattern search in `(log10(1 + n1), log10(1 + n2), w1,
+    /// w2)` with halving steps from the better of the two.
+    pub fn fit_two_lobes(&self, config: &LobeFitConfig) -> Result<TwoLobeFit> {
+        let one_lobe = self.fit(config)?;
+        let mut best: TwoLobeCandidate = (
+            self.two_lobe_relative_variance(
+                [one_lobe.exponent, 0.0],
+                [one_lobe.specular_weight, 0.0],
+            ),
+            [one_lobe.exponent, 0.0],
+            [one_lobe.specular_weight, 0.0],
+        );
+        if let Some(grid) = self.two_lobe_grid() {
+            best = better(best, grid);
+        }
+        if best.0.is_finite() {
+            best = self.refine_two_lobes(best);
+        }
+        let (mut relative_variance, mut exponents, mut weights) = best;
+        if relative_variance.is_nan() || relative_variance > one_lobe.relative_variance {
+            (relative_variance, exponents, weights) = (
+                one_lobe.relative_variance,
+                [one_lobe.exponent, 0.0],
+                [one_lobe.specular_weight, 0.0],
+            );
+        }
+        if exponents[1] > exponents[0] {
+            exponents.swap(0, 1);
+            weights.swap(0, 1);
+        }
+        Ok(TwoLobeFit {
+            exponents,
+            weights,
+            relative_variance,
+            one_lobe,
+        })
+    }
+
+    /// Coordinate pattern search from `start`; moves stay in the valid domain.
+    fn refine_two_lobes(&self, start: TwoLobeCandidate) -> TwoLobeCandidate {
+        let to_t = |n: f64| (1.0 + n).log10();
+        let to_n = |t: f64| (10f64.powf(t) - 1.0).clamp(0.0, MAX_EXPONENT);
+        let t_max = to_t(MAX_EXPONENT);
+        let mut best = start;
+        let mut x = [to_t(start.1[0]), to_t(start.1[1]), start.2[0], start.2[1]];
+        let (mut t_step, mut w_step) = (0.125, 0.025);
+        for _ in 0..TWO_LOBE_REFINE_LEVELS {
+            // At most a few passes per level: each accepted move restarts the pass.
+            for _ in 0..8 {
+                let moves: Vec<[f64; 4]> = (0..4)
+                    .flat_map(|k| {
+                        let step = if k < 2 { t_step } else { w_step };
+                        [-step, step].map(|d| {
+                            let mut y = x;
+                            y[k] += d;
+                            y
+                        })
+                    })
+                    .filter(|y| {
+                        y[0] >= 0.0
+                            && y[1] >= 0.0
+                            && y[0] <= t_max
+                            && y[1] <= t_max
+                            && y[2] >= 0.0
+                            && y[3] >= 0.0
+                            && y[2] + y[3] <= 1.0
+                    })
+                    .collect();
+                let found = moves
+                    .par_iter()
+                    .map(|y| {
+                        let (n, w) = ([to_n(y[0]), to_n(y[1])], [y[2], y[3]]);
+                        ((self.two_lobe_relative_variance(n, w), n, w), *y)
+                    })
+                    .filter(|(c, _)| c.0.is_finite())
+                    .reduce_with(|a, b| if b.0 .0 < a.0 .0 { b } else { a });
+                match found {
+                    Some((candidate, y)) if candidate.0 < best.0 => {
+                        best = candidate;
+                        x = y;
+                    }
+                    _ => break,
+                }
+            }
+            t_step *= 0.5;
+            w_step *= 0.5;
+        }
+        best
+    }
+}
+
+/// Chooses the two-lobe mixture for `target` (a table or a network, `f_r` by Rusinkiewicz
+/// angles).
+pub fn fit_two_lobes(target: &TargetFn<'_>, config: &LobeFitConfig) -> Result<TwoLobeFit> {
+    LobeQuadrature::new(target, config)?.fit_two_lobes(config)
+}
+
 /// Chooses the lobe for `target` (a table or a network, `f_r` by Rusinkiewicz angles).
 pub fn fit_lobe(target: &TargetFn<'_>, config: &LobeFitConfig) -> Result<LobeFit> {
     LobeQuadrature::new(target, config)?.fit(config)
@@ -301,6 +556,26 @@ impl LobeAnalysis {
         })
     }
 
+    /// [`LobeAnalysis::new`] plus the two-lobe search ([`LobeQuadrature::fit_two_lobes`]) on
+    /// the same quadrature, which is built once.
+    pub fn with_two_lobes(
+        target: &TargetFn<'_>,
+        fit_config: &FitConfig,
+        lobe_config: &LobeFitConfig,
+    ) -> Result<(Self, TwoLobeFit)> {
+        let model = phong_fit::fit(target, fit_config)?;
+        let quadrature = LobeQuadrature::new(target, lobe_config)?;
+        let two_lobes = quadrature.fit_two_lobes(lobe_config)?;
+        let model_relative_variance =
+            quadrature.relative_variance(model.params.exponent, model.params.specular_weight());
+        let analysis = LobeAnalysis {
+            model,
+            lowest_variance: two_lobes.one_lobe,
+            model_relative_variance,
+        };
+        Ok((analysis, two_lobes))
+    }
+
     /// The lobe `(n, w)` of `choice` (as [`choose_lobe`] would compute it).
     pub fn lobe(&self, choice: LobeChoice) -> (f64, f64) {
         match choice {
@@ -329,7 +604,6 @@ mod tests {
     use super::*;
     use crate::coords::from_rusinkiewicz;
     use crate::coords::RusinkiewiczAngles;
-    use crate::sampling::SamplingStrategy;
     use glam::Vec3;
 
     fn blinn_phong(kd: f64, ks: f64, n: f64) -> impl Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> {
@@ -448,5 +722,107 @@ mod tests {
             ..LobeFitConfig::default()
         };
         assert!(fit_lobe(&blinn_phong(0.5, 0.5, 10.0), &config).is_err());
+    }
+
+    /// A sharp peak over a broader glossy lobe over a diffuse base.
+    fn two_lobe_material(
+        kd: f64,
+        sharp: (f64, f64),
+        broad: (f64, f64),
+    ) -> impl Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> {
+        move |a: &RusinkiewiczAngles| {
+            let cos_h = a.theta_h.cos().max(0.0);
+            let lobe = |(ks, n): (f64, f64)| ks * (n + 2.0) / (2.0 * PI) * cos_h.powf(n);
+            Some([kd / PI + lobe(sharp) + lobe(broad); 3])
+        }
+    }
+
+    #[test]
+    fn two_lobes_are_never_worse_than_one() {
+        let config = LobeFitConfig::default();
+        let materials: Vec<Box<TargetFn<'static>>> = vec![
+            Box::new(blinn_phong(0.7, 0.0, 1.0)),
+            Box::new(blinn_phong(0.05, 0.9, 300.0)),
+            Box::new(blinn_phong(0.3, 0.2, 20_000.0)),
+            Box::new(|_: &RusinkiewiczAngles| Some([0.0; 3])),
+        ];
+        for (k, material) in materials.iter().enumerate() {
+            let quadrature = LobeQuadrature::new(&**material, &config).unwrap();
+            let fit = quadrature.fit_two_lobes(&config).unwrap();
+            assert!(
+                fit.relative_variance <= fit.one_lobe.relative_variance,
+                "material {k}: {fit:?}"
+            );
+            assert_eq!(fit.one_lobe, quadrature.fit(&config).unwrap());
+            assert!(fit.strategy().validated().is_ok(), "{fit:?}");
+            assert!(fit.exponents[0] >= fit.exponents[1]);
+            // The reported variance is that of the stored parameters.
+            let again = quadrature.two_lobe_relative_variance(fit.exponents, fit.weights);
+            assert!(
+                (again - fit.relative_variance).abs() <= 1e-9 * again.abs().max(1e-9),
+                "material {k}: {again} vs {fit:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_sharp_peak_over_a_broad_lobe_gets_two_lobes() {
+        let target = two_lobe_material(0.1, (0.3, 5_000.0), (0.5, 30.0));
+        let config = LobeFitConfig::default();
+        let fit = fit_two_lobes(&target, &config).unwrap();
+        assert!(
+            fit.relative_variance < 0.5 * fit.one_lobe.relative_variance,
+            "{fit:?}"
+        );
+        // The lobes land near the material's: one sharp, one broad, both carrying weight.
+        assert!(
+            fit.exponents[0] > 5_000.0 / 4.0 && fit.exponents[0] < 5_000.0 * 4.0,
+            "{fit:?}"
+        );
+        assert!(
+            fit.exponents[1] > 30.0 / 4.0 && fit.exponents[1] < 30.0 * 4.0,
+            "{fit:?}"
+        );
+        assert!(fit.weights[0] > 0.1 && fit.weights[1] > 0.1, "{fit:?}");
+    }
+
+    /// The two-lobe objective against Monte Carlo with the two-lobe sampler itself.
+    #[test]
+    fn two_lobe_second_moment_matches_monte_carlo() {
+        let target = two_lobe_material(0.2, (0.3, 2_000.0), (0.4, 20.0));
+        let config = LobeFitConfig::default();
+        let theta_v = 50f64.to_radians();
+        let q = quadrature(&target, theta_v, &config);
+        let (exponents, weights) = ([1_500.0, 25.0], [0.3, 0.5]);
+        let quad = mixture_second_moment(
+            &q,
+            &[(exponents[0], weights[0]), (exponents[1], weights[1])],
+        );
+        let strategy = SamplingStrategy::TwoLobe {
+            exponent1: exponents[0],
+            weight1: weights[0],
+            exponent2: exponents[1],
+            weight2: weights[1],
+        };
+        let view = Vec3::new(theta_v.sin() as f32, 0.0, theta_v.cos() as f32);
+        let mut rng = crate::rng::SplitMix64::from_state(77);
+        let (mut m1, mut m2, count) = (0.0, 0.0, 400_000);
+        for _ in 0..count {
+            let s = strategy.sample(view, [rng.next_f32(), rng.next_f32(), rng.next_f32()]);
+            if s.pdf <= 0.0 {
+                continue;
+            }
+            let a = to_rusinkiewicz(view.as_dvec3(), s.light.as_dvec3());
+            let (_, l) = from_rusinkiewicz(&a);
+            let ratio = target(&a).unwrap()[0] * l.z / s.pdf as f64;
+            m1 += ratio;
+            m2 += ratio * ratio;
+        }
+        let (m1, m2) = (m1 / count as f64, m2 / count as f64);
+        let mc = m2 / (m1 * m1);
+        assert!(
+            (quad - mc).abs() < 0.03 * mc,
+            "quadrature {quad} vs Monte Carlo {mc}"
+        );
     }
 }

@@ -1,6 +1,7 @@
 //! Importance sampling of the reflected direction (docs/design.md section 6): uniform hemisphere,
 //! cosine hemisphere and the Blinn-Phong mixture
-//! `pdf(l) = w (n + 1)/(2 pi) cos(theta_h)^n / (4 |v . h|) + (1 - w) max(l.z, 0)/pi`.
+//! `pdf(l) = w (n + 1)/(2 pi) cos(theta_h)^n / (4 |v . h|) + (1 - w) max(l.z, 0)/pi`, and its
+//! two-lobe extension `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine`.
 //!
 //! Every strategy takes three uniforms in `[0, 1]` (inclusive) and the view direction; the
 //! pdf is per unit solid angle of the light direction. Internally float64, so that exponents up to
@@ -18,6 +19,15 @@ use std::f64::consts::{FRAC_1_PI, TAU};
 /// Lanes per rayon task in the batched functions.
 const TASK_LANES: usize = 4096;
 
+/// The largest Blinn-Phong exponent accepted (docs/design.md promises stable sampling up to
+/// here; docs/hardening.md). The plugin's `jit.py`/`bsdf.py` use the same figure.
+pub const MAX_EXPONENT: f64 = 1e6;
+
+/// Whether `n` is a usable Blinn-Phong exponent: finite, in `[0, MAX_EXPONENT]`.
+pub fn exponent_in_range(n: f64) -> bool {
+    (0.0..=MAX_EXPONENT).contains(&n)
+}
+
 /// A sampling strategy for the light direction given the view direction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SamplingStrategy {
@@ -28,7 +38,21 @@ pub enum SamplingStrategy {
         exponent: f64,
         specular_weight: f64,
     },
+    /// Mixture of two Blinn-Phong lobes and a cosine lobe,
+    /// `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine` ([`two_lobe_density`]): a sharp peak
+    /// over a broader glossy halo or a diffuse base. Weights in `[0, 1]` with `w1 + w2 <= 1`,
+    /// exponents in `[0, MAX_EXPONENT]`; by convention (that of the lobe fit)
+    /// `exponent1 >= exponent2`, though the density does not depend on the order.
+    TwoLobe {
+        exponent1: f64,
+        weight1: f64,
+        exponent2: f64,
+        weight2: f64,
+    },
 }
+
+/// Slack on `w1 + w2 <= 1` for weights that went through float32 (0.7f32 + 0.3f32 > 1 in f64).
+const WEIGHT_SUM_TOLERANCE: f64 = 1e-6;
 
 /// One sampled light direction; `pdf == 0` marks an invalid sample (below the horizon).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,16 +62,16 @@ pub struct DirectionSample {
 }
 
 impl SamplingStrategy {
-    /// Checks the parameters (finite exponent >= 0, weight in [0, 1]).
+    /// Checks the parameters (exponent in [0, [`MAX_EXPONENT`]], weight in [0, 1]).
     pub fn validated(self) -> Result<Self> {
         if let SamplingStrategy::BlinnPhong {
             exponent,
             specular_weight,
         } = self
         {
-            if !(exponent.is_finite() && exponent >= 0.0) {
+            if !exponent_in_range(exponent) {
                 return Err(NbrdfError::InvalidArgument(format!(
-                    "Blinn-Phong exponent {exponent} must be finite and >= 0"
+                    "Blinn-Phong exponent {exponent} must be in [0, 1e6] (MAX_EXPONENT)"
                 )));
             }
             if !(0.0..=1.0).contains(&specular_weight) {
@@ -56,7 +80,41 @@ impl SamplingStrategy {
                 )));
             }
         }
+        if let Some(problem) = self.two_lobe_problem() {
+            return Err(NbrdfError::InvalidArgument(problem));
+        }
         Ok(self)
+    }
+
+    /// Why the parameters of a [`SamplingStrategy::TwoLobe`] are unusable, if they are.
+    fn two_lobe_problem(&self) -> Option<String> {
+        let SamplingStrategy::TwoLobe {
+            exponent1,
+            weight1,
+            exponent2,
+            weight2,
+        } = *self
+        else {
+            return None;
+        };
+        for (k, n) in [(1, exponent1), (2, exponent2)] {
+            if !exponent_in_range(n) {
+                return Some(format!(
+                    "two-lobe exponent{k} {n} must be finite, in [0, {MAX_EXPONENT:e}] (MAX_EXPONENT)"
+                ));
+            }
+        }
+        for (k, w) in [(1, weight1), (2, weight2)] {
+            if !(0.0..=1.0).contains(&w) {
+                return Some(format!("two-lobe weight{k} {w} must be in [0, 1]"));
+            }
+        }
+        if weight1 + weight2 > 1.0 + WEIGHT_SUM_TOLERANCE {
+            return Some(format!(
+                "two-lobe weights {weight1} + {weight2} must sum to at most 1"
+            ));
+        }
+        None
     }
 
     /// Whether the parameters are usable; unusable ones give pdf 0 everywhere instead of NaN.
@@ -65,7 +123,8 @@ impl SamplingStrategy {
             SamplingStrategy::BlinnPhong {
                 exponent,
                 specular_weight,
-            } => exponent.is_finite() && exponent >= 0.0 && (0.0..=1.0).contains(&specular_weight),
+            } => exponent_in_range(exponent) && (0.0..=1.0).contains(&specular_weight),
+            SamplingStrategy::TwoLobe { .. } => self.two_lobe_problem().is_none(),
             _ => true,
         }
     }
@@ -103,6 +162,19 @@ impl SamplingStrategy {
                     cosine_hemisphere(u1, u2)
                 }
             }
+            SamplingStrategy::TwoLobe {
+                exponent1,
+                weight1,
+                exponent2,
+                weight2,
+            } => match two_lobe_component(u0, weight1, weight2) {
+                Some(lobe) => {
+                    let exponent = if lobe == 1 { exponent1 } else { exponent2 };
+                    let h = blinn_phong_half_vector(exponent, u1, u2);
+                    2.0 * v.dot(h) * h - v
+                }
+                None => cosine_hemisphere(u1, u2),
+            },
         }
     }
 
@@ -129,7 +201,58 @@ impl SamplingStrategy {
                 exponent,
                 specular_weight,
             } => mixture_density(v, l, exponent, specular_weight),
+            SamplingStrategy::TwoLobe {
+                exponent1,
+                weight1,
+                exponent2,
+                weight2,
+            } => two_lobe_mixture_density(v, l, [exponent1, exponent2], [weight1, weight2]),
         }
+    }
+}
+
+/// Which component of a two-lobe mixture the uniform `u0` picks: `Some(1)`, `Some(2)` for the
+/// Blinn-Phong lobes, `None` for cosine. `u0 = 1` with no cosine weight left (`w1 + w2 >= 1`)
+/// still picks a lobe of positive weight.
+fn two_lobe_component(u0: f64, weight1: f64, weight2: f64) -> Option<u8> {
+    if u0 < weight1 {
+        Some(1)
+    } else if u0 < weight1 + weight2 {
+        Some(2)
+    } else if weight1 + weight2 >= 1.0 {
+        Some(if weight2 > 0.0 { 2 } else { 1 })
+    } else {
+        None
+    }
+}
+
+/// Two Blinn-Phong lobes plus cosine over the whole sphere of `l` (`v`, `l` unit), as
+/// [`mixture_density`] for one lobe; the cosine weight `1 - w1 - w2` is clamped at 0 (float32
+/// weights may sum to 1 + ulp).
+fn two_lobe_mixture_density(v: DVec3, l: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
+    let mut density = 0.0;
+    for (n, w) in exponents.into_iter().zip(weights) {
+        if w > 0.0 {
+            density += w * specular_density(v, l, n);
+        }
+    }
+    let cosine = (1.0 - weights[0] - weights[1]).max(0.0);
+    density + cosine * l.z.max(0.0) * FRAC_1_PI
+}
+
+/// The two-lobe mixture's density over the whole sphere of light directions (the two-lobe
+/// counterpart of [`blinn_phong_lobe_density`]): integrates to 1 for every view when the
+/// weights sum to at most 1; 0 for invalid parameters or directions.
+pub fn two_lobe_density(view: DVec3, light: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
+    let strategy = SamplingStrategy::TwoLobe {
+        exponent1: exponents[0],
+        weight1: weights[0],
+        exponent2: exponents[1],
+        weight2: weights[1],
+    };
+    match (strategy.params_ok(), normalized(view), normalized(light)) {
+        (true, Some(v), Some(l)) => two_lobe_mixture_density(v, l, exponents, weights),
+        _ => 0.0,
     }
 }
 
@@ -180,15 +303,24 @@ pub fn blinn_phong_half_vector(exponent: f64, u1: f64, u2: f64) -> DVec3 {
     spherical(cos, sin, u2)
 }
 
-/// `c^n` for `c` in `[0, 1]`, with `c^0 = 1` (also for `c = 0`) and no NaN for any `n >= 0`.
-fn cos_power(c: f64, n: f64) -> f64 {
+/// `cos^n` from `1 - cos` in `[0, 1]`, with `cos^0 = 1` (also for `cos = 0`) and no NaN for any
+/// `n >= 0`. Taking `1 - cos` rather than `cos` keeps sharp lobes exact: near the mirror
+/// direction `cos` rounds to 1 while `1 - cos` (from `|h_xy|^2`) keeps its relative precision.
+/// Twin: `jit.py` `_cos_power_from_one_minus` (held together by `tests/test_backends.py`).
+fn cos_power_from_one_minus(one_minus_cos: f64, n: f64) -> f64 {
     if n == 0.0 {
         1.0
-    } else if c <= 0.0 {
+    } else if one_minus_cos >= 1.0 {
         0.0
     } else {
-        (n * c.min(1.0).ln()).exp()
+        (n * (-one_minus_cos.max(0.0)).ln_1p()).exp()
     }
+}
+
+/// `1 - cos(theta_h)` of a unit half vector from its tangential part, `|h_xy|^2 / (1 + |h.z|)`,
+/// which does not cancel as `1 - h.z` does.
+fn one_minus_cos_theta(h: DVec3) -> f64 {
+    (h.x * h.x + h.y * h.y) / (1.0 + h.z.abs())
 }
 
 /// Density of the reflected direction when the half vector has density
@@ -203,7 +335,8 @@ fn specular_density(v: DVec3, l: DVec3, n: f64) -> f64 {
     if v_dot_h <= 0.0 {
         return 0.0;
     }
-    (n + 1.0) * 0.5 * FRAC_1_PI * cos_power(h.z.abs(), n) / (4.0 * v_dot_h)
+    (n + 1.0) * 0.5 * FRAC_1_PI * cos_power_from_one_minus(one_minus_cos_theta(h), n)
+        / (4.0 * v_dot_h)
 }
 
 fn mixture_density(v: DVec3, l: DVec3, n: f64, w: f64) -> f64 {
@@ -450,6 +583,8 @@ mod tests {
             bp(-1.0, 0.5),
             bp(f64::NAN, 0.5),
             bp(f64::INFINITY, 0.5),
+            bp(MAX_EXPONENT * (1.0 + 1e-12), 0.5),
+            bp(3.4e38, 0.5),
             bp(1.0, -0.1),
             bp(1.0, 1.5),
             bp(1.0, f64::NAN),
@@ -732,5 +867,137 @@ mod tests {
         }
         assert!(pdf[5] == 0.0 && weight[5] == 0.0);
         assert!(invalid > 0 && invalid < n / 4);
+    }
+
+    fn two_lobe(n1: f64, w1: f64, n2: f64, w2: f64) -> SamplingStrategy {
+        SamplingStrategy::TwoLobe {
+            exponent1: n1,
+            weight1: w1,
+            exponent2: n2,
+            weight2: w2,
+        }
+    }
+
+    /// [`lobe_integral`] for the two-lobe density.
+    fn two_lobe_integral(v: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
+        let density = |l: DVec3| two_lobe_density(v, l, exponents, weights);
+        let radius = 0.08;
+        let near = cap_integral(-v, radius, 400, 128, |l| density(l) * bump(-v, radius, l));
+        let far = sphere_integral(mirror(v), 1500, 256, |l| {
+            density(l) * (1.0 - bump(-v, radius, l))
+        });
+        near + far
+    }
+
+    #[test]
+    fn two_lobe_density_integrates_to_one_over_the_sphere() {
+        let views = [dir(0.0, 0.0), dir(60.0, 0.4), dir(85.0, 2.0)];
+        let cases = [
+            ([1e4, 30.0], [0.3, 0.5]),
+            ([1e5, 1e3], [0.6, 0.4]),
+            ([100.0, 1.0], [0.1, 0.2]),
+            ([1e6, 0.0], [0.5, 0.25]),
+        ];
+        for (exponents, weights) in cases {
+            for v in views {
+                let total = two_lobe_integral(v, exponents, weights);
+                assert!(
+                    (total - 1.0).abs() < 1e-4,
+                    "{exponents:?} {weights:?} v {v}: {total}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn two_lobe_validation_and_one_lobe_equivalence() {
+        assert!(two_lobe(1e4, 0.3, 50.0, 0.5).validated().is_ok());
+        assert!(two_lobe(1e6, 0.7f32 as f64, 0.0, 0.3f32 as f64)
+            .validated()
+            .is_ok());
+        for bad in [
+            two_lobe(-1.0, 0.3, 10.0, 0.3),
+            two_lobe(10.0, 0.3, 2e6, 0.3),
+            two_lobe(f64::NAN, 0.3, 10.0, 0.3),
+            two_lobe(10.0, 0.6, 1.0, 0.5),
+            two_lobe(10.0, -0.1, 1.0, 0.5),
+            two_lobe(10.0, 0.1, 1.0, f64::NAN),
+        ] {
+            assert!(
+                matches!(bad.validated(), Err(NbrdfError::InvalidArgument(_))),
+                "{bad:?}"
+            );
+            let s = bad.sample(Vec3::Z, [0.5; 3]);
+            assert_eq!(s.pdf, 0.0);
+            assert!(s.light.is_finite());
+        }
+        // A second lobe of weight 0 is the one-lobe mixture, sample for sample.
+        let one = SamplingStrategy::BlinnPhong {
+            exponent: 300.0,
+            specular_weight: 0.6,
+        };
+        let two = two_lobe(300.0, 0.6, 7.0, 0.0);
+        let mut rng = SplitMix64::from_state(3);
+        for _ in 0..2000 {
+            let v = uniform_hemisphere(rng.next_f64(), rng.next_f64()).as_vec3();
+            let u = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+            let (a, b) = (one.sample(v, u), two.sample(v, u));
+            assert_eq!(a.light, b.light);
+            assert!((a.pdf - b.pdf).abs() <= 1e-6 * a.pdf, "{a:?} {b:?}");
+        }
+    }
+
+    #[test]
+    fn two_lobe_sampled_pdf_equals_pdf_and_histogram_matches() {
+        let mut rng = SplitMix64::from_state(11);
+        let strategies = [
+            two_lobe(1e4, 0.4, 30.0, 0.4),
+            two_lobe(1e6, 0.5, 1e3, 0.5),
+            two_lobe(50.0, 0.2, 5.0, 0.1),
+        ];
+        for strategy in strategies {
+            for _ in 0..2000 {
+                let v = uniform_hemisphere(rng.next_f64(), rng.next_f64()).as_vec3();
+                let s = strategy.sample(v, [rng.next_f32(), rng.next_f32(), rng.next_f32()]);
+                assert_eq!(s.pdf, strategy.pdf(v, s.light), "{strategy:?}");
+                assert!(s.light.is_finite() && s.pdf.is_finite() && s.pdf >= 0.0);
+            }
+        }
+        let samples = 200_000;
+        for (strategy, v) in [
+            (two_lobe(1e4, 0.3, 40.0, 0.5), dir(45.0, 1.0)),
+            (two_lobe(2e3, 0.5, 20.0, 0.2), dir(80.0, -2.0)),
+        ] {
+            let r = mirror(v);
+            let tests: [&(dyn Fn(DVec3) -> f64 + Sync); 3] = [
+                &|l: DVec3| l.z + 0.5 * l.x * l.x,
+                &|l: DVec3| f64::from(u8::from(l.dot(r) > 0.995)),
+                &|l: DVec3| f64::from(u8::from(l.dot(r) > 0.9999)),
+            ];
+            for (t, g) in tests.into_iter().enumerate() {
+                let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
+                let mut rng = SplitMix64::from_state(29 + t as u64);
+                let (mut sum, mut sum2) = (0.0, 0.0);
+                for _ in 0..samples {
+                    let s = strategy.sample(
+                        v.as_vec3(),
+                        [rng.next_f32(), rng.next_f32(), rng.next_f32()],
+                    );
+                    let x = if s.pdf > 0.0 {
+                        g(s.light.as_dvec3())
+                    } else {
+                        0.0
+                    };
+                    sum += x;
+                    sum2 += x * x;
+                }
+                let mean = sum / samples as f64;
+                let sigma = ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt();
+                assert!(
+                    (mean - exact).abs() < 5.0 * sigma + 1e-4,
+                    "{strategy:?} test {t}: MC {mean} +- {sigma} vs quadrature {exact}"
+                );
+            }
+        }
     }
 }

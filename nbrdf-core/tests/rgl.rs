@@ -411,3 +411,192 @@ fn batches_match_single_evaluations() {
         );
     }
 }
+
+/// Training straight from a measurement file (`nbrdf train X.bsdf`): the source is recognised by
+/// content and the network learns the closed form of the constant synthetic measurement.
+#[cfg(feature = "train")]
+mod train_from_source {
+    use super::*;
+    use nbrdf_core::coords::{to_rusinkiewicz, RusinkiewiczAngles};
+    use nbrdf_core::merl::PhiFold;
+    use nbrdf_core::ops::train_network::{train_network, TrainRequest};
+    use nbrdf_core::source::{rgl_target, RglFold, TrainingSource, GRAZING_COS};
+    use nbrdf_core::train::TrainConfig;
+    use nbrdf_core::Nbrdf;
+
+    fn temp_dir(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("nbrdf-source-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn a_measurement_file_trains_to_its_closed_form() {
+        let dir = temp_dir("train");
+        let path = dir.join("constant"); // no extension: the content decides
+        std::fs::write(&path, Fields::valid(false).bytes()).unwrap();
+        let output = dir.join("constant.nbrdf.json");
+        let request = TrainRequest {
+            source: path.clone(),
+            phi_fold: PhiFold::default(),
+            rgl_fold: RglFold::AsMeasured,
+            output: Some(output.clone()),
+            name: None,
+            config: TrainConfig {
+                samples: 6000,
+                max_epochs: 80,
+                batch: 64,
+                seed: 1,
+                ..TrainConfig::default()
+            },
+            threads: None,
+        };
+        let report = train_network(&request, &mut |_| {}).unwrap().report;
+        assert!(
+            report.best_validation_loss < 1e-2
+                && report.best_validation_loss < 0.1 * report.history[0].1,
+            "{:?}",
+            report.history
+        );
+        let network = Nbrdf::load(&output).unwrap();
+        let p = &network.provenance;
+        assert_eq!(p["source_kind"], "rgl-measurement");
+        assert_eq!(p["rgl_fold"], "as-measured");
+        assert!(p["source"].as_str().unwrap().ends_with("constant"));
+        // f cos(theta_light) is the stored RGB (negative blue clamped to 0) in every direction.
+        for (view, light) in directions() {
+            if view.z < 0.2 || light.z < 0.2 {
+                continue;
+            }
+            let f = Brdf::eval(&network, view, light);
+            for c in 0..3 {
+                let got = f[c] * light.z;
+                let want = RGB[c].max(0.0);
+                assert!(
+                    (got - want).abs() < 0.1 * want + 0.01,
+                    "{view} {light}: {got} vs {want}"
+                );
+            }
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_reciprocal_mean_averages_both_directions() {
+        let m = parse(Fields::valid(false).bytes()).unwrap();
+        let measured = rgl_target(&m, RglFold::AsMeasured);
+        let mean = rgl_target(&m, RglFold::ReciprocalMean);
+        for (view, light) in directions() {
+            let angles: RusinkiewiczAngles = to_rusinkiewicz(view.as_dvec3(), light.as_dvec3());
+            let (cv, cl) = (view.z as f64, light.z as f64);
+            let a = measured(&angles).unwrap();
+            let b = mean(&angles);
+            if cv < GRAZING_COS || cl < GRAZING_COS {
+                assert!(b.is_none());
+                continue;
+            }
+            let b = b.unwrap();
+            for c in 0..3 {
+                let rgb = RGB[c].max(0.0) as f64;
+                let tol = 1e-4 * (rgb / cl.min(cv)).max(1e-6);
+                assert!((a[c] - rgb / cl).abs() < tol, "{a:?}");
+                let want = 0.5 * (rgb / cl + rgb / cv);
+                assert!((b[c] - want).abs() < tol, "{b:?} vs {want}");
+            }
+        }
+    }
+
+    fn open_error(name: &str, bytes: &[u8]) -> String {
+        let dir = temp_dir("sniff");
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let message = match TrainingSource::open(&path) {
+            Ok(_) => panic!("{name} opened"),
+            Err(e) => e.to_string(),
+        };
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(message.contains(name), "{message}");
+        message
+    }
+
+    #[test]
+    fn sources_are_told_apart_by_content_and_errors_name_the_file() {
+        let json = open_error("net.bsdf", br#"{"name": "x", "layers": []}"#);
+        assert!(json.contains("JSON"), "{json}");
+        assert!(open_error("empty.binary", b"").contains("empty"));
+        let tensor = Fields::valid(true).bytes();
+        open_error("truncated.bsdf", &tensor[..tensor.len() / 2]);
+        let merl_header: Vec<u8> = [90i32, 90, 180]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert!(open_error("short.binary", &merl_header).contains("truncated"));
+        let missing =
+            std::env::temp_dir().join(format!("nbrdf-absent-{}.bsdf", std::process::id()));
+        let message = TrainingSource::open(&missing).err().unwrap().to_string();
+        assert!(message.contains("nbrdf-absent-"), "{message}");
+        // A valid tensor file named like a table is still a measurement.
+        let dir = temp_dir("kind");
+        let path = dir.join("table.binary");
+        std::fs::write(&path, &tensor).unwrap();
+        let source = TrainingSource::open(&path).unwrap();
+        assert_eq!(source.kind(), "rgl-measurement");
+        assert_eq!(source.path(), path.as_path());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+/// Tables whose evaluation would leave the float32 range are refused (found by the rgl fuzz
+/// targets: an infinite Jacobian scale gave NaN where the reflectance was zero, and huge
+/// reflectances gave infinities).
+#[test]
+fn tables_beyond_the_float32_range_are_refused() {
+    let tiny_sigma = Fields::valid(true)
+        .set("ndf", DType::Float32, vec![2, 16], f32_bytes(&[1.8e25; 32]))
+        .set(
+            "sigma",
+            DType::Float32,
+            vec![2, 16],
+            f32_bytes(&[2.35e-38; 32]),
+        );
+    refused(tiny_sigma.bytes(), &["rgb", "float32 range"]);
+    let cells = N_THETA * 3 * RES * RES;
+    // The Jacobian scale is 30 / (4 * 0.75) = 10 here.
+    let huge_rgb = Fields::valid(true)
+        .set("ndf", DType::Float32, vec![2, 16], f32_bytes(&[30.0; 32]))
+        .set(
+            "rgb",
+            DType::Float32,
+            vec![1, N_THETA, 3, RES, RES],
+            f32_bytes(&vec![1e38; cells]),
+        );
+    refused(huge_rgb.bytes(), &["rgb", "float32 range"]);
+    // Without the Jacobian the scale is 1: the largest float32 reflectance still evaluates.
+    let largest = Fields::valid(false).set(
+        "rgb",
+        DType::Float32,
+        vec![1, N_THETA, 3, RES, RES],
+        f32_bytes(&vec![3e38; cells]),
+    );
+    let m = parse(largest.bytes()).unwrap();
+    let value = m.eval_cos_f32(direction(0.3, 0.0), direction(0.4, 2.0));
+    assert!(
+        value.iter().all(|v| v.is_finite() && *v > 1e38),
+        "{value:?}"
+    );
+}
+
+/// `f = f cos / cos` saturates at the largest float instead of overflowing as the light reaches
+/// the horizon, where float32 cosines go down to 1e-45.
+#[test]
+fn reflectance_at_the_horizon_saturates_instead_of_overflowing() {
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let view = direction(0.5, 0.3);
+    for z in [1e-7f32, 1e-30, 1e-38, 1e-45] {
+        let light = Vec3::new(1.0, 0.0, z);
+        let f = Brdf::eval(&m, view, light);
+        assert!(f.iter().all(|v| v.is_finite() && *v >= 0.0), "z {z}: {f:?}");
+    }
+    let f = Brdf::eval(&m, view, Vec3::new(1.0, 0.0, 1e-45));
+    assert!(f[1] == f32::MAX, "{f:?}");
+}

@@ -26,6 +26,10 @@ typedef enum NbrdfSamplingKind {
   NBRDF_SAMPLING_COSINE = 1,
   // Mixture of a Blinn-Phong lobe (`exponent`, weight `specular_weight`) and a cosine lobe.
   NBRDF_SAMPLING_PHONG = 2,
+  // Mixture of two Blinn-Phong lobes (`exponent`, `specular_weight`; `exponent2`,
+  // `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
+  // Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
+  NBRDF_SAMPLING_TWO_LOBE = 3,
 } NbrdfSamplingKind;
 
 // Status code returned (as `int32_t`) by every fallible function. On any value other than
@@ -61,19 +65,33 @@ typedef struct NbrdfNetworkInfo {
   uint32_t parameter_count;
   // 1 when the file carries Blinn-Phong sampling parameters, else 0.
   uint32_t has_sampling;
-  // Blinn-Phong exponent stored with the network (0 when `has_sampling` is 0).
+  // Blinn-Phong exponent stored with the network (0 when `has_sampling` is 0); of the first
+  // lobe when the file stores two (see `nbrdf_network_stored_sampler`).
   float exponent;
   // Blinn-Phong specular weight stored with the network (0 when `has_sampling` is 0).
   float specular_weight;
 } NbrdfNetworkInfo;
 
-// An importance-sampling strategy. `exponent` (finite, >= 0) and `specular_weight` (in [0, 1])
+// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
 // are read only for `NBRDF_SAMPLING_PHONG`.
 typedef struct NbrdfSampler {
   enum NbrdfSamplingKind kind;
   float exponent;
   float specular_weight;
 } NbrdfSampler;
+
+// An importance-sampling strategy with up to two Blinn-Phong lobes, for the `*_mixture`
+// functions: any kind of `NbrdfSamplingKind`. The first three fields are those of
+// `NbrdfSampler`; `exponent2` and `specular_weight2` are read only for
+// `NBRDF_SAMPLING_TWO_LOBE`, which takes exponents finite in [0, 1e6], weights in [0, 1] with
+// `specular_weight + specular_weight2 <= 1`.
+typedef struct NbrdfMixtureSampler {
+  enum NbrdfSamplingKind kind;
+  float exponent;
+  float specular_weight;
+  float exponent2;
+  float specular_weight2;
+} NbrdfMixtureSampler;
 
 #ifdef __cplusplus
 extern "C" {
@@ -199,12 +217,64 @@ int32_t nbrdf_sampler_pdf(const struct NbrdfSampler *sampler,
                           size_t n,
                           float *out_pdf);
 
-// Checks a sampler's kind and parameters (finite exponent >= 0, specular weight in [0, 1] for
+// Checks a sampler's kind and parameters (exponent in [0, 1e6], specular weight in [0, 1] for
 // `NBRDF_SAMPLING_PHONG`): `NBRDF_OK` or `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
 //
 // # Safety
 // `sampler` points to an `NbrdfSampler`.
 int32_t nbrdf_sampler_validate(const struct NbrdfSampler *sampler);
+
+// `nbrdf_network_sample` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
+//
+// # Safety
+// As `nbrdf_network_sample`, with `sampler` pointing to an `NbrdfMixtureSampler`.
+int32_t nbrdf_network_sample_mixture(const struct NbrdfNetwork *network,
+                                     const struct NbrdfMixtureSampler *sampler,
+                                     const float *view,
+                                     const float *u,
+                                     size_t n,
+                                     float *out_light,
+                                     float *out_weight,
+                                     float *out_pdf);
+
+// `nbrdf_merl_sample` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
+//
+// # Safety
+// As `nbrdf_merl_sample`, with `sampler` pointing to an `NbrdfMixtureSampler`.
+int32_t nbrdf_merl_sample_mixture(const struct NbrdfMerl *merl,
+                                  const struct NbrdfMixtureSampler *sampler,
+                                  const float *view,
+                                  const float *u,
+                                  size_t n,
+                                  float *out_light,
+                                  float *out_weight,
+                                  float *out_pdf);
+
+// `nbrdf_sampler_pdf` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
+//
+// # Safety
+// As `nbrdf_sampler_pdf`, with `sampler` pointing to an `NbrdfMixtureSampler`.
+int32_t nbrdf_mixture_sampler_pdf(const struct NbrdfMixtureSampler *sampler,
+                                  const float *view,
+                                  const float *light,
+                                  size_t n,
+                                  float *out_pdf);
+
+// Checks an `NbrdfMixtureSampler`'s kind and parameters: `NBRDF_OK` or
+// `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
+//
+// # Safety
+// `sampler` points to an `NbrdfMixtureSampler`.
+int32_t nbrdf_mixture_sampler_validate(const struct NbrdfMixtureSampler *sampler);
+
+// Fills `*out` with the sampling strategy stored in the network file: `NBRDF_SAMPLING_PHONG`
+// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, or `NBRDF_SAMPLING_COSINE` with zero
+// parameters when the file stores none.
+//
+// # Safety
+// `network` is a live handle; `out` points to a writable `NbrdfMixtureSampler`.
+int32_t nbrdf_network_stored_sampler(const struct NbrdfNetwork *network,
+                                     struct NbrdfMixtureSampler *out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -54,9 +54,13 @@ pub enum NbrdfSamplingKind {
     NBRDF_SAMPLING_COSINE = 1,
     /// Mixture of a Blinn-Phong lobe (`exponent`, weight `specular_weight`) and a cosine lobe.
     NBRDF_SAMPLING_PHONG = 2,
+    /// Mixture of two Blinn-Phong lobes (`exponent`, `specular_weight`; `exponent2`,
+    /// `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
+    /// Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
+    NBRDF_SAMPLING_TWO_LOBE = 3,
 }
 
-/// An importance-sampling strategy. `exponent` (finite, >= 0) and `specular_weight` (in [0, 1])
+/// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
 /// are read only for `NBRDF_SAMPLING_PHONG`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -64,6 +68,21 @@ pub struct NbrdfSampler {
     pub kind: NbrdfSamplingKind,
     pub exponent: f32,
     pub specular_weight: f32,
+}
+
+/// An importance-sampling strategy with up to two Blinn-Phong lobes, for the `*_mixture`
+/// functions: any kind of `NbrdfSamplingKind`. The first three fields are those of
+/// `NbrdfSampler`; `exponent2` and `specular_weight2` are read only for
+/// `NBRDF_SAMPLING_TWO_LOBE`, which takes exponents finite in [0, 1e6], weights in [0, 1] with
+/// `specular_weight + specular_weight2 <= 1`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NbrdfMixtureSampler {
+    pub kind: NbrdfSamplingKind,
+    pub exponent: f32,
+    pub specular_weight: f32,
+    pub exponent2: f32,
+    pub specular_weight2: f32,
 }
 
 /// Summary of a loaded network.
@@ -76,7 +95,8 @@ pub struct NbrdfNetworkInfo {
     pub parameter_count: u32,
     /// 1 when the file carries Blinn-Phong sampling parameters, else 0.
     pub has_sampling: u32,
-    /// Blinn-Phong exponent stored with the network (0 when `has_sampling` is 0).
+    /// Blinn-Phong exponent stored with the network (0 when `has_sampling` is 0); of the first
+    /// lobe when the file stores two (see `nbrdf_network_stored_sampler`).
     pub exponent: f32,
     /// Blinn-Phong specular weight stored with the network (0 when `has_sampling` is 0).
     pub specular_weight: f32,
@@ -303,6 +323,10 @@ unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrate
             exponent: f64::from(exponent),
             specular_weight: f64::from(specular_weight),
         },
+        3 => return Err(Failure::invalid(
+            "sampling kind 3 (two-lobe) needs an NbrdfMixtureSampler and the *_mixture functions"
+                .to_string(),
+        )),
         other => {
             return Err(Failure::invalid(format!(
                 "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
@@ -310,6 +334,65 @@ unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrate
         }
     };
     Ok(strategy.validated()?)
+}
+
+/// Reads an `NbrdfMixtureSampler` passed by C and validates it with the core.
+///
+/// # Safety
+/// A non-null `sampler` must point to a live `NbrdfMixtureSampler`.
+unsafe fn read_mixture_sampler(sampler: *const NbrdfMixtureSampler) -> FfiResult<SamplingStrategy> {
+    check_array(sampler, "sampler")?;
+    // SAFETY: as in `read_sampler`; the kind is read as a plain C int.
+    let (kind, exponent, specular_weight, exponent2, specular_weight2) = unsafe {
+        (
+            std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
+            std::ptr::addr_of!((*sampler).exponent).read(),
+            std::ptr::addr_of!((*sampler).specular_weight).read(),
+            std::ptr::addr_of!((*sampler).exponent2).read(),
+            std::ptr::addr_of!((*sampler).specular_weight2).read(),
+        )
+    };
+    let strategy = match kind {
+        0 => SamplingStrategy::Uniform,
+        1 => SamplingStrategy::Cosine,
+        2 => SamplingStrategy::BlinnPhong {
+            exponent: f64::from(exponent),
+            specular_weight: f64::from(specular_weight),
+        },
+        3 => SamplingStrategy::TwoLobe {
+            exponent1: f64::from(exponent),
+            weight1: f64::from(specular_weight),
+            exponent2: f64::from(exponent2),
+            weight2: f64::from(specular_weight2),
+        },
+        other => {
+            return Err(Failure::invalid(format!(
+                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe)"
+            )))
+        }
+    };
+    Ok(strategy.validated()?)
+}
+
+/// A sampler argument of the exported functions: `NbrdfSampler` or `NbrdfMixtureSampler`.
+trait SamplerArg {
+    /// # Safety
+    /// A non-null pointer must point to a live value of the type.
+    unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy>;
+}
+
+impl SamplerArg for NbrdfSampler {
+    unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
+        // SAFETY: forwarded contract.
+        unsafe { read_sampler(sampler) }
+    }
+}
+
+impl SamplerArg for NbrdfMixtureSampler {
+    unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
+        // SAFETY: forwarded contract.
+        unsafe { read_mixture_sampler(sampler) }
+    }
 }
 
 /// A path argument: bytes on Unix (any encoding), UTF-8 elsewhere.
@@ -427,10 +510,10 @@ unsafe fn eval_impl<H: BrdfHandle>(
 /// # Safety
 /// See the exported `*_sample` functions.
 #[allow(clippy::too_many_arguments)]
-unsafe fn sample_impl<H: BrdfHandle>(
+unsafe fn sample_impl<H: BrdfHandle, S: SamplerArg>(
     function: &str,
     handle: *const H,
-    sampler: *const NbrdfSampler,
+    sampler: *const S,
     view: *const f32,
     u: *const f32,
     n: usize,
@@ -448,7 +531,7 @@ unsafe fn sample_impl<H: BrdfHandle>(
         check_array(out_weight, "out_weight")?;
         check_array(out_pdf, "out_pdf")?;
         // SAFETY: forwarded contract.
-        let strategy = unsafe { read_sampler(sampler)? };
+        let strategy = unsafe { S::strategy(sampler)? };
         let len = array_len(n, 3)?;
         if n == 0 {
             return Ok(());
@@ -719,13 +802,27 @@ pub unsafe extern "C" fn nbrdf_sampler_pdf(
     n: usize,
     out_pdf: *mut f32,
 ) -> i32 {
-    guard("nbrdf_sampler_pdf", || {
+    // SAFETY: forwarded contract.
+    unsafe { pdf_impl("nbrdf_sampler_pdf", sampler, view, light, n, out_pdf) }
+}
+
+/// # Safety
+/// See the exported `*_pdf` functions.
+unsafe fn pdf_impl<S: SamplerArg>(
+    function: &str,
+    sampler: *const S,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_pdf: *mut f32,
+) -> i32 {
+    guard(function, || {
         check_array(sampler, "sampler")?;
         check_array(view, "view")?;
         check_array(light, "light")?;
         check_array(out_pdf, "out_pdf")?;
         // SAFETY: forwarded contract.
-        let strategy = unsafe { read_sampler(sampler)? };
+        let strategy = unsafe { S::strategy(sampler)? };
         let len = array_len(n, 3)?;
         if n == 0 {
             return Ok(());
@@ -738,7 +835,7 @@ pub unsafe extern "C" fn nbrdf_sampler_pdf(
     })
 }
 
-/// Checks a sampler's kind and parameters (finite exponent >= 0, specular weight in [0, 1] for
+/// Checks a sampler's kind and parameters (exponent in [0, 1e6], specular weight in [0, 1] for
 /// `NBRDF_SAMPLING_PHONG`): `NBRDF_OK` or `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
 ///
 /// # Safety
@@ -748,6 +845,146 @@ pub unsafe extern "C" fn nbrdf_sampler_validate(sampler: *const NbrdfSampler) ->
     // SAFETY: forwarded contract.
     guard("nbrdf_sampler_validate", || {
         unsafe { read_sampler(sampler) }.map(drop)
+    })
+}
+
+/// `nbrdf_network_sample` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
+///
+/// # Safety
+/// As `nbrdf_network_sample`, with `sampler` pointing to an `NbrdfMixtureSampler`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_sample_mixture(
+    network: *const NbrdfNetwork,
+    sampler: *const NbrdfMixtureSampler,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        sample_impl(
+            "nbrdf_network_sample_mixture",
+            network,
+            sampler,
+            view,
+            u,
+            n,
+            out_light,
+            out_weight,
+            out_pdf,
+        )
+    }
+}
+
+/// `nbrdf_merl_sample` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
+///
+/// # Safety
+/// As `nbrdf_merl_sample`, with `sampler` pointing to an `NbrdfMixtureSampler`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_sample_mixture(
+    merl: *const NbrdfMerl,
+    sampler: *const NbrdfMixtureSampler,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        sample_impl(
+            "nbrdf_merl_sample_mixture",
+            merl,
+            sampler,
+            view,
+            u,
+            n,
+            out_light,
+            out_weight,
+            out_pdf,
+        )
+    }
+}
+
+/// `nbrdf_sampler_pdf` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
+///
+/// # Safety
+/// As `nbrdf_sampler_pdf`, with `sampler` pointing to an `NbrdfMixtureSampler`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_mixture_sampler_pdf(
+    sampler: *const NbrdfMixtureSampler,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        pdf_impl(
+            "nbrdf_mixture_sampler_pdf",
+            sampler,
+            view,
+            light,
+            n,
+            out_pdf,
+        )
+    }
+}
+
+/// Checks an `NbrdfMixtureSampler`'s kind and parameters: `NBRDF_OK` or
+/// `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
+///
+/// # Safety
+/// `sampler` points to an `NbrdfMixtureSampler`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_mixture_sampler_validate(
+    sampler: *const NbrdfMixtureSampler,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    guard("nbrdf_mixture_sampler_validate", || {
+        unsafe { read_mixture_sampler(sampler) }.map(drop)
+    })
+}
+
+/// Fills `*out` with the sampling strategy stored in the network file: `NBRDF_SAMPLING_PHONG`
+/// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, or `NBRDF_SAMPLING_COSINE` with zero
+/// parameters when the file stores none.
+///
+/// # Safety
+/// `network` is a live handle; `out` points to a writable `NbrdfMixtureSampler`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_stored_sampler(
+    network: *const NbrdfNetwork,
+    out: *mut NbrdfMixtureSampler,
+) -> i32 {
+    guard("nbrdf_network_stored_sampler", || {
+        // SAFETY: forwarded contract.
+        let network = &unsafe { reference(network, "network")? }.network;
+        check_array(out, "out")?;
+        let mut sampler = NbrdfMixtureSampler {
+            kind: NbrdfSamplingKind::NBRDF_SAMPLING_COSINE,
+            exponent: 0.0,
+            specular_weight: 0.0,
+            exponent2: 0.0,
+            specular_weight2: 0.0,
+        };
+        if let Some(stored) = &network.sampling {
+            sampler.kind = NbrdfSamplingKind::NBRDF_SAMPLING_PHONG;
+            sampler.exponent = stored.exponent;
+            sampler.specular_weight = stored.specular_weight;
+            if let Some(second) = stored.second_lobe {
+                sampler.kind = NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE;
+                sampler.exponent2 = second.exponent;
+                sampler.specular_weight2 = second.specular_weight;
+            }
+        }
+        // SAFETY: non-null, aligned, writable by contract.
+        unsafe { out.write(sampler) };
+        Ok(())
     })
 }
 

@@ -596,3 +596,129 @@ fn merl_batches_are_planar() {
     unsafe { nbrdf_merl_free(handle.cast_mut()) };
     std::fs::remove_file(&path).unwrap();
 }
+
+#[test]
+fn two_lobe_samplers_go_through_the_mixture_functions() {
+    let two = NbrdfMixtureSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE,
+        exponent: 2000.0,
+        specular_weight: 0.4,
+        exponent2: 20.0,
+        specular_weight2: 0.35,
+    };
+    let core = SamplingStrategy::TwoLobe {
+        exponent1: 2000.0,
+        weight1: f64::from(0.4f32),
+        exponent2: 20.0,
+        weight2: f64::from(0.35f32),
+    };
+    let (network, _) = load_network(4);
+    let n = 64;
+    let views: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let t = 1.5 * i as f32 / n as f32;
+            Vec3::new(t.sin(), 0.0, t.cos())
+        })
+        .collect();
+    let us: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let k = i as f32;
+            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
+        })
+        .collect();
+    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
+    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
+    let mut pdf_again = vec![0.0; n];
+    // SAFETY: valid pointers and sizes.
+    unsafe {
+        assert_eq!(nbrdf_mixture_sampler_validate(&two), OK, "{}", last_error());
+        assert_eq!(
+            nbrdf_network_sample_mixture(
+                network.0,
+                &two,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                light.as_mut_ptr(),
+                weight.as_mut_ptr(),
+                pdf.as_mut_ptr()
+            ),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_mixture_sampler_pdf(
+                &two,
+                view.as_ptr(),
+                light.as_ptr(),
+                n,
+                pdf_again.as_mut_ptr()
+            ),
+            OK
+        );
+    }
+    assert_eq!(pdf, pdf_again);
+    for i in 0..n {
+        let s = core.sample(views[i], us[i].to_array());
+        assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
+        assert_eq!(s.pdf, pdf[i]);
+    }
+    // The one-lobe struct refuses kind 3; bad two-lobe parameters are invalid arguments.
+    let one = NbrdfSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE,
+        exponent: 10.0,
+        specular_weight: 0.5,
+    };
+    // SAFETY: valid pointers.
+    unsafe {
+        assert_eq!(nbrdf_sampler_validate(&one), INVALID);
+        assert!(
+            last_error().contains("NbrdfMixtureSampler"),
+            "{}",
+            last_error()
+        );
+        for bad in [
+            NbrdfMixtureSampler {
+                specular_weight2: 0.7,
+                ..two
+            },
+            NbrdfMixtureSampler {
+                exponent2: 2e6,
+                ..two
+            },
+            NbrdfMixtureSampler {
+                exponent: f32::NAN,
+                ..two
+            },
+        ] {
+            assert_eq!(nbrdf_mixture_sampler_validate(&bad), INVALID, "{bad:?}");
+            assert!(last_error().starts_with("nbrdf_mixture_sampler_validate: "));
+        }
+    }
+    // What the file stores: one lobe here, two after adding a second lobe.
+    let mut stored = two;
+    // SAFETY: valid pointers.
+    unsafe {
+        assert_eq!(nbrdf_network_stored_sampler(network.0, &mut stored), OK);
+    }
+    assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_PHONG);
+    assert_eq!((stored.exponent, stored.specular_weight), (40.0, 0.25));
+    assert_eq!((stored.exponent2, stored.specular_weight2), (0.0, 0.0));
+    let path = scratch("two-lobe").join("two.nbrdf.json");
+    let text = network_json(4).replace(
+        r#""source": "manual"}"#,
+        r#""source": "manual", "second_lobe": {"exponent": 8.0, "specular_weight": 0.5}}"#,
+    );
+    std::fs::write(&path, text).unwrap();
+    let mut handle = null_mut();
+    // SAFETY: valid path and pointers.
+    unsafe {
+        assert_eq!(nbrdf_network_load(c_path(&path).as_ptr(), &mut handle), OK);
+        let two_file = Network(handle);
+        assert_eq!(nbrdf_network_stored_sampler(two_file.0, &mut stored), OK);
+        assert_eq!(nbrdf_network_stored_sampler(two_file.0, null_mut()), NULL);
+    }
+    assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE);
+    assert_eq!((stored.exponent2, stored.specular_weight2), (8.0, 0.5));
+}

@@ -64,6 +64,10 @@ fn header_declares_the_contract() {
         "int32_t nbrdf_network_eval(",
         "int32_t nbrdf_merl_sample(",
         "int32_t nbrdf_sampler_pdf(",
+        "NBRDF_SAMPLING_TWO_LOBE = 3",
+        "typedef struct NbrdfMixtureSampler",
+        "int32_t nbrdf_network_sample_mixture(",
+        "int32_t nbrdf_network_stored_sampler(",
         "#ifndef NBRDF_H",
     ] {
         assert!(

@@ -80,7 +80,7 @@ def train_missing(nbrdf: Path, out: Path, samples: int, source: str = "sgd", onl
             run([nbrdf, "tabulate", keras, "-o", table])
             keras.unlink()
         run([nbrdf, "train", table, "-o", net, "--samples", samples, "--name", name])
-        run([nbrdf, "fit-phong", net])
+        run([nbrdf, "fit-phong", net, "--lobes", "1"])  # one-lobe labels for the predictor
         table.unlink()  # 35 MB each; the source regenerates it
         print(f"[{k + 1}/{len(names)}] {name}: {time.perf_counter() - start:.1f} s", flush=True)
 
@@ -368,7 +368,7 @@ def report(argv: list[str] | None) -> int:
         if fitted is None or fitted.get("source") != "fit":
             fitted_dir = args.out / "fitted"
             fitted_dir.mkdir(exist_ok=True)
-            run([args.cli, "fit-phong", src, "-o", fitted_dir / f"{n}.nbrdf.json"])
+            run([args.cli, "fit-phong", src, "--lobes", "1", "-o", fitted_dir / f"{n}.nbrdf.json"])
             fitted = json.loads((fitted_dir / f"{n}.nbrdf.json").read_text())["sampling"]
         row = f"| {n} | {fitted['exponent']:.1f} | {fitted['specular_weight']:.3f} |"
         for variant in PREDICTORS:

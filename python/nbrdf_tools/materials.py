@@ -196,11 +196,13 @@ class Artefacts:
         if not self.can_fit_phong():
             return
         # "lobe" changes the key whenever the choice of lobe changes, so older fits are redone.
-        inputs = {"command": "nbrdf fit-phong", "lobe": "variance", "network": record.get("network_trained_hash")}
+        # "--lobes 1": the phong strategies here are one lobe (fit-phong's default may store two).
+        inputs = {"command": "nbrdf fit-phong", "lobe": "variance", "lobes": 1,
+                  "network": record.get("network_trained_hash")}
         if record.get("phong_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return
         self.log(f"  {name}: fitting the Blinn-Phong sampling lobe (nbrdf fit-phong)")
-        fit = json.loads(_run([self.cli, "fit-phong", network, "--json", "--lobe", "variance"]))
+        fit = json.loads(_run([self.cli, "fit-phong", network, "--json", "--lobe", "variance", "--lobes", "1"]))
         # fit-phong rewrites the network file (with the lobe): remember what it now holds.
         record.update(phong_inputs=inputs, network_hash=file_hash(network),
                       phong_fit={k: fit[k] for k in ("exponent", "specular_weight", "loss", "model_exponent",

@@ -118,6 +118,8 @@ def table_path(out: Path, set_name: str, name: str, recipe: Recipe) -> Path:
 
 
 def ensure_table(out: Path, set_name: str, name: str, recipe: Recipe, nbrdf: Path, shared: Path) -> Path:
+    if set_name == "rgl" and recipe.rgl_fold == "direct":  # `nbrdf train` reads the measurement itself
+        return measured_path(shared, name)
     path = table_path(out, set_name, name, recipe)
     if path.is_file():
         return path
@@ -181,8 +183,9 @@ class GroundTruth:
 
 def train_one(nbrdf: Path, table: Path, network: Path, sampling: str, recipe: Recipe, fold: str,
               threads: int | None) -> dict:
-    cmd = [nbrdf, "train", table, "-o", network, "--sampling", sampling, "--seed", recipe.seed,
-           "--phi-fold", fold, "--quiet"]
+    cmd = [nbrdf, "train", table, "-o", network, "--sampling", sampling, "--seed", recipe.seed, "--quiet"]
+    if fold != "direct":
+        cmd += ["--phi-fold", fold]
     if recipe.samples is not None:
         cmd += ["--samples", recipe.samples]
     if recipe.epochs is not None:
@@ -489,9 +492,10 @@ def parse_args(argv):
                    help="output folder of everything: results, networks, tables (default: %(default)s)")
     p.add_argument("--resolution", type=int, help="sphere image size (default: 128, nbrdf compare's)")
     p.add_argument("--metric-samples", type=int, help="directions of the log-space error (default: 100,000)")
-    p.add_argument("--rgl-fold", choices=("mirror", "reciprocal"), default="mirror",
+    p.add_argument("--rgl-fold", choices=("mirror", "reciprocal", "direct"), default="mirror",
                    help="how RGL tables fold phi_d: mirror keeps the measurement's non-reciprocity (default), "
-                        "reciprocal is a standard MERL table")
+                        "reciprocal is a standard MERL table; direct: no table, `nbrdf train X.bsdf` learns "
+                        "the measurement itself")
     p.add_argument("--seed", type=int, default=0, help="training seed (default: 0)")
     p.add_argument("--threads", type=int, help="trainer threads (default: one per core)")
     p.add_argument("--no-authors", action="store_true", help="skip the authors' networks on RGL")

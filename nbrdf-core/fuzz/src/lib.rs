@@ -149,3 +149,25 @@ pub fn assert_acceptable_merl(bytes: &[u8]) -> f64 {
     }
     largest * MERL_MAX_SCALE * (1.0 + 1e-6)
 }
+
+/// What an accepted RGL measurement must do: evaluate at `pairs` (degenerate ones included)
+/// through the `Brdf` trait to finite non-negative values, single and batched alike (the trainer
+/// and the plugins read it there), and, for unit directions, give Mitsuba's raw (possibly
+/// slightly negative) `eval` finite values too.
+pub fn check_rgl_measurement(measurement: &nbrdf_core::rgl::RglMeasurement, pairs: &[(Vec3, Vec3)]) {
+    let (single, batch) = check_evaluations(measurement, pairs, None);
+    for (i, ((s, b), (light, view))) in single.iter().zip(&batch).zip(pairs).enumerate() {
+        // The batch is cosine weighted; both clamp the same raw value, so zero must agree.
+        assert_eq!(
+            s.iter().map(|x| *x == 0.0).collect::<Vec<_>>(),
+            b.iter().map(|x| *x == 0.0).collect::<Vec<_>>(),
+            "pair {i} (light {light}, view {view}): eval {s:?} vs eval_cos_batch {b:?}"
+        );
+        let (view, light) = (view.normalize_or_zero(), light.normalize_or_zero());
+        let raw = measurement.eval_cos_f32(view, light);
+        assert!(
+            raw.iter().all(|x| x.is_finite()),
+            "eval_cos_f32(light {light}, view {view}) = {raw:?}"
+        );
+    }
+}

@@ -34,6 +34,7 @@ fn column_mean_std<R: AsRef<[f32]>>(rows: &[R], floor: f32) -> (Vec<f32>, Vec<f3
 
 /// Reads a JSON model file (autoencoder, predictor); errors name the file.
 fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
+    crate::error::regular_file_size(path, crate::error::MAX_JSON_BYTES, "a JSON model")?;
     let text = std::fs::read_to_string(path)
         .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
     parse_json(&text, &path.display().to_string())

@@ -114,7 +114,8 @@ pub fn highlight_profile(net: &Nbrdf) -> Vec<f32> {
 /// autoencoder's auxiliary lobe loss (`ae train --lobe-weight`).
 pub fn lobe_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
     if let Some(s) = &net.sampling {
-        if s.source == "fit" && !refit {
+        // A two-lobe fit is no one-lobe label: its first lobe goes with a second one.
+        if s.source == "fit" && !refit && s.second_lobe.is_none() {
             return Ok((s.exponent as f64, s.specular_weight as f64));
         }
     }

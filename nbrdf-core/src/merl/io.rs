@@ -1,8 +1,8 @@
 //! Reading, validating and writing MERL-format files (a 12-byte header, then three channels of
 //! float64 cell values, channel-major).
 
-use super::{cell_coordinates, MerlTable, PhiFold, CELLS, N_PHI_D, N_THETA_D, N_THETA_H};
-use crate::error::{NbrdfError, Result};
+use super::{cell_coordinates, MerlTable, PhiFold, CELLS, N_PHI_D, N_THETA_D, N_THETA_H, SCALE};
+use crate::error::{regular_file_size, NbrdfError, Result};
 use std::io::Read;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -22,6 +22,53 @@ fn describe_position(flat: usize) -> String {
     format!("{channel} channel, cell (theta_h {th}, theta_d {td}, phi_d {pd})")
 }
 
+/// Whether bytes start with the header of a MERL table (90, 90, 180).
+pub(crate) fn has_merl_header(bytes: &[u8]) -> bool {
+    bytes.len() >= HEADER_SIZE
+        && HEADER
+            .iter()
+            .enumerate()
+            .all(|(k, h)| bytes[4 * k..4 * k + 4] == h.to_le_bytes())
+}
+
+/// Whether bytes look like the start of a JSON document (an NBRDF network given by mistake).
+pub(crate) fn looks_like_json(bytes: &[u8]) -> bool {
+    matches!(
+        bytes.iter().find(|b| !b.is_ascii_whitespace()),
+        Some(b'{') | Some(b'[')
+    )
+}
+
+/// The first reason stored values (channel-major, `3 * CELLS`, finite) cannot be rendered:
+/// a value whose reflectance (stored x [`SCALE`]) overflows float32, the precision the
+/// renderer reads it in, or a table without a single cell valid in all three channels.
+fn value_problem(stored_at: impl Fn(usize) -> f64) -> Option<String> {
+    for (c, scale) in SCALE.iter().enumerate() {
+        for i in 0..CELLS {
+            let flat = c * CELLS + i;
+            let value = stored_at(flat);
+            if value * scale > f64::from(f32::MAX) {
+                return Some(format!(
+                    "value {value:e} at byte offset {} ({}) is {:e} once scaled, beyond the \
+                     float32 range (3.4e38) the table is rendered in",
+                    HEADER_SIZE + 8 * flat,
+                    describe_position(flat),
+                    value * scale
+                ));
+            }
+        }
+    }
+    let any_valid = (0..CELLS).any(|i| (0..3).all(|c| stored_at(c * CELLS + i) >= 0.0));
+    if !any_valid {
+        return Some(
+            "no valid cell: every cell has a channel marked not measured (negative), \
+             so the table would render black"
+                .to_string(),
+        );
+    }
+    None
+}
+
 impl MerlTable {
     /// Parses the bytes of a MERL file; `origin` names the file in errors.
     pub fn from_bytes(bytes: &[u8], origin: &Path) -> Result<Self> {
@@ -32,6 +79,13 @@ impl MerlTable {
     /// `file_size` is the real size, for the message.
     fn parse(bytes: &[u8], file_size: u64, origin: &Path) -> Result<Self> {
         let fail = |message: String| Err(NbrdfError::format(origin, message));
+        if !has_merl_header(bytes) && looks_like_json(bytes) {
+            return fail(
+                "this is JSON (an NBRDF network?), not a MERL table (.binary); networks are \
+                 read by the nbrdf BSDF and the commands that take NAME.nbrdf.json"
+                    .to_string(),
+            );
+        }
         if bytes.len() < HEADER_SIZE {
             return fail(format!(
                 "truncated: {file_size} bytes, a MERL table has {FILE_SIZE} (not even the 12-byte header)"
@@ -71,6 +125,9 @@ impl MerlTable {
             }
             cells[k % CELLS][k / CELLS] = value;
         }
+        if let Some(problem) = value_problem(|flat| cells[flat % CELLS][flat / CELLS]) {
+            return fail(problem);
+        }
         Ok(MerlTable {
             cells,
             channel_major: OnceLock::new(),
@@ -81,6 +138,8 @@ impl MerlTable {
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let io = |e| NbrdfError::io(path, e);
+        // Before opening: a FIFO would block the open, a device would never end.
+        regular_file_size(path, u64::MAX, "a MERL table (.binary)")?;
         let file = std::fs::File::open(path).map_err(io)?;
         let file_size = file.metadata().map_err(io)?.len();
         // Bounded read: a huge file given by mistake is rejected without loading it whole.
@@ -124,6 +183,9 @@ impl MerlTable {
                 stored[k],
                 describe_position(k)
             )));
+        }
+        if let Some(problem) = value_problem(|flat| stored[flat]) {
+            return Err(NbrdfError::InvalidArgument(problem));
         }
         let cells = (0..CELLS)
             .map(|i| [stored[i], stored[CELLS + i], stored[2 * CELLS + i]])

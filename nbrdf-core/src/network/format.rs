@@ -9,6 +9,32 @@ use std::path::Path;
 pub const FORMAT_NAME: &str = "nbrdf";
 pub const FORMAT_VERSION: u32 = 1;
 
+/// What a serde_json syntax error means to the user: non-finite numbers (`NaN`, `Infinity`,
+/// which Python's json module writes) are named, the rest reported as corrupt JSON.
+fn describe_json_error(text: &str, error: &serde_json::Error) -> String {
+    let (line, column) = (error.line(), error.column());
+    let near = text
+        .lines()
+        .nth(line.saturating_sub(1))
+        .map(|l| {
+            let chars: Vec<char> = l.chars().collect();
+            let at = column.saturating_sub(1).min(chars.len());
+            chars[at.saturating_sub(2)..(at + 10).min(chars.len())]
+                .iter()
+                .collect::<String>()
+        })
+        .unwrap_or_default();
+    for token in ["NaN", "Infinity"] {
+        if near.contains(token) {
+            return format!(
+                "{token} is not valid JSON (line {line} column {column}): network parameters \
+                 must be finite numbers"
+            );
+        }
+    }
+    format!("not valid JSON (truncated or corrupt?): {error}")
+}
+
 /// What is read from a file once `format` and `version` have been checked.
 #[derive(Deserialize)]
 struct FileIn {
@@ -136,15 +162,33 @@ impl Nbrdf {
     /// Loads and validates an `*.nbrdf.json` file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| NbrdfError::io(path, e))?;
+        crate::error::regular_file_size(
+            path,
+            crate::error::MAX_JSON_BYTES,
+            "an NBRDF network (.nbrdf.json)",
+        )?;
+        let bytes = std::fs::read(path).map_err(|e| NbrdfError::io(path, e))?;
+        if crate::merl::io::has_merl_header(&bytes) {
+            return Err(NbrdfError::format(
+                path,
+                "this is a MERL table (binary), not an NBRDF network JSON; the nbrdf BSDF and \
+                 the network commands read *.nbrdf.json (the merl BSDF reads tables)",
+            ));
+        }
+        let text = String::from_utf8(bytes).map_err(|e| {
+            NbrdfError::format(
+                path,
+                format!("not text ({e}): an NBRDF network is a JSON file (*.nbrdf.json)"),
+            )
+        })?;
         Self::from_json_str(&text, path)
     }
 
     /// Parses and validates the JSON text of a network; `origin` names the source in errors.
     pub fn from_json_str(text: &str, origin: &Path) -> Result<Self> {
         let fail = |message: String| NbrdfError::format(origin, message);
-        let root: serde_json::Value = serde_json::from_str(text)
-            .map_err(|e| fail(format!("not valid JSON (truncated or corrupt?): {e}")))?;
+        let root: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| fail(describe_json_error(text, &e)))?;
         check_header(&root).map_err(fail)?;
         let file: FileIn = serde_json::from_value(root)
             .map_err(|e| fail(format!("not a valid NBRDF network: {e}")))?;

@@ -65,6 +65,32 @@ pub struct SamplingParams {
     pub specular_weight: f32,
     /// Where the figures come from: "fit", "predicted" or "manual".
     pub source: String,
+    /// A second, broader Blinn-Phong lobe: the mixture becomes
+    /// `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine` ([`SamplingStrategy::TwoLobe`]).
+    /// Optional, so version-1 files without it load and sample as before; readers that predate
+    /// it ignore it and sample the first lobe with cosine, a valid (if weaker) density.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub second_lobe: Option<SecondLobe>,
+    /// What the lobe search measured when it chose these parameters (informational).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_variance: Option<SamplingVariances>,
+}
+
+/// The second lobe of a two-lobe sampling mixture.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SecondLobe {
+    pub exponent: f32,
+    pub specular_weight: f32,
+}
+
+/// Mean relative variance `R - 1` of BSDF sampling ([`crate::lobe_fit`]) of each strategy the
+/// fit compared; `nbrdf fit-phong` stores the lowest.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SamplingVariances {
+    pub one_lobe: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub two_lobe: Option<f64>,
+    pub cosine: f64,
 }
 
 impl SamplingParams {
@@ -76,9 +102,9 @@ impl SamplingParams {
                 self.model
             ));
         }
-        if !(self.exponent.is_finite() && self.exponent >= 0.0) {
+        if !crate::sampling::exponent_in_range(f64::from(self.exponent)) {
             return Some(format!(
-                "sampling exponent {} must be finite and >= 0",
+                "sampling exponent {} must be in [0, 1e6] (MAX_EXPONENT)",
                 self.exponent
             ));
         }
@@ -88,13 +114,36 @@ impl SamplingParams {
                 self.specular_weight
             ));
         }
+        if self.second_lobe.is_some() {
+            if let Err(NbrdfError::InvalidArgument(message)) = self.two_lobe_strategy().validated()
+            {
+                return Some(format!("sampling second_lobe: {message}"));
+            }
+        }
         None
     }
 
-    /// The sampling strategy these parameters describe.
+    fn two_lobe_strategy(&self) -> SamplingStrategy {
+        let second = self.second_lobe.unwrap_or(SecondLobe {
+            exponent: 0.0,
+            specular_weight: 0.0,
+        });
+        SamplingStrategy::TwoLobe {
+            exponent1: f64::from(self.exponent),
+            weight1: f64::from(self.specular_weight),
+            exponent2: f64::from(second.exponent),
+            weight2: f64::from(second.specular_weight),
+        }
+    }
+
+    /// The sampling strategy these parameters describe: the one-lobe Blinn-Phong mixture, or
+    /// the two-lobe one when a second lobe is stored.
     pub fn strategy(&self) -> Result<SamplingStrategy> {
         if let Some(message) = self.problem() {
             return Err(NbrdfError::InvalidArgument(message));
+        }
+        if self.second_lobe.is_some() {
+            return self.two_lobe_strategy().validated();
         }
         SamplingStrategy::BlinnPhong {
             exponent: f64::from(self.exponent),
@@ -262,10 +311,13 @@ impl Brdf for Nbrdf {
         let (Some(l), Some(v)) = (normalized(light.as_dvec3()), normalized(view.as_dvec3())) else {
             return [0.0; 3];
         };
+        // The horizon test in float32, the precision the batched kernel tests it in: a z that
+        // underflows there (a grazing direction with huge x, y) is at the horizon in both.
+        let (v, l) = (v.as_vec3(), l.as_vec3());
         if l.z <= 0.0 || v.z <= 0.0 {
             return [0.0; 3];
         }
-        self.eval_input(network_input(v.as_vec3(), l.as_vec3()))
+        self.eval_input(network_input(v, l))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {

@@ -456,6 +456,8 @@ fn json_round_trip_is_exact() {
         exponent: 210.0,
         specular_weight: 0.31,
         source: "fit".into(),
+        second_lobe: None,
+        relative_variance: None,
     });
     net.provenance = serde_json::json!({"epochs": 12, "loss": 0.0123, "table": "gold.binary"});
     let path = temp_path("roundtrip");
@@ -491,6 +493,8 @@ fn malformed_files_are_rejected_with_the_file_name() {
             exponent: 10.0,
             specular_weight: 0.5,
             source: "manual".into(),
+            second_lobe: None,
+            relative_variance: None,
         });
         n.to_json_string()
     })
@@ -542,6 +546,14 @@ fn malformed_files_are_rejected_with_the_file_name() {
         }),
         ("unknown sampling model 'ggx'", |v| {
             v["sampling"]["model"] = "ggx".into()
+        }),
+        ("two-lobe weights 0.5 + 0.75", |v| {
+            v["sampling"]["second_lobe"] =
+                serde_json::json!({"exponent": 5.0, "specular_weight": 0.75})
+        }),
+        ("two-lobe exponent2 2000000", |v| {
+            v["sampling"]["second_lobe"] =
+                serde_json::json!({"exponent": 2e6, "specular_weight": 0.1})
         }),
         ("top level is not a JSON object", |v| {
             *v = serde_json::json!([1, 2])
@@ -602,4 +614,51 @@ fn wide_and_narrow_networks_use_the_right_scratch() {
         let want = reference_cos(&uneven, *v, *l);
         (0..3).for_each(|c| Tally::default().check(g[c], &want, c, &"uneven"));
     }
+}
+
+#[test]
+fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
+    let mut net = test_net(4, 2);
+    let one = SamplingParams {
+        model: "blinn-phong".into(),
+        exponent: 900.0,
+        specular_weight: 0.5,
+        source: "fit".into(),
+        second_lobe: None,
+        relative_variance: None,
+    };
+    net.sampling = Some(one.clone());
+    // A one-lobe file writes no new fields and samples with the one-lobe mixture.
+    let text = net.to_json_string();
+    assert!(!text.contains("second_lobe") && !text.contains("relative_variance"));
+    assert_eq!(
+        net.sampling_strategy(),
+        Some(SamplingStrategy::BlinnPhong {
+            exponent: 900.0,
+            specular_weight: 0.5
+        })
+    );
+    net.sampling = Some(SamplingParams {
+        second_lobe: Some(super::SecondLobe {
+            exponent: 40.0,
+            specular_weight: 0.3,
+        }),
+        relative_variance: Some(super::SamplingVariances {
+            one_lobe: 2.5,
+            two_lobe: Some(1.25),
+            cosine: 40.0,
+        }),
+        ..one
+    });
+    let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();
+    assert_eq!(back, net);
+    assert_eq!(
+        back.sampling_strategy(),
+        Some(SamplingStrategy::TwoLobe {
+            exponent1: 900.0,
+            weight1: 0.5,
+            exponent2: 40.0,
+            weight2: f64::from(0.3f32),
+        })
+    );
 }

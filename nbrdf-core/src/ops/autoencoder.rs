@@ -1,6 +1,6 @@
 //! `nbrdf ae train|encode|decode|eval` and `nbrdf interpolate`: the autoencoder over networks.
 
-use super::{read_nbrdf_dir, with_threads};
+use super::{limits, read_nbrdf_dir, with_threads};
 use crate::analytic::{AnalyticBrdf, ModelKind};
 use crate::coords::from_rusinkiewicz;
 use crate::error::{NbrdfError, Result};
@@ -133,6 +133,21 @@ pub fn train_autoencoder(
     request: &AeTrainRequest,
     observer: &mut (dyn AeTrainObserver + Send),
 ) -> Result<AeTrainReport> {
+    let c = &request.config;
+    limits::check_range("--hidden", c.hidden, 1, limits::MAX_HIDDEN)?;
+    limits::check_range("--epochs", c.max_epochs, 1, limits::MAX_EPOCHS)?;
+    limits::check_range("--warmup", c.warmup_epochs, 0, limits::MAX_EPOCHS)?;
+    limits::check_range("--batch", c.batch, 1, limits::MAX_BATCH)?;
+    limits::check_range("--mixup", c.mixup, 0, limits::MAX_ITERATIONS)?;
+    limits::check_range("--image-size", c.image_size, 1, limits::MAX_RESOLUTION)?;
+    limits::check_range(
+        "--select-refine",
+        request.select_refine,
+        0,
+        limits::MAX_ITERATIONS,
+    )?;
+    let seeds = usize::try_from(request.seeds).unwrap_or(usize::MAX);
+    limits::check_range("--seeds", seeds, 1, limits::MAX_ITERATIONS)?;
     let nets = read_nbrdf_dir(&request.nbrdfs)?;
     let (materials, hidden, split) = training_materials(&nets, request.extra_nbrdfs.as_deref())?;
     let config = &request.config;
@@ -224,6 +239,7 @@ pub struct Encoded {
 
 /// The code of the network at `input`, refined by `refine` iterations.
 pub fn encode(ae: &Path, input: &Path, refine: usize) -> Result<Encoded> {
+    limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
     let ae = AutoEncoder::load(ae)?;
     let net = Nbrdf::load(input)?;
     let t0 = Instant::now();
@@ -236,6 +252,7 @@ pub fn encode(ae: &Path, input: &Path, refine: usize) -> Result<Encoded> {
 
 /// A code: a JSON array of numbers.
 pub fn read_code(path: &Path) -> Result<Vec<f32>> {
+    crate::error::regular_file_size(path, 64 << 20, "a code (a JSON array of numbers)")?;
     let text =
         std::fs::read_to_string(path).map_err(|e| invalid(format!("{}: {e}", path.display())))?;
     serde_json::from_str(&text).map_err(|e| invalid(format!("{}: {e}", path.display())))
@@ -272,9 +289,8 @@ pub fn interpolate(
     refine: usize,
     output: &Path,
 ) -> Result<()> {
-    if steps < 2 {
-        return Err(invalid("--steps must be at least 2".into()));
-    }
+    limits::check_range("--steps", steps, 2, 1000)?;
+    limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
     let ae = AutoEncoder::load(ae)?;
     let (a, b) = (Nbrdf::load(a)?, Nbrdf::load(b)?);
     let (za, zb) = (
@@ -428,6 +444,8 @@ pub struct AeEvalReport {
 /// AE and PCA reconstructions of a part of the split in image space (64 x 64 sphere, light at
 /// 45 degrees; MAE and RMSE on linear pixels, SSIM tone-mapped).
 pub fn evaluate_autoencoder(request: &AeEvalRequest) -> Result<AeEvalReport> {
+    limits::check_range("--refine", request.refine, 0, limits::MAX_ITERATIONS)?;
+    limits::check_range("--components", request.components, 1, 10_000)?;
     let ae = AutoEncoder::load(&request.ae)?;
     let nets = read_nbrdf_dir(&request.nbrdfs)?;
     let get = |name: &String| -> Result<&Nbrdf> {

@@ -61,9 +61,12 @@ pub fn compare(
     samples: usize,
     threads: Option<usize>,
 ) -> Result<CompareReport> {
+    super::limits::check_compare(resolution, samples)?;
     let a = Material::read_folded(reference, fold)?;
     let b = Material::read_folded(test, fold)?;
-    let comparison = with_threads(threads, || metrics::compare(&a, &b, resolution, samples))??;
+    let pair = format!("{} vs {}", reference.display(), test.display());
+    let comparison = with_threads(threads, || metrics::compare(&a, &b, resolution, samples))?
+        .map_err(super::about_data(&pair))?;
     Ok(CompareReport {
         reference: reference.display().to_string(),
         test: test.display().to_string(),

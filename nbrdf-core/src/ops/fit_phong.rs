@@ -2,10 +2,10 @@
 
 use super::with_threads;
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig};
+use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, TwoLobeFit};
 use crate::merl::PhiFold;
 use crate::metrics::Material;
-use crate::network::{SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
+use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
 use crate::phong_fit::FitConfig;
 use crate::target::material_target;
 use serde::Serialize;
@@ -20,10 +20,35 @@ pub struct FitPhongRequest {
     /// For a network: where to write it (default: in place). An error for a table.
     pub output: Option<PathBuf>,
     pub lobe: LobeChoice,
+    /// One lobe, two lobes, or whichever samples with the lower variance.
+    pub lobes: LobeCount,
     pub phi_fold: PhiFold,
     /// Samples and seed of the model fit.
     pub fit: FitConfig,
     pub threads: Option<usize>,
+}
+
+/// How many Blinn-Phong lobes the stored sampling mixture has.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LobeCount {
+    /// Two lobes where they sample with a relative variance lower by more than
+    /// [`TWO_LOBE_MIN_GAIN`] than one lobe (the simpler strategy otherwise).
+    #[default]
+    Auto,
+    One,
+    Two,
+}
+
+/// `Auto` stores two lobes only when their relative variance is below this fraction of the
+/// one-lobe's: a marginal gain is not worth the file's second lobe.
+pub const TWO_LOBE_MIN_GAIN: f64 = 0.98;
+
+/// The two-lobe mixture the search found (stored or not).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TwoLobeReport {
+    /// `[n1, n2]`, sharp lobe first.
+    pub exponents: [f64; 2],
+    pub weights: [f64; 2],
 }
 
 /// Mean relative variance `R - 1` of BSDF sampling with each candidate lobe.
@@ -32,6 +57,9 @@ pub struct RelativeVariances {
     pub variance_lobe: f64,
     pub model_lobe: f64,
     pub cosine: f64,
+    /// The two-lobe mixture's, when it was searched (`--lobes auto|2` with `--lobe variance`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub two_lobe: Option<f64>,
 }
 
 /// What `fit-phong` found (and wrote).
@@ -41,7 +69,11 @@ pub struct FitPhongReport {
     pub model: String,
     pub exponent: f32,
     pub specular_weight: f32,
+    /// The stored second lobe, if two lobes were stored.
+    pub second_lobe: Option<SecondLobe>,
     pub source: String,
+    /// The two-lobe search's result, if it ran.
+    pub two_lobe: Option<TwoLobeReport>,
     /// [`LobeChoice::as_str`] of the stored lobe.
     pub lobe: &'static str,
     pub kd: [f64; 3],
@@ -73,6 +105,18 @@ impl fmt::Display for FitPhongReport {
             self.loss, self.kd[0], self.kd[1], self.kd[2], self.ks[0], self.ks[1], self.ks[2],
             v.variance_lobe, v.model_lobe, v.cosine,
         )?;
+        if let (Some(two), Some(variance)) = (&self.two_lobe, v.two_lobe) {
+            writeln!(
+                f,
+                "two lobes: exponents {:.4} {:.4}, weights {:.4} {:.4}, relative variance {:.4e} ({})",
+                two.exponents[0],
+                two.exponents[1],
+                two.weights[0],
+                two.weights[1],
+                variance,
+                if self.second_lobe.is_some() { "stored" } else { "not stored: one lobe does as well" },
+            )?;
+        }
         if let Some(out) = &self.written {
             writeln!(f, "updated the sampling of {out}")?;
         }
@@ -83,22 +127,69 @@ impl fmt::Display for FitPhongReport {
 /// Fits the model and searches the lowest-variance lobe of the input; a network gets the lobe
 /// of `request.lobe` as its "fit" sampling.
 pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
+    super::limits::check_fit_samples(request.fit.samples)?;
     let material = Material::read_folded(&request.input, request.phi_fold)?;
     if request.output.is_some() && matches!(material, Material::Table(_)) {
-        return Err(NbrdfError::InvalidArgument(
+        return Err(NbrdfError::Usage(
             "-o/--output applies to networks; for a table the fit is printed".into(),
         ));
     }
+    if request.lobes == LobeCount::Two && request.lobe == LobeChoice::Model {
+        return Err(NbrdfError::InvalidArgument(
+            "--lobes 2 searches the lowest-variance lobes; it does not combine with --lobe model"
+                .into(),
+        ));
+    }
+    let search_two = request.lobes != LobeCount::One && request.lobe == LobeChoice::LowestVariance;
     let lobe_config = LobeFitConfig::default();
-    let analysis = with_threads(request.threads, || {
-        LobeAnalysis::new(&*material_target(&material), &request.fit, &lobe_config)
-    })??;
+    let (analysis, two_lobes) = with_threads(request.threads, || -> Result<_> {
+        let target = material_target(&material);
+        if search_two {
+            let (analysis, two) =
+                LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
+            Ok((analysis, Some(two)))
+        } else {
+            Ok((
+                LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
+                None,
+            ))
+        }
+    })?
+    .map_err(super::about_data(&request.input.display().to_string()))?;
     let (exponent, specular_weight) = analysis.lobe(request.lobe);
+    let one_lobe_variance = match request.lobe {
+        LobeChoice::LowestVariance => analysis.lowest_variance.relative_variance,
+        LobeChoice::Model => analysis.model_relative_variance,
+    };
+    let stored_two = two_lobes.filter(|two| match request.lobes {
+        LobeCount::Two => true,
+        LobeCount::One => false,
+        LobeCount::Auto => two.relative_variance < TWO_LOBE_MIN_GAIN * one_lobe_variance,
+    });
+    let (exponent, specular_weight, second_lobe) = match stored_two {
+        Some(TwoLobeFit {
+            exponents, weights, ..
+        }) => (
+            exponents[0],
+            weights[0],
+            Some(SecondLobe {
+                exponent: exponents[1] as f32,
+                specular_weight: weights[1] as f32,
+            }),
+        ),
+        None => (exponent, specular_weight, None),
+    };
     let sampling = SamplingParams {
         model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
         exponent: exponent as f32,
         specular_weight: specular_weight as f32,
         source: "fit".to_string(),
+        second_lobe,
+        relative_variance: Some(SamplingVariances {
+            one_lobe: one_lobe_variance,
+            two_lobe: two_lobes.map(|two| two.relative_variance),
+            cosine: analysis.lowest_variance.cosine_relative_variance,
+        }),
     };
     let mut written = None;
     if let Material::Network(mut net) = material {
@@ -113,7 +204,12 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         model: sampling.model,
         exponent: sampling.exponent,
         specular_weight: sampling.specular_weight,
+        second_lobe: sampling.second_lobe,
         source: sampling.source,
+        two_lobe: two_lobes.map(|two| TwoLobeReport {
+            exponents: two.exponents,
+            weights: two.weights,
+        }),
         lobe: request.lobe.as_str(),
         kd: p.kd,
         ks: p.ks,
@@ -124,6 +220,7 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
             variance_lobe: analysis.lowest_variance.relative_variance,
             model_lobe: analysis.model_relative_variance,
             cosine: analysis.lowest_variance.cosine_relative_variance,
+            two_lobe: two_lobes.map(|two| two.relative_variance),
         },
         written,
         choice: request.lobe,

@@ -10,12 +10,15 @@
 //! * `ae train|encode|decode|eval`, `interpolate`: [`autoencoder`].
 //! * `predictor train|eval`, `predict-phong`: [`predictor`].
 //!
+//! [`limits`] holds the ranges of their size settings, checked before anything is allocated.
+//!
 //! [`Display`]: std::fmt::Display
 
 pub mod autoencoder;
 pub mod catalogue;
 pub mod compare;
 pub mod fit_phong;
+pub mod limits;
 pub mod predictor;
 pub mod table;
 pub mod train_network;
@@ -29,9 +32,7 @@ use std::path::Path;
 pub fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
     match threads {
         None => Ok(f()),
-        Some(0) => Err(NbrdfError::InvalidArgument(
-            "--threads must be at least 1".into(),
-        )),
+        Some(0) => Err(NbrdfError::Usage("--threads must be at least 1".into())),
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -65,6 +66,18 @@ pub fn to_json_pretty<T: Serialize>(report: &T) -> Result<String> {
         .and_then(|value| serde_json::to_string_pretty(&value))
         .map_err(|e| NbrdfError::InvalidArgument(format!("cannot format JSON: {e}")))?;
     Ok(format!("{text}\n"))
+}
+
+/// Puts the file the data came from in front of an error about the data ("no valid
+/// directions"), which the numerical code raising it cannot name; other errors name their
+/// file already.
+pub(crate) fn about_data(source: &str) -> impl Fn(NbrdfError) -> NbrdfError + '_ {
+    move |error| match error {
+        NbrdfError::InvalidArgument(message) => {
+            NbrdfError::InvalidArgument(format!("{source}: {message}"))
+        }
+        other => other,
+    }
 }
 
 fn invalid(message: String) -> NbrdfError {

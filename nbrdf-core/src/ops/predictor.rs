@@ -143,6 +143,9 @@ fn rmse_ratio(relative_variance: f64, fitted_relative_variance: f64) -> f64 {
 /// Trains the predictor on the codes of the training split's networks (every RGB
 /// permutation), labelled by [`lobe_label`], and writes it.
 pub fn train_predictor(request: &PredictorTrainRequest) -> Result<PredictorTrainReport> {
+    use super::limits::{check_range, MAX_ITERATIONS};
+    check_range("--refine", request.refine, 0, MAX_ITERATIONS)?;
+    check_range("--cross-validate", request.cross_validate, 0, 1000)?;
     if request.cross_validate == 1 {
         return Err(invalid(
             "--cross-validate needs at least 2 folds (0 turns it off)".into(),
@@ -496,6 +499,8 @@ pub fn predict_phong(
         exponent: n,
         specular_weight: w,
         source: "predicted".to_string(),
+        second_lobe: None,
+        relative_variance: None,
     });
     net.validate()?;
     let out = output.unwrap_or(input);

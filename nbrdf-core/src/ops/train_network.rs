@@ -1,8 +1,9 @@
-//! `nbrdf train`: a network learnt from a MERL-format table.
+//! `nbrdf train`: a network learnt from a MERL-format table or an RGL `.bsdf` measurement.
 
 use super::{file_stem, with_threads};
 use crate::error::Result;
-use crate::merl::{MerlTable, PhiFold};
+use crate::merl::PhiFold;
+use crate::source::{rgl_target, RglFold, TrainingSource};
 use crate::train::{self, EpochStats, TrainConfig, TrainReport};
 use std::fmt;
 use std::path::PathBuf;
@@ -10,8 +11,12 @@ use std::path::PathBuf;
 /// What to train.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainRequest {
-    pub table: PathBuf,
+    /// A MERL-format table or an RGL `.bsdf` measurement, told apart by content.
+    pub source: PathBuf,
+    /// How a table folds phi_d (tables only).
     pub phi_fold: PhiFold,
+    /// How an RGL measurement's non-reciprocity enters the target (measurements only).
+    pub rgl_fold: RglFold,
     /// Default: `NAME.nbrdf.json` in the current directory.
     pub output: Option<PathBuf>,
     /// Stored in the network; default: the table's file name without extensions.
@@ -47,34 +52,52 @@ impl fmt::Display for TrainNetworkReport {
     }
 }
 
-/// Trains a network on the table, calling `on_epoch` after every epoch, and writes it with its
-/// provenance (the settings, the source table and its `phi_d` fold).
+/// Trains a network on the source, calling `on_epoch` after every epoch, and writes it with its
+/// provenance (the settings, the source file, its kind and fold).
 pub fn train_network(
     request: &TrainRequest,
     on_epoch: &mut (dyn FnMut(&EpochStats) + Send),
 ) -> Result<TrainNetworkReport> {
-    let table = MerlTable::read(&request.table)?.with_phi_fold(request.phi_fold);
+    super::limits::check_train(&request.config)?;
+    let source = TrainingSource::open(&request.source)?;
     let name = request
         .name
         .clone()
-        .unwrap_or_else(|| file_stem(&request.table));
+        .unwrap_or_else(|| file_stem(&request.source));
     let output = request
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{name}.nbrdf.json")));
     let config = &request.config;
-    let target = train::table_target(&table);
-    let outcome = with_threads(request.threads, || {
-        train::train(&target, config, &name, on_epoch)
-    })??;
+    let kind = source.kind();
+    let (outcome, fold_key, fold) = match source {
+        TrainingSource::Table { table, .. } => {
+            let table = table.with_phi_fold(request.phi_fold);
+            let target = train::table_target(&table);
+            let outcome = with_threads(request.threads, || {
+                train::train(&target, config, &name, on_epoch)
+            })?
+            .map_err(super::about_data(&request.source.display().to_string()))?;
+            (outcome, "phi_fold", table.phi_fold().as_str())
+        }
+        TrainingSource::Rgl(measurement) => {
+            let target = rgl_target(&measurement, request.rgl_fold);
+            let outcome = with_threads(request.threads, || {
+                train::train(&target, config, &name, on_epoch)
+            })?
+            .map_err(super::about_data(&request.source.display().to_string()))?;
+            (outcome, "rgl_fold", request.rgl_fold.as_str())
+        }
+    };
     let mut network = outcome.network;
     network.provenance = train::provenance(
         config,
         &outcome.report,
-        &request.table.display().to_string(),
+        &request.source.display().to_string(),
     );
     if let Some(p) = network.provenance.as_object_mut() {
-        p.insert("phi_fold".into(), table.phi_fold().as_str().into());
+        p.insert("source_kind".into(), kind.into());
+        p.insert(fold_key.into(), fold.into());
     }
     network.validate()?;
     network.save(&output)?;

@@ -231,11 +231,14 @@ fn for_each_pair(
 }
 
 /// The measurement as a reflectance function: directions are normalised first and negative
-/// (out-of-gamut) values clamped to zero, as the trait requires.
+/// (out-of-gamut) values clamped to zero, as the trait requires. `f = f cos / cos` grows without
+/// bound as the light approaches the horizon (cosines down to 1e-45 in float32), so it saturates
+/// at `f32::MAX` rather than becoming infinite; `f cos` itself is always finite (the loader
+/// checks the tables' range).
 impl Brdf for RglMeasurement {
     fn eval(&self, view: Vec3, light: Vec3) -> [f32; 3] {
         let (view, light) = (view.normalize_or_zero(), light.normalize_or_zero());
-        RglMeasurement::eval(self, view, light).map(|v| v.max(0.0) as f32)
+        RglMeasurement::eval(self, view, light).map(|v| v.clamp(0.0, f64::from(f32::MAX)) as f32)
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {

@@ -52,6 +52,35 @@ pub struct RglMeasurement {
     reduction: i32,
 }
 
+/// Why the evaluation could leave the float32 range it is computed in (Mitsuba's RGB variants
+/// and [`RglMeasurement::eval_cos_f32`]), or `None`. Interpolation never leaves the range of
+/// the values it blends, so `|f cos| <= max |rgb| * max ndf / (4 min sigma)` (the last factor
+/// only with the Jacobian flag); beyond `f32::MAX` the product would be infinite, or NaN where a
+/// zero reflectance meets an infinite scale, so both the bound and the scale must stay below.
+fn float32_range_problem(rgb: &[f32], jacobian: Option<(&[f32], &[f32])>) -> Option<String> {
+    let largest = |values: &[f32]| values.iter().fold(0.0f64, |m, v| m.max(f64::from(v.abs())));
+    let rgb_max = largest(rgb);
+    let scale = match jacobian {
+        Some((ndf, sigma)) => {
+            let sigma_min = sigma
+                .iter()
+                .fold(f64::INFINITY, |m, v| m.min(f64::from(*v)));
+            largest(ndf) / (4.0 * sigma_min)
+        }
+        None => 1.0,
+    };
+    let bound = rgb_max * scale;
+    // The scale is a float32 product of its own (an infinite one turns a zero reflectance NaN).
+    let limit = f64::from(f32::MAX);
+    (!(scale <= limit && bound <= limit)).then(|| {
+        format!(
+            "values up to {rgb_max:e} times the Jacobian's largest ndf / (4 sigma) = {scale:e} \
+             can reach {bound:e}, beyond the float32 range (3.4e38) the measurement is \
+             evaluated in"
+        )
+    })
+}
+
 impl RglMeasurement {
     /// Reads and validates the RGL measurement at `path`.
     pub fn load(path: impl AsRef<Path>) -> Result<RglMeasurement> {
@@ -160,6 +189,10 @@ impl RglMeasurement {
                     format!("holds {v}; the projected area must be positive"),
                 );
             }
+        }
+
+        if let Some(problem) = float32_range_problem(&rgb, jacobian.then_some((&ndf, &sigma))) {
+            return fail("rgb", problem);
         }
 
         let isotropic = n_phi <= 2;

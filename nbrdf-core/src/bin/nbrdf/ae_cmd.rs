@@ -7,6 +7,7 @@ use nbrdf_core::latent::autoencoder::{AeConfig, AeEpoch};
 use nbrdf_core::ops::autoencoder::{
     self as ops_ae, AeEvalRequest, AeTrainObserver, AeTrainRequest, PcaTables as Tables, SplitPart,
 };
+use nbrdf_core::ops::limits::{MAX_EPOCHS, MAX_HIDDEN};
 use nbrdf_core::ops::to_json_pretty;
 use nbrdf_core::{NbrdfError, Result};
 use std::path::PathBuf;
@@ -42,8 +43,9 @@ pub struct AeTrainArgs {
     /// Refinement iterations of that choice.
     #[arg(long, default_value_t = 30)]
     select_refine: usize,
-    /// Epoch limit (early stopping usually ends sooner).
-    #[arg(long, default_value_t = AeConfig::default().max_epochs)]
+    /// Epoch limit (early stopping usually ends sooner; at most 1e6).
+    #[arg(long, default_value_t = AeConfig::default().max_epochs,
+          value_parser = super::count_in::<1, { MAX_EPOCHS }>)]
     epochs: usize,
     /// Epochs of weight-space warm start before the image loss.
     #[arg(long, default_value_t = AeConfig::default().warmup_epochs)]
@@ -51,8 +53,9 @@ pub struct AeTrainArgs {
     /// Early-stopping patience in epochs.
     #[arg(long, default_value_t = AeConfig::default().patience)]
     patience: usize,
-    /// Width of the encoder's and decoder's hidden layer.
-    #[arg(long, default_value_t = AeConfig::default().hidden)]
+    /// Width of the encoder's and decoder's hidden layer (at most 4096).
+    #[arg(long, default_value_t = AeConfig::default().hidden,
+          value_parser = super::count_in::<1, { MAX_HIDDEN }>)]
     hidden: usize,
     /// Adam learning rate.
     #[arg(long, default_value_t = AeConfig::default().learning_rate)]

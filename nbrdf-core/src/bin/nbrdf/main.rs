@@ -3,13 +3,15 @@
 //! One variant of [`Command`] per subcommand, each with its own argument struct and `run_*`
 //! function: it turns the arguments into the settings of one library function of
 //! [`nbrdf_core::ops`], calls it and prints its report. `main` alone turns errors into
-//! `error: ...` on stderr and exit status 1.
+//! `error: ...` on stderr and an exit status: 2 for usage errors (clap's convention: bad or
+//! missing arguments, options out of their range, [`NbrdfError::Usage`]), 1 for failures (I/O,
+//! file formats, data).
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use nbrdf_core::analytic::ModelKind;
 use nbrdf_core::lobe_fit::LobeChoice;
 use nbrdf_core::merl::PhiFold;
-use nbrdf_core::ops::{self, catalogue, compare, fit_phong, table};
+use nbrdf_core::ops::{self, catalogue, compare, fit_phong, limits, table};
 use nbrdf_core::phong_fit::FitConfig;
 use nbrdf_core::{NbrdfError, Result};
 use std::io::Write;
@@ -153,6 +155,25 @@ impl From<LobeArg> for LobeChoice {
     }
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum LobesArg {
+    Auto,
+    #[value(name = "1")]
+    One,
+    #[value(name = "2")]
+    Two,
+}
+
+impl From<LobesArg> for fit_phong::LobeCount {
+    fn from(l: LobesArg) -> Self {
+        match l {
+            LobesArg::Auto => fit_phong::LobeCount::Auto,
+            LobesArg::One => fit_phong::LobeCount::One,
+            LobesArg::Two => fit_phong::LobeCount::Two,
+        }
+    }
+}
+
 #[derive(Args)]
 struct FitPhongArgs {
     /// A MERL-format table (.binary) or a network (.nbrdf.json, updated with the fit).
@@ -169,12 +190,18 @@ struct FitPhongArgs {
     /// 7-parameter fit (docs/design.md section 6), which can be a poor sampler for weak sharp spikes.
     #[arg(long, value_enum, default_value_t = LobeArg::Variance)]
     lobe: LobeArg,
+    /// How many Blinn-Phong lobes the sampling mixture has: `auto` (default) searches one and
+    /// two lobes on the same quadrature and stores two where they lower the relative variance
+    /// (by more than 2 %); `1` or `2` force the count (`2` needs `--lobe variance`).
+    #[arg(long, value_enum, default_value_t = LobesArg::Auto)]
+    lobes: LobesArg,
     /// How the table folds phi_d: reciprocal for MERL tables, mirror for non-reciprocal ones
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     phi_fold: PhiFoldArg,
-    /// Directions sampled (adaptively) for the fit.
-    #[arg(long, default_value_t = FitConfig::default().samples)]
+    /// Directions sampled (adaptively) for the fit, at most 1e8.
+    #[arg(long, default_value_t = FitConfig::default().samples,
+          value_parser = count_in::<1, { limits::MAX_SAMPLES }>)]
     samples: usize,
     /// Random seed of the sampled directions.
     #[arg(long, default_value_t = 0)]
@@ -196,11 +223,12 @@ struct CompareArgs {
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     phi_fold: PhiFoldArg,
-    /// Width and height of the sphere images, pixels.
-    #[arg(long, default_value_t = 128)]
+    /// Width and height of the sphere images, pixels (at most 4096).
+    #[arg(long, default_value_t = 128, value_parser = count_in::<1, { limits::MAX_RESOLUTION }>)]
     resolution: usize,
-    /// Directions sampled for the log-space error (each of adaptive and uniform sampling).
-    #[arg(long, default_value_t = 100_000)]
+    /// Directions sampled for the log-space error (each of adaptive and uniform sampling), at
+    /// most 1e8.
+    #[arg(long, default_value_t = 100_000, value_parser = count_in::<1, { limits::MAX_SAMPLES }>)]
     samples: usize,
     /// Print the comparison as JSON.
     #[arg(long)]
@@ -217,7 +245,7 @@ fn main() -> ExitCode {
             // --help and --version come through here too and are not failures.
             let _ = e.print();
             return if e.use_stderr() {
-                ExitCode::from(1)
+                ExitCode::from(EXIT_USAGE)
             } else {
                 ExitCode::SUCCESS
             };
@@ -227,8 +255,37 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(1)
+            ExitCode::from(exit_status(&e))
         }
+    }
+}
+
+/// Exit status of a usage error (clap's own for bad arguments).
+const EXIT_USAGE: u8 = 2;
+/// Exit status of a failure: I/O, a bad file, data the command cannot work with.
+const EXIT_FAILURE: u8 = 1;
+
+fn exit_status(error: &NbrdfError) -> u8 {
+    match error {
+        NbrdfError::Usage(_) => EXIT_USAGE,
+        _ => EXIT_FAILURE,
+    }
+}
+
+/// A clap value parser for a count in `[MIN, MAX]` (the ranges of [`ops::limits`], which the
+/// library checks again for its other callers).
+pub(crate) fn count_in<const MIN: usize, const MAX: usize>(
+    text: &str,
+) -> std::result::Result<usize, String> {
+    let value: usize = text
+        .parse()
+        .map_err(|e| format!("{e} (a whole number in [{MIN}, {MAX}])"))?;
+    if (MIN..=MAX).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value} is out of range: it must be in [{MIN}, {MAX}] (docs/hardening.md)"
+        ))
     }
 }
 
@@ -281,6 +338,7 @@ fn run_fit_phong(args: &FitPhongArgs) -> Result<()> {
         input: args.input.clone(),
         output: args.output.clone(),
         lobe: args.lobe.into(),
+        lobes: args.lobes.into(),
         phi_fold: args.phi_fold.into(),
         fit: FitConfig {
             samples: args.samples,

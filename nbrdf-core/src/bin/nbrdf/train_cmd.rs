@@ -1,8 +1,10 @@
 //! `nbrdf train`.
 
-use super::{emit, progress, PhiFoldArg};
+use super::{count_in, emit, progress, PhiFoldArg};
 use clap::{Args, ValueEnum};
+use nbrdf_core::ops::limits::{MAX_BATCH, MAX_EPOCHS, MAX_HIDDEN, MAX_SAMPLES};
 use nbrdf_core::ops::train_network::{train_network, TrainRequest};
+use nbrdf_core::source::RglFold;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
 use nbrdf_core::train::{EpochStats, TrainConfig};
@@ -26,10 +28,29 @@ impl From<SamplingArg> for AngularSampling {
     }
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+pub enum RglFoldArg {
+    /// f(view, light) as Mitsuba's `measured` evaluates it (RGL data is not reciprocal).
+    AsMeasured,
+    /// The mean of f(view, light) and f(light, view): a reciprocal network.
+    ReciprocalMean,
+}
+
+impl From<RglFoldArg> for RglFold {
+    fn from(f: RglFoldArg) -> Self {
+        match f {
+            RglFoldArg::AsMeasured => RglFold::AsMeasured,
+            RglFoldArg::ReciprocalMean => RglFold::ReciprocalMean,
+        }
+    }
+}
+
 #[derive(Args)]
 pub struct TrainArgs {
-    /// The MERL-format table to learn.
-    #[arg(value_name = "TABLE.binary")]
+    /// What to learn: a MERL-format table or an RGL .bsdf measurement (told apart by content).
+    /// A measurement is learnt as Mitsuba's `measured` plugin evaluates it, at the trainer's
+    /// sample directions.
+    #[arg(value_name = "TABLE.binary|MEASUREMENT.bsdf")]
     pub table: PathBuf,
     /// Where to write the network; defaults to TABLE's name with .nbrdf.json in the current
     /// directory.
@@ -42,21 +63,29 @@ pub struct TrainArgs {
     /// tabulated with `tabulate_rgl --phi-fold mirror`.
     #[arg(long, value_enum, default_value_t = PhiFoldArg::Reciprocal)]
     pub phi_fold: PhiFoldArg,
+    /// How an RGL measurement's non-reciprocity enters the target (measurements only).
+    #[arg(long, value_enum, default_value_t = RglFoldArg::AsMeasured)]
+    pub rgl_fold: RglFoldArg,
     /// Training samples (invalid cells and directions below the horizon are not counted);
-    /// 10% more are drawn for validation.
-    #[arg(long, default_value_t = TrainConfig::default().samples)]
+    /// 10% more are drawn for validation. At most 1e8.
+    #[arg(long, default_value_t = TrainConfig::default().samples,
+          value_parser = count_in::<1, MAX_SAMPLES>)]
     pub samples: usize,
-    /// Maximum number of epochs.
-    #[arg(long, default_value_t = TrainConfig::default().max_epochs)]
+    /// Maximum number of epochs (at most 1e6).
+    #[arg(long, default_value_t = TrainConfig::default().max_epochs,
+          value_parser = count_in::<1, MAX_EPOCHS>)]
     pub epochs: usize,
-    /// Width of the two hidden layers.
-    #[arg(long, default_value_t = TrainConfig::default().hidden)]
+    /// Width of the two hidden layers (at most 4096; the traced Mitsuba backend is slow beyond a
+    /// few hundred).
+    #[arg(long, default_value_t = TrainConfig::default().hidden,
+          value_parser = count_in::<1, MAX_HIDDEN>)]
     pub hidden: usize,
     /// Adam learning rate.
     #[arg(long, default_value_t = AdamConfig::default().learning_rate)]
     pub lr: f32,
-    /// Mini-batch size.
-    #[arg(long, default_value_t = TrainConfig::default().batch)]
+    /// Mini-batch size (at most 2^20; with the width, within the 8 GiB memory estimate).
+    #[arg(long, default_value_t = TrainConfig::default().batch,
+          value_parser = count_in::<1, MAX_BATCH>)]
     pub batch: usize,
     /// Stop after this many epochs without a 0.1% improvement of the validation loss (the best
     /// weights are kept).
@@ -111,8 +140,9 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
     let bar = progress::epoch_bar(config.max_epochs, args.quiet)?;
     bar.set_message("drawing samples");
     let request = TrainRequest {
-        table: args.table.clone(),
+        source: args.table.clone(),
         phi_fold: args.phi_fold.into(),
+        rgl_fold: args.rgl_fold.into(),
         output: args.output.clone(),
         name: args.name.clone(),
         config,

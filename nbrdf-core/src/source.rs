@@ -1,0 +1,128 @@
+//! What a network is trained from: a MERL-format table or an RGL `.bsdf` measurement, told apart
+//! by the file's content (its first bytes), not its name.
+//!
+//! An RGL measurement is learnt from [`RglMeasurement::eval`] at the trainer's own sample
+//! directions, with no MERL grid in between. Loss decisions (docs/results/rgl-training.md):
+//! * Reciprocity: RGL data is not reciprocal, and Mitsuba's `measured` plugin (what a scene with
+//!   the measurement renders) evaluates `f(view, light)` as measured. [`RglFold::AsMeasured`]
+//!   learns exactly that; [`RglFold::ReciprocalMean`] learns `(f(v, l) + f(l, v)) / 2`, as
+//!   `tabulate_rgl --phi-fold reciprocal` did.
+//! * Horizon: the loss compares `ln(1 + f cos_light)`, and `f cos_light` is what the measurement
+//!   stores (`eval_cos_f32`), so the `1 / cos` of `f` never reaches the loss for the light.
+//!   The reciprocal mean's swapped term carries `cos_light / cos_view`, which grows without bound
+//!   at grazing views; samples with either cosine below [`GRAZING_COS`] are dropped there.
+//! * Out-of-gamut RGB values (slightly negative) are clamped to 0, as the `Brdf` impl does.
+
+use crate::coords::{from_rusinkiewicz, RusinkiewiczAngles};
+use crate::error::{NbrdfError, Result};
+use crate::merl::MerlTable;
+use crate::rgl::RglMeasurement;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// Below this cosine (about 89.4 degrees) the reciprocal mean is not trained on.
+pub const GRAZING_COS: f64 = 0.01;
+
+/// How an RGL measurement's lack of reciprocity enters the training target.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RglFold {
+    /// `f(view, light)` as Mitsuba's `measured` evaluates it.
+    #[default]
+    AsMeasured,
+    /// `(f(view, light) + f(light, view)) / 2`: a reciprocal network.
+    ReciprocalMean,
+}
+
+impl RglFold {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RglFold::AsMeasured => "as-measured",
+            RglFold::ReciprocalMean => "reciprocal-mean",
+        }
+    }
+}
+
+/// A training source read from a file.
+pub enum TrainingSource {
+    Table { path: PathBuf, table: MerlTable },
+    Rgl(Box<RglMeasurement>),
+}
+
+const TENSOR_MAGIC: &[u8] = b"tensor_file\0";
+/// The MERL header: three little-endian i32 resolutions (90, 90, 180).
+const MERL_HEADER: [u8; 12] = [90, 0, 0, 0, 90, 0, 0, 0, 180, 0, 0, 0];
+
+impl TrainingSource {
+    /// Opens `path`, deciding from its first 12 bytes whether it is an RGL tensor file or a MERL
+    /// table; anything else is an error naming the file and the formats accepted.
+    pub fn open(path: impl AsRef<Path>) -> Result<TrainingSource> {
+        let path = path.as_ref();
+        let mut head = Vec::with_capacity(12);
+        std::fs::File::open(path)
+            .and_then(|f| f.take(12).read_to_end(&mut head))
+            .map_err(|e| NbrdfError::io(path, e))?;
+        if head.as_slice() == TENSOR_MAGIC {
+            Ok(TrainingSource::Rgl(Box::new(RglMeasurement::load(path)?)))
+        } else if head.as_slice() == MERL_HEADER {
+            Ok(TrainingSource::Table {
+                path: path.to_path_buf(),
+                table: MerlTable::read(path)?,
+            })
+        } else {
+            let what = if head.first().is_some_and(|b| matches!(b, b'{' | b'[')) {
+                " (it looks like JSON: a network file? `nbrdf train` learns from measurements)"
+            } else if head.is_empty() {
+                " (the file is empty)"
+            } else {
+                ""
+            };
+            Err(NbrdfError::format(
+                path,
+                format!(
+                    "not a training source{what}: expected an RGL .bsdf measurement (starting \
+                     with \"tensor_file\") or a MERL-format table (header 90 90 180)"
+                ),
+            ))
+        }
+    }
+
+    /// `"merl-table"` or `"rgl-measurement"`, for provenance.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TrainingSource::Table { .. } => "merl-table",
+            TrainingSource::Rgl(_) => "rgl-measurement",
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        match self {
+            TrainingSource::Table { path, .. } => path,
+            TrainingSource::Rgl(m) => m.path(),
+        }
+    }
+}
+
+/// The training target of an RGL measurement: `f_r(view, light)` at the sample's angles, folded
+/// as `fold` says, negative values clamped to 0; `None` (no sample) for grazing directions of the
+/// reciprocal mean.
+pub fn rgl_target(
+    measurement: &RglMeasurement,
+    fold: RglFold,
+) -> impl Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> + Sync + '_ {
+    move |angles| {
+        let (view, light) = from_rusinkiewicz(angles);
+        let (v, l) = (view.as_vec3(), light.as_vec3());
+        let f = measurement.eval(v, l);
+        let f = match fold {
+            RglFold::AsMeasured => f,
+            RglFold::ReciprocalMean => {
+                if (v.z as f64) < GRAZING_COS || (l.z as f64) < GRAZING_COS {
+                    return None;
+                }
+                let g = measurement.eval(l, v);
+                std::array::from_fn(|c| 0.5 * (f[c] + g[c]))
+            }
+        };
+        Some(f.map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 }))
+    }
+}
