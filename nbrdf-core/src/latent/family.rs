@@ -15,6 +15,8 @@ use super::autoencoder::{AutoEncoder, FORMAT_NAME};
 use crate::error::Result;
 use crate::network::Nbrdf;
 use crate::train::{self, EpochStats, TrainConfig, TrainReport};
+use std::borrow::Cow;
+use std::time::Instant;
 
 /// The networks an autoencoder encodes: width and seed of their common initialisation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -172,6 +174,62 @@ impl Family {
     }
 }
 
+/// What happens to a network foreign to the autoencoder's family before it is encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Relearn {
+    /// Re-learn it ([`Family::relearn_with`]) with `nbrdf train`'s defaults, or at most
+    /// `max_epochs` epochs (faster, and a network further from those the autoencoder saw).
+    Auto { max_epochs: Option<usize> },
+    /// Encode it as it is (its code is then not to be trusted).
+    Off,
+}
+
+impl Default for Relearn {
+    fn default() -> Self {
+        Relearn::Auto { max_epochs: None }
+    }
+}
+
+/// Told what [`encodable`] does, for the messages of a command.
+pub trait RelearnObserver {
+    /// `net` is not of `family` for `reason`; `relearning`: it is re-learnt now (else it is
+    /// encoded as it is).
+    fn foreign(&mut self, net: &str, reason: &str, family: Family, relearning: bool);
+    /// `net` was re-learnt in `seconds`.
+    fn relearnt(&mut self, net: &str, seconds: f64, report: &TrainReport);
+}
+
+/// `net` as an autoencoder of `family` ([`Family::of`]) can encode it: as it is when it is of
+/// the family, when `relearn` is off, or when the autoencoder records no family (re-learning
+/// would not bring a network closer to networks of mixed origin); else re-learnt.
+pub fn encodable<'a>(
+    family: Option<Family>,
+    net: &'a Nbrdf,
+    relearn: Relearn,
+    observer: &mut dyn RelearnObserver,
+) -> Result<Cow<'a, Nbrdf>> {
+    let Some(family) = family else {
+        return Ok(Cow::Borrowed(net));
+    };
+    let Some(reason) = family.foreign_reason(net) else {
+        return Ok(Cow::Borrowed(net));
+    };
+    let Relearn::Auto { max_epochs } = relearn else {
+        observer.foreign(&net.name, &reason, family, false);
+        return Ok(Cow::Borrowed(net));
+    };
+    observer.foreign(&net.name, &reason, family, true);
+    let mut config = family.train_config();
+    if let Some(epochs) = max_epochs {
+        config.max_epochs = epochs;
+        config.min_epochs = config.min_epochs.min(epochs);
+    }
+    let start = Instant::now();
+    let (relearnt, report) = family.relearn_with(net, &config, &mut |_| {})?;
+    observer.relearnt(&net.name, start.elapsed().as_secs_f64(), &report);
+    Ok(Cow::Owned(relearnt))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -241,6 +299,58 @@ mod tests {
         let mixed = serde_json::json!({"networks": Family::record(None)});
         assert_eq!(Family::recorded(21, &mixed), None);
         assert_eq!(Family::recorded(21, &serde_json::Value::Null), None);
+    }
+
+    /// Records what [`encodable`] reports.
+    #[derive(Default)]
+    struct Events(Vec<String>);
+
+    impl RelearnObserver for Events {
+        fn foreign(&mut self, net: &str, reason: &str, _: Family, relearning: bool) {
+            self.0.push(format!("foreign {net} {relearning}: {reason}"));
+        }
+        fn relearnt(&mut self, net: &str, _: f64, report: &TrainReport) {
+            self.0.push(format!("relearnt {net} {}", report.epochs_run));
+        }
+    }
+
+    #[test]
+    fn only_foreign_networks_are_relearnt_and_each_step_is_reported() {
+        let f = Family { hidden: 4, seed: 2 };
+        let mut own = Nbrdf::random("own", 4, 1);
+        own.provenance = serde_json::json!({"trainer": train::TRAINER_VERSION, "seed": 2});
+        let mut keras = Nbrdf::random("keras", 4, 3);
+        keras.provenance = serde_json::json!({"method": "imported from Keras"});
+        let quick = Relearn::Auto {
+            max_epochs: Some(1),
+        };
+        let mut events = Events::default();
+        let same =
+            |c: &Cow<'_, Nbrdf>, n: &Nbrdf| matches!(c, Cow::Borrowed(b) if std::ptr::eq(*b, n));
+
+        assert!(same(
+            &encodable(Some(f), &own, quick, &mut events).unwrap(),
+            &own
+        ));
+        assert!(same(
+            &encodable(None, &keras, quick, &mut events).unwrap(),
+            &keras
+        ));
+        assert!(events.0.is_empty(), "{:?}", events.0);
+
+        let kept = encodable(Some(f), &keras, Relearn::Off, &mut events).unwrap();
+        assert!(same(&kept, &keras));
+        assert_eq!(events.0.len(), 1);
+        assert!(events.0[0].starts_with("foreign keras false: imported from Keras"));
+
+        events.0.clear();
+        let relearnt = encodable(Some(f), &keras, quick, &mut events).unwrap();
+        assert!(matches!(relearnt, Cow::Owned(_)));
+        assert_eq!(f.foreign_reason(&relearnt), None);
+        assert_eq!(relearnt.provenance["relearnt_from"], keras.provenance);
+        assert_eq!(events.0.len(), 2, "{:?}", events.0);
+        assert!(events.0[0].starts_with("foreign keras true"));
+        assert_eq!(events.0[1], "relearnt keras 1");
     }
 
     /// A re-learnt network is a fresh `nbrdf train` run on the tabulation, i.e. the weights of
