@@ -1,5 +1,6 @@
 """The package as a user gets it: sdist -> wheel -> manylinux wheel -> a fresh venv, in which
-`nbrdf --version`, `nbrdf synth` + `nbrdf train` and `python -m nbrdf_mitsuba render` work.
+`nbrdf --version`, `nbrdf synth` + `nbrdf train`, `nbrdf predict-phong` (the built-in models) and
+`python -m nbrdf_mitsuba render` work.
 
 * The sdist is built with `python -m build --sdist`, unpacked outside the repository and built
   into a wheel there: it must carry the Cargo workspace it needs (nothing is read from the
@@ -33,6 +34,8 @@ VERSION = re.search(r'^version = "(.+)"', (REPO / "mitsuba-plugin" / "pyproject.
 SDIST_MUST_HOLD = ["setup.py", "pyproject.toml", "README.md", "nbrdf_mitsuba/__init__.py", "nbrdf_mitsuba/render.py",
                    "rust/Cargo.toml", "rust/Cargo.lock", "rust/nbrdf-core/Cargo.toml", "rust/nbrdf-core/src/lib.rs",
                    "rust/nbrdf-core/src/bin/nbrdf/main.rs", "rust/nbrdf-core/data/merl_fits.json",
+                   # the built-in latent models the command embeds (nbrdf-core/src/bin/nbrdf/pretrained.rs)
+                   "rust/nbrdf-core/data/models/autoencoder.json", "rust/nbrdf-core/data/models/predictor.json",
                    "rust/nbrdf-ffi/Cargo.toml", "rust/nbrdf-ffi/build.rs", "rust/nbrdf-ffi/src/lib.rs",
                    "rust/nbrdf-ffi/include/nbrdf.h"]
 
@@ -142,6 +145,9 @@ def test_fresh_venv_has_the_command_and_the_renderer(venv, tmp_path):
     run(["nbrdf", "train", "gold.binary", "-o", "gold.nbrdf.json", "--epochs", "2", "--min-epochs", "0",
          "--samples", "20000"], env=env, cwd=tmp_path)
     assert (tmp_path / "gold.nbrdf.json").stat().st_size > 1000
+    # The installed command carries its models: a network of `nbrdf train` needs no flags.
+    predicted = run(["nbrdf", "predict-phong", "gold.nbrdf.json"], env=env, cwd=tmp_path)
+    assert "predicted blinn-phong" in predicted.stdout and "re-learn" not in predicted.stderr
 
     python = venv / "bin" / "python"
     where = run([python, "-c", "import nbrdf_mitsuba._native as n; print(n.__file__); print(n.version())"],

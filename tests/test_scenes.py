@@ -378,6 +378,22 @@ def test_bench_rays_quick_json(tmp_path):
     assert chart.stat().st_size > 1000 and chart.with_suffix(".pdf").is_file()
 
 
+def test_bench_rays_runs_in_scalar_rgb(tmp_path):
+    """docs/mitsuba.md's scalar rows: one mode, the rust backend, the chosen BSDFs and the reference."""
+    cli = _cli_or_skip()
+    out = tmp_path / "scalar.json"
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_rays", "--variant", "scalar_rgb", "--bsdfs", "nbrdf",
+                          "--width", "48", "--spp", "1", "--repeats", "1", "--no-progress", "--json", str(out),
+                          "--out", str(tmp_path / "bench"), "--cli", str(cli)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(out.read_text())
+    assert (report["variant"], report["mode"], report["resolution"]) == ("scalar_rgb", "scalar", [48, 32])
+    assert set(report["bsdfs"]) == {"nbrdf", "roughconductor"}
+    assert all(figures["mrays_per_s"] > 0 for figures in report["bsdfs"].values())
+    assert "once per direction" in run.stdout + run.stderr  # the plugin's note on scalar variants
+
+
 def test_command_errors_carry_the_commands_stderr(tmp_path):
     """The scripts' one CLI wrapper: a failing command raises with its exit status and stderr."""
     from nbrdf_tools import cli

@@ -50,3 +50,51 @@ def test_rgb_variant_loads(files, restore_variant):
     mi.set_variant("scalar_rgb")
     assert "NbrdfBSDF" in str(mi.load_dict({"type": "nbrdf", "filename": str(files["nbrdf"])}))
     assert "MerlBSDF" in str(mi.load_dict({"type": "merl", "filename": str(files["merl"])}))
+
+
+# Run in a fresh process: the note is said once per process, and this one may have said it.
+SCALAR_NOTE_SCRIPT = r"""
+import sys
+import nbrdf_mitsuba
+import mitsuba as mi
+
+class Recorder(mi.Appender):
+    def __init__(self):
+        super().__init__()
+        self.lines = []
+    def append(self, level, text):
+        self.lines.append((level, text))
+    def log_progress(self, *args):
+        pass
+
+network, table, with_llvm = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
+recorder = Recorder()
+mi.logger().clear_appenders()  # Mitsuba's own appender would print to stdout too
+mi.logger().add_appender(recorder)
+said = lambda: [(level, text) for level, text in recorder.lines if "once per direction" in text]
+if with_llvm:
+    mi.set_variant("llvm_ad_rgb")
+    mi.load_dict({"type": "nbrdf", "filename": network})
+    print("llvm", len(said()))
+mi.set_variant("scalar_rgb")
+for _ in range(2):
+    mi.load_dict({"type": "nbrdf", "filename": network})
+    mi.load_dict({"type": "merl", "filename": table})
+print("scalar", len(said()), said()[0][0] == mi.LogLevel.Warn, "in scalar_rgb" in said()[0][1])
+"""
+
+
+def test_scalar_variants_say_their_cost_once(files):
+    """A scalar variant evaluates the BSDFs one direction per call through Python: the plugin
+    says so with one warning per process, not per BSDF, and says nothing in llvm_ad_rgb."""
+    import subprocess
+    import sys
+
+    with_llvm = nbrdf_mitsuba.llvm.problem() is None and "llvm_ad_rgb" in mi.variants()
+    result = subprocess.run([sys.executable, "-c", SCALAR_NOTE_SCRIPT, str(files["nbrdf"]), str(files["merl"]),
+                             "1" if with_llvm else "0"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    if with_llvm:
+        assert "llvm 0" in lines
+    assert "scalar 1 True True" in lines, result.stdout + result.stderr

@@ -33,6 +33,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import threading
 
 import drjit as dr
 import mitsuba as mi
@@ -98,6 +99,30 @@ def use_wavefront_mode(reason: str = "requested") -> list[str]:
                                   f"thread ({reason}): the nbrdf/merl BSDFs call native code on whole "
                                   "wavefronts and cannot run inside symbolic loops or calls")
     return changed
+
+
+# --------------------------------------------------------------------------------------------
+# Scalar variants
+
+_scalar_cost_said = False
+_scalar_cost_lock = threading.Lock()  # Mitsuba builds a scene's plugins on several threads
+
+
+def _say_scalar_cost() -> None:
+    """Logs once per process (a warning, shown at Mitsuba's default level) that scalar variants
+    evaluate these BSDFs one direction per call through Python: renders that are tens of times
+    slower than in llvm_ad_rgb, measured in docs/mitsuba.md ("Performance"). Once, because the
+    rust backend is the only one there and every scalar scene would repeat it."""
+    global _scalar_cost_said
+    with _scalar_cost_lock:
+        if _scalar_cost_said:
+            return
+        _scalar_cost_said = True
+    mi.Log(mi.LogLevel.Warn, f"nbrdf_mitsuba: in {mi.variant()} Mitsuba calls the nbrdf and merl BSDFs once "
+                             "per direction, each call going through Python and cffi into the native library: "
+                             "renders are tens of times slower than in llvm_ad_rgb (or than with Mitsuba's "
+                             "own BSDFs). Use scalar variants for reference checks and small images "
+                             "(said once per process).")
 
 
 # --------------------------------------------------------------------------------------------
@@ -216,6 +241,8 @@ class _NativeBSDFMixin:
         second = (_get(props, "exponent2"), _get(props, "specular_weight2"))
         self._configure_sampling(sampling, exponent, weight, second)
         self._backend = self._choose_backend(_get(props, "backend", _default_backend))
+        if not _is_jit():
+            _say_scalar_cost()
 
         if _is_jit():
             if mi.variant().startswith("llvm"):

@@ -3,10 +3,13 @@
 Every BSDF under test is put on the four plates of the Veach scene (direct illumination with MIS:
 per sample one camera ray, one shadow ray and one BSDF ray), rendered once to compile the kernels,
 then timed over several renders; runs of the different BSDFs alternate within one process so that
-machine load affects them alike. Modes: ``default`` (Dr.Jit's symbolic loops and calls, Mitsuba's
-megakernel) and ``wavefront`` (symbolic loops and calls off, which the Rust backend needs).
+machine load affects them alike. Modes of the JIT variants: ``default`` (Dr.Jit's symbolic loops and
+calls, Mitsuba's megakernel) and ``wavefront`` (symbolic loops and calls off, which the Rust backend
+needs). A scalar variant (``--variant scalar_rgb``) has one mode, ``scalar``, and the Rust backend
+alone, which Mitsuba calls once per direction through Python (docs/mitsuba.md, "Performance").
 
     python -m nbrdf_tools.bench_rays [--quick] [--json FILE] [--modes default,wavefront] [--no-progress]
+    python -m nbrdf_tools.bench_rays --variant scalar_rgb --bsdfs nbrdf,roughconductor --width 128 --spp 4
 
 The network is trained by ``nbrdf train`` (briefly: speed, not accuracy, is measured) unless the
 authors' Keras network of the material is in the shared data.
@@ -63,9 +66,19 @@ def ensure_inputs(material: str, out: Path, nbrdf: Path) -> tuple[Path, Path]:
     return network, table
 
 
+def is_scalar(variant: str) -> bool:
+    return variant.startswith("scalar_")
+
+
 def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
-    """BSDFs to time in `mode`; the Rust-backed ones exist in wavefront mode only."""
+    """BSDFs to time in `mode`; the Rust-backed ones exist in wavefront and scalar mode only,
+    the traced ones in the JIT modes only."""
     bsdfs = {}
+    if mode == "scalar":
+        bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "rust"}
+        bsdfs["merl"] = {"type": "merl", "filename": str(table), "backend": "rust"}
+        bsdfs.update(builtin_bsdfs())
+        return bsdfs
     bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit"}
     bsdfs["nbrdf-opaque"] = {"type": "nbrdf", "filename": str(network), "backend": "jit", "jit_weights": "opaque"}
     bsdfs["merl"] = {"type": "merl", "filename": str(table), "backend": "jit"}
@@ -77,6 +90,8 @@ def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
 
 
 def set_mode(mode: str) -> None:
+    if mode == "scalar":
+        return
     symbolic = mode == "default"
     dr.set_flag(dr.JitFlag.SymbolicLoops, symbolic)
     dr.set_flag(dr.JitFlag.SymbolicCalls, symbolic)
@@ -148,8 +163,14 @@ def plot(results: list[dict], path: Path) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--variant", default="llvm_ad_rgb")
-    parser.add_argument("--modes", default="default,wavefront", help="comma-separated: default, wavefront")
+    parser.add_argument("--variant", default="llvm_ad_rgb",
+                        help="an RGB variant: llvm_ad_rgb, cuda_ad_rgb or scalar_rgb (default: %(default)s)")
+    parser.add_argument("--modes", default="default,wavefront",
+                        help="comma-separated: default, wavefront (JIT variants; a scalar variant runs its one "
+                             "mode, scalar)")
+    parser.add_argument("--bsdfs", help="comma-separated: time only these BSDFs of the mode's list "
+                                        "(nbrdf, nbrdf-opaque, merl, nbrdf-rust, merl-rust, diffuse, "
+                                        "roughconductor, roughplastic, principled; default: all)")
     parser.add_argument("--material", default=DEFAULT_MATERIAL)
     parser.add_argument("--width", type=int, default=768)
     parser.add_argument("--spp", type=int, default=16)
@@ -165,9 +186,13 @@ def main(argv: list[str] | None = None) -> int:
     progress.set_enabled(not args.no_progress)
     if args.quick:
         args.width, args.spp, args.repeats = 192, 4, 2
-    for mode in args.modes.split(","):
-        if mode not in ("default", "wavefront"):
+    modes = ["scalar"] if is_scalar(args.variant) else args.modes.split(",")
+    for mode in modes:
+        if mode not in ("default", "wavefront", "scalar"):
             parser.error(f"unknown mode '{mode}'")
+    wanted = args.bsdfs.split(",") if args.bsdfs else None
+    if wanted and "roughconductor" not in wanted:
+        wanted.append("roughconductor")  # the reference of the ratios
 
     mi.set_variant(args.variant)
     nbrdf_mitsuba.register()
@@ -179,8 +204,14 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     resolution = (args.width, args.width * 2 // 3)
     results = []
-    for mode in args.modes.split(","):
-        bsdfs = bench_mode(mode, candidates(network, table, mode), resolution, args.spp, args.repeats)
+    for mode in modes:
+        bsdfs = candidates(network, table, mode)
+        if wanted:
+            unknown = [name for name in wanted if name not in bsdfs]
+            if unknown:
+                parser.error(f"--bsdfs: {', '.join(unknown)} not in the {mode} mode's list ({', '.join(bsdfs)})")
+            bsdfs = {name: bsdfs[name] for name in wanted}
+        bsdfs = bench_mode(mode, bsdfs, resolution, args.spp, args.repeats)
         results.append({"scene": "veach", "variant": args.variant, "mode": mode, "resolution": list(resolution),
                         "spp": args.spp, "bsdfs": bsdfs})
     print_table(results)

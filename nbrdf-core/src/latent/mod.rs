@@ -3,6 +3,7 @@
 //! code, and the PCA baseline of Nielsen et al. 2015.
 
 pub mod autoencoder;
+pub mod family;
 pub mod mlp;
 pub mod pca;
 pub mod predictor;
@@ -33,11 +34,15 @@ fn column_mean_std<R: AsRef<[f32]>>(rows: &[R], floor: f32) -> (Vec<f32>, Vec<f3
 
 /// Reads a JSON model file (autoencoder, predictor); errors name the file.
 fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
-    let named =
-        |e: &dyn std::fmt::Display| NbrdfError::InvalidArgument(format!("{}: {e}", path.display()));
     crate::error::regular_file_size(path, crate::error::MAX_JSON_BYTES, "a JSON model")?;
-    let text = std::fs::read_to_string(path).map_err(|e| named(&e))?;
-    serde_json::from_str(&text).map_err(|e| named(&e))
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))?;
+    parse_json(&text, &path.display().to_string())
+}
+
+/// Parses a JSON model (a file's text, or a model embedded in a program); errors name `origin`.
+fn parse_json<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T> {
+    serde_json::from_str(text).map_err(|e| NbrdfError::InvalidArgument(format!("{origin}: {e}")))
 }
 
 /// Writes a JSON model file; errors name the file.

@@ -413,11 +413,19 @@ impl PhongPredictor {
 
     pub fn load(path: impl AsRef<std::path::Path>) -> Result<Self> {
         let path = path.as_ref();
-        let p: PhongPredictor = super::read_json(path)?;
+        Self::checked(super::read_json(path)?, &path.display().to_string())
+    }
+
+    /// A predictor from the text of a P.json file (e.g. one embedded in a program); errors
+    /// name `origin`.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self> {
+        Self::checked(super::parse_json(text, origin)?, origin)
+    }
+
+    fn checked(p: PhongPredictor, origin: &str) -> Result<Self> {
         if p.format != FORMAT_NAME {
             return Err(NbrdfError::InvalidArgument(format!(
-                "{}: not a Phong predictor",
-                path.display()
+                "{origin}: not a Phong predictor"
             )));
         }
         Ok(p)

@@ -5,6 +5,7 @@ use crate::analytic::{AnalyticBrdf, ModelKind};
 use crate::coords::from_rusinkiewicz;
 use crate::error::{NbrdfError, Result};
 use crate::latent::autoencoder::{AeConfig, AeEpoch, AutoEncoder, Split};
+use crate::latent::family::{self, Family, Relearn, RelearnObserver};
 use crate::latent::pca::{CellValues, Pca};
 use crate::latent::predictor::lobe_label;
 use crate::latent::sphere::{LIGHT_THETA_DEG, SIZE};
@@ -95,11 +96,12 @@ impl fmt::Display for AeTrainReport {
 type FlatNetworks = Vec<(String, Vec<f32>)>;
 
 /// The flat networks the autoencoder trains on (with the extra networks of training
-/// materials), their hidden width and the fixed split.
+/// materials), their hidden width, the fixed split and the family of the networks trained on
+/// (`None` unless they share one initialisation of `nbrdf train`, [`Family::common`]).
 fn training_materials(
     nets: &[(String, Nbrdf)],
     extra: Option<&Path>,
-) -> Result<(FlatNetworks, usize, Split)> {
+) -> Result<(FlatNetworks, usize, Split, Option<Family>)> {
     let hidden = nets[0].1.hidden_width();
     if nets.iter().any(|(_, n)| n.hidden_width() != hidden) {
         return Err(invalid("the networks differ in hidden width".into()));
@@ -110,6 +112,7 @@ fn training_materials(
         .iter()
         .map(|(n, net)| (n.clone(), net.to_flat()))
         .collect();
+    let mut used: Vec<Nbrdf> = Vec::new();
     if let Some(dir) = extra {
         for (name, net) in read_nbrdf_dir(dir)? {
             if net.hidden_width() != hidden {
@@ -121,10 +124,12 @@ fn training_materials(
             }
             if split.train.contains(&name) && !split.validation.contains(&name) {
                 materials.push((name, net.to_flat()));
+                used.push(net);
             }
         }
     }
-    Ok((materials, hidden, split))
+    let family = Family::common(nets.iter().map(|(_, n)| n).chain(&used));
+    Ok((materials, hidden, split, family))
 }
 
 /// Trains the autoencoder (of the best of `request.seeds` seeds) and writes it with its
@@ -149,7 +154,8 @@ pub fn train_autoencoder(
     let seeds = usize::try_from(request.seeds).unwrap_or(usize::MAX);
     limits::check_range("--seeds", seeds, 1, limits::MAX_ITERATIONS)?;
     let nets = read_nbrdf_dir(&request.nbrdfs)?;
-    let (materials, hidden, split) = training_materials(&nets, request.extra_nbrdfs.as_deref())?;
+    let (materials, hidden, split, family) =
+        training_materials(&nets, request.extra_nbrdfs.as_deref())?;
     let config = &request.config;
     let lobes: Vec<(String, f64, f64)> = if config.lobe_weight > 0.0 {
         with_threads(request.threads, || {
@@ -213,6 +219,8 @@ pub fn train_autoencoder(
             serde_json::to_value(&history).unwrap_or_default(),
         );
         obj.insert("nbrdfs".into(), request.nbrdfs.display().to_string().into());
+        // What the commands that encode read back to decide which networks to re-learn.
+        obj.insert("networks".into(), Family::record(family));
         if let Some(dir) = &request.extra_nbrdfs {
             obj.insert("extra_nbrdfs".into(), dir.display().to_string().into());
         }
@@ -234,14 +242,45 @@ pub fn train_autoencoder(
 #[derive(Clone, Debug, PartialEq)]
 pub struct Encoded {
     pub code: Vec<f32>,
+    /// Encoding time (a re-learn before it not included).
     pub milliseconds: f64,
 }
 
-/// The code of the network at `input`, refined by `refine` iterations.
-pub fn encode(ae: &Path, input: &Path, refine: usize) -> Result<Encoded> {
+/// How the commands that encode networks treat those foreign to the autoencoder's family
+/// ([`family::encodable`]), and who hears about it.
+pub struct Encoding<'a> {
+    pub relearn: Relearn,
+    pub observer: &'a mut dyn RelearnObserver,
+}
+
+impl Encoding<'_> {
+    /// `net` as `ae` can encode it.
+    pub fn prepare<'n>(
+        &mut self,
+        ae: &AutoEncoder,
+        net: &'n Nbrdf,
+    ) -> Result<std::borrow::Cow<'n, Nbrdf>> {
+        if let Relearn::Auto {
+            max_epochs: Some(epochs),
+        } = self.relearn
+        {
+            limits::check_range("--relearn-epochs", epochs, 1, limits::MAX_EPOCHS)?;
+        }
+        family::encodable(Family::of(ae), net, self.relearn, &mut *self.observer)
+    }
+}
+
+/// The code of the network at `input` (re-learnt first if foreign, see [`Encoding`]), refined
+/// by `refine` iterations.
+pub fn encode(
+    ae: &AutoEncoder,
+    input: &Path,
+    refine: usize,
+    encoding: &mut Encoding<'_>,
+) -> Result<Encoded> {
     limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
-    let ae = AutoEncoder::load(ae)?;
     let net = Nbrdf::load(input)?;
+    let net = encoding.prepare(ae, &net)?;
     let t0 = Instant::now();
     let code = ae.encode_refined(&net, refine)?;
     Ok(Encoded {
@@ -272,8 +311,7 @@ fn stem_name(path: &Path) -> String {
 
 /// Decodes the code at `code` into a network named `name` (default: `output`'s stem) and
 /// writes it to `output`.
-pub fn decode(ae: &Path, code: &Path, output: &Path, name: Option<&str>) -> Result<()> {
-    let ae = AutoEncoder::load(ae)?;
+pub fn decode(ae: &AutoEncoder, code: &Path, output: &Path, name: Option<&str>) -> Result<()> {
     let code = read_code(code)?;
     let name = name.map_or_else(|| stem_name(output), str::to_string);
     ae.decode(&code, &name)?.save(output)
@@ -281,18 +319,20 @@ pub fn decode(ae: &Path, code: &Path, output: &Path, name: Option<&str>) -> Resu
 
 /// Writes `steps` networks along the latent path (`latent_NN`) and the weight-space path
 /// (`weights_NN`) from `a` to `b` into `output`; the endpoint codes are refined by `refine`
-/// iterations.
+/// iterations. Foreign endpoints are re-learnt first ([`Encoding`]), and both paths start
+/// from those: weights are only comparable between networks of one initialisation.
 pub fn interpolate(
-    ae: &Path,
+    ae: &AutoEncoder,
     (a, b): (&Path, &Path),
     steps: usize,
     refine: usize,
     output: &Path,
+    encoding: &mut Encoding<'_>,
 ) -> Result<()> {
     limits::check_range("--steps", steps, 2, 1000)?;
     limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
-    let ae = AutoEncoder::load(ae)?;
     let (a, b) = (Nbrdf::load(a)?, Nbrdf::load(b)?);
+    let (a, b) = (encoding.prepare(ae, &a)?, encoding.prepare(ae, &b)?);
     let (za, zb) = (
         ae.encode_refined(&a, refine)?,
         ae.encode_refined(&b, refine)?,
@@ -368,7 +408,6 @@ impl SplitPart {
 /// What `ae eval` evaluates.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AeEvalRequest {
-    pub ae: PathBuf,
     pub nbrdfs: PathBuf,
     pub pca_tables: PcaTables,
     pub components: usize,
@@ -443,10 +482,9 @@ pub struct AeEvalReport {
 
 /// AE and PCA reconstructions of a part of the split in image space (64 x 64 sphere, light at
 /// 45 degrees; MAE and RMSE on linear pixels, SSIM tone-mapped).
-pub fn evaluate_autoencoder(request: &AeEvalRequest) -> Result<AeEvalReport> {
+pub fn evaluate_autoencoder(ae: &AutoEncoder, request: &AeEvalRequest) -> Result<AeEvalReport> {
     limits::check_range("--refine", request.refine, 0, limits::MAX_ITERATIONS)?;
     limits::check_range("--components", request.components, 1, 10_000)?;
-    let ae = AutoEncoder::load(&request.ae)?;
     let nets = read_nbrdf_dir(&request.nbrdfs)?;
     let get = |name: &String| -> Result<&Nbrdf> {
         nets.iter()

@@ -1,6 +1,7 @@
 //! `nbrdf predictor train|eval` and `nbrdf predict-phong`: sampling lobes predicted from
 //! autoencoder codes.
 
+use super::autoencoder::Encoding;
 use super::{read_nbrdf_dir, with_threads};
 use crate::error::{NbrdfError, Result};
 use crate::latent::autoencoder::{permute_outputs, AutoEncoder, PERMUTATIONS};
@@ -34,7 +35,6 @@ pub enum PredictorLoss {
 /// What `predictor train` trains.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PredictorTrainRequest {
-    pub ae: PathBuf,
     pub nbrdfs: PathBuf,
     /// More labelled networks; those of non-training materials are ignored.
     pub extra_nbrdfs: Option<PathBuf>,
@@ -142,7 +142,10 @@ fn rmse_ratio(relative_variance: f64, fitted_relative_variance: f64) -> f64 {
 
 /// Trains the predictor on the codes of the training split's networks (every RGB
 /// permutation), labelled by [`lobe_label`], and writes it.
-pub fn train_predictor(request: &PredictorTrainRequest) -> Result<PredictorTrainReport> {
+pub fn train_predictor(
+    ae: &AutoEncoder,
+    request: &PredictorTrainRequest,
+) -> Result<PredictorTrainReport> {
     use super::limits::{check_range, MAX_ITERATIONS};
     check_range("--refine", request.refine, 0, MAX_ITERATIONS)?;
     check_range("--cross-validate", request.cross_validate, 0, 1000)?;
@@ -151,13 +154,12 @@ pub fn train_predictor(request: &PredictorTrainRequest) -> Result<PredictorTrain
             "--cross-validate needs at least 2 folds (0 turns it off)".into(),
         ));
     }
-    let ae = AutoEncoder::load(&request.ae)?;
     let mut nets = read_nbrdf_dir(&request.nbrdfs)?;
     if let Some(dir) = &request.extra_nbrdfs {
         // Only training materials: `train` below keeps those.
         nets.extend(read_nbrdf_dir(dir)?);
     }
-    with_threads(request.threads, || train_on_split(request, &ae, &nets))?
+    with_threads(request.threads, || train_on_split(request, ae, &nets))?
 }
 
 fn train_on_split(
@@ -404,13 +406,11 @@ pub struct PredictorEvalReport {
 /// Fitted vs predicted lobes of the autoencoder's test split, scored by the relative variance
 /// of BSDF sampling.
 pub fn evaluate_predictor(
-    ae: &Path,
-    predictor: &Path,
+    ae: &AutoEncoder,
+    pred: &PhongPredictor,
     nbrdfs: &Path,
     threads: Option<usize>,
 ) -> Result<PredictorEvalReport> {
-    let ae = AutoEncoder::load(ae)?;
-    let pred = PhongPredictor::load(predictor)?;
     let nets = read_nbrdf_dir(nbrdfs)?;
     with_threads(threads, || -> Result<PredictorEvalReport> {
         let mut test = Vec::new();
@@ -463,7 +463,7 @@ pub struct PredictReport {
     pub exponent: f32,
     pub specular_weight: f32,
     pub output: PathBuf,
-    /// Encoding and prediction time.
+    /// Encoding and prediction time (a re-learn before it not included).
     pub milliseconds: f64,
 }
 
@@ -480,19 +480,21 @@ impl fmt::Display for PredictReport {
 }
 
 /// Predicts the network's lobe from its code and writes it as "predicted" sampling to
-/// `output` (default: in place).
+/// `output` (default: in place). A network foreign to the autoencoder's family is re-learnt
+/// first ([`Encoding`]) and the lobe predicted from that version; the file written is the
+/// network read, with the lobe.
 pub fn predict_phong(
-    ae: &Path,
-    predictor: &Path,
+    ae: &AutoEncoder,
+    pred: &PhongPredictor,
     input: &Path,
     output: Option<&Path>,
+    encoding: &mut Encoding<'_>,
 ) -> Result<PredictReport> {
-    let ae = AutoEncoder::load(ae)?;
-    let pred = PhongPredictor::load(predictor)?;
     let mut net = Nbrdf::load(input)?;
+    let encodable = encoding.prepare(ae, &net)?;
     let t0 = Instant::now();
-    let code = ae.encode_refined(&net, pred.refine_steps)?;
-    let (n, w) = pred.predict(&pred.inputs(&code, &net));
+    let code = ae.encode_refined(&encodable, pred.refine_steps)?;
+    let (n, w) = pred.predict(&pred.inputs(&code, &encodable));
     let milliseconds = t0.elapsed().as_secs_f64() * 1e3;
     net.sampling = Some(SamplingParams {
         model: SAMPLING_MODEL_BLINN_PHONG.to_string(),

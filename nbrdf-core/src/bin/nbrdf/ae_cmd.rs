@@ -1,5 +1,6 @@
 //! `nbrdf ae train|encode|decode|eval` and `nbrdf interpolate`.
 
+use super::pretrained::{self, Messages, RelearnArgs};
 use super::{emit, progress};
 use clap::{Args, Subcommand};
 use indicatif::ProgressBar;
@@ -100,9 +101,9 @@ pub struct AeTrainArgs {
 
 #[derive(Args)]
 pub struct AeEncodeArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
+    ae: Option<PathBuf>,
     /// The neural BRDF to read.
     #[arg(value_name = "NBRDF.json")]
     input: PathBuf,
@@ -113,13 +114,15 @@ pub struct AeEncodeArgs {
     /// loss against the network's own sphere image (analysis by synthesis; ~10 ms each).
     #[arg(long, default_value_t = 0)]
     refine: usize,
+    #[command(flatten)]
+    relearn: RelearnArgs,
 }
 
 #[derive(Args)]
 pub struct AeDecodeArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
+    ae: Option<PathBuf>,
     /// The latent code: a JSON array of 32 numbers (from `nbrdf ae encode`).
     #[arg(value_name = "CODE.json")]
     code: PathBuf,
@@ -133,9 +136,9 @@ pub struct AeDecodeArgs {
 
 #[derive(Args)]
 pub struct InterpolateArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
+    ae: Option<PathBuf>,
     /// The first material (a neural BRDF).
     #[arg(value_name = "A.json")]
     a: PathBuf,
@@ -152,6 +155,8 @@ pub struct InterpolateArgs {
     /// Where to write the result.
     #[arg(short, long, value_name = "DIR")]
     output: PathBuf,
+    #[command(flatten)]
+    relearn: RelearnArgs,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -173,9 +178,9 @@ pub enum SplitArg {
 
 #[derive(Args)]
 pub struct AeEvalArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
+    ae: Option<PathBuf>,
     /// The networks the autoencoder was trained on.
     #[arg(long, value_name = "DIR")]
     nbrdfs: PathBuf,
@@ -315,7 +320,13 @@ fn run_ae_train(args: &AeTrainArgs) -> Result<()> {
 }
 
 fn run_ae_encode(args: &AeEncodeArgs) -> Result<()> {
-    let encoded = ops_ae::encode(&args.ae, &args.input, args.refine)?;
+    let ae = pretrained::autoencoder(args.ae.as_deref())?;
+    let encoded = ops_ae::encode(
+        &ae,
+        &args.input,
+        args.refine,
+        &mut pretrained::encoding(&args.relearn, &mut Messages),
+    )?;
     if args.timing {
         eprintln!("encoded in {:.3} ms", encoded.milliseconds);
     }
@@ -325,17 +336,20 @@ fn run_ae_encode(args: &AeEncodeArgs) -> Result<()> {
 }
 
 fn run_ae_decode(args: &AeDecodeArgs) -> Result<()> {
-    ops_ae::decode(&args.ae, &args.code, &args.output, args.name.as_deref())?;
+    let ae = pretrained::autoencoder(args.ae.as_deref())?;
+    ops_ae::decode(&ae, &args.code, &args.output, args.name.as_deref())?;
     emit(&format!("wrote {}\n", args.output.display()))
 }
 
 pub fn run_interpolate(args: &InterpolateArgs) -> Result<()> {
+    let ae = pretrained::autoencoder(args.ae.as_deref())?;
     ops_ae::interpolate(
-        &args.ae,
+        &ae,
         (&args.a, &args.b),
         args.steps,
         args.refine,
         &args.output,
+        &mut pretrained::encoding(&args.relearn, &mut Messages),
     )?;
     emit(&format!(
         "wrote {} latent_NN and weights_NN networks to {}\n",
@@ -346,14 +360,17 @@ pub fn run_interpolate(args: &InterpolateArgs) -> Result<()> {
 
 /// `nbrdf ae eval`: AE and PCA reconstructions of the test split in image space, as JSON.
 fn run_ae_eval(args: &AeEvalArgs) -> Result<()> {
-    let report = ops_ae::evaluate_autoencoder(&AeEvalRequest {
-        ae: args.ae.clone(),
-        nbrdfs: args.nbrdfs.clone(),
-        pca_tables: args.pca_tables.into(),
-        components: args.components,
-        split: args.split.into(),
-        refine: args.refine,
-        threads: args.threads,
-    })?;
+    let ae = pretrained::autoencoder(args.ae.as_deref())?;
+    let report = ops_ae::evaluate_autoencoder(
+        &ae,
+        &AeEvalRequest {
+            nbrdfs: args.nbrdfs.clone(),
+            pca_tables: args.pca_tables.into(),
+            components: args.components,
+            split: args.split.into(),
+            refine: args.refine,
+            threads: args.threads,
+        },
+    )?;
     emit(&to_json_pretty(&report)?)
 }

@@ -20,6 +20,7 @@ use std::process::ExitCode;
 
 mod ae_cmd;
 mod predictor_cmd;
+mod pretrained;
 mod progress;
 #[cfg(test)]
 mod tests;

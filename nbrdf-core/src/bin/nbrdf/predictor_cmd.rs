@@ -1,6 +1,7 @@
 //! `nbrdf predictor train|eval` and `nbrdf predict-phong`.
 
 use super::emit;
+use super::pretrained::{self, Messages, RelearnArgs};
 use clap::{Args, Subcommand};
 use nbrdf_core::latent::predictor::PredictorConfig;
 use nbrdf_core::ops::predictor::{self as ops_pred, PredictorLoss as Loss, PredictorTrainRequest};
@@ -28,9 +29,9 @@ pub enum PredictorLoss {
 
 #[derive(Args)]
 pub struct PredictorTrainArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
+    ae: Option<PathBuf>,
     /// The networks of the training split (with or without fitted sampling parameters).
     #[arg(long, value_name = "DIR")]
     nbrdfs: PathBuf,
@@ -85,12 +86,13 @@ pub struct PredictorTrainArgs {
 
 #[derive(Args)]
 pub struct PredictorEvalArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
-    /// The trained Phong-parameter predictor (from `nbrdf predictor train`).
+    ae: Option<PathBuf>,
+    /// The predictor (from `nbrdf predictor train`; default: the built-in one, which reads
+    /// the built-in autoencoder's codes: --ae needs --predictor).
     #[arg(long, value_name = "P.json")]
-    predictor: PathBuf,
+    predictor: Option<PathBuf>,
     /// The networks (the test split is read from the autoencoder).
     #[arg(long, value_name = "DIR")]
     nbrdfs: PathBuf,
@@ -101,12 +103,13 @@ pub struct PredictorEvalArgs {
 
 #[derive(Args)]
 pub struct PredictPhongArgs {
-    /// The trained autoencoder (from `nbrdf ae train`).
+    /// The autoencoder (from `nbrdf ae train`; default: the built-in one).
     #[arg(long, value_name = "AE.json")]
-    ae: PathBuf,
-    /// The trained Phong-parameter predictor (from `nbrdf predictor train`).
+    ae: Option<PathBuf>,
+    /// The predictor (from `nbrdf predictor train`; default: the built-in one, which reads
+    /// the built-in autoencoder's codes: --ae needs --predictor).
     #[arg(long, value_name = "P.json")]
-    predictor: PathBuf,
+    predictor: Option<PathBuf>,
     /// The neural BRDF to read.
     #[arg(value_name = "NBRDF.json")]
     input: PathBuf,
@@ -116,6 +119,8 @@ pub struct PredictPhongArgs {
     /// Print the encode + predict time to stderr.
     #[arg(long)]
     timing: bool,
+    #[command(flatten)]
+    relearn: RelearnArgs,
 }
 
 impl From<PredictorLoss> for Loss {
@@ -135,40 +140,45 @@ pub fn run_predictor(command: PredictorCommand) -> Result<()> {
 }
 
 fn run_predictor_train(args: &PredictorTrainArgs) -> Result<()> {
-    let report = ops_pred::train_predictor(&PredictorTrainRequest {
-        ae: args.ae.clone(),
-        nbrdfs: args.nbrdfs.clone(),
-        extra_nbrdfs: args.extra_nbrdfs.clone(),
-        output: args.output.clone(),
-        config: PredictorConfig {
-            hidden: args.hidden,
-            iterations: args.iterations,
-            seed: args.seed,
-            members: args.members,
-            weight_decay: args.weight_decay,
+    let ae = pretrained::autoencoder(args.ae.as_deref())?;
+    let report = ops_pred::train_predictor(
+        &ae,
+        &PredictorTrainRequest {
+            nbrdfs: args.nbrdfs.clone(),
+            extra_nbrdfs: args.extra_nbrdfs.clone(),
+            output: args.output.clone(),
+            config: PredictorConfig {
+                hidden: args.hidden,
+                iterations: args.iterations,
+                seed: args.seed,
+                members: args.members,
+                weight_decay: args.weight_decay,
+            },
+            loss: args.loss.into(),
+            refit: args.refit,
+            cross_validate: args.cross_validate,
+            code_only: args.code_only,
+            refine: args.refine,
+            threads: args.threads,
         },
-        loss: args.loss.into(),
-        refit: args.refit,
-        cross_validate: args.cross_validate,
-        code_only: args.code_only,
-        refine: args.refine,
-        threads: args.threads,
-    })?;
+    )?;
     emit(&report.to_string())
 }
 
 fn run_predictor_eval(args: &PredictorEvalArgs) -> Result<()> {
-    let report =
-        ops_pred::evaluate_predictor(&args.ae, &args.predictor, &args.nbrdfs, args.threads)?;
+    let (ae, predictor) = pretrained::models(args.ae.as_deref(), args.predictor.as_deref())?;
+    let report = ops_pred::evaluate_predictor(&ae, &predictor, &args.nbrdfs, args.threads)?;
     emit(&to_json_pretty(&report)?)
 }
 
 pub fn run_predict_phong(args: &PredictPhongArgs) -> Result<()> {
+    let (ae, predictor) = pretrained::models(args.ae.as_deref(), args.predictor.as_deref())?;
     let report = ops_pred::predict_phong(
-        &args.ae,
-        &args.predictor,
+        &ae,
+        &predictor,
         &args.input,
         args.output.as_deref(),
+        &mut pretrained::encoding(&args.relearn, &mut Messages),
     )?;
     if args.timing {
         eprintln!("encoded and predicted in {:.3} ms", report.milliseconds);

@@ -187,3 +187,74 @@ fn info_of_a_missing_file_names_it() {
         .to_string()
         .contains("nbrdf-no-such-file.binary"));
 }
+
+/// The built-in models are what `python -m nbrdf_tools.pretrained` packages: an autoencoder that
+/// records the family of its training networks (`nbrdf train`, seed 0, the default width), which
+/// decides what is re-learnt, and a predictor of its codes.
+#[test]
+fn builtin_models_record_their_family() {
+    use nbrdf_core::latent::family::Family;
+    use nbrdf_core::network::{Nbrdf, DEFAULT_HIDDEN};
+    let (ae, predictor) = pretrained::models(None, None).unwrap();
+    assert_eq!(
+        Family::of(&ae),
+        Some(Family {
+            hidden: DEFAULT_HIDDEN,
+            seed: 0
+        })
+    );
+    assert_eq!(predictor.provenance["networks"], ae.provenance["networks"]);
+    assert_eq!((ae.split.train.len(), ae.split.test.len()), (80, 20));
+    let net = Nbrdf::random("n", DEFAULT_HIDDEN, 1);
+    let code = ae.encode(&net).unwrap();
+    assert_eq!(predictor.inputs(&code, &net).len(), predictor.mlp.inputs());
+    let (n, w) = predictor.predict(&predictor.inputs(&code, &net));
+    assert!(n.is_finite() && n >= 0.0 && (0.0..=1.0).contains(&w));
+}
+
+#[test]
+fn models_are_optional_but_a_predictor_goes_with_its_autoencoder() {
+    for command in [
+        vec!["nbrdf", "predict-phong", "n.nbrdf.json"],
+        vec!["nbrdf", "predict-phong", "n.nbrdf.json", "--no-relearn"],
+        vec![
+            "nbrdf",
+            "predict-phong",
+            "n.nbrdf.json",
+            "--relearn-epochs",
+            "3",
+        ],
+        vec!["nbrdf", "ae", "encode", "n.nbrdf.json"],
+        vec!["nbrdf", "ae", "decode", "code.json", "-o", "d.nbrdf.json"],
+        vec!["nbrdf", "ae", "eval", "--nbrdfs", "dir"],
+        vec!["nbrdf", "interpolate", "a.json", "b.json", "-o", "dir"],
+        vec![
+            "nbrdf",
+            "predictor",
+            "train",
+            "--nbrdfs",
+            "dir",
+            "-o",
+            "p.json",
+        ],
+        vec!["nbrdf", "predictor", "eval", "--nbrdfs", "dir"],
+    ] {
+        assert!(Cli::try_parse_from(&command).is_ok(), "{command:?}");
+    }
+    for command in [
+        vec![
+            "nbrdf",
+            "predict-phong",
+            "n.json",
+            "--no-relearn",
+            "--relearn-epochs",
+            "3",
+        ],
+        vec!["nbrdf", "predict-phong", "n.json", "--relearn-epochs", "0"],
+    ] {
+        assert!(Cli::try_parse_from(&command).is_err(), "{command:?}");
+    }
+    let refused = pretrained::models(Some(std::path::Path::new("ae.json")), None).unwrap_err();
+    assert!(matches!(refused, NbrdfError::Usage(_)), "{refused}");
+    assert!(refused.to_string().contains("--predictor"));
+}

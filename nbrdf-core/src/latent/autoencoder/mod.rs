@@ -217,11 +217,19 @@ impl AutoEncoder {
 
     pub fn load(path: impl AsRef<std::path::Path>) -> Result<Self> {
         let path = path.as_ref();
-        let ae: AutoEncoder = super::read_json(path)?;
+        Self::checked(super::read_json(path)?, &path.display().to_string())
+    }
+
+    /// An autoencoder from the text of an AE.json file (e.g. one embedded in a program);
+    /// errors name `origin`.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self> {
+        Self::checked(super::parse_json(text, origin)?, origin)
+    }
+
+    fn checked(ae: AutoEncoder, origin: &str) -> Result<Self> {
         if ae.format != FORMAT_NAME || ae.mean.len() != ae.encoder.inputs() {
             return Err(NbrdfError::InvalidArgument(format!(
-                "{}: not an NBRDF autoencoder",
-                path.display()
+                "{origin}: not an NBRDF autoencoder"
             )));
         }
         Ok(ae)
