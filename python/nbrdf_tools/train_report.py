@@ -68,18 +68,19 @@ CSV_COLUMNS = ["set", "material", "method", "reference", *METRICS, "train_second
 @dataclass
 class Recipe:
     samples: int | None  # None: the trainer's default (the paper's 800,000)
-    epochs: int | None  # None: the trainer's default (100, early stopping)
+    epochs: int | None  # None: the trainer's default (300, adaptive budget)
     min_epochs: int | None  # None: the trainer's default (30)
-    patience: int | None  # None: the trainer's default (10)
+    patience: int | None  # None: the trainer's default (20)
     seed: int
     resolution: int
     metric_samples: int
     rgl_fold: str
+    fixed_budget: bool = False  # the trainer's --fixed-budget (the paper's, the defaults before 0.2)
 
     def key(self, set_name: str) -> dict:
         """What a stored result must match to be reused."""
         key = {"samples": self.samples, "epochs": self.epochs, "min_epochs": self.min_epochs,
-               "patience": self.patience, "seed": self.seed,
+               "patience": self.patience, "seed": self.seed, "budget": "fixed" if self.fixed_budget else "adaptive",
                "resolution": self.resolution, "metric_samples": self.metric_samples, "metrics": METRICS_VERSION}
         if set_name == "rgl":
             key["phi_fold"] = self.rgl_fold
@@ -194,6 +195,8 @@ def train_one(nbrdf: Path, table: Path, network: Path, sampling: str, recipe: Re
         cmd += ["--min-epochs", recipe.min_epochs]
     if recipe.patience is not None:
         cmd += ["--patience", recipe.patience]
+    if recipe.fixed_budget:
+        cmd += ["--fixed-budget"]
     if threads is not None:
         cmd += ["--threads", threads]
     network.parent.mkdir(parents=True, exist_ok=True)
@@ -481,10 +484,13 @@ def parse_args(argv):
     p.add_argument("--materials", help="comma-separated subset of material names (of either set); RGL materials "
                                        "may be paths of .bsdf measurements")
     p.add_argument("--samples", type=int, help="training samples per network (default: the trainer's, 800,000)")
-    p.add_argument("--epochs", type=int, help="maximum epochs (default: the trainer's, 100 with early stopping)")
+    p.add_argument("--epochs", type=int, help="maximum epochs (default: the trainer's, 300 with early stopping)")
     p.add_argument("--min-epochs", type=int, help="no early stopping before this epoch (default: the trainer's, 30)")
     p.add_argument("--patience", type=int,
-                   help="epochs without a 0.1 %% validation improvement before stopping (default: the trainer's, 10)")
+                   help="epochs without a 0.1 %% validation improvement before the learning rate drops or "
+                        "training stops (default: the trainer's, 20)")
+    p.add_argument("--fixed-budget", action="store_true",
+                   help="train with the paper's fixed budget (nbrdf train --fixed-budget, the defaults before 0.2)")
     p.add_argument("--quick", action="store_true",
                    help=f"a check, not a result: 5 materials per set (unless --materials), {QUICK_SAMPLES:,} samples, "
                         f"{QUICK_EPOCHS} epochs, 64x64 spheres, 20,000 metric directions (unless given)")
@@ -525,6 +531,7 @@ def main(argv: list[str] | None = None) -> int:
         resolution=args.resolution or (64 if args.quick else 128),
         metric_samples=args.metric_samples or (20_000 if args.quick else 100_000),
         rgl_fold=args.rgl_fold,
+        fixed_budget=args.fixed_budget,
     )
     wanted = [m.strip() for m in args.materials.split(",") if m.strip()] if args.materials else None
     have_rgl = (args.shared / "data" / "rgl").is_dir()

@@ -122,13 +122,15 @@ impl Family {
         Some("no provenance of `nbrdf train`".to_string())
     }
 
-    /// The training settings of a re-learn: `nbrdf train`'s defaults from this family's
+    /// The training settings of a re-learn: the fixed budget the family's networks were trained
+    /// with ([`TrainConfig::fixed_budget`], `nbrdf train`'s defaults before 0.2; a re-learnt
+    /// network should land where the autoencoder's training networks did), from this family's
     /// initialisation.
     pub fn train_config(&self) -> TrainConfig {
         TrainConfig {
             hidden: self.hidden,
             seed: self.seed,
-            ..TrainConfig::default()
+            ..TrainConfig::fixed_budget()
         }
     }
 
