@@ -637,3 +637,13 @@ fn a_vndf_row_without_density_evaluates_to_the_closed_form() {
         );
     }
 }
+
+/// Grazing directions on opposite sides have a half vector too short to normalise in float32
+/// (found by rgl_structured): no NaN, no reflection.
+#[test]
+fn opposite_grazing_directions_give_zero() {
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let (view, light) = (Vec3::new(-1.0, 0.0, 1e-30), Vec3::new(1.0, 0.0, 1e-30));
+    assert_eq!(m.eval_cos_f32(view, light), [0.0; 3]);
+    assert_eq!(Brdf::eval(&m, view, light), [0.0; 3]);
+}

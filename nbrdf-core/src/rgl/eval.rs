@@ -161,6 +161,11 @@ impl RglMeasurement {
             wo.y = mulsign_neg(wo.y, sy);
         }
         let m = normalize(wo + wi);
+        // Grazing directions on opposite sides: the half vector's squared length underflows and
+        // normalising it gives NaN (in Mitsuba too); there is no reflection to measure there.
+        if !m.is_finite() {
+            return [0.0; 3];
+        }
         let theta_i = elevation(wi);
         let phi_i = atan2(wi.y, wi.x);
         let theta_m = elevation(m);
