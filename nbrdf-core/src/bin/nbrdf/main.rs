@@ -47,7 +47,7 @@ enum Command {
     Tabulate(TabulateArgs),
     /// Validate a MERL-format table and print per-channel reflectance statistics.
     Info(InfoArgs),
-    /// Train a neural BRDF on a MERL-format table and write it as NAME.nbrdf.json.
+    /// Train a neural BRDF on a MERL-format table or an RGL measurement, write NAME.nbrdf.json.
     Train(train_cmd::TrainArgs),
     /// Fit the Blinn-Phong sampling lobe (exponent, specular weight) to a table or a network.
     FitPhong(FitPhongArgs),
