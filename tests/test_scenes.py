@@ -360,7 +360,13 @@ def test_rgl_materials_are_accepted_as_paths(tmp_path):
 
 
 def test_bench_rays_quick_json(tmp_path):
+    """The speed table's run: every BSDF of both modes with Mrays/s, memory and ratios; the
+    network's sampling strategies; Mitsuba's measured BSDF on the shared RGL file (or the note
+    naming it when the shared data is absent)."""
     cli = _cli_or_skip()
+    from conftest import SHARED
+
+    rgl = SHARED / "data" / "rgl" / "paper_white_rgb.bsdf"
     out = tmp_path / "bench.json"
     run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_rays", "--quick", "--no-progress",
                           "--json", str(out), "--out", str(tmp_path / "bench"), "--cli", str(cli)],
@@ -368,11 +374,36 @@ def test_bench_rays_quick_json(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     report = json.loads(out.read_text())
     assert report["scene"] == "veach" and report["mode"] == "default" and report["variant"] == "llvm_ad_rgb"
-    assert [run["mode"] for run in report["runs"]] == ["default", "wavefront"]
-    for run in report["runs"]:
-        assert run["scene"] == "veach" and run["variant"] == "llvm_ad_rgb"
-        for name in ("nbrdf", "roughconductor", "diffuse", "principled"):
-            assert run["bsdfs"][name]["mrays_per_s"] > 0 and run["bsdfs"][name]["seconds"] > 0
+    assert [mode_run["mode"] for mode_run in report["runs"]] == ["default", "wavefront"]
+    network = tmp_path / "bench" / "gold-metallic-paint.nbrdf.json"
+    layers = json.loads(network.read_text())["layers"]
+    parameters = sum(len(layer["weights"]) + len(layer["bias"]) for layer in layers)
+    assert parameters == sum(layer["inputs"] * layer["outputs"] + layer["outputs"] for layer in layers)
+    assert "second_lobe" in json.loads(network.read_text())["sampling"]  # fit-phong --lobes 2
+    names = ("nbrdf", "nbrdf-opaque", "nbrdf-cosine", "nbrdf-phong", "nbrdf-two_lobe", "merl", "roughconductor",
+             "roughplastic", "principled", "diffuse")
+    for mode_run in report["runs"]:
+        bsdfs = mode_run["bsdfs"]
+        assert mode_run["scene"] == "veach" and mode_run["variant"] == "llvm_ad_rgb"
+        for name in names:
+            assert bsdfs[name]["mrays_per_s"] > 0 and bsdfs[name]["seconds"] > 0, name
+            assert bsdfs[name]["memory_bytes"] > 0, name
+            ratio = bsdfs[name]["ratio_vs_roughconductor"]
+            assert ratio == pytest.approx(bsdfs[name]["mrays_per_s"] / bsdfs["roughconductor"]["mrays_per_s"])
+        for name in ("nbrdf", "nbrdf-opaque", "nbrdf-two_lobe"):
+            assert bsdfs[name]["memory_bytes"] == 4 * parameters and bsdfs[name]["file_bytes"] == network.stat().st_size
+        assert bsdfs["merl"]["memory_bytes"] == 34_992_012  # 12-byte header + 3 x 90x90x180 float64
+        # diffuse: one RGB reflectance; roughconductor: alpha, eta, k.
+        assert bsdfs["diffuse"]["memory_bytes"] == 12 and bsdfs["roughconductor"]["memory_bytes"] == 12
+        if rgl.is_file():
+            assert bsdfs["measured"]["memory_bytes"] == rgl.stat().st_size
+            assert bsdfs["measured"]["ratio_vs_measured"] == 1.0
+            assert bsdfs["nbrdf"]["ratio_vs_measured"] == pytest.approx(
+                bsdfs["nbrdf"]["mrays_per_s"] / bsdfs["measured"]["mrays_per_s"])
+    if rgl.is_file():
+        assert report["measured"] == str(rgl) and "vs measured" in run.stdout
+    else:
+        assert "measured" not in report["bsdfs"] and f"measured skipped: {rgl} is missing" in run.stdout
     assert {"nbrdf-rust", "merl"} <= set(report["runs"][1]["bsdfs"])
     chart = tmp_path / "bench" / "rays_per_second.png"
     assert chart.stat().st_size > 1000 and chart.with_suffix(".pdf").is_file()
