@@ -310,9 +310,13 @@ def test_convergence_quick_json(tmp_path):
         assert {"scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "relmse", "mape",
                 "psnr_peak1"} <= set(row)
         assert row["scene"] == "veach"
-        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
+        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "measured")
         assert row["seconds"] > 0 and np.isfinite(row["rmse"])
     assert {r["strategy"] for r in rows} >= {"uniform", "cosine", "phong-predicted"}
+    if " fit-phong " in help_text:
+        assert {"phong-fit", "two-lobe-fit"} <= {r["strategy"] for r in rows}
+        exponents, weights = report["equal_time"][0]["two_lobe_exponents"], report["equal_time"][0]["two_lobe_weights"]
+        assert len(exponents) == 2 and min(exponents) >= 0 and min(weights) >= 0 and sum(weights) <= 1 + 1e-6
     assert sorted({r["spp"] for r in rows}) == [1, 2, 4]
     lobe = report["equal_time"][0]
     assert lobe["predicted_exponent"] >= 0 and 0 <= lobe["predicted_specular_weight"] <= 1
@@ -327,6 +331,52 @@ def test_convergence_quick_json(tmp_path):
     # --out holds the caches too.
     assert list((tmp_path / "out" / "materials").glob("*.nbrdf.json"))
     assert list((tmp_path / "out" / "references").glob("*.exr"))
+
+
+def test_convergence_rgl_path_against_measured(tmp_path, shared):
+    """An RGL measurement given as a path outside the shared data: every NBRDF strategy is
+    compared with Mitsuba's measured at equal time over several seeds."""
+    cli = _cli_or_skip()
+    mine = tmp_path / "my_paint.bsdf"
+    mine.write_bytes((shared / "data" / "rgl" / "cc_ibiza_sunset_rgb.bsdf").read_bytes())
+    out = tmp_path / "result.json"
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
+                          "--materials", "", "--rgl", str(mine), "--seeds", "3", "--json", str(out),
+                          "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(out.read_text())
+    assert {r["material"] for r in report["results"]} == {"my_paint"}
+    assert {r["strategy"] for r in report["results"]} == {"uniform", "cosine", "phong-fit", "two-lobe-fit",
+                                                          "measured"}
+    assert {r["seed"] for r in report["results"]} == {0, 1, 2}
+    summary = report["equal_time"][0]
+    assert summary["statistic"] == "median over seeds" and summary["seeds"] == 3
+    assert set(summary["vs_measured"]) == {"uniform", "cosine", "phong-fit", "two-lobe-fit"}
+    assert summary["best_vs_measured"] == min(summary["vs_measured"].values())
+    assert summary["vs_measured"][summary["best_nbrdf"]] == summary["best_vs_measured"]
+    text = (tmp_path / "out" / "veach" / "summary.md").read_text()
+    assert "two-lobe-fit / measured" in text and f"| {summary['best_nbrdf']} " in text
+
+
+def test_equal_time_summary_is_robust_to_one_bad_seed():
+    """Median over seeds: one seed with a firefly (RMSE x100) moves the pooled RMSE, not the
+    median; the ratio to measured and the best strategy follow the median."""
+    from nbrdf_tools.convergence import equal_time_summary
+
+    rows = []
+    for strategy, base in (("cosine", 1.0), ("phong-fit", 0.5), ("measured", 0.6)):
+        for spp, seconds in ((1, 0.1), (2, 0.2), (4, 0.4)):
+            for seed in range(5):
+                rmse = base / np.sqrt(spp) * (100.0 if (strategy == "phong-fit" and seed == 3) else 1.0 + 0.01 * seed)
+                rows.append({"strategy": strategy, "spp": spp, "seed": seed, "seconds": seconds, "rmse": rmse})
+    summary = equal_time_summary(rows)
+    assert summary["seconds"] == pytest.approx(0.4) and summary["seeds"] == 5
+    assert summary["rmse"]["phong-fit"] == pytest.approx(0.5 * 1.02 / 2)  # median of 1.00, 1.01, 1.02, 100, 1.04
+    pooled = np.sqrt(np.mean(np.array([1.0, 1.01, 1.02, 100.0, 1.04]) ** 2)) * 0.5 / 2
+    assert summary["rmse_pooled"]["phong-fit"] == pytest.approx(pooled)
+    assert summary["vs_measured"]["phong-fit"] == pytest.approx(0.5 / 0.6)
+    assert summary["best_nbrdf"] == "phong-fit" and "measured" not in summary["vs_measured"]
 
 
 def test_convergence_reports_missing_inputs_before_any_work(tmp_path):
