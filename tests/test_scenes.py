@@ -310,9 +310,13 @@ def test_convergence_quick_json(tmp_path):
         assert {"scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "relmse", "mape",
                 "psnr_peak1"} <= set(row)
         assert row["scene"] == "veach"
-        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
+        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "measured")
         assert row["seconds"] > 0 and np.isfinite(row["rmse"])
     assert {r["strategy"] for r in rows} >= {"uniform", "cosine", "phong-predicted"}
+    if " fit-phong " in help_text:
+        assert {"phong-fit", "two-lobe-fit"} <= {r["strategy"] for r in rows}
+        exponents, weights = report["equal_time"][0]["two_lobe_exponents"], report["equal_time"][0]["two_lobe_weights"]
+        assert len(exponents) == 2 and min(exponents) >= 0 and min(weights) >= 0 and sum(weights) <= 1 + 1e-6
     assert sorted({r["spp"] for r in rows}) == [1, 2, 4]
     lobe = report["equal_time"][0]
     assert lobe["predicted_exponent"] >= 0 and 0 <= lobe["predicted_specular_weight"] <= 1
@@ -327,6 +331,52 @@ def test_convergence_quick_json(tmp_path):
     # --out holds the caches too.
     assert list((tmp_path / "out" / "materials").glob("*.nbrdf.json"))
     assert list((tmp_path / "out" / "references").glob("*.exr"))
+
+
+def test_convergence_rgl_path_against_measured(tmp_path, shared):
+    """An RGL measurement given as a path outside the shared data: every NBRDF strategy is
+    compared with Mitsuba's measured at equal time over several seeds."""
+    cli = _cli_or_skip()
+    mine = tmp_path / "my_paint.bsdf"
+    mine.write_bytes((shared / "data" / "rgl" / "cc_ibiza_sunset_rgb.bsdf").read_bytes())
+    out = tmp_path / "result.json"
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
+                          "--materials", "", "--rgl", str(mine), "--seeds", "3", "--json", str(out),
+                          "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(out.read_text())
+    assert {r["material"] for r in report["results"]} == {"my_paint"}
+    assert {r["strategy"] for r in report["results"]} == {"uniform", "cosine", "phong-fit", "two-lobe-fit",
+                                                          "measured"}
+    assert {r["seed"] for r in report["results"]} == {0, 1, 2}
+    summary = report["equal_time"][0]
+    assert summary["statistic"] == "median over seeds" and summary["seeds"] == 3
+    assert set(summary["vs_measured"]) == {"uniform", "cosine", "phong-fit", "two-lobe-fit"}
+    assert summary["best_vs_measured"] == min(summary["vs_measured"].values())
+    assert summary["vs_measured"][summary["best_nbrdf"]] == summary["best_vs_measured"]
+    text = (tmp_path / "out" / "veach" / "summary.md").read_text()
+    assert "two-lobe-fit / measured" in text and f"| {summary['best_nbrdf']} " in text
+
+
+def test_equal_time_summary_is_robust_to_one_bad_seed():
+    """Median over seeds: one seed with a firefly (RMSE x100) moves the pooled RMSE, not the
+    median; the ratio to measured and the best strategy follow the median."""
+    from nbrdf_tools.convergence import equal_time_summary
+
+    rows = []
+    for strategy, base in (("cosine", 1.0), ("phong-fit", 0.5), ("measured", 0.6)):
+        for spp, seconds in ((1, 0.1), (2, 0.2), (4, 0.4)):
+            for seed in range(5):
+                rmse = base / np.sqrt(spp) * (100.0 if (strategy == "phong-fit" and seed == 3) else 1.0 + 0.01 * seed)
+                rows.append({"strategy": strategy, "spp": spp, "seed": seed, "seconds": seconds, "rmse": rmse})
+    summary = equal_time_summary(rows)
+    assert summary["seconds"] == pytest.approx(0.4) and summary["seeds"] == 5
+    assert summary["rmse"]["phong-fit"] == pytest.approx(0.5 * 1.02 / 2)  # median of 1.00, 1.01, 1.02, 100, 1.04
+    pooled = np.sqrt(np.mean(np.array([1.0, 1.01, 1.02, 100.0, 1.04]) ** 2)) * 0.5 / 2
+    assert summary["rmse_pooled"]["phong-fit"] == pytest.approx(pooled)
+    assert summary["vs_measured"]["phong-fit"] == pytest.approx(0.5 / 0.6)
+    assert summary["best_nbrdf"] == "phong-fit" and "measured" not in summary["vs_measured"]
 
 
 def test_convergence_reports_missing_inputs_before_any_work(tmp_path):
@@ -360,7 +410,13 @@ def test_rgl_materials_are_accepted_as_paths(tmp_path):
 
 
 def test_bench_rays_quick_json(tmp_path):
+    """The speed table's run: every BSDF of both modes with Mrays/s, memory and ratios; the
+    network's sampling strategies; Mitsuba's measured BSDF on the shared RGL file (or the note
+    naming it when the shared data is absent)."""
     cli = _cli_or_skip()
+    from conftest import SHARED
+
+    rgl = SHARED / "data" / "rgl" / "paper_white_rgb.bsdf"
     out = tmp_path / "bench.json"
     run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_rays", "--quick", "--no-progress",
                           "--json", str(out), "--out", str(tmp_path / "bench"), "--cli", str(cli)],
@@ -368,11 +424,36 @@ def test_bench_rays_quick_json(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     report = json.loads(out.read_text())
     assert report["scene"] == "veach" and report["mode"] == "default" and report["variant"] == "llvm_ad_rgb"
-    assert [run["mode"] for run in report["runs"]] == ["default", "wavefront"]
-    for run in report["runs"]:
-        assert run["scene"] == "veach" and run["variant"] == "llvm_ad_rgb"
-        for name in ("nbrdf", "roughconductor", "diffuse", "principled"):
-            assert run["bsdfs"][name]["mrays_per_s"] > 0 and run["bsdfs"][name]["seconds"] > 0
+    assert [mode_run["mode"] for mode_run in report["runs"]] == ["default", "wavefront"]
+    network = tmp_path / "bench" / "gold-metallic-paint.nbrdf.json"
+    layers = json.loads(network.read_text())["layers"]
+    parameters = sum(len(layer["weights"]) + len(layer["bias"]) for layer in layers)
+    assert parameters == sum(layer["inputs"] * layer["outputs"] + layer["outputs"] for layer in layers)
+    assert "second_lobe" in json.loads(network.read_text())["sampling"]  # fit-phong --lobes 2
+    names = ("nbrdf", "nbrdf-opaque", "nbrdf-cosine", "nbrdf-phong", "nbrdf-two_lobe", "merl", "roughconductor",
+             "roughplastic", "principled", "diffuse")
+    for mode_run in report["runs"]:
+        bsdfs = mode_run["bsdfs"]
+        assert mode_run["scene"] == "veach" and mode_run["variant"] == "llvm_ad_rgb"
+        for name in names:
+            assert bsdfs[name]["mrays_per_s"] > 0 and bsdfs[name]["seconds"] > 0, name
+            assert bsdfs[name]["memory_bytes"] > 0, name
+            ratio = bsdfs[name]["ratio_vs_roughconductor"]
+            assert ratio == pytest.approx(bsdfs[name]["mrays_per_s"] / bsdfs["roughconductor"]["mrays_per_s"])
+        for name in ("nbrdf", "nbrdf-opaque", "nbrdf-two_lobe"):
+            assert bsdfs[name]["memory_bytes"] == 4 * parameters and bsdfs[name]["file_bytes"] == network.stat().st_size
+        assert bsdfs["merl"]["memory_bytes"] == 34_992_012  # 12-byte header + 3 x 90x90x180 float64
+        # diffuse: one RGB reflectance; roughconductor: alpha, eta, k.
+        assert bsdfs["diffuse"]["memory_bytes"] == 12 and bsdfs["roughconductor"]["memory_bytes"] == 12
+        if rgl.is_file():
+            assert bsdfs["measured"]["memory_bytes"] == rgl.stat().st_size
+            assert bsdfs["measured"]["ratio_vs_measured"] == 1.0
+            assert bsdfs["nbrdf"]["ratio_vs_measured"] == pytest.approx(
+                bsdfs["nbrdf"]["mrays_per_s"] / bsdfs["measured"]["mrays_per_s"])
+    if rgl.is_file():
+        assert report["measured"] == str(rgl) and "vs measured" in run.stdout
+    else:
+        assert "measured" not in report["bsdfs"] and f"measured skipped: {rgl} is missing" in run.stdout
     assert {"nbrdf-rust", "merl"} <= set(report["runs"][1]["bsdfs"])
     chart = tmp_path / "bench" / "rays_per_second.png"
     assert chart.stat().st_size > 1000 and chart.with_suffix(".pdf").is_file()

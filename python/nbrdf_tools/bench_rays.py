@@ -1,4 +1,15 @@
-"""Rays per second of our BSDFs against Mitsuba's built-ins, in the same scene, variant and mode.
+"""Rays per second of our BSDFs against Mitsuba's built-ins, in the same scene, variant and mode:
+the paper's speed table, with the memory each material needs.
+
+BSDFs: ``nbrdf`` (the network file's default sampling, literal and ``-opaque`` weights), ``nbrdf``
+with each sampling strategy (``nbrdf-cosine``, ``nbrdf-phong``, ``nbrdf-two_lobe``), ``merl`` (the
+MERL-format table), ``measured`` (Mitsuba's BSDF of an RGL measurement, ``--rgl``; default the
+shared ``paper_white_rgb.bsdf``, skipped with a note when absent), Mitsuba's ``roughconductor``,
+``roughplastic``, ``principled`` and ``diffuse``; in wavefront mode also the ``rust`` backends.
+Every one is printed and written with its Mrays/s, its ratios to ``measured`` and to
+``roughconductor``, and ``memory_bytes``: the bytes of the material's data (a network's float32
+parameters, the MERL table and the RGL file as stored, a built-in's traversable parameters as
+float32).
 
 Every BSDF under test is put on the four plates of the Veach scene (direct illumination with MIS:
 per sample one camera ray, one shadow ray and one BSDF ray), rendered once to compile the kernels,
@@ -8,11 +19,13 @@ calls, Mitsuba's megakernel) and ``wavefront`` (symbolic loops and calls off, wh
 needs). A scalar variant (``--variant scalar_rgb``) has one mode, ``scalar``, and the Rust backend
 alone, which Mitsuba calls once per direction through Python (docs/mitsuba.md, "Performance").
 
-    python -m nbrdf_tools.bench_rays [--quick] [--json FILE] [--modes default,wavefront] [--no-progress]
+    python -m nbrdf_tools.bench_rays [--quick] [--json FILE] [--modes default,wavefront] [--rgl PATH.bsdf]
     python -m nbrdf_tools.bench_rays --variant scalar_rgb --bsdfs nbrdf,roughconductor --width 128 --spp 4
 
 The network is trained by ``nbrdf train`` (briefly: speed, not accuracy, is measured) unless the
-authors' Keras network of the material is in the shared data.
+authors' Keras network of the material is in the shared data; ``nbrdf fit-phong --lobes 2``
+stores its two sampling lobes (so its default sampling is ``two_lobe``; ``nbrdf-phong`` samples
+the first of them).
 """
 
 from __future__ import annotations
@@ -36,20 +49,25 @@ from nbrdf_tools.scenes.veach import veach_scene_dict
 
 RAYS_PER_SAMPLE = 3  # camera ray, emitter (shadow) ray, BSDF ray of the MIS direct integrator
 DEFAULT_MATERIAL = "gold-metallic-paint"
+DEFAULT_RGL = "paper_white_rgb"
+NBRDF_STRATEGIES = ("cosine", "phong", "two_lobe")
+# The ratios' denominators: Mitsuba's sampling of measured data, and its analytic microfacet BSDF.
+REFERENCES = ("measured", "roughconductor")
 
 
 def builtin_bsdfs() -> dict[str, dict]:
     return {
-        "diffuse": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.4, 0.3]}},
         "roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.1},
         "roughplastic": {"type": "roughplastic", "distribution": "ggx", "alpha": 0.1},
         "principled": {"type": "principled", "base_color": {"type": "rgb", "value": [0.8, 0.5, 0.2]},
                        "roughness": 0.3, "metallic": 0.5},
+        "diffuse": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.4, 0.3]}},
     }
 
 
 def ensure_inputs(material: str, out: Path, nbrdf: Path) -> tuple[Path, Path]:
-    """The NBRDF and the MERL-format table of `material`, made once under `out`."""
+    """The NBRDF (with two fitted sampling lobes) and the MERL-format table of `material`, made
+    once under `out`."""
     out.mkdir(parents=True, exist_ok=True)
     table = out / f"{material}.sgd.binary"
     if not table.exists():
@@ -63,6 +81,8 @@ def ensure_inputs(material: str, out: Path, nbrdf: Path) -> tuple[Path, Path]:
             import_keras.convert(keras, network)
         else:
             cli.run([nbrdf, "train", table, "-o", network, "--epochs", "5", "--samples", "200000", "--quiet"])
+    if "second_lobe" not in (json.loads(network.read_text()).get("sampling") or {}):
+        cli.run([nbrdf, "fit-phong", network, "--lobes", "2"])
     return network, table
 
 
@@ -70,9 +90,23 @@ def is_scalar(variant: str) -> bool:
     return variant.startswith("scalar_")
 
 
-def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
+def rgl_measurement(option: Path | None) -> tuple[Path | None, str | None]:
+    """The RGL file of ``measured`` and, when there is none, the note saying what is missing.
+    A path given with ``--rgl`` must exist (MissingDataError); the shared default may not."""
+    if option is not None:
+        if not option.is_file():
+            raise MissingDataError(f"RGL measurement {option} (--rgl) is missing")
+        return option, None
+    default = shared_path("data", "rgl", f"{DEFAULT_RGL}.bsdf")
+    if default.is_file():
+        return default, None
+    return None, (f"measured skipped: {default} is missing (pass --rgl PATH.bsdf, or set NBRDF_SHARED to the "
+                  "shared data folder that holds data/rgl)")
+
+
+def candidates(network: Path, table: Path, mode: str, measured: Path | None = None) -> dict[str, dict]:
     """BSDFs to time in `mode`; the Rust-backed ones exist in wavefront and scalar mode only,
-    the traced ones in the JIT modes only."""
+    the traced ones (and Mitsuba's `measured`) in the JIT modes only."""
     bsdfs = {}
     if mode == "scalar":
         bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "rust"}
@@ -81,12 +115,64 @@ def candidates(network: Path, table: Path, mode: str) -> dict[str, dict]:
         return bsdfs
     bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit"}
     bsdfs["nbrdf-opaque"] = {"type": "nbrdf", "filename": str(network), "backend": "jit", "jit_weights": "opaque"}
+    for strategy in NBRDF_STRATEGIES:
+        bsdfs[f"nbrdf-{strategy}"] = {"type": "nbrdf", "filename": str(network), "backend": "jit",
+                                      "sampling": strategy}
     bsdfs["merl"] = {"type": "merl", "filename": str(table), "backend": "jit"}
+    if measured is not None:
+        bsdfs["measured"] = {"type": "measured", "filename": str(measured)}
     if mode == "wavefront":
         bsdfs["nbrdf-rust"] = {"type": "nbrdf", "filename": str(network), "backend": "rust"}
         bsdfs["merl-rust"] = {"type": "merl", "filename": str(table), "backend": "rust"}
     bsdfs.update(builtin_bsdfs())
     return bsdfs
+
+
+def network_parameter_count(network: Path) -> int:
+    return sum(len(layer["weights"]) + len(layer["bias"]) for layer in json.loads(network.read_text())["layers"])
+
+
+def traversed_float_count(bsdf: dict) -> int:
+    """Floats among the parameters Mitsuba's ``traverse`` exposes for a BSDF (its whole state
+    for the built-ins: colours count three)."""
+    count = 0
+    for _, value in mi.traverse(mi.load_dict(bsdf)).items():
+        if dr.is_array_v(value) and dr.is_arithmetic_v(value):
+            count += dr.width(value) * (dr.size_v(value) if dr.depth_v(value) > 1 else 1)
+    return count
+
+
+def memory(bsdf: dict) -> dict:
+    """``memory_bytes`` of a material (and what it counts) and ``file_bytes`` where it has a file:
+    a network's float32 parameters, a MERL table or an RGL measurement as stored, a built-in's
+    traversable parameters as float32."""
+    if bsdf["type"] == "nbrdf":
+        path = Path(bsdf["filename"])
+        count = network_parameter_count(path)
+        return {"memory_bytes": 4 * count, "memory": f"{count} float32 parameters",
+                "file_bytes": path.stat().st_size}
+    if bsdf["type"] in ("merl", "measured"):
+        size = Path(bsdf["filename"]).stat().st_size
+        what = "MERL table (float64)" if bsdf["type"] == "merl" else "RGL file"
+        return {"memory_bytes": size, "memory": what, "file_bytes": size}
+    count = traversed_float_count(bsdf)
+    return {"memory_bytes": 4 * count, "memory": f"{count} float32 parameters"}
+
+
+def add_ratios(bsdfs: dict) -> None:
+    """``ratio_vs_NAME`` (Mrays/s over that of NAME) for each of :data:`REFERENCES` timed here."""
+    for reference in REFERENCES:
+        if reference in bsdfs:
+            base = bsdfs[reference]["mrays_per_s"]
+            for figures in bsdfs.values():
+                figures[f"ratio_vs_{reference}"] = figures["mrays_per_s"] / base
+
+
+def human_bytes(n: int) -> str:
+    for unit, scale in (("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n} B"
 
 
 def set_mode(mode: str) -> None:
@@ -123,15 +209,17 @@ def bench_mode(mode: str, bsdfs: dict[str, dict], resolution, spp: int, repeats:
 def print_table(results: list[dict]) -> None:
     for result in results:
         bsdfs = result["bsdfs"]
-        reference = bsdfs["roughconductor"]["mrays_per_s"]
         print(f"\n{result['scene']} scene, {result['variant']}, {result['mode']} mode")
-        print(f"{'BSDF':<16}{'Mrays/s':>10}{'vs roughconductor':>20}")
+        print(f"{'BSDF':<16}{'Mrays/s':>10}{'vs measured':>13}{'vs roughconductor':>19}{'memory':>11}")
         for name, figures in bsdfs.items():
-            print(f"{name:<16}{figures['mrays_per_s']:>10.2f}{figures['mrays_per_s'] / reference:>19.2f}x")
+            ratios = [f"{figures[f'ratio_vs_{r}']:.2f}x" if f"ratio_vs_{r}" in figures else "-" for r in REFERENCES]
+            print(f"{name:<16}{figures['mrays_per_s']:>10.2f}{ratios[0]:>13}{ratios[1]:>19}"
+                  f"{human_bytes(figures['memory_bytes']):>11}")
 
 
 def plot(results: list[dict], path: Path) -> Path:
-    """Bar chart of Mrays/s per BSDF, one bar per mode (PNG and PDF), built-ins in grey tones."""
+    """Bar chart of Mrays/s per BSDF, one bar per mode (PNG and PDF); each BSDF labelled with its
+    memory."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -146,7 +234,10 @@ def plot(results: list[dict], path: Path) -> Path:
         values = [result["bsdfs"].get(name, {}).get("mrays_per_s", 0.0) for name in names]
         bars = ax.bar(x + (k - (len(results) - 1) / 2) * width, values, width, label=f"{result['mode']} mode")
         ax.bar_label(bars, labels=[f"{v:.1f}" if v > 0 else "" for v in values], fontsize=6, padding=1)
-    ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+    sizes = {name: figures["memory_bytes"] for result in results for name, figures in result["bsdfs"].items()
+             if "memory_bytes" in figures}
+    labels = [f"{name}\n{human_bytes(sizes[name])}" if name in sizes else name for name in names]
+    ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=8)
     ax.set_ylabel("Mrays/s (higher is better)")
     first = results[0]
     ax.set_title(f"{first['scene']} scene, {first['variant']}, {first['resolution'][0]}x{first['resolution'][1]}, "
@@ -169,9 +260,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="comma-separated: default, wavefront (JIT variants; a scalar variant runs its one "
                              "mode, scalar)")
     parser.add_argument("--bsdfs", help="comma-separated: time only these BSDFs of the mode's list "
-                                        "(nbrdf, nbrdf-opaque, merl, nbrdf-rust, merl-rust, diffuse, "
+                                        "(nbrdf, nbrdf-opaque, nbrdf-cosine, nbrdf-phong, nbrdf-two_lobe, merl, measured, "
+                                        "nbrdf-rust, merl-rust, diffuse, "
                                         "roughconductor, roughplastic, principled; default: all)")
-    parser.add_argument("--material", default=DEFAULT_MATERIAL)
+    parser.add_argument("--material", default=DEFAULT_MATERIAL,
+                        help="MERL material of the nbrdf and merl BSDFs (default: %(default)s)")
+    parser.add_argument("--rgl", type=Path,
+                        help=f"RGL measurement (.bsdf) of the measured BSDF (default: the shared {DEFAULT_RGL}.bsdf "
+                             "when present, else measured is skipped)")
     parser.add_argument("--width", type=int, default=768)
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--repeats", type=int, default=5)
@@ -198,22 +294,30 @@ def main(argv: list[str] | None = None) -> int:
     nbrdf_mitsuba.register()
     try:
         cli.check_cli(args.cli)
+        measured, note = rgl_measurement(args.rgl)
         network, table = ensure_inputs(args.material, args.out, args.cli)
     except (MissingDataError, cli.CommandError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
+    if note:
+        print(f"note: {note}")
     resolution = (args.width, args.width * 2 // 3)
     results = []
     for mode in modes:
-        bsdfs = candidates(network, table, mode)
+        tested = candidates(network, table, mode, measured)
         if wanted:
-            unknown = [name for name in wanted if name not in bsdfs]
+            unknown = [name for name in wanted if name not in tested]
             if unknown:
-                parser.error(f"--bsdfs: {', '.join(unknown)} not in the {mode} mode's list ({', '.join(bsdfs)})")
-            bsdfs = {name: bsdfs[name] for name in wanted}
-        bsdfs = bench_mode(mode, bsdfs, resolution, args.spp, args.repeats)
+                parser.error(f"--bsdfs: {', '.join(unknown)} not in the {mode} mode's list ({', '.join(tested)})")
+            tested = {name: tested[name] for name in wanted}
+        bsdfs = bench_mode(mode, tested, resolution, args.spp, args.repeats)
+        for name, bsdf in tested.items():
+            bsdfs[name].update(memory(bsdf))
+        add_ratios(bsdfs)
         results.append({"scene": "veach", "variant": args.variant, "mode": mode, "resolution": list(resolution),
-                        "spp": args.spp, "bsdfs": bsdfs})
+                        "spp": args.spp, "material": args.material,
+                        "measured": str(measured) if measured else None, "notes": [note] if note else [],
+                        "bsdfs": bsdfs})
     print_table(results)
     chart = plot(results, args.plot or args.out / "rays_per_second.png")
     print(f"\nwrote {chart} and {chart.with_suffix('.pdf')}")

@@ -6,12 +6,20 @@ repeated with the same seed and the fastest time kept) and compared with a conve
 reference; a CSV, a JSON file, EXR renders, PNG plots (log-log, one curve per strategy) and a
 Markdown summary land in the output folder.
 
-Strategies (docs/design.md section 6): ``uniform``, ``cosine`` and ``phong-fit`` sample our NBRDF
-(the ``nbrdf`` BSDF) by the uniform hemisphere, the cosine lobe and the Blinn-Phong lobe fitted by
-``nbrdf fit-phong``; ``phong-predicted`` samples the NBRDF through the lobe that the latent-space
-predictor gives (``--ae AE.json --predictor P.json``, from ``nbrdf ae train`` and ``nbrdf predictor
-train``; skipped with a note without them); ``measured`` is Mitsuba's own ``measured`` BSDF with its
-own sampling (RGL materials only).
+Strategies (docs/design.md section 6): ``uniform``, ``cosine``, ``phong-fit`` and ``two-lobe-fit``
+sample our NBRDF (the ``nbrdf`` BSDF, sampling ``uniform``, ``cosine``, ``phong``, ``two_lobe``) by
+the uniform hemisphere, the cosine lobe, the best single Blinn-Phong lobe (``nbrdf fit-phong
+--lobes 1``) and the two-lobe mixture (``--lobes 2``, stored in the network file);
+``phong-predicted`` samples the NBRDF through the lobe that the latent-space predictor gives
+(``--ae AE.json --predictor P.json``, from ``nbrdf ae train`` and ``nbrdf predictor train``;
+skipped with a note without them); ``measured`` is Mitsuba's own ``measured`` BSDF with its own
+sampling (RGL materials only; it samples the measurement with its data-driven warp).
+
+Several seeds (``--seeds``) handle the heavy-tailed noise of single renders: the equal-time
+figures (``equal_time`` in the JSON, the summary's tables) are the median over seeds of the RMSE
+(``rmse``), beside the root of the mean squared error over seeds (``rmse_pooled``); for RGL
+materials also each strategy's RMSE over ``measured``'s at the same time (``vs_measured``) and
+the best NBRDF strategy (``best_nbrdf``, ``best_vs_measured``).
 
 References and ground truths (cached under ``OUT/references`` with JSON sidecars, re-rendered when
 any input changes; see ground_truth.py), all with multiple importance sampling (emitter + BSDF
@@ -33,6 +41,7 @@ In the Veach scene the errors are measured on the plates only (the floor and wal
 in the kitchen on the whole image.
 
     python -m nbrdf_tools.convergence --scene veach [--materials a,b] [--rgl x,PATH.bsdf] [--integrator bsdf|mis]
+        [--strategies a,b] [--seeds N]
     python -m nbrdf_tools.convergence --scene kitchen [--kitchen PATH]
     python -m nbrdf_tools.convergence --scene veach --quick --json out/convergence.json
 
@@ -64,8 +73,9 @@ from nbrdf_tools.materials import VEACH_MERL, VEACH_RGL, Artefacts, Material
 from nbrdf_tools.paths import SCENES, MissingDataError, default_cli, default_out, shared_path
 from nbrdf_tools.progress import bar, log
 from nbrdf_tools.render import render_passes, timed_render, warm_up, write_exr, write_png
-STRATEGIES = ("uniform", "cosine", "phong-fit", "phong-predicted", "measured")
-NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong", "phong-predicted": "phong"}
+STRATEGIES = ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "measured")
+NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong", "two-lobe-fit": "two_lobe",
+                  "phong-predicted": "phong"}
 REFERENCE_SEED = 1_000_000  # references use seeds from here on; test renders stay far below
 QUICK_TRAIN_ARGS = ["--samples", "40000", "--epochs", "3", "--min-epochs", "1"]
 
@@ -218,7 +228,8 @@ def timing_repeats(spp: int) -> int:
 
 def series(rows: list[dict], strategy: str, metric: str = "rmse") -> dict[str, np.ndarray] | None:
     """A strategy's curve over its seeds: per spp level the median time and the median, lowest
-    and highest error (arrays in spp order), or None when the strategy has no rows."""
+    and highest error and the root mean square over seeds (``pooled``; for ``rmse`` the RMSE of
+    all seeds' pixels together; arrays in spp order), or None when the strategy has no rows."""
     levels = sorted({r["spp"] for r in rows if r["strategy"] == strategy})
     if not levels:
         return None
@@ -227,18 +238,30 @@ def series(rows: list[dict], strategy: str, metric: str = "rmse") -> dict[str, n
     return {"spp": np.array(levels), "seconds": np.array([np.median([r["seconds"] for r in level])
                                                          for level in per_level]),
             "median": np.array([np.median(e) for e in errors]), "low": np.array([e.min() for e in errors]),
+            "pooled": np.array([np.sqrt(np.mean(e ** 2)) for e in errors]),
             "high": np.array([e.max() for e in errors]), "seeds": min(len(level) for level in per_level)}
 
 
 def equal_time_summary(rows: list[dict]) -> dict:
-    """RMSE (median over seeds) of every strategy at the longest render time that all
-    strategies reached."""
-    by_strategy: dict[str, list[tuple[float, float]]] = {}
-    for strategy in dict.fromkeys(r["strategy"] for r in rows):
-        curve = series(rows, strategy)
-        by_strategy[strategy] = list(zip(curve["seconds"], curve["median"]))
-    budget = min(max(t for t, _ in points) for points in by_strategy.values())
-    return {"seconds": budget, "rmse": {s: rmse_at_time(p, budget) for s, p in by_strategy.items()}}
+    """RMSE of every strategy at the longest render time that all strategies reached: the median
+    over seeds (``rmse``) and the root mean square over seeds (``rmse_pooled``); with ``measured``
+    among them, each strategy's median RMSE over measured's (``vs_measured``) and the best NBRDF
+    strategy's."""
+    curves = {strategy: series(rows, strategy) for strategy in dict.fromkeys(r["strategy"] for r in rows)}
+    budget = min(float(curve["seconds"].max()) for curve in curves.values())
+    summary = {"seconds": budget, "statistic": "median over seeds",
+               "seeds": min(int(curve["seeds"]) for curve in curves.values()),
+               "rmse": {s: rmse_at_time(list(zip(c["seconds"], c["median"])), budget) for s, c in curves.items()},
+               "rmse_pooled": {s: rmse_at_time(list(zip(c["seconds"], c["pooled"])), budget)
+                               for s, c in curves.items()}}
+    if "measured" in summary["rmse"]:
+        measured = summary["rmse"]["measured"]
+        summary["vs_measured"] = {s: r / measured for s, r in summary["rmse"].items() if s != "measured"}
+        nbrdf = {s: r for s, r in summary["vs_measured"].items() if s in NBRDF_SAMPLING}
+        if nbrdf:
+            best = min(nbrdf, key=nbrdf.get)
+            summary.update(best_nbrdf=best, best_vs_measured=nbrdf[best])
+    return summary
 
 
 # ---------------------------------------------------------------------------------------------
@@ -421,9 +444,11 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
                                    **representation_metrics(ground_truth, table_ref, mask)})
         # Strategies.
         strategies = {}
-        for strategy in STRATEGIES:
+        for strategy in (s for s in STRATEGIES if s in args.strategies):
             if strategy in NBRDF_SAMPLING:
                 if strategy == "phong-fit" and not material.has_phong:
+                    continue
+                if strategy == "two-lobe-fit" and not material.has_two_lobes:
                     continue
                 extra = {}
                 if strategy == "phong-predicted":
@@ -452,6 +477,8 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
         summary = equal_time_summary(rows)
         equal_time.append({"scene": "veach", "material": label, "kind": material.kind,
                            "exponent": material.exponent, "specular_weight": material.specular_weight,
+                           "two_lobe_exponents": material.two_lobe_exponents,
+                           "two_lobe_weights": material.two_lobe_weights,
                            **({"predicted_exponent": predicted_lobes[label][0],
                                "predicted_specular_weight": predicted_lobes[label][1]}
                               if label in predicted_lobes else {}),
@@ -550,6 +577,37 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
 # Reports
 
 
+def vs_measured_table(equal_time: list[dict]) -> list[str]:
+    """Markdown lines: per material with ``measured``, each NBRDF strategy's RMSE over
+    measured's at equal time (median over seeds; the pooled RMSE's ratio in brackets) and the
+    best; none without such materials (e.g. reports written before these fields)."""
+    rows = [e for e in equal_time if "vs_measured" in e]
+    if not rows:
+        return []
+    strategies = [s for s in STRATEGIES if s in NBRDF_SAMPLING and any(s in e["vs_measured"] for e in rows)]
+    lines = ["RMSE of each NBRDF strategy over the RMSE of Mitsuba's `measured` (sampling the measurement) "
+             "at the same render time, median over seeds (in brackets: root mean square over seeds); below 1 "
+             "is better than `measured`:", "",
+             "| material | time (s) | measured RMSE | " + " | ".join(f"{s} / measured" for s in strategies)
+             + " | best |",
+             "|" + "---|" * (len(strategies) + 4)]
+    for e in rows:
+        pooled = e.get("rmse_pooled", {})
+        cells = []
+        for s in strategies:
+            if s not in e["vs_measured"]:
+                cells.append("-")
+                continue
+            cell = f"{e['vs_measured'][s]:.2f}"
+            if s in pooled and "measured" in pooled:
+                cell += f" ({pooled[s] / pooled['measured']:.2f})"
+            cells.append(cell)
+        best = f"{e['best_nbrdf']} {e['best_vs_measured']:.2f}" if "best_nbrdf" in e else "-"
+        lines.append(f"| {e['material']} | {e['seconds']:.2f} | {e['rmse']['measured']:.4g} | "
+                     + " | ".join(cells) + f" | {best} |")
+    return lines + [""]
+
+
 def markdown(report: dict) -> str:
     lines = []
     scene = report["settings"]["scene"]
@@ -560,7 +618,7 @@ def markdown(report: dict) -> str:
                   f"{report['settings']['resolution'][1]}"
                   + (f", median of {report['settings']['seeds']} seeds" if report["settings"].get("seeds", 1) > 1 else "")
                   + "):", ""]
-        header = ("| material | Phong n, w | time (s) | " + " | ".join(strategies)
+        header = ("| material | Phong n, w | two lobes n1, w1; n2, w2 | time (s) | " + " | ".join(strategies)
                   + " | phong-fit / cosine | phong-fit / uniform |")
         predicted = "phong-predicted" in strategies
         if predicted:
@@ -570,10 +628,13 @@ def markdown(report: dict) -> str:
             r = e["rmse"]
             phong = e.get("exponent")
             lobe = f"{phong:.3g}, {e['specular_weight']:.2f}" if phong is not None else "-"
+            two = e.get("two_lobe_exponents")
+            lobes = (f"{two[0]:.3g}, {e['two_lobe_weights'][0]:.2f}; {two[1]:.3g}, {e['two_lobe_weights'][1]:.2f}"
+                     if two else "-")
             cells = [f"{r[s]:.4g}" if s in r else "-" for s in strategies]
             ratio_c = f"{r['phong-fit'] / r['cosine']:.2f}" if "phong-fit" in r and "cosine" in r else "-"
             ratio_u = f"{r['phong-fit'] / r['uniform']:.3f}" if "phong-fit" in r and "uniform" in r else "-"
-            line = (f"| {e['material']} | {lobe} | {e['seconds']:.2f} | " + " | ".join(cells)
+            line = (f"| {e['material']} | {lobe} | {lobes} | {e['seconds']:.2f} | " + " | ".join(cells)
                     + f" | {ratio_c} | {ratio_u} |")
             if predicted:
                 pn = e.get("predicted_exponent")
@@ -583,6 +644,7 @@ def markdown(report: dict) -> str:
                 line += f" {plobe} | {ratio_p} |"
             lines.append(line)
         lines.append("")
+        lines += vs_measured_table(report["equal_time"])
     if report["representation"]:
         lines += [f"Representation error against the ground truth ({report['settings']['gt_spp']} spp, MIS/path, "
                   "same random numbers):", "",
@@ -661,6 +723,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, help="image width (Veach: 384, kitchen: from kitchen_materials.json)")
     parser.add_argument("--height", type=int, help="image height (default: 2/3 of the width, kitchen 9/16)")
     parser.add_argument("--max-spp", type=int, default=128, help="highest spp of the series 1, 2, 4, ...")
+    parser.add_argument("--strategies", default=",".join(STRATEGIES),
+                        help="Veach: comma-separated strategies to render, of those available per material "
+                             "(default: %(default)s)")
     parser.add_argument("--seeds", type=int, default=1,
                         help="independent renders per strategy and spp; the plots show their median and range "
                              "(default: %(default)s)")
@@ -691,6 +756,10 @@ def main(argv: list[str] | None = None) -> int:
 
     train_args = args.train_args.split()
     progress.set_enabled(not args.no_progress)
+    args.strategies = [s for s in args.strategies.split(",") if s]
+    unknown = [s for s in args.strategies if s not in STRATEGIES]
+    if unknown or not args.strategies:
+        parser.error(f"--strategies: unknown {', '.join(unknown) or '(none given)'}; choose from {', '.join(STRATEGIES)}")
     notes = []
     if args.rgl is None:
         shared_rgl = [m for m in VEACH_RGL if shared_path("data", "rgl", f"{m}.bsdf").is_file()]
@@ -749,11 +818,12 @@ def main(argv: list[str] | None = None) -> int:
     nbrdf_mitsuba.register()
     cache = RenderCache(cache_root / "references", force=args.force)
     if artefacts.can_train():
-        notes.append(f"NBRDFs trained with `nbrdf train` on the tables ({' '.join(train_args) or 'default recipe'})")
+        notes.append(f"NBRDFs trained with `nbrdf train` on the MERL tables and on the RGL measurements themselves "
+                     f"({' '.join(train_args) or 'default recipe'})")
     else:
         notes.append("NBRDFs imported from the authors' Keras networks (`nbrdf train` is not available)")
     if not artefacts.can_fit_phong():
-        notes.append("Blinn-Phong lobes: `nbrdf fit-phong` is not available, phong-fit skipped")
+        notes.append("Blinn-Phong lobes: `nbrdf fit-phong` is not available, phong-fit and two-lobe-fit skipped")
     if not (args.ae and args.predictor):
         message = "phong-predicted skipped: pass --ae AE.json --predictor P.json (nbrdf ae train, nbrdf predictor train)"
         print(f"note: {message}")

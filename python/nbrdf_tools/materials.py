@@ -6,10 +6,12 @@
   ``../shared/data/reference-nbrdf/merl/NAME.h5`` (trained on the real MERL measurement, not on
   our synthesised table: its error against the table is then not only the network's).
 * RGL materials (a ``.bsdf`` file, or ``NAME`` for ``SHARED/data/rgl/NAME.bsdf``): the table is tabulated through Mitsuba's
-  ``measured`` plugin (``python -m nbrdf_mitsuba.tabulate_rgl``); the NBRDF is trained on it in
-  the same way (fallback: ``reference-nbrdf/rgl-isotropic/NAME.h5``).
-* The Blinn-Phong sampling lobe is fitted to the NBRDF with ``nbrdf fit-phong``, which stores it
-  in the network file.
+  ``measured`` plugin (``python -m nbrdf_mitsuba.tabulate_rgl``; the ``merl`` representation);
+  the NBRDF is trained on the measurement itself, ``nbrdf train NAME.bsdf`` (fallback:
+  ``reference-nbrdf/rgl-isotropic/NAME.h5``).
+* The Blinn-Phong sampling lobes are fitted to the NBRDF with ``nbrdf fit-phong``: the best
+  single lobe (``--lobes 1``, kept in the record) and the two-lobe mixture (``--lobes 2``, stored
+  in the network file, whose default sampling it becomes).
 
 Every artefact lands under ``OUT/materials`` with a ``NAME.artefacts.json`` record of its inputs
 (content hashes, commands); it is rebuilt when they change.
@@ -60,19 +62,30 @@ class Material:
     network: Path  # *.nbrdf.json
     network_source: str  # "trained" (nbrdf train) or "keras" (imported reference network)
     measured: Path | None = None  # RGL .bsdf (ground truth through Mitsuba's `measured` BSDF)
-    exponent: float | None = None
+    exponent: float | None = None  # the best single lobe
     specular_weight: float | None = None
     phong_source: str | None = None  # "fit" (nbrdf fit-phong) or None
+    # The two-lobe mixture stored in the network file: [n1, n2], [w1, w2].
+    two_lobe_exponents: tuple[float, float] | None = None
+    two_lobe_weights: tuple[float, float] | None = None
     notes: list[str] = field(default_factory=list)
 
     @property
     def has_phong(self) -> bool:
         return self.exponent is not None and self.specular_weight is not None
 
+    @property
+    def has_two_lobes(self) -> bool:
+        return self.two_lobe_exponents is not None and self.two_lobe_weights is not None
+
     def nbrdf(self, sampling: str | None = None, **extra) -> dict:
+        """The ``nbrdf`` BSDF; ``phong`` samples the best single lobe (not the first lobe of the
+        file's two-lobe mixture) unless ``extra`` names another."""
         bsdf = {"type": "nbrdf", "filename": str(self.network)}
         if sampling is not None:
             bsdf["sampling"] = sampling
+        if sampling == "phong" and self.has_phong:
+            bsdf.update(exponent=float(self.exponent), specular_weight=float(self.specular_weight))
         bsdf.update(extra)
         return bsdf
 
@@ -167,10 +180,11 @@ class Artefacts:
             record.update(table_inputs=inputs, table_hash=file_hash(table))
         return table
 
-    def _network(self, name: str, table: Path, keras: Path, record: dict) -> tuple[Path, str]:
+    def _network(self, name: str, data: Path, keras: Path, record: dict) -> tuple[Path, str]:
+        """The NBRDF trained on ``data`` (a MERL-format table or an RGL measurement)."""
         network = self.folder / f"{name}.nbrdf.json"
         if self.can_train():
-            inputs = {"source": "trained", "table": file_hash(table), "args": self.train_args}
+            inputs = {"source": "trained", "data": data.name, "data_hash": file_hash(data), "args": self.train_args}
         elif keras.is_file():
             inputs = {"source": "keras", "keras": file_hash(keras)}
         else:
@@ -180,8 +194,8 @@ class Artefacts:
         if network.is_file() and record.get("network_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return network, inputs["source"]
         if inputs["source"] == "trained":
-            self.log(f"  {name}: training the NBRDF (nbrdf train {' '.join(self.train_args)})")
-            _run([self.cli, "train", table, "-o", network, "--name", name, "--quiet", *self.train_args])
+            self.log(f"  {name}: training the NBRDF (nbrdf train {data.name} {' '.join(self.train_args)})")
+            _run([self.cli, "train", data, "-o", network, "--name", name, "--quiet", *self.train_args])
         else:
             self.log(f"  {name}: importing the authors' Keras NBRDF {keras}")
             from nbrdf_mitsuba import import_keras
@@ -195,30 +209,43 @@ class Artefacts:
     def _phong(self, name: str, network: Path, record: dict) -> None:
         if not self.can_fit_phong():
             return
-        # "lobe" changes the key whenever the choice of lobe changes, so older fits are redone.
-        # "--lobes 1": the phong strategies here are one lobe (fit-phong's default may store two).
-        inputs = {"command": "nbrdf fit-phong", "lobe": "variance", "lobes": 1,
+        # "lobe" and "lobes" change the key whenever the choice of lobes changes, so older fits
+        # are redone. The best single lobe (the phong strategies) is fitted into a scratch copy
+        # and kept in the record; the two-lobe mixture is stored in the network file.
+        inputs = {"command": "nbrdf fit-phong", "lobe": "variance", "lobes": [1, 2],
                   "network": record.get("network_trained_hash")}
         if record.get("phong_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return
-        self.log(f"  {name}: fitting the Blinn-Phong sampling lobe (nbrdf fit-phong)")
-        fit = json.loads(_run([self.cli, "fit-phong", network, "--json", "--lobe", "variance", "--lobes", "1"]))
-        # fit-phong rewrites the network file (with the lobe): remember what it now holds.
+        self.log(f"  {name}: fitting the Blinn-Phong sampling lobes (nbrdf fit-phong --lobes 1, --lobes 2)")
+        scratch = network.with_name(f"{name}.one-lobe.nbrdf.json")
+        try:
+            fit = json.loads(_run([self.cli, "fit-phong", network, "--json", "--lobe", "variance", "--lobes", "1",
+                                   "-o", scratch]))
+        finally:
+            scratch.unlink(missing_ok=True)
+        two = json.loads(_run([self.cli, "fit-phong", network, "--json", "--lobe", "variance", "--lobes", "2"]))
+        # fit-phong rewrote the network file (with the lobes): remember what it now holds.
         record.update(phong_inputs=inputs, network_hash=file_hash(network),
                       phong_fit={k: fit[k] for k in ("exponent", "specular_weight", "loss", "model_exponent",
-                                                 "model_specular_weight", "relative_variance") if k in fit})
+                                                 "model_specular_weight", "relative_variance") if k in fit},
+                      two_lobe_fit={k: two[k] for k in ("two_lobe", "relative_variance") if k in two})
 
     def _material(self, name: str, kind: str, table: Path, keras: Path, measured: Path | None, record: dict) -> Material:
-        network, source = self._network(name, table, keras, record)
+        network, source = self._network(name, measured or table, keras, record)
         self._phong(name, network, record)
         self._save_record(name, record)
         sampling = json.loads(network.read_text()).get("sampling") or {}
         material = Material(name=name, kind=kind, table=table, network=network, network_source=source,
                             measured=measured)
         if sampling.get("model") == "blinn-phong":
-            material.exponent = float(sampling["exponent"])
-            material.specular_weight = float(sampling["specular_weight"])
+            one = record.get("phong_fit") or sampling
+            material.exponent = float(one["exponent"])
+            material.specular_weight = float(one["specular_weight"])
             material.phong_source = sampling.get("source", "fit")
+            second = sampling.get("second_lobe")
+            if second:
+                material.two_lobe_exponents = (float(sampling["exponent"]), float(second["exponent"]))
+                material.two_lobe_weights = (float(sampling["specular_weight"]), float(second["specular_weight"]))
         if source == "keras":
             material.notes.append("NBRDF imported from the authors' Keras network (no `nbrdf train`)")
         if not material.has_phong:
