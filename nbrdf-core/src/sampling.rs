@@ -557,18 +557,22 @@ mod tests {
         1.0 - t * t * (3.0 - 2.0 * t)
     }
 
-    /// Integral over the sphere of the Blinn-Phong density: the specular term has an integrable
-    /// `1 / |l + v|` singularity at `l = -v`, so a partition of unity integrates a neighbourhood
-    /// of `-v` on a grid centred there (where the singularity is harmless in polar coordinates)
-    /// and the rest on a grid centred on the mirror direction, where sharp lobes are.
-    fn lobe_integral(v: DVec3, n: f64, w: f64) -> f64 {
-        let density = |l: DVec3| blinn_phong_lobe_density(v, l, n, w);
+    /// Integral over the sphere of a lobe density at view `v`: the specular terms have an
+    /// integrable `1 / |l + v|` singularity at `l = -v`, so a partition of unity integrates a
+    /// neighbourhood of `-v` on a grid centred there (where the singularity is harmless in polar
+    /// coordinates) and the rest on a grid centred on the mirror direction, where sharp lobes are.
+    fn density_integral(v: DVec3, density: impl Fn(DVec3) -> f64 + Sync) -> f64 {
         let radius = 0.08;
         let near = cap_integral(-v, radius, 400, 128, |l| density(l) * bump(-v, radius, l));
         let far = sphere_integral(mirror(v), 1500, 256, |l| {
             density(l) * (1.0 - bump(-v, radius, l))
         });
         near + far
+    }
+
+    /// [`density_integral`] of the Blinn-Phong mixture.
+    fn lobe_integral(v: DVec3, n: f64, w: f64) -> f64 {
+        density_integral(v, |l| blinn_phong_lobe_density(v, l, n, w))
     }
 
     #[test]
@@ -687,6 +691,43 @@ mod tests {
         }
     }
 
+    /// For each function `g` of `tests`, its mean over `samples` draws of `strategy` at `v`
+    /// (seeded `seed + index`) against the quadrature of `g * pdf` over the sphere around `r`:
+    /// the sampler must draw from the density that `pdf` reports.
+    fn assert_sample_means_match_pdf(
+        strategy: &SamplingStrategy,
+        v: DVec3,
+        r: DVec3,
+        tests: &[&(dyn Fn(DVec3) -> f64 + Sync)],
+        samples: usize,
+        seed: u64,
+    ) {
+        for (t, g) in tests.iter().enumerate() {
+            let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
+            let mut rng = SplitMix64::from_state(seed + t as u64);
+            let (mut sum, mut sum2) = (0.0, 0.0);
+            for _ in 0..samples {
+                let s = strategy.sample(
+                    v.as_vec3(),
+                    [rng.next_f32(), rng.next_f32(), rng.next_f32()],
+                );
+                let x = if s.pdf > 0.0 {
+                    g(s.light.as_dvec3())
+                } else {
+                    0.0
+                };
+                sum += x;
+                sum2 += x * x;
+            }
+            let mean = sum / samples as f64;
+            let sigma = ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt();
+            assert!(
+                (mean - exact).abs() < 5.0 * sigma + 1e-4,
+                "{strategy:?} test {t}: MC {mean} +- {sigma} vs quadrature {exact}"
+            );
+        }
+    }
+
     /// Monte Carlo means under the sampler against quadrature of the same function times the pdf:
     /// checks that the sampler draws from the density that `pdf` reports.
     #[test]
@@ -717,31 +758,7 @@ mod tests {
                 [&|l: DVec3| l.z + 0.5 * l.x * l.x, &|l: DVec3| {
                     f64::from(u8::from(l.dot(r) > 0.995))
                 }];
-            for (t, g) in tests.into_iter().enumerate() {
-                let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
-                let mut rng = SplitMix64::from_state(17 + t as u64);
-                let mut sum = 0.0;
-                let mut sum2 = 0.0;
-                for _ in 0..samples {
-                    let s = strategy.sample(
-                        v.as_vec3(),
-                        [rng.next_f32(), rng.next_f32(), rng.next_f32()],
-                    );
-                    let x = if s.pdf > 0.0 {
-                        g(s.light.as_dvec3())
-                    } else {
-                        0.0
-                    };
-                    sum += x;
-                    sum2 += x * x;
-                }
-                let mean = sum / samples as f64;
-                let sigma = ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt();
-                assert!(
-                    (mean - exact).abs() < 5.0 * sigma + 1e-4,
-                    "{strategy:?} test {t}: MC {mean} +- {sigma} vs quadrature {exact}"
-                );
-            }
+            assert_sample_means_match_pdf(&strategy, v, r, &tests, samples, 17);
         }
     }
 
@@ -878,15 +895,9 @@ mod tests {
         }
     }
 
-    /// [`lobe_integral`] for the two-lobe density.
+    /// [`density_integral`] of the two-lobe mixture.
     fn two_lobe_integral(v: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
-        let density = |l: DVec3| two_lobe_density(v, l, exponents, weights);
-        let radius = 0.08;
-        let near = cap_integral(-v, radius, 400, 128, |l| density(l) * bump(-v, radius, l));
-        let far = sphere_integral(mirror(v), 1500, 256, |l| {
-            density(l) * (1.0 - bump(-v, radius, l))
-        });
-        near + far
+        density_integral(v, |l| two_lobe_density(v, l, exponents, weights))
     }
 
     #[test]
@@ -974,30 +985,7 @@ mod tests {
                 &|l: DVec3| f64::from(u8::from(l.dot(r) > 0.995)),
                 &|l: DVec3| f64::from(u8::from(l.dot(r) > 0.9999)),
             ];
-            for (t, g) in tests.into_iter().enumerate() {
-                let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
-                let mut rng = SplitMix64::from_state(29 + t as u64);
-                let (mut sum, mut sum2) = (0.0, 0.0);
-                for _ in 0..samples {
-                    let s = strategy.sample(
-                        v.as_vec3(),
-                        [rng.next_f32(), rng.next_f32(), rng.next_f32()],
-                    );
-                    let x = if s.pdf > 0.0 {
-                        g(s.light.as_dvec3())
-                    } else {
-                        0.0
-                    };
-                    sum += x;
-                    sum2 += x * x;
-                }
-                let mean = sum / samples as f64;
-                let sigma = ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt();
-                assert!(
-                    (mean - exact).abs() < 5.0 * sigma + 1e-4,
-                    "{strategy:?} test {t}: MC {mean} +- {sigma} vs quadrature {exact}"
-                );
-            }
+            assert_sample_means_match_pdf(&strategy, v, r, &tests, samples, 29);
         }
     }
 }
