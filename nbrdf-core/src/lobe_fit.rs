@@ -656,6 +656,31 @@ mod tests {
 
     /// The quadrature's second moment against Monte Carlo with the sampler itself: draw from the
     /// mixture, average (g/p)^2 and g/p.
+    /// Monte Carlo estimates of `E[g/p]` and `E[(g/p)^2]` with `g = f_r cos(theta_l)` (red
+    /// channel of `target`) and `p` the pdf of `strategy`, from `count` samples at `view` drawn
+    /// with the uniforms of `uniform`; the independent check of the quadrature's moments.
+    fn sampled_moments(
+        strategy: &SamplingStrategy,
+        view: Vec3,
+        target: &TargetFn<'_>,
+        count: usize,
+        uniform: &mut dyn FnMut() -> f32,
+    ) -> (f64, f64) {
+        let (mut m1, mut m2) = (0.0, 0.0);
+        for _ in 0..count {
+            let s = strategy.sample(view, [uniform(), uniform(), uniform()]);
+            if s.pdf <= 0.0 {
+                continue;
+            }
+            let a = to_rusinkiewicz(view.as_dvec3(), s.light.as_dvec3());
+            let (_, l) = from_rusinkiewicz(&a);
+            let ratio = target(&a).unwrap()[0] * l.z / s.pdf as f64;
+            m1 += ratio;
+            m2 += ratio * ratio;
+        }
+        (m1 / count as f64, m2 / count as f64)
+    }
+
     #[test]
     fn quadrature_second_moment_matches_monte_carlo() {
         let target = blinn_phong(0.2, 0.6, 60.0);
@@ -676,21 +701,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             ((state >> 11) as f64 / (1u64 << 53) as f64) as f32
         };
-        let (mut m1, mut m2, count) = (0.0, 0.0, 400_000);
-        for _ in 0..count {
-            let s = strategy.sample(view, [uniform(), uniform(), uniform()]);
-            if s.pdf <= 0.0 {
-                continue;
-            }
-            let (l, v) = (s.light.as_dvec3(), view.as_dvec3());
-            let a = to_rusinkiewicz(v, l);
-            let (_, l2) = from_rusinkiewicz(&a);
-            let g = target(&a).unwrap()[0] * l2.z;
-            let ratio = g / s.pdf as f64;
-            m1 += ratio;
-            m2 += ratio * ratio;
-        }
-        let (m1, m2) = (m1 / count as f64, m2 / count as f64);
+        let (m1, m2) = sampled_moments(&strategy, view, &target, 400_000, &mut uniform);
         let mc = m2 / (m1 * m1);
         assert!(
             (quad - mc).abs() < 0.03 * mc,
@@ -806,19 +817,7 @@ mod tests {
         };
         let view = Vec3::new(theta_v.sin() as f32, 0.0, theta_v.cos() as f32);
         let mut rng = crate::rng::SplitMix64::from_state(77);
-        let (mut m1, mut m2, count) = (0.0, 0.0, 400_000);
-        for _ in 0..count {
-            let s = strategy.sample(view, [rng.next_f32(), rng.next_f32(), rng.next_f32()]);
-            if s.pdf <= 0.0 {
-                continue;
-            }
-            let a = to_rusinkiewicz(view.as_dvec3(), s.light.as_dvec3());
-            let (_, l) = from_rusinkiewicz(&a);
-            let ratio = target(&a).unwrap()[0] * l.z / s.pdf as f64;
-            m1 += ratio;
-            m2 += ratio * ratio;
-        }
-        let (m1, m2) = (m1 / count as f64, m2 / count as f64);
+        let (m1, m2) = sampled_moments(&strategy, view, &target, 400_000, &mut || rng.next_f32());
         let mc = m2 / (m1 * m1);
         assert!(
             (quad - mc).abs() < 0.03 * mc,
