@@ -2,8 +2,12 @@
 //! log-space targets (docs/design.md section 5).
 //!
 //! * Adaptive: `theta_h, theta_d ~ U[0, pi/2]`, `phi_d ~ U[0, 2 pi)`, `phi_h = 0`, uniform in
-//!   the angles, which puts many samples near the specular peak (`theta_h` small).
-//! * Uniform: light and view each uniform over the hemisphere.
+//!   the angles, which puts many samples near the specular peak (`theta_h` small). For an
+//!   anisotropic network `phi_h ~ U[-pi, pi)` as well (the fourth uniform), so all four angles
+//!   are covered.
+//! * Uniform: light and view each uniform over the hemisphere (all four angles already vary).
+//!
+//! Sample inputs are [`crate::coords::network_input_for`] of the network's kind.
 //!
 //! A candidate is dropped when the light or the view is at or below the horizon (the BRDF is 0
 //! there and `cos_light` would be 0) or when the target function reports invalid data; candidates
@@ -101,6 +105,7 @@ const MAX_CANDIDATES_PER_SAMPLE: u64 = 64;
 pub fn draw(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
+    anisotropic: bool,
     count: usize,
     seed: u64,
     stream: Stream,
@@ -122,7 +127,7 @@ pub fn draw(
         }
         let blocks: Vec<(Vec<Sample>, Vec<Outcome>)> = (next_block..next_block + BLOCKS_PER_ROUND)
             .into_par_iter()
-            .map(|b| draw_block(target, sampling, seed, stream, b))
+            .map(|b| draw_block(target, sampling, anisotropic, seed, stream, b))
             .collect();
         next_block += BLOCKS_PER_ROUND;
         for (samples, outcomes) in blocks {
@@ -146,6 +151,7 @@ pub fn draw(
 fn draw_block(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
+    anisotropic: bool,
     seed: u64,
     stream: Stream,
     block: u64,
@@ -160,7 +166,7 @@ fn draw_block(
             rng.next_f64(),
             rng.next_f64(),
         ];
-        let outcome = match candidate(target, sampling, u) {
+        let outcome = match candidate(target, sampling, anisotropic, u) {
             Ok(sample) => {
                 samples.push(sample);
                 Outcome::Kept
@@ -172,13 +178,22 @@ fn draw_block(
     (samples, outcomes)
 }
 
-/// The view/light pair and angles of four uniforms.
-pub fn directions(sampling: AngularSampling, u: [f64; 4]) -> (DVec3, DVec3, RusinkiewiczAngles) {
+/// The view/light pair and angles of four uniforms; `anisotropic` draws `phi_h` too (adaptive
+/// sampling; uniform sampling covers it anyway).
+pub fn directions(
+    sampling: AngularSampling,
+    anisotropic: bool,
+    u: [f64; 4],
+) -> (DVec3, DVec3, RusinkiewiczAngles) {
     match sampling {
         AngularSampling::Adaptive => {
             let angles = RusinkiewiczAngles {
                 theta_h: u[0] * FRAC_PI_2,
-                phi_h: 0.0,
+                phi_h: if anisotropic {
+                    (2.0 * u[3] - 1.0) * PI
+                } else {
+                    0.0
+                },
                 theta_d: u[1] * FRAC_PI_2,
                 phi_d: u[2] * 2.0 * PI,
             };
@@ -206,9 +221,10 @@ fn uniform_hemisphere(u_cos: f64, u_phi: f64) -> DVec3 {
 fn candidate(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
+    anisotropic: bool,
     u: [f64; 4],
 ) -> std::result::Result<Sample, Outcome> {
-    let (view, light, angles) = directions(sampling, u);
+    let (view, light, angles) = directions(sampling, anisotropic, u);
     let (l, v) = (light.as_vec3(), view.as_vec3());
     // The f32 directions are what a renderer hands the network, so they decide the horizon.
     if l.z <= 0.0 || v.z <= 0.0 {
@@ -221,7 +237,7 @@ fn candidate(
     let cos_light = l.z;
     let log_target = f.map(|c| (c * cos_light as f64).ln_1p() as f32);
     Ok(Sample {
-        x: crate::coords::network_input(v, l),
+        x: crate::coords::network_input_for(anisotropic, v, l),
         log_target,
         cos_light,
     })
@@ -239,7 +255,7 @@ mod tests {
     #[test]
     fn keeps_only_valid_samples_above_the_horizon() {
         for sampling in [AngularSampling::Adaptive, AngularSampling::Uniform] {
-            let set = draw(&constant, sampling, 5000, 3, Stream::TrainSamples).unwrap();
+            let set = draw(&constant, sampling, false, 5000, 3, Stream::TrainSamples).unwrap();
             assert_eq!(set.samples.len(), 5000);
             assert_eq!(set.candidates, 5000 + set.below_horizon + set.invalid);
             assert!(set.invalid > 0, "{sampling}");
@@ -259,11 +275,33 @@ mod tests {
         }
     }
 
+    /// Anisotropic draws cover phi_h uniformly (the input's `x[1] = sin th sin ph` takes both
+    /// signs, `atan2(x1, x0)` spreads over all four quadrants); isotropic ones keep `x[1] = 0`.
+    #[test]
+    fn anisotropic_draws_cover_phi_h() {
+        for sampling in [AngularSampling::Adaptive, AngularSampling::Uniform] {
+            let iso = draw(&constant, sampling, false, 2000, 5, Stream::TrainSamples).unwrap();
+            assert!(iso.samples.iter().all(|s| s.x[1] == 0.0 && s.x[0] >= 0.0));
+            let aniso = draw(&constant, sampling, true, 4000, 5, Stream::TrainSamples).unwrap();
+            let mut quadrants = [0usize; 4];
+            for s in &aniso.samples {
+                let phi = s.x[1].atan2(s.x[0]);
+                let q = ((phi + std::f32::consts::PI) / std::f32::consts::FRAC_PI_2) as usize;
+                quadrants[q.min(3)] += 1;
+            }
+            assert!(
+                quadrants.iter().all(|&q| q > 800 && q < 1200),
+                "{sampling}: {quadrants:?}"
+            );
+        }
+    }
+
     #[test]
     fn fails_clearly_when_nothing_is_valid() {
         let err = draw(
             &|_: &RusinkiewiczAngles| None,
             AngularSampling::Adaptive,
+            false,
             10,
             0,
             Stream::TrainSamples,
@@ -277,6 +315,7 @@ mod tests {
         let set = draw(
             &constant,
             AngularSampling::Adaptive,
+            false,
             4000,
             9,
             Stream::TrainSamples,
