@@ -55,6 +55,8 @@ pub mod source;
 #[cfg(feature = "train")]
 pub mod analytic;
 #[cfg(feature = "train")]
+pub mod anisotropic_lobe_fit;
+#[cfg(feature = "train")]
 pub mod latent;
 #[cfg(feature = "train")]
 pub mod lobe_fit;

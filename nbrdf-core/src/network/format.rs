@@ -218,6 +218,9 @@ impl Nbrdf {
         if let Some(message) = file.sampling.as_ref().and_then(SamplingParams::problem) {
             return Err(fail(message));
         }
+        if let Some(message) = anisotropy_problem(file.anisotropic, file.sampling.as_ref()) {
+            return Err(fail(message));
+        }
         let layers: [Layer; 3] = file
             .layers
             .try_into()
@@ -267,7 +270,8 @@ impl Nbrdf {
     pub fn validate(&self) -> Result<()> {
         let problem = shape_problem(&self.layers)
             .or_else(|| value_problem(&self.layers))
-            .or_else(|| self.sampling.as_ref().and_then(SamplingParams::problem));
+            .or_else(|| self.sampling.as_ref().and_then(SamplingParams::problem))
+            .or_else(|| anisotropy_problem(self.anisotropic, self.sampling.as_ref()));
         match problem {
             Some(message) => Err(NbrdfError::InvalidArgument(format!(
                 "network '{}': {message}",
@@ -275,5 +279,16 @@ impl Nbrdf {
             ))),
             None => Ok(()),
         }
+    }
+}
+
+/// An anisotropic sampling lobe on an isotropic network: its orientation would be meaningless
+/// (the network does not see the tangent).
+fn anisotropy_problem(anisotropic: bool, sampling: Option<&SamplingParams>) -> Option<String> {
+    match sampling {
+        Some(s) if s.exponent_v.is_some() && !anisotropic => Some(
+            "sampling exponent_v (an anisotropic lobe) needs an anisotropic network".to_string(),
+        ),
+        _ => None,
     }
 }

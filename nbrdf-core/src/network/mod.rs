@@ -72,6 +72,12 @@ pub struct SamplingParams {
     /// it ignore it and sample the first lobe with cosine, a valid (if weaker) density.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub second_lobe: Option<SecondLobe>,
+    /// The exponent across the tangent of an anisotropic lobe: `exponent` becomes `n_u`
+    /// (along the tangent x) and this `n_v` ([`SamplingStrategy::AnisotropicBlinnPhong`]).
+    /// Optional and only for anisotropic networks (`nbrdf fit-phong` stores it); readers that
+    /// predate it sample the isotropic lobe of exponent `n_u`, a valid (if weaker) density.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exponent_v: Option<f32>,
     /// What the lobe search measured when it chose these parameters (informational).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_variance: Option<SamplingVariances>,
@@ -91,6 +97,10 @@ pub struct SamplingVariances {
     pub one_lobe: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub two_lobe: Option<f64>,
+    /// The anisotropic lobe's, for anisotropic networks; there `one_lobe` is the best
+    /// isotropic lobe's on the same (all view azimuths) quadrature.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anisotropic: Option<f64>,
     pub cosine: f64,
 }
 
@@ -115,6 +125,19 @@ impl SamplingParams {
                 self.specular_weight
             ));
         }
+        if let Some(nv) = self.exponent_v {
+            if !crate::sampling::exponent_in_range(f64::from(nv)) {
+                return Some(format!(
+                    "sampling exponent_v {nv} must be in [0, 1e6] (MAX_EXPONENT)"
+                ));
+            }
+            if self.second_lobe.is_some() {
+                return Some(
+                    "sampling: exponent_v (an anisotropic lobe) and second_lobe do not combine"
+                        .into(),
+                );
+            }
+        }
         if self.second_lobe.is_some() {
             if let Err(NbrdfError::InvalidArgument(message)) = self.two_lobe_strategy().validated()
             {
@@ -137,11 +160,19 @@ impl SamplingParams {
         }
     }
 
-    /// The sampling strategy these parameters describe: the one-lobe Blinn-Phong mixture, or
-    /// the two-lobe one when a second lobe is stored.
+    /// The sampling strategy these parameters describe: the one-lobe Blinn-Phong mixture, the
+    /// two-lobe one when a second lobe is stored, the anisotropic one with `exponent_v`.
     pub fn strategy(&self) -> Result<SamplingStrategy> {
         if let Some(message) = self.problem() {
             return Err(NbrdfError::InvalidArgument(message));
+        }
+        if let Some(nv) = self.exponent_v {
+            return SamplingStrategy::anisotropic(
+                f64::from(self.exponent),
+                f64::from(nv),
+                f64::from(self.specular_weight),
+            )
+            .validated();
         }
         if self.second_lobe.is_some() {
             return self.two_lobe_strategy().validated();

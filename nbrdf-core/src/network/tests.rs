@@ -468,6 +468,7 @@ fn json_round_trip_is_exact() {
         specular_weight: 0.31,
         source: "fit".into(),
         second_lobe: None,
+        exponent_v: None,
         relative_variance: None,
     });
     net.provenance = serde_json::json!({"epochs": 12, "loss": 0.0123, "table": "gold.binary"});
@@ -574,6 +575,7 @@ fn malformed_files_are_rejected_with_the_file_name() {
             specular_weight: 0.5,
             source: "manual".into(),
             second_lobe: None,
+            exponent_v: None,
             relative_variance: None,
         });
         n.to_json_string()
@@ -710,6 +712,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
         specular_weight: 0.5,
         source: "fit".into(),
         second_lobe: None,
+        exponent_v: None,
         relative_variance: None,
     };
     net.sampling = Some(one.clone());
@@ -731,6 +734,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
         relative_variance: Some(super::SamplingVariances {
             one_lobe: 2.5,
             two_lobe: Some(1.25),
+            anisotropic: None,
             cosine: 40.0,
         }),
         ..one
@@ -746,4 +750,58 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
             weight2: f64::from(0.3f32),
         })
     );
+}
+
+#[test]
+fn anisotropic_sampling_lobe_round_trips_and_is_checked_on_load() {
+    let mut net = test_net(4, 3);
+    net.anisotropic = true;
+    let lobe = SamplingParams {
+        model: "blinn-phong".into(),
+        exponent: 400.0,
+        specular_weight: 0.6,
+        source: "fit".into(),
+        second_lobe: None,
+        exponent_v: Some(25.0),
+        relative_variance: None,
+    };
+    net.sampling = Some(lobe.clone());
+    let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();
+    assert_eq!(back, net);
+    assert_eq!(
+        back.sampling_strategy(),
+        Some(SamplingStrategy::anisotropic(
+            400.0,
+            25.0,
+            f64::from(0.6f32)
+        ))
+    );
+    let refused = |n: &Nbrdf, want: &str| {
+        let err = Nbrdf::from_json_str(&n.to_json_string(), Path::new("t")).unwrap_err();
+        assert!(err.to_string().contains(want), "{err}");
+        assert!(n.validate().is_err());
+    };
+    for bad in [-1.0, f32::NAN, f32::INFINITY, 2e6] {
+        net.sampling = Some(SamplingParams {
+            exponent_v: Some(bad),
+            ..lobe.clone()
+        });
+        if bad.is_finite() {
+            refused(&net, "exponent_v");
+        } else {
+            // JSON has no NaN or infinity: the in-memory check refuses them.
+            assert!(net.validate().is_err());
+        }
+    }
+    net.sampling = Some(SamplingParams {
+        second_lobe: Some(super::SecondLobe {
+            exponent: 40.0,
+            specular_weight: 0.3,
+        }),
+        ..lobe.clone()
+    });
+    refused(&net, "do not combine");
+    net.sampling = Some(lobe);
+    net.anisotropic = false;
+    refused(&net, "needs an anisotropic network");
 }

@@ -1,6 +1,9 @@
 //! `nbrdf fit-phong`: the Blinn-Phong sampling lobe of a table or a network.
 
 use super::with_threads;
+use crate::anisotropic_lobe_fit::{
+    fit_anisotropic_lobe, AnisotropicLobeFit, AnisotropicLobeFitConfig,
+};
 use crate::error::{NbrdfError, Result};
 use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, TwoLobeFit};
 use crate::merl::PhiFold;
@@ -60,6 +63,11 @@ pub struct RelativeVariances {
     /// The two-lobe mixture's, when it was searched (`--lobes auto|2` with `--lobe variance`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub two_lobe: Option<f64>,
+    /// The anisotropic lobe's, for anisotropic networks (with `--lobe variance`, not
+    /// `--lobes 2`); `variance_lobe` and `cosine` are then on its quadrature over all view
+    /// azimuths.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anisotropic: Option<f64>,
 }
 
 /// What `fit-phong` found (and wrote).
@@ -69,6 +77,8 @@ pub struct FitPhongReport {
     pub model: String,
     pub exponent: f32,
     pub specular_weight: f32,
+    /// `n_v` of the stored anisotropic lobe (then `exponent` is `n_u`).
+    pub exponent_v: Option<f32>,
     /// The stored second lobe, if two lobes were stored.
     pub second_lobe: Option<SecondLobe>,
     pub source: String,
@@ -105,6 +115,14 @@ impl fmt::Display for FitPhongReport {
             self.loss, self.kd[0], self.kd[1], self.kd[2], self.ks[0], self.ks[1], self.ks[2],
             v.variance_lobe, v.model_lobe, v.cosine,
         )?;
+        if let (Some(nv), Some(variance)) = (self.exponent_v, v.anisotropic) {
+            writeln!(
+                f,
+                "anisotropic lobe (stored): exponents {:.4} along the tangent, {nv:.4} across, \
+                 weight {:.4}, relative variance {variance:.4e}",
+                self.exponent, self.specular_weight,
+            )?;
+        }
         if let (Some(two), Some(variance)) = (&self.two_lobe, v.two_lobe) {
             writeln!(
                 f,
@@ -140,18 +158,33 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 .into(),
         ));
     }
-    let search_two = request.lobes != LobeCount::One && request.lobe == LobeChoice::LowestVariance;
+    // Anisotropic networks get the anisotropic lobe unless two (isotropic) lobes are asked for.
+    let search_anisotropic = matches!(&material, Material::Network(net) if net.anisotropic)
+        && request.lobe == LobeChoice::LowestVariance
+        && request.lobes != LobeCount::Two;
+    let search_two = request.lobes != LobeCount::One
+        && request.lobe == LobeChoice::LowestVariance
+        && !search_anisotropic;
     let lobe_config = LobeFitConfig::default();
-    let (analysis, two_lobes) = with_threads(request.threads, || -> Result<_> {
+    let (analysis, two_lobes, anisotropic) = with_threads(request.threads, || -> Result<_> {
         let target = material_target(&material);
+        let anisotropic: Option<AnisotropicLobeFit> = if search_anisotropic {
+            Some(fit_anisotropic_lobe(
+                &*target,
+                &AnisotropicLobeFitConfig::default(),
+            )?)
+        } else {
+            None
+        };
         if search_two {
             let (analysis, two) =
                 LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
-            Ok((analysis, Some(two)))
+            Ok((analysis, Some(two), anisotropic))
         } else {
             Ok((
                 LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
                 None,
+                anisotropic,
             ))
         }
     })?
@@ -179,17 +212,35 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         ),
         None => (exponent, specular_weight, None),
     };
-    let sampling = SamplingParams {
-        model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
-        exponent: exponent as f32,
-        specular_weight: specular_weight as f32,
-        source: "fit".to_string(),
-        second_lobe,
-        relative_variance: Some(SamplingVariances {
-            one_lobe: one_lobe_variance,
-            two_lobe: two_lobes.map(|two| two.relative_variance),
-            cosine: analysis.lowest_variance.cosine_relative_variance,
-        }),
+    let sampling = match anisotropic {
+        Some(a) => SamplingParams {
+            model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
+            exponent: a.exponent_u as f32,
+            specular_weight: a.specular_weight as f32,
+            source: "fit".to_string(),
+            second_lobe: None,
+            exponent_v: Some(a.exponent_v as f32),
+            relative_variance: Some(SamplingVariances {
+                one_lobe: a.isotropic_relative_variance,
+                two_lobe: None,
+                anisotropic: Some(a.relative_variance),
+                cosine: a.cosine_relative_variance,
+            }),
+        },
+        None => SamplingParams {
+            model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
+            exponent: exponent as f32,
+            specular_weight: specular_weight as f32,
+            source: "fit".to_string(),
+            second_lobe,
+            exponent_v: None,
+            relative_variance: Some(SamplingVariances {
+                one_lobe: one_lobe_variance,
+                two_lobe: two_lobes.map(|two| two.relative_variance),
+                anisotropic: None,
+                cosine: analysis.lowest_variance.cosine_relative_variance,
+            }),
+        },
     };
     let mut written = None;
     if let Material::Network(mut net) = material {
@@ -204,6 +255,7 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         model: sampling.model,
         exponent: sampling.exponent,
         specular_weight: sampling.specular_weight,
+        exponent_v: sampling.exponent_v,
         second_lobe: sampling.second_lobe,
         source: sampling.source,
         two_lobe: two_lobes.map(|two| TwoLobeReport {
@@ -217,10 +269,15 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         model_specular_weight: p.specular_weight(),
         loss: analysis.model.loss,
         relative_variance: RelativeVariances {
-            variance_lobe: analysis.lowest_variance.relative_variance,
+            variance_lobe: anisotropic.map_or(analysis.lowest_variance.relative_variance, |a| {
+                a.isotropic_relative_variance
+            }),
             model_lobe: analysis.model_relative_variance,
-            cosine: analysis.lowest_variance.cosine_relative_variance,
+            cosine: anisotropic.map_or(analysis.lowest_variance.cosine_relative_variance, |a| {
+                a.cosine_relative_variance
+            }),
             two_lobe: two_lobes.map(|two| two.relative_variance),
+            anisotropic: anisotropic.map(|a| a.relative_variance),
         },
         written,
         choice: request.lobe,

@@ -502,6 +502,7 @@ pub fn predict_phong(
         specular_weight: w,
         source: "predicted".to_string(),
         second_lobe: None,
+        exponent_v: None,
         relative_variance: None,
     });
     net.validate()?;
