@@ -27,7 +27,7 @@ STATUS_NAMES = {
 }
 
 #: ``NbrdfSamplingKind`` values by the names the BSDF plugins accept.
-SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2, "two_lobe": 3}
+SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2, "two_lobe": 3, "anisotropic_phong": 4}
 
 
 class NbrdfError(RuntimeError):
@@ -228,8 +228,9 @@ class Network(_Handle):
         self.anisotropic = bool(anisotropic[0])
         stored = ffi.new("NbrdfMixtureSampler *")
         check(lib.nbrdf_network_stored_sampler(self._ptr, stored))
-        #: "two_lobe" when the file stores a second lobe, "phong" for one, None for none.
-        self.stored_sampling = {2: "phong", 3: "two_lobe"}.get(int(stored.kind))
+        #: "two_lobe" when the file stores a second lobe, "anisotropic_phong" for an anisotropic
+        #: lobe (exponent2 is then n_v), "phong" for one, None for none.
+        self.stored_sampling = {2: "phong", 3: "two_lobe", 4: "anisotropic_phong"}.get(int(stored.kind))
         self.exponent2 = float(stored.exponent2)
         self.specular_weight2 = float(stored.specular_weight2)
 

@@ -26,6 +26,9 @@ Rejected: non-finite or negative exponents, exponents above ``MAX_EXPONENT`` (1e
 weights outside [0, 1], two-lobe weights summing above 1, NaN or infinite network weights,
 weights of the wrong count. The second lobe of ``sampling`` = ``two_lobe`` is ``exponent2`` and
 ``specular_weight2`` (the mixture ``w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine``).
+With ``sampling`` = ``anisotropic_phong`` (Ashikhmin-Shirley lobe in the shading frame, mixed with
+cosine), ``exponent`` is ``n_u`` (along the tangent), ``exponent2`` is ``n_v`` (across it) and
+``specular_weight2`` is unused.
 """
 
 from __future__ import annotations
@@ -313,13 +316,17 @@ class _NativeBSDFMixin:
         if sampling == "two_lobe" and (exponent2 is None or weight2 is None):
             raise ValueError(f'{self._type_name()} "{self._filename}": sampling "two_lobe" needs '
                              '"exponent2" and "specular_weight2" (or a file that stores two lobes)')
+        if sampling == "anisotropic_phong" and exponent2 is None:
+            raise ValueError(f'{self._type_name()} "{self._filename}": sampling "anisotropic_phong" '
+                             'needs "exponent2" (n_v, across the tangent; or a file that stores an '
+                             'anisotropic lobe)')
         return (_as_float(self, "exponent2", exponent2, 0.0),
                 _as_float(self, "specular_weight2", weight2, 0.0))
 
     def _phong_parameters(self, sampling, exponent, weight) -> tuple[float, float]:
         """(exponent, weight) with file defaults applied; errors when phong lacks them."""
-        if sampling == "phong" and (exponent is None or weight is None):
-            raise ValueError(f'{self._type_name()} "{self._filename}": sampling "phong" needs '
+        if sampling in ("phong", "anisotropic_phong") and (exponent is None or weight is None):
+            raise ValueError(f'{self._type_name()} "{self._filename}": sampling "{sampling}" needs '
                              '"exponent" and "specular_weight"')
         return _as_float(self, "exponent", exponent, 0.0), _as_float(self, "specular_weight", weight, 0.0)
 
@@ -499,12 +506,14 @@ class _NativeBSDFMixin:
         old = (self._exponent_value, self._weight_value, self._exponent2_value, self._weight2_value)
         if new != old:
             self._set_sampler(*new)  # validated above: cannot fail
-            if self._sampling not in ("phong", "two_lobe") or (
-                    self._sampling == "phong" and new[2:] != old[2:]):
+            if self._sampling not in ("phong", "two_lobe", "anisotropic_phong") or (
+                    self._sampling == "phong" and new[2:] != old[2:]) or (
+                    self._sampling == "anisotropic_phong" and new[3] != old[3]):
                 mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
-                                         f'specular_weight only affect sampling "phong" and "two_lobe", '
-                                         f'exponent2 and specular_weight2 only "two_lobe" (this BSDF '
-                                         f'uses "{self._sampling}")')
+                                         f'specular_weight only affect sampling "phong", "two_lobe" and '
+                                         f'"anisotropic_phong", exponent2 only "two_lobe" and '
+                                         f'"anisotropic_phong", specular_weight2 only "two_lobe" (this '
+                                         f'BSDF uses "{self._sampling}")')
         if hasattr(self, "_traced"):
             self._apply_traced_state()
 
@@ -528,8 +537,10 @@ class _NativeBSDFMixin:
     def to_string(self):
         lines = [f'filename = "{self._filename}"', *self._describe(), f"backend = {self._backend}",
                  f"sampling = {self._sampling}"]
-        if self._sampling in ("phong", "two_lobe"):
+        if self._sampling in ("phong", "two_lobe", "anisotropic_phong"):
             lines += [f"exponent = {self._exponent_value:g}", f"specular_weight = {self._weight_value:g}"]
+        if self._sampling == "anisotropic_phong":
+            lines += [f"exponent2 = {self._exponent2_value:g} (n_v)"]
         if self._sampling == "two_lobe":
             lines += [f"exponent2 = {self._exponent2_value:g}", f"specular_weight2 = {self._weight2_value:g}"]
         return f"{type(self).__name__}[\n" + ",\n".join("  " + line for line in lines) + "\n]"
@@ -539,9 +550,11 @@ class NbrdfMixin(_NativeBSDFMixin):
     """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file.
 
     Parameters: ``filename``; ``sampling`` = ``two_lobe`` (default when the file stores two
-    Blinn-Phong lobes) | ``phong`` (default when it stores one; with a two-lobe file, its first
-    lobe) | ``cosine`` (default otherwise) | ``uniform``; ``exponent``, ``specular_weight``,
-    ``exponent2`` and ``specular_weight2`` override the stored lobes.
+    Blinn-Phong lobes) | ``anisotropic_phong`` (default when it stores an anisotropic lobe,
+    ``sampling.exponent_v``: ``exponent2`` is then ``n_v``) | ``phong`` (default when it stores
+    one; with a two-lobe file, its first lobe) | ``cosine`` (default otherwise) | ``uniform``;
+    ``exponent``, ``specular_weight``, ``exponent2`` and ``specular_weight2`` override the stored
+    lobes.
     """
 
     PLUGIN = "nbrdf"
@@ -606,8 +619,8 @@ class NbrdfMixin(_NativeBSDFMixin):
                 f"(jit) backend evaluates in reasonable time (JIT_MAX_HIDDEN_WIDTH)")
 
     def _default_sampling(self, exponent, weight, second=(None, None)) -> str:
-        if self._native.stored_sampling == "two_lobe":
-            return "two_lobe"
+        if self._native.stored_sampling in ("two_lobe", "anisotropic_phong"):
+            return self._native.stored_sampling
         if self._native.has_sampling or (exponent is not None and weight is not None):
             return "two_lobe" if None not in second else "phong"
         return "cosine"
@@ -622,6 +635,8 @@ class NbrdfMixin(_NativeBSDFMixin):
         if self._native.stored_sampling == "two_lobe":
             exponent2 = self._native.exponent2 if exponent2 is None else exponent2
             weight2 = self._native.specular_weight2 if weight2 is None else weight2
+        if self._native.stored_sampling == "anisotropic_phong" and sampling == "anisotropic_phong":
+            exponent2 = self._native.exponent2 if exponent2 is None else exponent2
         return _NativeBSDFMixin._second_lobe(self, sampling, exponent2, weight2)
 
     def _describe(self) -> list[str]:

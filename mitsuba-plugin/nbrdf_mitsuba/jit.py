@@ -19,6 +19,11 @@ reference). Its twins, and the tests that hold the two together:
   ``blinn_phong_half_vector``; uniforms clamped like ``unit_interval``);
 * :func:`two_lobe_pdf` and the ``two_lobe`` branch of :func:`sample` - ``sampling.rs``
   ``SamplingStrategy::TwoLobe`` (``two_lobe_mixture_density``, ``two_lobe_component``);
+* :func:`anisotropic_pdf`, :func:`anisotropic_half_vector` and the ``anisotropic_phong`` branch of
+  :func:`sample` - ``sampling.rs`` ``SamplingStrategy::AnisotropicBlinnPhong``
+  (``anisotropic_mixture_density``, ``anisotropic_half_vector``); ``exponent2`` is ``n_v``.
+  Held to the library by ``tests/test_anisotropic.py`` (``test_anisotropic_lobe_backends_agree``)
+  and Mitsuba's chi^2 test there;
 * :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``.
 
 Tests: ``tests/test_backends.py`` (eval, pdf, samples and renders of both backends, and a
@@ -334,7 +339,51 @@ def two_lobe_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weigh
     return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
-STRATEGIES = ("uniform", "cosine", "phong", "two_lobe")
+def anisotropic_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent_u, specular_weight, exponent_v):
+    """The anisotropic Blinn-Phong mixture (Ashikhmin-Shirley half-vector density, ``n_u`` along
+    the tangent x, ``n_v`` across) per unit solid angle of ``light``, zero unless both directions
+    are above the horizon (``sampling.rs`` ``anisotropic_mixture_density``)."""
+    v, v_ok = _unit(view)
+    l, l_ok = _unit(light)
+    one_minus_cos, v_dot_h, h_ok = _half_vector_terms(view, light)
+    # The half vector's azimuth from s = v |l| + l |v| as in _half_vector_terms.
+    vr, lr = _in_range(view.x, view.y, view.z), _in_range(light.x, light.y, light.z)
+    s = vr * dr.norm(lr) + lr * dr.norm(vr)
+    xy2 = dr.fma(s.x, s.x, s.y * s.y)
+    cos2_phi = dr.select(xy2 > 0, s.x * s.x / dr.select(xy2 > 0, xy2, 1.0), 1.0)
+    exponent = exponent_u * cos2_phi + exponent_v * (1.0 - cos2_phi)
+    lobe = (dr.sqrt((exponent_u + 1.0) * (exponent_v + 1.0)) * (0.5 / math.pi)
+            * _cos_power_from_one_minus(one_minus_cos, exponent))
+    specular = dr.select(h_ok & (v_dot_h > 0), lobe / (4.0 * v_dot_h), 0.0)
+    specular = dr.select(specular_weight > 0, specular_weight * specular, 0.0)
+    pdf = specular + (1.0 - specular_weight) * dr.maximum(l.z, 0.0) / math.pi
+    return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
+
+
+def anisotropic_half_vector(exponent_u, exponent_v, u1, u2) -> mi.Vector3f:
+    """``phi = atan(sqrt((n_u + 1)/(n_v + 1)) tan(pi xi / 2))`` per quadrant (``u1`` picks the
+    quadrant and ``xi``), then ``cos theta_h = u2^(1/(n(phi) + 1))``."""
+    scaled = 4.0 * dr.clip(u1, 0.0, 1.0)
+    quadrant = dr.minimum(dr.floor(scaled), 3.0)
+    xi = scaled - quadrant
+    ratio = dr.sqrt((exponent_u + 1.0) / (exponent_v + 1.0))
+    phi0 = dr.atan(ratio * dr.tan(0.5 * math.pi * xi))
+    phi = dr.select(quadrant == 0, phi0,
+                    dr.select(quadrant == 1, math.pi - phi0,
+                              dr.select(quadrant == 2, math.pi + phi0, 2.0 * math.pi - phi0)))
+    sin_phi, cos_phi = dr.sincos(phi)
+    exponent = exponent_u * cos_phi * cos_phi + exponent_v * sin_phi * sin_phi
+    u2 = dr.clip(u2, 0.0, 1.0)
+    positive = u2 > 0
+    log_u2 = dr.log(dr.select(positive, u2, 1.0))
+    one_minus_cos = dr.select(positive, -_expm1_nonpositive(log_u2 / (exponent + 1.0)), 1.0)
+    one_minus_cos = dr.clip(one_minus_cos, 0.0, 1.0)
+    cos_theta = 1.0 - one_minus_cos
+    sin_theta = dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta))
+    return mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
+
+
+STRATEGIES = ("uniform", "cosine", "phong", "two_lobe", "anisotropic_phong")
 
 
 def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0, exponent2=0.0,
@@ -344,6 +393,8 @@ def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0, exponent2
         return mixture_pdf(view, light, exponent, specular_weight)
     if strategy == "two_lobe":
         return two_lobe_pdf(view, light, exponent, specular_weight, exponent2, specular_weight2)
+    if strategy == "anisotropic_phong":
+        return anisotropic_pdf(view, light, exponent, specular_weight, exponent2)
     v, v_ok = _unit(view)
     l, l_ok = _unit(light)
     density = 0.5 / math.pi if strategy == "uniform" else l.z / math.pi
@@ -377,6 +428,12 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0, e
         h = blinn_phong_half_vector(dr.select(first, exponent, exponent2), u1, u2)
         reflected = 2.0 * dr.dot(v, h) * h - v
         light = dr.select(first | second, reflected, cosine_hemisphere(u1, u2))
+    elif strategy == "anisotropic_phong":
+        v, _ = _unit(view)
+        h = anisotropic_half_vector(exponent, exponent2, u1, u2)
+        reflected = 2.0 * dr.dot(v, h) * h - v
+        specular = (u0 < specular_weight) | (specular_weight >= 1.0)
+        light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
     else:
         raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
     _, view_ok = _unit(view)

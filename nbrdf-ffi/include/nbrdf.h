@@ -30,6 +30,11 @@ typedef enum NbrdfSamplingKind {
   // `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
   // Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
   NBRDF_SAMPLING_TWO_LOBE = 3,
+  // Anisotropic Blinn-Phong lobe (Ashikhmin-Shirley: `exponent` = `n_u` along the tangent x,
+  // `exponent2` = `n_v` across it, weight `specular_weight`) mixed with a cosine lobe; for
+  // anisotropic networks, whose directions are in the shading frame. Only in an
+  // `NbrdfMixtureSampler`; `specular_weight2` is not read.
+  NBRDF_SAMPLING_ANISOTROPIC_PHONG = 4,
 } NbrdfSamplingKind;
 
 // Status code returned (as `int32_t`) by every fallible function. On any value other than
@@ -84,7 +89,8 @@ typedef struct NbrdfSampler {
 // functions: any kind of `NbrdfSamplingKind`. The first three fields are those of
 // `NbrdfSampler`; `exponent2` and `specular_weight2` are read only for
 // `NBRDF_SAMPLING_TWO_LOBE`, which takes exponents finite in [0, 1e6], weights in [0, 1] with
-// `specular_weight + specular_weight2 <= 1`.
+// `specular_weight + specular_weight2 <= 1`; `NBRDF_SAMPLING_ANISOTROPIC_PHONG` reads
+// `exponent2` as `n_v` (finite in [0, 1e6]).
 typedef struct NbrdfMixtureSampler {
   enum NbrdfSamplingKind kind;
   float exponent;
@@ -277,8 +283,9 @@ int32_t nbrdf_mixture_sampler_pdf(const struct NbrdfMixtureSampler *sampler,
 int32_t nbrdf_mixture_sampler_validate(const struct NbrdfMixtureSampler *sampler);
 
 // Fills `*out` with the sampling strategy stored in the network file: `NBRDF_SAMPLING_PHONG`
-// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, or `NBRDF_SAMPLING_COSINE` with zero
-// parameters when the file stores none.
+// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, `NBRDF_SAMPLING_ANISOTROPIC_PHONG`
+// (`exponent2` = `n_v`), or `NBRDF_SAMPLING_COSINE` with zero parameters when the file stores
+// none.
 //
 // # Safety
 // `network` is a live handle; `out` points to a writable `NbrdfMixtureSampler`.

@@ -58,6 +58,11 @@ pub enum NbrdfSamplingKind {
     /// `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
     /// Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
     NBRDF_SAMPLING_TWO_LOBE = 3,
+    /// Anisotropic Blinn-Phong lobe (Ashikhmin-Shirley: `exponent` = `n_u` along the tangent x,
+    /// `exponent2` = `n_v` across it, weight `specular_weight`) mixed with a cosine lobe; for
+    /// anisotropic networks, whose directions are in the shading frame. Only in an
+    /// `NbrdfMixtureSampler`; `specular_weight2` is not read.
+    NBRDF_SAMPLING_ANISOTROPIC_PHONG = 4,
 }
 
 /// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
@@ -74,7 +79,8 @@ pub struct NbrdfSampler {
 /// functions: any kind of `NbrdfSamplingKind`. The first three fields are those of
 /// `NbrdfSampler`; `exponent2` and `specular_weight2` are read only for
 /// `NBRDF_SAMPLING_TWO_LOBE`, which takes exponents finite in [0, 1e6], weights in [0, 1] with
-/// `specular_weight + specular_weight2 <= 1`.
+/// `specular_weight + specular_weight2 <= 1`; `NBRDF_SAMPLING_ANISOTROPIC_PHONG` reads
+/// `exponent2` as `n_v` (finite in [0, 1e6]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NbrdfMixtureSampler {
@@ -323,10 +329,12 @@ unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrate
             exponent: f64::from(exponent),
             specular_weight: f64::from(specular_weight),
         },
-        3 => return Err(Failure::invalid(
-            "sampling kind 3 (two-lobe) needs an NbrdfMixtureSampler and the *_mixture functions"
-                .to_string(),
-        )),
+        3 | 4 => {
+            return Err(Failure::invalid(format!(
+            "sampling kind {kind} ({}) needs an NbrdfMixtureSampler and the *_mixture functions",
+            if kind == 3 { "two-lobe" } else { "anisotropic phong" }
+        )))
+        }
         other => {
             return Err(Failure::invalid(format!(
                 "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
@@ -365,9 +373,14 @@ unsafe fn read_mixture_sampler(sampler: *const NbrdfMixtureSampler) -> FfiResult
             exponent2: f64::from(exponent2),
             weight2: f64::from(specular_weight2),
         },
+        4 => SamplingStrategy::anisotropic(
+            f64::from(exponent),
+            f64::from(exponent2),
+            f64::from(specular_weight),
+        ),
         other => {
             return Err(Failure::invalid(format!(
-                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe)"
+                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 4 = anisotropic phong)"
             )))
         }
     };
@@ -972,8 +985,9 @@ pub unsafe extern "C" fn nbrdf_mixture_sampler_validate(
 }
 
 /// Fills `*out` with the sampling strategy stored in the network file: `NBRDF_SAMPLING_PHONG`
-/// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, or `NBRDF_SAMPLING_COSINE` with zero
-/// parameters when the file stores none.
+/// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, `NBRDF_SAMPLING_ANISOTROPIC_PHONG`
+/// (`exponent2` = `n_v`), or `NBRDF_SAMPLING_COSINE` with zero parameters when the file stores
+/// none.
 ///
 /// # Safety
 /// `network` is a live handle; `out` points to a writable `NbrdfMixtureSampler`.
@@ -1001,6 +1015,10 @@ pub unsafe extern "C" fn nbrdf_network_stored_sampler(
                 sampler.kind = NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE;
                 sampler.exponent2 = second.exponent;
                 sampler.specular_weight2 = second.specular_weight;
+            }
+            if let Some(exponent_v) = stored.exponent_v {
+                sampler.kind = NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG;
+                sampler.exponent2 = exponent_v;
             }
         }
         // SAFETY: non-null, aligned, writable by contract.

@@ -722,3 +722,117 @@ fn two_lobe_samplers_go_through_the_mixture_functions() {
     assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE);
     assert_eq!((stored.exponent2, stored.specular_weight2), (8.0, 0.5));
 }
+
+#[test]
+fn anisotropic_samplers_go_through_the_mixture_functions() {
+    let aniso = NbrdfMixtureSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG,
+        exponent: 1000.0,
+        specular_weight: 0.6,
+        exponent2: 10.0,
+        specular_weight2: 0.0,
+    };
+    let core = SamplingStrategy::anisotropic(1000.0, 10.0, f64::from(0.6f32));
+    let n = 64;
+    let views: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let (t, p) = (1.5 * i as f32 / n as f32, 0.3 * i as f32);
+            Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
+        })
+        .collect();
+    let us: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let k = i as f32;
+            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
+        })
+        .collect();
+    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
+    let (network, _) = load_network(4);
+    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
+    let mut pdf_again = vec![0.0; n];
+    // SAFETY: valid pointers and sizes.
+    unsafe {
+        assert_eq!(
+            nbrdf_mixture_sampler_validate(&aniso),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_network_sample_mixture(
+                network.0,
+                &aniso,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                light.as_mut_ptr(),
+                weight.as_mut_ptr(),
+                pdf.as_mut_ptr()
+            ),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_mixture_sampler_pdf(
+                &aniso,
+                view.as_ptr(),
+                light.as_ptr(),
+                n,
+                pdf_again.as_mut_ptr()
+            ),
+            OK
+        );
+    }
+    assert_eq!(pdf, pdf_again);
+    for i in 0..n {
+        let s = core.sample(views[i], us[i].to_array());
+        assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
+        assert_eq!(s.pdf, pdf[i]);
+    }
+    let one = NbrdfSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG,
+        exponent: 10.0,
+        specular_weight: 0.5,
+    };
+    // SAFETY: valid pointers.
+    unsafe {
+        assert_eq!(nbrdf_sampler_validate(&one), INVALID);
+        assert!(last_error().contains("NbrdfMixtureSampler"));
+        let bad = NbrdfMixtureSampler {
+            exponent2: 2e6,
+            ..aniso
+        };
+        assert_eq!(nbrdf_mixture_sampler_validate(&bad), INVALID);
+    }
+    // A file storing exponent_v reports the anisotropic kind with n_v in exponent2.
+    let path = scratch("aniso-lobe").join("aniso.nbrdf.json");
+    let text = network_json(4)
+        .replace(r#""version": 1,"#, r#""version": 2, "anisotropic": true,"#)
+        .replace(
+            r#""source": "manual"}"#,
+            r#""source": "manual", "exponent_v": 7.5}"#,
+        );
+    std::fs::write(&path, text).unwrap();
+    let mut handle = null_mut();
+    let mut stored = aniso;
+    // SAFETY: valid path and pointers.
+    unsafe {
+        assert_eq!(
+            nbrdf_network_load(c_path(&path).as_ptr(), &mut handle),
+            OK,
+            "{}",
+            last_error()
+        );
+        let file = Network(handle);
+        assert_eq!(nbrdf_network_stored_sampler(file.0, &mut stored), OK);
+    }
+    assert_eq!(
+        stored.kind,
+        NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG
+    );
+    assert_eq!(
+        (stored.exponent, stored.specular_weight, stored.exponent2),
+        (40.0, 0.25, 7.5)
+    );
+}

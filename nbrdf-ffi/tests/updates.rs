@@ -28,6 +28,7 @@ fn any_sampler() -> impl Strategy<Value = NbrdfSampler> {
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_PHONG),
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_PHONG),
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE),
+        Just(NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG),
     ];
     (kind, exponent, weight).prop_map(|(kind, exponent, specular_weight)| NbrdfSampler {
         kind,
@@ -46,7 +47,8 @@ fn core_accepts(s: &NbrdfSampler) -> bool {
         },
         // The one-lobe struct has no second lobe: two-lobe samplers go through
         // NbrdfMixtureSampler, and this struct refuses the kind.
-        NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE => return false,
+        NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE
+        | NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG => return false,
     };
     strategy.validated().is_ok()
 }
