@@ -681,6 +681,22 @@ mod tests {
         assert!(aniso.anisotropic && !iso.anisotropic);
         let (ea, ei) = (error_over_phi_h(&aniso), error_over_phi_h(&iso));
         assert!(ea < 0.5 * ei, "anisotropic {ea} vs isotropic {ei}");
+        // The trained network's sampling lobe is anisotropic the oracle's way: its peak is
+        // narrow along x (tangent width 0.15 vs 0.5, i.e. n_u ~ 44, n_v ~ 4), and the lobe
+        // samples it better than the best isotropic one.
+        let mut lobe_config = crate::anisotropic_lobe_fit::AnisotropicLobeFitConfig::default();
+        lobe_config.base.s_bins = 60;
+        lobe_config.base.phi_bins = 48;
+        lobe_config.base.view_thetas = vec![0.3, 0.8, 1.2];
+        lobe_config.refine_levels = 3;
+        let target = crate::target::network_target(&aniso);
+        let lobe =
+            crate::anisotropic_lobe_fit::fit_anisotropic_lobe(&target, &lobe_config).unwrap();
+        assert!(lobe.exponent_u > 2.0 * lobe.exponent_v, "{lobe:?}");
+        assert!(
+            lobe.relative_variance < lobe.isotropic_relative_variance,
+            "{lobe:?}"
+        );
     }
 
     #[test]
