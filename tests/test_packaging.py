@@ -37,7 +37,8 @@ SDIST_MUST_HOLD = ["setup.py", "pyproject.toml", "README.md", "nbrdf_mitsuba/__i
                    # the built-in latent models the command embeds (nbrdf-core/src/bin/nbrdf/pretrained.rs)
                    "rust/nbrdf-core/data/models/autoencoder.json", "rust/nbrdf-core/data/models/predictor.json",
                    "rust/nbrdf-ffi/Cargo.toml", "rust/nbrdf-ffi/build.rs", "rust/nbrdf-ffi/src/lib.rs",
-                   "rust/nbrdf-ffi/include/nbrdf.h"]
+                   "rust/nbrdf-ffi/include/nbrdf.h", "rust/nbrdf-ffi/train/Cargo.toml",
+                   "rust/nbrdf-ffi/train/src/lib.rs", "rust/nbrdf-ffi/train/include/nbrdf_train.h"]
 
 pytestmark = [
     pytest.mark.skipif(sys.platform != "linux" or platform.machine() not in ("x86_64", "aarch64"),
@@ -126,6 +127,7 @@ def test_wheel_is_manylinux_and_complete(wheel):
         metadata = archive.read(f"{dist_info}/METADATA").decode()
     assert tags and all(re.fullmatch(r"py3-none-(manylinux_\d+_\d+|manylinux\d+)_(x86_64|aarch64)", t) for t in tags)
     assert "nbrdf_mitsuba/libnbrdf_ffi.so" in names and "nbrdf_mitsuba/nbrdf.h" in names
+    assert "nbrdf_mitsuba/libnbrdf_train.so" in names and "nbrdf_mitsuba/nbrdf_train.h" in names
     assert f"nbrdf_mitsuba-{VERSION}.data/scripts/nbrdf" in names
     assert "License-Expression: MIT" in metadata
     assert "Project-URL: " in metadata and "Keywords: " in metadata

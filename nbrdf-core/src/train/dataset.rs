@@ -15,7 +15,7 @@ use crate::coords::{from_rusinkiewicz, to_rusinkiewicz, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
 use crate::network::{INPUTS, OUTPUTS};
 use crate::rng::{SplitMix64, Stream};
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt;
@@ -153,13 +153,7 @@ fn draw_block(
     let mut samples = Vec::with_capacity(BLOCK as usize);
     let mut outcomes = Vec::with_capacity(BLOCK as usize);
     for k in block * BLOCK..(block + 1) * BLOCK {
-        let mut rng = SplitMix64::new(seed, stream, 4 * k);
-        let u = [
-            rng.next_f64(),
-            rng.next_f64(),
-            rng.next_f64(),
-            rng.next_f64(),
-        ];
+        let u = candidate_uniforms(seed, stream, k);
         let outcome = match candidate(target, sampling, u) {
             Ok(sample) => {
                 samples.push(sample);
@@ -203,28 +197,72 @@ fn uniform_hemisphere(u_cos: f64, u_phi: f64) -> DVec3 {
     DVec3::new(sin * c, sin * s, cos)
 }
 
+/// The `f32` view and light of candidate uniforms `u` with their angles, or `None` when either
+/// is at or below the horizon: the f32 directions are what a renderer hands the network, so
+/// they decide the horizon.
+fn candidate_directions(
+    sampling: AngularSampling,
+    u: [f64; 4],
+) -> Option<(Vec3, Vec3, RusinkiewiczAngles)> {
+    let (view, light, angles) = directions(sampling, u);
+    let (v, l) = (view.as_vec3(), light.as_vec3());
+    (l.z > 0.0 && v.z > 0.0).then_some((v, l, angles))
+}
+
+/// The uniforms of candidate `k` of stream `stream` of `seed`.
+fn candidate_uniforms(seed: u64, stream: Stream, k: u64) -> [f64; 4] {
+    let mut rng = SplitMix64::new(seed, stream, 4 * k);
+    [
+        rng.next_f64(),
+        rng.next_f64(),
+        rng.next_f64(),
+        rng.next_f64(),
+    ]
+}
+
 fn candidate(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
     u: [f64; 4],
 ) -> std::result::Result<Sample, Outcome> {
-    let (view, light, angles) = directions(sampling, u);
-    let (l, v) = (light.as_vec3(), view.as_vec3());
-    // The f32 directions are what a renderer hands the network, so they decide the horizon.
-    if l.z <= 0.0 || v.z <= 0.0 {
-        return Err(Outcome::BelowHorizon);
-    }
+    let (v, l, angles) = candidate_directions(sampling, u).ok_or(Outcome::BelowHorizon)?;
     let f = target(&angles).ok_or(Outcome::Invalid)?;
     if !f.iter().all(|c| c.is_finite() && *c >= 0.0) {
         return Err(Outcome::Invalid);
     }
     let cos_light = l.z;
-    let log_target = f.map(|c| (c * cos_light as f64).ln_1p() as f32);
-    Ok(Sample {
-        x: crate::coords::network_input(v, l),
-        log_target,
-        cos_light,
-    })
+    Ok(sample(v, l, f.map(|c| c * cos_light as f64)))
+}
+
+/// The sample of a view/light pair above the horizon and its `f_r cos_light` (finite, >= 0).
+pub fn sample(view: Vec3, light: Vec3, f_cos_light: [f64; 3]) -> Sample {
+    Sample {
+        x: crate::coords::network_input(view, light),
+        log_target: f_cos_light.map(|c| c.ln_1p() as f32),
+        cos_light: light.z,
+    }
+}
+
+/// The `(view, light)` pairs that [`draw`] would make samples of, for a target valid
+/// everywhere: the first `count` candidates of stream `stream` of `seed` above the horizon, in
+/// order. A caller that evaluates its own reflectance at them (the distiller,
+/// [`crate::train::arrays`]) trains on the trainer's own sampling.
+pub fn draw_directions(
+    sampling: AngularSampling,
+    count: usize,
+    seed: u64,
+    stream: Stream,
+) -> Vec<(Vec3, Vec3)> {
+    let mut pairs = Vec::with_capacity(count);
+    let mut k = 0u64;
+    while pairs.len() < count {
+        if let Some((v, l, _)) = candidate_directions(sampling, candidate_uniforms(seed, stream, k))
+        {
+            pairs.push((v, l));
+        }
+        k += 1;
+    }
+    pairs
 }
 
 #[cfg(test)]
