@@ -289,6 +289,9 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError as error:  # the training library is missing
         print(f"error: {error}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # delivered once the running Mitsuba or trainer call returns
+        print("error: interrupted; no network written", file=sys.stderr)
+        return 130
     print(f"wrote {summary['output']}: {summary['pairs'] - summary['validation']} samples "
           f"(+{summary['validation']} validation) evaluated by Mitsuba ({summary['variant']}) in "
           f"{summary['evaluation_seconds']:.1f} s; {summary['epochs']} epochs, best validation loss "
