@@ -174,6 +174,8 @@ def test_user_errors_are_one_line_messages(tmp_path, capsys):
         ((source, "-o", tmp_path), "is a directory"),
         ((source, "-o", out, "--variant", "no_such_variant"), "not available"),
         ((source, "-o", out, "--samples", "0"), "--samples"),
+        ((source, "-o", out, "--epochs", "-3"), "--epochs -3 is out of range"),
+        ((source, "-o", out, "--seed", str(2**70)), "--seed"),
     ]
     for args, needle in cases:
         status, err = run_main(capsys, *args, "--variant", "scalar_rgb") if "--variant" not in args \

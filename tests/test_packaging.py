@@ -1,6 +1,6 @@
 """The package as a user gets it: sdist -> wheel -> manylinux wheel -> a fresh venv, in which
-`nbrdf --version`, `nbrdf synth` + `nbrdf train`, `nbrdf predict-phong` (the built-in models) and
-`python -m nbrdf_mitsuba render` work.
+`nbrdf --version`, `nbrdf synth` + `nbrdf train`, `nbrdf predict-phong` (the built-in models),
+`python -m nbrdf_mitsuba render` and `python -m nbrdf_mitsuba.distill` work.
 
 * The sdist is built with `python -m build --sdist`, unpacked outside the repository and built
   into a wheel there: it must carry the Cargo workspace it needs (nothing is read from the
@@ -165,3 +165,12 @@ def test_fresh_venv_has_the_command_and_the_renderer(venv, tmp_path):
                  "print(np.array(mi.Bitmap(sys.argv[1])).mean())", tmp_path / "out.exr"], env=env, cwd=tmp_path)
     assert np.isfinite(float(check.stdout)) and float(check.stdout) > 0.01
     assert (tmp_path / "out.png").is_file()
+
+    # The distiller loads the bundled training library (libnbrdf_train) from the venv.
+    (tmp_path / "plastic.json").write_text('{"type": "roughplastic", "alpha": 0.2}')
+    distilled = run([python, "-m", "nbrdf_mitsuba.distill", "plastic.json", "-o", "plastic.nbrdf.json",
+                     "--samples", "2000", "--epochs", "2", "-q"], env=env, cwd=tmp_path)
+    assert "wrote plastic.nbrdf.json" in distilled.stdout
+    where = run([python, "-c", "import nbrdf_mitsuba._train_native as n; print(n.library_path())"],
+                env=env, cwd=tmp_path).stdout.strip()
+    assert where.startswith(str(venv)), where

@@ -165,9 +165,13 @@ def config_from(args):
                          ("batch", args.batch), ("seed", args.seed), ("threads", args.threads),
                          ("learning_rate", args.learning_rate), ("target_loss", args.target_loss)):
         if value is not None:
-            if isinstance(value, int) and value < 0:
-                raise DistillError(f"--{field.replace('_', '-')} must not be negative")
-            setattr(config, field, value)
+            option = {"max_epochs": "--epochs"}.get(field, f"--{field.replace('_', '-')}")
+            try:
+                if isinstance(value, int) and value < 0:
+                    raise OverflowError
+                setattr(config, field, value)
+            except OverflowError:
+                raise DistillError(f"{option} {value} is out of range") from None
     if args.sampling is not None:
         config.sampling = native.SAMPLINGS[args.sampling]
     return config
