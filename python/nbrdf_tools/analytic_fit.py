@@ -90,7 +90,8 @@ def ggx_d(cos_h: np.ndarray, alpha: float) -> np.ndarray:
     """Mitsuba's isotropic GGX normal distribution ``D(m)``."""
     cos2 = cos_h * cos_h
     a2 = alpha * alpha
-    denom = math.pi * a2 * (cos2 * (1.0 / a2 - 1.0) + 1.0) ** 2
+    # 1 / (pi a^2 cos^4 (1 + tan^2 / a^2)^2), written without the tangent.
+    denom = math.pi * a2 * (cos2 + (1.0 - cos2) / a2) ** 2
     return np.where(cos_h > 0, 1.0 / denom, 0.0)
 
 

@@ -57,6 +57,8 @@ METRICS = ("mae_tonemapped", "rmse_tonemapped", "ssim", "flip_hdr", "rmse", "log
 # Lower is better for all but SSIM.
 HIGHER_IS_BETTER = {"ssim"}
 METRICS_VERSION = 1
+# Stored fits made by other fitting code are redone.
+FITS_VERSION = 2
 
 
 def weight_count(hidden: int) -> int:
@@ -192,7 +194,7 @@ def fit_row(material: Material, model_name: str, data, settings: Settings, refer
     from nbrdf_tools import analytic_fit as af
 
     key = {**settings.metric_key(), "fit_samples": settings.fit_samples, "seed": settings.seed,
-           "input": str(material.path)}
+           "input": str(material.path), "fits": FITS_VERSION}
     row = cache.get(material, model_name, key)
     if row is not None:
         return row
