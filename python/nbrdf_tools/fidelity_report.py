@@ -393,6 +393,32 @@ def fit_verdicts(rows: list[dict], materials: list[str], table_hidden: int) -> t
     return lines, wins
 
 
+def fit_summary(rows: list[dict], materials: list[str], table_hidden: int) -> list[str]:
+    """One sentence per fitted model: on how many materials it beats the network, per metric."""
+    lines = []
+    n = weight_count(table_hidden)
+    for model in dict.fromkeys(r["method"] for r in rows if r["kind"] == "fit"):
+        counts = []
+        label = None
+        for k, name, _ in METRIC_COLUMNS:
+            won, total = [], 0
+            for m in materials:
+                net = [r for r in rows if r["material"] == m and r["kind"] == "nbrdf" and r["hidden"] == table_hidden
+                       and r["sampling"] == "adaptive"]
+                fit = [r for r in rows if r["material"] == m and r["method"] == model]
+                if not net or not fit:
+                    continue
+                label = fit[0]["label"]
+                total += 1
+                a, b = net[0]["metrics"][k], fit[0]["metrics"][k]
+                if (b > a) if k in HIGHER_IS_BETTER else (b < a):
+                    won.append(m)
+            counts.append(f"{name} {len(won)}/{total}" + (f" ({', '.join(won)})" if won else ""))
+        if label:
+            lines.append(f"* {label} beats NBRDF-{n} on: " + "; ".join(counts) + ".")
+    return lines
+
+
 def uniform_table(rows: list[dict], materials: list[str]) -> list[str]:
     lines = ["| material | weights | sampling | " + " | ".join(label for _, label, _ in METRIC_COLUMNS) + " |",
              "|---|---:|---|" + "---:|" * len(METRIC_COLUMNS)]
@@ -412,43 +438,50 @@ MARKERS = {"roughconductor": "s", "roughplastic": "D", "blinn_phong": "^", "abc"
 
 
 def plot(path: Path, rows: list[dict], materials: list[str]) -> None:
+    """Error against memory (log-log), one column per material: the NBRDF sweep as a line, the
+    fits and the MERL table as markers, the sizes of the measured file and the MERL table."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, (key, label) in zip(axes, (("log_error_adaptive", "log-space BRDF error (adaptive directions)"),
-                                       ("rmse_tonemapped", "tone-mapped image RMSE"))):
-        for i, m in enumerate(materials):
-            colour = colours[i % len(colours)]
+    metrics = (("log_error_adaptive", "log-space BRDF error"), ("rmse_tonemapped", "tone-mapped image RMSE"))
+    cols = max(len(materials), 1)
+    fig, axes = plt.subplots(len(metrics), cols, figsize=(3.6 * cols + 0.6, 6.8), squeeze=False)
+    colours = dict(zip(MARKERS, plt.rcParams["axes.prop_cycle"].by_key()["color"][1:]))
+    for j, m in enumerate(materials):
+        for i, (key, label) in enumerate(metrics):
+            ax = axes[i][j]
             s = sweep_rows(rows, m)
             if s:
-                ax.plot([r["memory_bytes"] for r in s], [r["metrics"][key] for r in s], "o-", color=colour,
-                        label=f"{m}: NBRDF sweep")
+                ax.plot([r["memory_bytes"] for r in s], [r["metrics"][key] for r in s], "o-", color="k", ms=4,
+                        label="NBRDF (adaptive), 6-h-h-3")
             for r in rows:
                 if r["material"] == m and r.get("metrics") and r["method"] in MARKERS:
-                    ax.scatter([r["memory_bytes"]], [r["metrics"][key]], marker=MARKERS[r["method"]], color=colour,
-                               edgecolor="k", linewidths=0.4, s=45, zorder=3)
-        for r in rows:
-            if r["method"] == "measured":
-                ax.axvline(r["memory_bytes"], color="0.6", ls=":", lw=0.8)
-        ax.axvline(MERL_TABLE_BYTES, color="0.4", ls="--", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("memory, bytes (float32 parameters; files for the references)")
-        ax.set_ylabel(label)
-        ax.grid(True, which="both", alpha=0.25)
-    handles = [plt.Line2D([], [], marker=mk, ls="", color="0.5", markeredgecolor="k", label=name)
-               for name, mk in MARKERS.items()]
-    handles += [plt.Line2D([], [], ls=":", color="0.6", label="measured .bsdf size"),
-                plt.Line2D([], [], ls="--", color="0.4", label="MERL table size")]
-    axes[0].legend(fontsize=7, loc="lower left")
-    axes[1].legend(handles=handles, fontsize=7, loc="lower left")
-    fig.suptitle("Error against memory: NBRDF size sweep (lines), analytic fits and the MERL table (markers)",
-                 fontsize=10)
-    fig.tight_layout()
+                    ax.scatter([r["memory_bytes"]], [r["metrics"][key]], marker=MARKERS[r["method"]],
+                               color=colours[r["method"]], edgecolor="k", linewidths=0.4, s=50, zorder=3,
+                               label=r["label"].replace("`", ""))
+                if r["material"] == m and r["method"] == "measured":
+                    ax.axvline(r["memory_bytes"], color="0.6", ls=":", lw=0.9, label="measured .bsdf file")
+            ax.axvline(MERL_TABLE_BYTES, color="0.4", ls="--", lw=0.9, label="MERL table")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.grid(True, which="both", alpha=0.25)
+            if i == 0:
+                ax.set_title(m, fontsize=9)
+            if i == len(metrics) - 1:
+                ax.set_xlabel("memory, bytes", fontsize=8)
+            if j == 0:
+                ax.set_ylabel(label, fontsize=8)
+            ax.tick_params(labelsize=7)
+    handles = {}
+    for ax in axes.ravel():
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
+    fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=min(len(handles), 5), fontsize=7,
+               frameon=False)
+    fig.suptitle("Error against memory (float32 parameters; file sizes for the references)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.08, 1, 0.97))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -459,6 +492,9 @@ def write_report(report: Path, rows: list[dict], materials: list[Material], sett
     aniso = [m.name for m in materials if m.group == "anisotropic"]
     training = (f"{settings.samples:,} samples" if settings.samples else "the trainer's default samples (800,000)")
     training += f", at most {settings.epochs} epochs" if settings.epochs else ", the trainer's default epoch budget"
+    if settings.samples or settings.epochs:
+        training += (" (a reduced budget: the trainer's defaults are 800,000 samples and up to 300 epochs; "
+                     "[rgl-training.md](rgl-training.md) has the 675-weight networks at the defaults)")
     lines = [
         "# Fidelity: NBRDF against analytic fits and the measured data", "",
         "```sh", command, "```", "",
@@ -502,7 +538,8 @@ def write_report(report: Path, rows: list[dict], materials: list[Material], sett
     n = weight_count(settings.table_hidden)
     lines += [f"## Material by material: who wins each metric, NBRDF-{n} (adaptive) or the fit", "",
               "Each cell names the winner and gives the fit's value.", ""] + verdict_table + [""]
-    lines += ["### Where a fit wins", ""] + (wins or [f"No fit beats NBRDF-{n} on any metric of any material."]) + [""]
+    lines += ["### Where a fit wins", ""] + fit_summary(rows, iso, settings.table_hidden) + [""]
+    lines += (wins or [f"No fit beats NBRDF-{n} on any metric of any material."]) + [""]
     lines += ["## Size sweep: error against memory", "",
               f"![error against memory]({report.with_suffix('.png').name})", ""] + sweep_table(rows, iso) + [""]
     lines += sweep_trend(rows, iso) + [""]
