@@ -393,6 +393,38 @@ def fit_verdicts(rows: list[dict], materials: list[str], table_hidden: int) -> t
     return lines, wins
 
 
+def summary(rows: list[dict], materials: list[str], table_hidden: int) -> list[str]:
+    """Per material: the best fit against NBRDF-n in log error and FLIP, the smallest network that
+    beats the best fit, and the network against the MERL table."""
+    n = weight_count(table_hidden)
+    lines = []
+    for m in materials:
+        mine = [r for r in rows if r["material"] == m]
+        net = [r for r in mine if r["kind"] == "nbrdf" and r["hidden"] == table_hidden and r["sampling"] == "adaptive"]
+        fits = [r for r in mine if r["kind"] == "fit"]
+        if not net or not fits:
+            continue
+        net = net[0]["metrics"]
+        parts = []
+        for key, name in (("log_error_adaptive", "log error"), ("flip_hdr", "HDR-FLIP")):
+            best = min(fits, key=lambda r: r["metrics"][key])
+            b, a = best["metrics"][key], net[key]
+            verdict = (f"NBRDF-{n} is {b / a:.1f}x lower" if a < b else f"**the fit is {a / b:.2f}x lower**")
+            parts.append(f"best fit in {name}: {best['label']} ({_fmt(b, 'e' if key.startswith('log') else 'f4')} "
+                         f"against {_fmt(a, 'e' if key.startswith('log') else 'f4')}: {verdict})")
+        best = min(fits, key=lambda r: r["metrics"]["log_error_adaptive"])["metrics"]["log_error_adaptive"]
+        smaller = [r for r in sweep_rows(rows, m) if r["metrics"]["log_error_adaptive"] < best]
+        parts.append("the smallest network below the best fit's log error: "
+                     + (f"{smaller[0]['stored_values']} weights" if smaller else "none of the sweep"))
+        table = [r for r in mine if r["method"] == "merl-table" and r.get("metrics")]
+        if table:
+            t = table[0]["metrics"]["log_error_adaptive"]
+            parts.append(f"MERL table log error {_fmt(t)} ({'above' if t > net['log_error_adaptive'] else 'below'} "
+                         f"NBRDF-{n}'s, in {table[0]['memory_bytes'] / (4 * n):,.0f}x the memory)")
+        lines.append(f"* **{m}**: " + "; ".join(parts) + ".")
+    return lines
+
+
 def fit_summary(rows: list[dict], materials: list[str], table_hidden: int) -> list[str]:
     """One sentence per fitted model: on how many materials it beats the network, per metric."""
     lines = []
@@ -531,6 +563,7 @@ def write_report(report: Path, rows: list[dict], materials: list[Material], sett
         "--phi-fold reciprocal`, what Mitsuba's `merl`-style readers take) and rendered with the `merl` BSDF.",
         "",
     ]
+    lines += ["## Summary", ""] + summary(rows, iso, settings.table_hidden) + [""]
     lines += [f"## Representation table: NBRDF at {weight_count(settings.table_hidden)} weights against each fit", ""]
     for m in iso:
         lines += [f"### {m}", ""] + representation_table(rows, m, settings.table_hidden) + [""]
