@@ -11,6 +11,8 @@ over the masked pixels and all channels.
 * ``mape`` = mean |x - r| / (|r| + eps), eps = 0.01 (0.01 is 1 % of a diffuse white)
 * ``psnr_peak1``    = 20 log10(1 / RMSE) dB: peak 1, the linear value of display white (HDR
   highlights above it are not clipped); the renders' PSNR
+* ``rmse_tone_mapped`` = RMSE of the ``tone_map``-ped images (display values in [0, 1]: a
+  highlight's error counts as seen, not by its HDR magnitude)
 * ``psnr_peak_ref`` = 20 log10(max(reference) / RMSE) dB: peak = the reference's maximum; the
   sphere images' PSNR of ``nbrdf compare`` and :mod:`nbrdf_tools.compare_materials`
 
@@ -91,6 +93,10 @@ def relative_rmse(reference, image, mask=None) -> float:
 def tone_map(image: np.ndarray) -> np.ndarray:
     """``min(max(x, 1e-12)^(1/2.2), 1)`` of a linear image (float64)."""
     return np.minimum(np.maximum(np.asarray(image, dtype=np.float64), 1e-12) ** (1.0 / GAMMA), 1.0)
+
+
+def rmse_tone_mapped(reference, image, mask=None) -> float:
+    return rmse(tone_map(reference), tone_map(image), mask)
 
 
 def ssim(reference, image, channel_axis: int = -1) -> float:
