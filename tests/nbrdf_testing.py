@@ -218,18 +218,21 @@ def random_layers(hidden: int = 21, seed: int = 0) -> list[tuple[np.ndarray, np.
     return layers
 
 
-def write_network(path: Path, layers=None, sampling: dict | None = None, name: str = "synthetic") -> Path:
-    """Writes an ``*.nbrdf.json`` file (docs/design.md section 4)."""
+def write_network(path: Path, layers=None, sampling: dict | None = None, name: str = "synthetic",
+                  anisotropic: bool = False) -> Path:
+    """Writes an ``*.nbrdf.json`` file (docs/design.md section 4); an anisotropic one is version 2."""
     import json
 
     layers = random_layers() if layers is None else layers
     document = {
-        "format": "nbrdf", "version": 1, "name": name,
+        "format": "nbrdf", "version": 2 if anisotropic else 1, "name": name,
         "layers": [{"inputs": int(w.shape[0]), "outputs": int(w.shape[1]),
                     "weights": [float(v) for v in np.asarray(w, np.float32).ravel()],
                     "bias": [float(v) for v in np.asarray(b, np.float32)]} for w, b in layers],
         "provenance": {"source": "nbrdf tests"},
     }
+    if anisotropic:
+        document["anisotropic"] = True
     if sampling is not None:
         document["sampling"] = sampling
     Path(path).write_text(json.dumps(document))
@@ -253,17 +256,20 @@ def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
                  np.asarray(f[f"dense_{k}/dense_{k}/bias:0"], np.float64)) for k in (1, 2, 3)]
 
 
-def network_input(light: np.ndarray, view: np.ndarray) -> np.ndarray:
-    """(n, 6) isotropic input ``[sin th, 0, cos th, d.x, d.y, d.z]``."""
-    theta_h, _, _, _, d = to_angles(light, view)
-    n = theta_h.shape[0]
-    return np.stack([np.sin(theta_h), np.zeros(n), np.cos(theta_h), d[0], d[1], d[2]], axis=1)
+def network_input(light: np.ndarray, view: np.ndarray, anisotropic: bool = False) -> np.ndarray:
+    """(n, 6) isotropic input ``[sin th, 0, cos th, d.x, d.y, d.z]``, or the anisotropic one
+    ``[sin th cos ph, sin th sin ph, cos th, d]`` (the half vector, then the difference vector)."""
+    theta_h, phi_h, _, _, d = to_angles(light, view)
+    if not anisotropic:
+        phi_h = np.zeros_like(theta_h)
+    s = np.sin(theta_h)
+    return np.stack([s * np.cos(phi_h), s * np.sin(phi_h), np.cos(theta_h), d[0], d[1], d[2]], axis=1)
 
 
-def nbrdf_reference(layers, light: np.ndarray, view: np.ndarray) -> np.ndarray:
+def nbrdf_reference(layers, light: np.ndarray, view: np.ndarray, anisotropic: bool = False) -> np.ndarray:
     """f_r cos(theta_l), (3, n), float64; zero when either direction is below the horizon."""
     (w1, b1), (w2, b2), (w3, b3) = layers
-    x = network_input(light, view)
+    x = network_input(light, view, anisotropic)
     y = np.maximum(x @ w1 + b1, 0)
     y = np.maximum(y @ w2 + b2, 0)
     f = np.maximum(np.exp(y @ w3 + b3) - 1, 0).T

@@ -101,9 +101,10 @@ def test_an_xml_scene_gives_the_same_network(llvm_variant, distilled, tmp_path):
     assert from_xml["provenance"]["distilled_from"]["format"] == "xml"
 
 
-def python_bsdf(name: str, reflectance) -> dict:
+def python_bsdf(name: str, reflectance, of_directions: bool = False) -> dict:
     """Registers a diffuse-flagged Python BSDF of the current variant whose eval is
-    ``reflectance(cos_view, cos_light) cos_light`` above the horizon; returns its load_dict spec."""
+    ``reflectance(cos_view, cos_light) cos_light`` above the horizon (``reflectance(view, light)``
+    with ``of_directions``); returns its load_dict spec."""
 
     class Custom(mi.BSDF):
         def __init__(self, props):
@@ -113,7 +114,7 @@ def python_bsdf(name: str, reflectance) -> dict:
 
         def eval(self, ctx, si, wo, active=True):
             cos_view, cos_light = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
-            f = reflectance(cos_view, cos_light)
+            f = reflectance(si.wi, wo) if of_directions else reflectance(cos_view, cos_light)
             return mi.Color3f(dr.select((cos_view > 0) & (cos_light > 0), f * cos_light, 0.0))
 
         def pdf(self, ctx, si, wo, active=True):
@@ -232,3 +233,55 @@ def test_an_rgl_measurement_loads_as_measured(shared):
     measurement = next((shared / "data" / "rgl").glob("*.bsdf"))
     bsdf, kind = load_bsdf(measurement)
     assert kind == "rgl" and "Measured" in type(bsdf).__name__ + str(bsdf)
+
+
+# -- anisotropy -----------------------------------------------------------------------------------
+
+ANISOTROPIC_CONDUCTOR = {"type": "roughconductor", "distribution": "ggx", "alpha_u": 0.05, "alpha_v": 0.3}
+TINY = ["--samples", "2000", "--epochs", "2", "--seed", "1", "-q"]
+
+
+def test_auto_anisotropy_follows_the_source(llvm_variant, tmp_path, capsys):
+    from nbrdf_mitsuba.distill import ROTATION_TOLERANCE, decide_anisotropy, rotation_difference
+
+    mi.set_variant("llvm_ad_rgb")
+    plastic, conductor = mi.load_dict(ROUGHPLASTIC), mi.load_dict(ANISOTROPIC_CONDUCTOR)
+    # The numerical check alone tells them apart, with a wide margin on both sides.
+    assert rotation_difference(plastic) < 1e-3 * ROTATION_TOLERANCE
+    assert rotation_difference(conductor) > 10 * ROTATION_TOLERANCE
+    assert rotation_difference(mi.load_dict({**ANISOTROPIC_CONDUCTOR, "alpha_v": 0.05})) < 0.1 * ROTATION_TOLERANCE
+    assert decide_anisotropy(plastic, "auto")[0] is False
+    anisotropic, why = decide_anisotropy(conductor, "auto")
+    assert anisotropic and why["bsdf_flag_anisotropic"]
+    assert decide_anisotropy(conductor, "off")[0] is False and decide_anisotropy(plastic, "on")[0] is True
+    # A Python BSDF that depends on the azimuth without setting the flag is caught numerically.
+    azimuthal = mi.load_dict(python_bsdf("nbrdf_test_azimuthal",
+                                         lambda v, l: 0.05 + 0.5 * dr.square(v.x + l.x), of_directions=True))
+    anisotropic, why = decide_anisotropy(azimuthal, "auto")
+    assert anisotropic and not why["bsdf_flag_anisotropic"], why
+    isotropic = mi.load_dict(python_bsdf("nbrdf_test_radial",
+                                         lambda v, l: 0.05 + 0.5 * dr.square(v.z * l.z), of_directions=True))
+    assert decide_anisotropy(isotropic, "auto")[0] is False
+
+    for spec, expected in ((ROUGHPLASTIC, False), (ANISOTROPIC_CONDUCTOR, True)):
+        source = tmp_path / "source.json"
+        source.write_text(json.dumps(spec))
+        out = tmp_path / "auto.nbrdf.json"
+        status, err = run_main(capsys, source, "-o", out, "--variant", "llvm_ad_rgb", *TINY)
+        assert status == 0, err
+        network = json.loads(out.read_text())
+        assert network.get("anisotropic", False) is expected, spec
+        assert network["version"] == (2 if expected else 1)
+        assert network["provenance"]["distilled_from"]["anisotropy"]["requested"] == "auto"
+        # A user's sample count is kept for both kinds.
+        assert network["provenance"]["samples"] == 2000
+        assert (mi.load_dict({"type": "nbrdf", "filename": str(out)}).flags()
+                & mi.BSDFFlags.Anisotropic) == (mi.BSDFFlags.Anisotropic if expected else 0)
+
+
+def test_a_bad_anisotropy_value_is_an_error(tmp_path):
+    source = tmp_path / "source.json"
+    source.write_text(json.dumps(ROUGHPLASTIC))
+    result = distill(source, "-o", tmp_path / "out.nbrdf.json", "--anisotropy", "maybe")
+    assert result.returncode == 2 and "--anisotropy" in result.stderr and "maybe" in result.stderr
+    assert "Traceback" not in result.stderr and not (tmp_path / "out.nbrdf.json").exists()

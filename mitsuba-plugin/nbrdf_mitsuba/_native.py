@@ -222,6 +222,10 @@ class Network(_Handle):
         self.has_sampling = bool(info.has_sampling)
         self.exponent = float(info.exponent)
         self.specular_weight = float(info.specular_weight)
+        anisotropic = ffi.new("uint32_t *")
+        check(lib.nbrdf_network_is_anisotropic(self._ptr, anisotropic))
+        #: Whether the network's input carries phi_h (file format version 2).
+        self.anisotropic = bool(anisotropic[0])
         stored = ffi.new("NbrdfMixtureSampler *")
         check(lib.nbrdf_network_stored_sampler(self._ptr, stored))
         #: "two_lobe" when the file stores a second lobe, "phong" for one, None for none.

@@ -84,6 +84,12 @@ def default_config():
     return config
 
 
+def for_anisotropy(config, anisotropic: bool, scale_samples: bool) -> None:
+    """Makes ``config`` one for an isotropic or anisotropic network, in place; with
+    ``scale_samples`` an anisotropic one gets the trainer's default factor times the samples."""
+    check(lib.nbrdf_train_config_for_anisotropy(config, int(anisotropic), int(scale_samples)))
+
+
 def sample_directions(config) -> tuple[np.ndarray, np.ndarray, int]:
     """The trainer's planar (3, n) float32 ``view`` and ``light`` directions for ``config``
     (training pairs first) and how many of the last are for validation."""

@@ -210,10 +210,6 @@ class _NativeBSDFMixin:
         if not mi.is_rgb or mi.is_polarized:
             raise RuntimeError(f"{self._type_name()}: only RGB variants are supported (the current variant is "
                                f"{mi.variant()}; use e.g. scalar_rgb or llvm_ad_rgb)")
-        flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-        self.m_components = [flags]
-        self.m_flags = flags
-
         filename = _get(props, "filename")
         if not filename:
             raise ValueError(f'{self._type_name()}: the "filename" parameter is required '
@@ -234,6 +230,13 @@ class _NativeBSDFMixin:
             raise RuntimeError(f"{self._type_name()}: cannot load {where}{message} "
                                f"[{error.status_name}]") from None
         self._path = path
+        flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+        if getattr(self._native, "anisotropic", False):
+            # An anisotropic network reads phi_h in the shading frame (x: si.sh_frame.s, the
+            # tangent), like Mitsuba's anisotropic BSDFs.
+            flags = flags | mi.BSDFFlags.Anisotropic
+        self.m_components = [flags]
+        self.m_flags = flags
 
         sampling = _get(props, "sampling")
         exponent = _get(props, "exponent")
@@ -561,7 +564,7 @@ class NbrdfMixin(_NativeBSDFMixin):
         return jit.TracedNetwork([
             (np.asarray(layer["weights"], dtype=np.float32).reshape(layer["inputs"], layer["outputs"]),
              np.asarray(layer["bias"], dtype=np.float32)) for layer in layers
-        ], weights=mode)
+        ], weights=mode, anisotropic=self._native.anisotropic)
 
     def _traverse_traced(self, put):
         # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3, updatable through
@@ -624,7 +627,7 @@ class NbrdfMixin(_NativeBSDFMixin):
     def _describe(self) -> list[str]:
         net = self._native
         lines = [f'name = "{net.name}"', f"hidden_width = {net.hidden_width}",
-                 f"parameter_count = {net.parameter_count}"]
+                 f"parameter_count = {net.parameter_count}", f"anisotropic = {str(net.anisotropic).lower()}"]
         if self._backend == "jit":
             lines.append(f"jit_weights = {self._traced.mode}")
         return lines

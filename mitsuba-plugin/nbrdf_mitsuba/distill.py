@@ -17,6 +17,11 @@ exactly as ``nbrdf train`` does (same sampling, loss, validation split and early
   --rgl-fold reciprocal-mean`` does for RGL measurements).
 * A BSDF returning NaN or infinity is an error (its first bad direction is named); slightly
   negative values are clamped to 0 by the trainer.
+* Anisotropy (``--anisotropy auto|on|off``, as ``nbrdf train``): an anisotropic network also
+  takes the half vector's azimuth ``phi_h`` (file format version 2) and is trained on the
+  trainer's anisotropic directions with 5x the default samples. ``auto`` makes one when the
+  BSDF's flags say ``Anisotropic`` or when its values change as view and light turn together
+  about the normal (:func:`rotation_difference`): a Python BSDF may not set the flag.
 """
 
 from __future__ import annotations
@@ -149,6 +154,62 @@ def check_finite(values: np.ndarray, view: np.ndarray, light: np.ndarray, what: 
             f"at view {view[:, i].tolist()}, light {light[:, i].tolist()}); a BSDF must evaluate to finite values")
 
 
+# -- anisotropy ----------------------------------------------------------------------------------
+
+#: ``--anisotropy auto`` calls a BSDF anisotropic above this :func:`rotation_difference`. An
+#: isotropic BSDF differs by float32 rounding only (about 1e-6; a few 1e-4 for a very sharp
+#: highlight); roughconductor with alpha_u 0.05, alpha_v 0.3 by about 0.5.
+ROTATION_TOLERANCE = 1e-2
+ANISOTROPY = ("auto", "on", "off")
+#: Random pairs of the rotation check.
+ROTATION_PAIRS = 4096
+
+
+def rotation_difference(bsdf, pairs: int = ROTATION_PAIRS, seed: int = 7) -> float:
+    """``sum |f(R v, R l) - f(v, l)| / sum (f(R v, R l) + f(v, l))`` (all channels) over random
+    view/light pairs above the horizon, each turned by its own random angle about the normal:
+    0 for an isotropic BSDF, up to 1 for one whose highlight depends on the azimuth."""
+    rng = np.random.default_rng(seed)
+
+    def hemisphere(n):
+        cos = rng.uniform(0.05, 1.0, n)  # not grazing: a horizon cut would dominate rounding
+        sin, phi = np.sqrt(1 - cos * cos), rng.uniform(0, 2 * np.pi, n)
+        return np.stack([sin * np.cos(phi), sin * np.sin(phi), cos])
+
+    view, light = hemisphere(pairs), hemisphere(pairs)
+    # Half the pairs near the mirror direction, where a highlight's shape shows.
+    mirror = pairs // 2
+    light[:, :mirror] = view[:, :mirror] * np.array([[-1], [-1], [1]])
+    light[:2, :mirror] += rng.normal(0, 0.15, (2, mirror))
+    light[2, :mirror] = np.abs(light[2, :mirror]) + 0.05
+    light /= np.linalg.norm(light, axis=0)
+    angle = rng.uniform(0.3, 2 * np.pi - 0.3, pairs)
+    c, s = np.cos(angle), np.sin(angle)
+
+    def turn(d):
+        return np.stack([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]])
+
+    a, b = eval_cos(bsdf, view, light), eval_cos(bsdf, turn(view), turn(light))
+    check_finite(a, view, light, "values")
+    check_finite(b, turn(view), turn(light), "values")
+    total = float(np.sum(np.abs(a) + np.abs(b)))
+    return 0.0 if total == 0 else float(np.sum(np.abs(a - b)) / total)
+
+
+def decide_anisotropy(bsdf, requested: str) -> tuple[bool, dict]:
+    """Whether to train an anisotropic network for ``--anisotropy requested``, and why (stored in
+    the provenance)."""
+    if requested not in ANISOTROPY:
+        raise DistillError(f"--anisotropy {requested!r}: expected one of {', '.join(ANISOTROPY)}")
+    flagged = bool(bsdf.flags() & mi.BSDFFlags.Anisotropic)
+    why = {"requested": requested, "bsdf_flag_anisotropic": flagged}
+    if requested != "auto":
+        return requested == "on", why
+    difference = rotation_difference(bsdf)
+    why["rotation_difference"] = round(difference, 6)
+    return flagged or difference > ROTATION_TOLERANCE, why
+
+
 # -- the command ---------------------------------------------------------------------------------
 
 
@@ -190,6 +251,12 @@ def distill(args) -> dict:
     from . import _train_native as native
 
     config = config_from(args)
+    anisotropic, anisotropy = decide_anisotropy(bsdf, args.anisotropy)
+    try:
+        # The trainer's default sample count grows for anisotropic networks; a user's stays.
+        native.for_anisotropy(config, anisotropic, scale_samples=args.samples is None)
+    except native.TrainError as error:
+        raise DistillError(str(error)) from None
     start = time.perf_counter()
     try:
         view, light, n_validation = native.sample_directions(config)
@@ -210,6 +277,7 @@ def distill(args) -> dict:
         "bsdf": str(bsdf),
         "values": "BSDF.eval(si.wi = view, wo = light) = f_r cos(theta_light), local frame",
         "evaluation_seconds": round(evaluation_seconds, 3),
+        "anisotropy": anisotropy,
     }
     progress = _progress(args.quiet, config.max_epochs)
     try:
@@ -230,6 +298,7 @@ def distill(args) -> dict:
         "output": output, "pairs": view.shape[1], "validation": n_validation, "variant": variant,
         "evaluation_seconds": evaluation_seconds, "seconds": time.perf_counter() - start,
         "epochs": provenance["epochs"], "loss": provenance["best_validation_loss"],
+        "anisotropic": anisotropic,
     }
 
 
@@ -270,7 +339,12 @@ def parser() -> argparse.ArgumentParser:
                                      "scalar_rgb, which is much slower)")
     p.add_argument("--reciprocal", action="store_true",
                    help="learn (f(view, light) + f(light, view)) / 2 instead of the BSDF as it evaluates")
-    p.add_argument("--samples", type=int, help="training pairs (default: the trainer's, 800000)")
+    p.add_argument("--anisotropy", default="auto", choices=ANISOTROPY,
+                   help="an anisotropic network (its input carries the half vector's azimuth; 5x the default "
+                        "samples): on, off, or auto (default): when the BSDF's flags say Anisotropic or its values "
+                        "change as view and light turn together about the normal")
+    p.add_argument("--samples", type=int, help="training pairs (default: the trainer's, 800000; 4000000 for "
+                                               "an anisotropic network)")
     p.add_argument("--epochs", type=int, help="most epochs (default: the trainer's, 300, with early stopping)")
     p.add_argument("--hidden", type=int, help="hidden layer width (default: 21, the paper's)")
     p.add_argument("--batch", type=int, help="mini-batch size (default: 512)")
@@ -296,7 +370,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # delivered once the running Mitsuba or trainer call returns
         print("error: interrupted; no network written", file=sys.stderr)
         return 130
-    print(f"wrote {summary['output']}: {summary['pairs'] - summary['validation']} samples "
+    kind = "anisotropic" if summary["anisotropic"] else "isotropic"
+    print(f"wrote {summary['output']} ({kind}): {summary['pairs'] - summary['validation']} samples "
           f"(+{summary['validation']} validation) evaluated by Mitsuba ({summary['variant']}) in "
           f"{summary['evaluation_seconds']:.1f} s; {summary['epochs']} epochs, best validation loss "
           f"{summary['loss']:.4e}; {summary['seconds']:.1f} s in all")

@@ -6,8 +6,9 @@ mode and runs on CUDA as well as LLVM.
 This module is a deliberate second copy of the Rust library's math (the Rust code stays the
 reference). Its twins, and the tests that hold the two together:
 
-* :func:`network_input` - ``nbrdf-core/src/coords.rs`` ``network_input_components`` (the
-  isotropic Rusinkiewicz input encoding);
+* :func:`network_input` - ``nbrdf-core/src/coords.rs`` ``network_input_components_for`` (the
+  Rusinkiewicz input encoding, isotropic with ``phi_h = 0`` or anisotropic with the full half
+  vector);
 * :class:`TracedNetwork` - ``nbrdf-core/src/network.rs`` ``eval_input`` / ``eval_chunks``: the
   same fused multiply-adds, ReLU as a compare-select (NaN -> 0, ``relu``) and the exp argument
   clamped to ``[EXP_ARGUMENT_MIN, EXP_ARGUMENT_MAX]`` with NaN going to the lower end
@@ -90,8 +91,10 @@ def _unit_or_normal(x, y, z):
     return dr.select(usable, x, 0.0), dr.select(usable, y, 0.0), dr.select(usable, z, 1.0)
 
 
-def network_input(view: mi.Vector3f, light: mi.Vector3f) -> list:
-    """``[sin th, 0, cos th, d.x, d.y, d.z]`` (docs/design.md section 2), branch-free like the Rust code."""
+def network_input(view: mi.Vector3f, light: mi.Vector3f, anisotropic: bool = False) -> list:
+    """``[sin th, 0, cos th, d.x, d.y, d.z]`` (docs/design.md section 2), branch-free like the Rust code;
+    for an anisotropic network ``[sin th cos ph, sin th sin ph, cos th, d.x, d.y, d.z]``, the half
+    vector in the local frame (x: the shading frame's tangent)."""
     lx, ly, lz = _unit_or_normal(light.x, light.y, light.z)
     vx, vy, vz = _unit_or_normal(view.x, view.y, view.z)
     hx, hy, hz = lx + vx, ly + vy, lz + vz
@@ -109,6 +112,8 @@ def network_input(view: mi.Vector3f, light: mi.Vector3f) -> list:
     ty = dr.fma(-sin_ph, lx, cos_ph * ly)
     dx = dr.fma(hz, tx, -sin_th * lz)
     dz = dr.fma(sin_th, tx, hz * lz)
+    if anisotropic:
+        return [sin_th * cos_ph, sin_th * sin_ph, hz, dx, ty, dz]
     return [sin_th, None, hz, dx, ty, dz]  # None: the constant-zero input, skipped in layer 1
 
 
@@ -128,10 +133,13 @@ class TracedNetwork:
     update call ``refresh()`` so the traced kernels see the new values.
     """
 
-    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "literal"):
+    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "literal",
+                 anisotropic: bool = False):
         if weights not in ("opaque", "literal"):
             raise ValueError(f"weights must be 'opaque' or 'literal', got '{weights}'")
         self.mode = weights
+        #: Whether the input carries phi_h (file format version 2, ``"anisotropic": true``).
+        self.anisotropic = bool(anisotropic)
         self.shapes = [(int(W.shape[0]), int(W.shape[1])) for W, _ in layers]
         self.parameter_count = sum(i * o + o for i, o in self.shapes)
         flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
@@ -189,7 +197,7 @@ class TracedNetwork:
     def eval(self, view: mi.Vector3f, light: mi.Vector3f) -> mi.Color3f:
         """``f_r(light, view)``, zero at or below the horizon and for zero or non-finite
         directions (``network.rs`` ``eval_chunks``)."""
-        f = self.eval_input(network_input(view, light))
+        f = self.eval_input(network_input(view, light, self.anisotropic))
         return dr.select(_both_valid_above(view, light), f, 0.0)
 
 

@@ -24,6 +24,7 @@ fn bench_train(c: &mut Criterion) {
     let set = dataset::draw(
         &glossy,
         AngularSampling::Adaptive,
+        false,
         SAMPLES,
         1,
         Stream::TrainSamples,

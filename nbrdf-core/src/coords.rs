@@ -124,6 +124,26 @@ pub fn cos_theta_light(angles: &RusinkiewiczAngles) -> f64 {
 /// and selects only, no trigonometry, no branches the compiler cannot turn into blends).
 #[inline(always)]
 pub fn network_input_components(vx: f32, vy: f32, vz: f32, lx: f32, ly: f32, lz: f32) -> [f32; 6] {
+    network_input_components_for(false, vx, vy, vz, lx, ly, lz)
+}
+
+/// The network input of one view/light pair for an isotropic (`anisotropic = false`,
+/// [`network_input_components`]) or an anisotropic network: the anisotropic input is the full
+/// half vector and the difference vector, `[sin th cos ph, sin th sin ph, cos th, d.x, d.y, d.z]`
+/// (docs/design.md section 4); the isotropic one is the same with `phi_h = 0`. The difference
+/// vector is the same in both (it is measured in the half vector's own frame). Twin:
+/// `jit.py` `network_input` (held together by `tests/test_backends.py`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn network_input_components_for(
+    anisotropic: bool,
+    vx: f32,
+    vy: f32,
+    vz: f32,
+    lx: f32,
+    ly: f32,
+    lz: f32,
+) -> [f32; 6] {
     let (lx, ly, lz) = normalize_or_normal_f32(lx, ly, lz);
     let (vx, vy, vz) = normalize_or_normal_f32(vx, vy, vz);
     let (hx, hy, hz) = (lx + vx, ly + vy, lz + vz);
@@ -141,7 +161,11 @@ pub fn network_input_components(vx: f32, vy: f32, vz: f32, lx: f32, ly: f32, lz:
     let ty = -sin_ph * lx + cos_ph * ly;
     let dx = hz * tx - sin_th * lz;
     let dz = sin_th * tx + hz * lz;
-    [sin_th, 0.0, hz, dx, ty, dz]
+    if anisotropic {
+        [sin_th * cos_ph, sin_th * sin_ph, hz, dx, ty, dz]
+    } else {
+        [sin_th, 0.0, hz, dx, ty, dz]
+    }
 }
 
 /// The isotropic network input straight from Rusinkiewicz angles (`phi_h` is dropped):
@@ -150,12 +174,22 @@ pub fn network_input_components(vx: f32, vy: f32, vz: f32, lx: f32, ly: f32, lz:
 /// is tiny (the first rows of the MERL grid), where `phi_h` recomputed from the directions is
 /// rounding noise.
 pub fn network_input_from_angles(angles: &RusinkiewiczAngles) -> [f32; 6] {
+    network_input_from_angles_for(false, angles)
+}
+
+/// [`network_input_from_angles`] for an isotropic or (with `phi_h`) an anisotropic network.
+pub fn network_input_from_angles_for(anisotropic: bool, angles: &RusinkiewiczAngles) -> [f32; 6] {
     let (sin_th, cos_th) = angles.theta_h.sin_cos();
     let (sin_td, cos_td) = angles.theta_d.sin_cos();
     let (sin_pd, cos_pd) = angles.phi_d.sin_cos();
+    let (sin_ph, cos_ph) = if anisotropic {
+        angles.phi_h.sin_cos()
+    } else {
+        (0.0, 1.0)
+    };
     [
-        sin_th as f32,
-        0.0,
+        (sin_th * cos_ph) as f32,
+        (sin_th * sin_ph) as f32,
         cos_th as f32,
         (sin_td * cos_pd) as f32,
         (sin_td * sin_pd) as f32,
@@ -181,6 +215,20 @@ fn normalize_or_normal_f32(x: f32, y: f32, z: f32) -> (f32, f32, f32) {
 #[inline]
 pub fn network_input(view: Vec3, light: Vec3) -> [f32; 6] {
     network_input_components(view.x, view.y, view.z, light.x, light.y, light.z)
+}
+
+/// [`network_input_components_for`] for `glam` vectors.
+#[inline]
+pub fn network_input_for(anisotropic: bool, view: Vec3, light: Vec3) -> [f32; 6] {
+    network_input_components_for(
+        anisotropic,
+        view.x,
+        view.y,
+        view.z,
+        light.x,
+        light.y,
+        light.z,
+    )
 }
 
 #[cfg(test)]
@@ -213,6 +261,24 @@ mod tests {
             let expect = [sin_th, 0.0, hd.half.z, hd.diff.x, hd.diff.y, hd.diff.z];
             for k in 0..6 {
                 prop_assert!((x[k] as f64 - expect[k]).abs() < 1e-4, "{k}: {x:?} vs {expect:?}");
+            }
+        }
+
+        #[test]
+        fn anisotropic_input_is_the_half_and_difference_vector(
+            tl in 0.0..FRAC_PI_2, pl in -PI..PI, tv in 0.0..FRAC_PI_2, pv in -PI..PI
+        ) {
+            let (l, v) = (spherical_direction(tl, pl), spherical_direction(tv, pv));
+            let hd = half_diff(v, l);
+            let x = network_input_for(true, v.as_vec3(), l.as_vec3());
+            let expect = [hd.half.x, hd.half.y, hd.half.z, hd.diff.x, hd.diff.y, hd.diff.z];
+            for k in 0..6 {
+                prop_assert!((x[k] as f64 - expect[k]).abs() < 1e-4, "{k}: {x:?} vs {expect:?}");
+            }
+            let a = to_rusinkiewicz(v, l);
+            let y = network_input_from_angles_for(true, &a);
+            for k in 0..6 {
+                prop_assert!((y[k] as f64 - expect[k]).abs() < 1e-5, "{k}: {y:?} vs {expect:?}");
             }
         }
 

@@ -61,6 +61,11 @@ impl Material {
             Material::Network(n) => Some(n.eval_at_angles(angles)),
         }
     }
+
+    /// Whether the material depends on `phi_h` (an anisotropic network).
+    pub fn is_anisotropic(&self) -> bool {
+        matches!(self, Material::Network(n) if n.anisotropic)
+    }
 }
 
 /// A linear RGB image, planar channels.
@@ -263,6 +268,8 @@ pub fn log_error(
     seed: u64,
 ) -> Result<f64> {
     let (mut sum, mut kept) = (0.0f64, 0usize);
+    // Over all four angles when either material depends on phi_h.
+    let anisotropic = a.is_anisotropic() || b.is_anisotropic();
     let mut k = 0u64;
     while kept < samples {
         if k > 64 * samples as u64 + 4096 {
@@ -278,7 +285,7 @@ pub fn log_error(
             rng.next_f64(),
             rng.next_f64(),
         ];
-        let (view, light, angles) = directions(sampling, u);
+        let (view, light, angles) = directions(sampling, anisotropic, u);
         if light.z <= 0.0 || view.z <= 0.0 {
             continue;
         }

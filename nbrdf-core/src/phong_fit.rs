@@ -92,6 +92,7 @@ pub fn fit(target: &TargetFn<'_>, config: &FitConfig) -> Result<PhongFit> {
     let set = dataset::draw(
         target,
         AngularSampling::Adaptive,
+        false,
         config.samples,
         config.seed,
         Stream::FitSamples,

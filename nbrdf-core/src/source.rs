@@ -94,6 +94,15 @@ impl TrainingSource {
         }
     }
 
+    /// Whether the source is isotropic: MERL tables are by construction, RGL measurements say
+    /// so in their header ([`RglMeasurement::is_isotropic`]).
+    pub fn is_isotropic(&self) -> bool {
+        match self {
+            TrainingSource::Table { .. } => true,
+            TrainingSource::Rgl(m) => m.is_isotropic(),
+        }
+    }
+
     pub fn path(&self) -> &Path {
         match self {
             TrainingSource::Table { path, .. } => path,

@@ -421,7 +421,7 @@ mod train_from_source {
     use nbrdf_core::merl::PhiFold;
     use nbrdf_core::ops::train_network::{train_network, TrainRequest};
     use nbrdf_core::source::{rgl_target, RglFold, TrainingSource, GRAZING_COS};
-    use nbrdf_core::train::TrainConfig;
+    use nbrdf_core::train::{Anisotropy, TrainConfig};
     use nbrdf_core::Nbrdf;
 
     fn temp_dir(tag: &str) -> PathBuf {
@@ -449,6 +449,8 @@ mod train_from_source {
                 seed: 1,
                 ..TrainConfig::fixed_budget()
             },
+            anisotropy: Anisotropy::Auto,
+            scale_samples: false,
             threads: None,
         };
         let report = train_network(&request, &mut |_| {}).unwrap().report;
@@ -477,6 +479,84 @@ mod train_from_source {
                     "{view} {light}: {got} vs {want}"
                 );
             }
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The synthetic measurement over five incident azimuths (`-pi..pi`): an anisotropic file.
+    fn anisotropic_fields() -> Fields {
+        let n_phi = 5;
+        let phi: Vec<f32> = (0..n_phi)
+            .map(|i| (i as f32 / 2.0 - 1.0) * std::f32::consts::PI)
+            .collect();
+        let iso = Fields::valid(false);
+        let per_phi = |name: &str| -> Vec<u8> {
+            let data = &iso.0.iter().find(|f| f.0 == name).unwrap().3;
+            data.repeat(n_phi)
+        };
+        let (vndf, luminance, rgb) = (per_phi("vndf"), per_phi("luminance"), per_phi("rgb"));
+        iso.set("phi_i", DType::Float32, vec![n_phi], f32_bytes(&phi))
+            .set("vndf", DType::Float32, vec![n_phi, N_THETA, RES, RES], vndf)
+            .set(
+                "luminance",
+                DType::Float32,
+                vec![n_phi, N_THETA, RES, RES],
+                luminance,
+            )
+            .set(
+                "rgb",
+                DType::Float32,
+                vec![n_phi, N_THETA, 3, RES, RES],
+                rgb,
+            )
+    }
+
+    /// `--anisotropy auto` follows the file's isotropic flag; on/off force it. An anisotropic
+    /// network is written as format version 2 and records the decision.
+    #[test]
+    fn anisotropy_follows_the_measurement_unless_forced() {
+        let dir = temp_dir("aniso");
+        let files = [
+            ("iso", Fields::valid(false).bytes()),
+            ("aniso", anisotropic_fields().bytes()),
+        ];
+        let cases = [
+            ("iso", Anisotropy::Auto, false),
+            ("aniso", Anisotropy::Auto, true),
+            ("aniso", Anisotropy::Off, false),
+            ("iso", Anisotropy::On, true),
+        ];
+        for (name, bytes) in &files {
+            std::fs::write(dir.join(name), bytes).unwrap();
+        }
+        assert!(!parse(anisotropic_fields().bytes()).unwrap().is_isotropic());
+        for (name, anisotropy, expect) in cases {
+            let output = dir.join(format!("{name}-{}.nbrdf.json", anisotropy.as_str()));
+            let request = TrainRequest {
+                source: dir.join(name),
+                phi_fold: PhiFold::default(),
+                rgl_fold: RglFold::AsMeasured,
+                output: Some(output.clone()),
+                name: None,
+                config: TrainConfig {
+                    samples: 500,
+                    max_epochs: 1,
+                    batch: 64,
+                    ..TrainConfig::fixed_budget()
+                },
+                anisotropy,
+                scale_samples: true,
+                threads: None,
+            };
+            let report = train_network(&request, &mut |_| {}).unwrap().report;
+            // The default-count scaling: five times the samples for the fourth angle.
+            let samples = if expect { 2500 } else { 500 };
+            assert_eq!(report.train_samples, samples, "{name} {anisotropy:?}");
+            let text = std::fs::read_to_string(&output).unwrap();
+            let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+            assert_eq!(json["version"], if expect { 2 } else { 1 }, "{name}");
+            assert_eq!(json["provenance"]["anisotropic"], expect);
+            assert_eq!(Nbrdf::load(&output).unwrap().anisotropic, expect);
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

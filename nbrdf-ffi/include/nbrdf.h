@@ -126,6 +126,15 @@ void nbrdf_network_free(struct NbrdfNetwork *network);
 int32_t nbrdf_network_info(const struct NbrdfNetwork *network,
                            struct NbrdfNetworkInfo *out);
 
+// Stores in `*out` 1 when the network is anisotropic (file format version 2, input with the half
+// vector's azimuth `phi_h` in the local frame whose x axis is the tangent), else 0. A separate
+// call rather than a field of `NbrdfNetworkInfo`, whose layout stays that of version 0.1.
+//
+// # Safety
+// `network` is a live handle; `out` points to a writable `uint32_t`.
+int32_t nbrdf_network_is_anisotropic(const struct NbrdfNetwork *network,
+                                     uint32_t *out);
+
 // Stores in `*out_name` the network's name (UTF-8, NUL-terminated, possibly empty). The string
 // belongs to the handle and stays valid until `nbrdf_network_free`.
 //

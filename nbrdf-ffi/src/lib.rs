@@ -636,6 +636,27 @@ pub unsafe extern "C" fn nbrdf_network_info(
     })
 }
 
+/// Stores in `*out` 1 when the network is anisotropic (file format version 2, input with the half
+/// vector's azimuth `phi_h` in the local frame whose x axis is the tangent), else 0. A separate
+/// call rather than a field of `NbrdfNetworkInfo`, whose layout stays that of version 0.1.
+///
+/// # Safety
+/// `network` is a live handle; `out` points to a writable `uint32_t`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_is_anisotropic(
+    network: *const NbrdfNetwork,
+    out: *mut u32,
+) -> i32 {
+    guard("nbrdf_network_is_anisotropic", || {
+        // SAFETY: forwarded contract.
+        let network = &unsafe { reference(network, "network")? }.network;
+        check_array(out, "out")?;
+        // SAFETY: non-null, aligned, writable by contract.
+        unsafe { out.write(u32::from(network.anisotropic)) };
+        Ok(())
+    })
+}
+
 /// Stores in `*out_name` the network's name (UTF-8, NUL-terminated, possibly empty). The string
 /// belongs to the handle and stays valid until `nbrdf_network_free`.
 ///

@@ -7,7 +7,12 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub const FORMAT_NAME: &str = "nbrdf";
-pub const FORMAT_VERSION: u32 = 1;
+/// The newest version this build reads and writes. Version 2 adds `anisotropic` (default false);
+/// an isotropic network is still written as version 1, which every reader understands and which
+/// loads and evaluates as before (docs/design.md section 4).
+pub const FORMAT_VERSION: u32 = 2;
+/// The version of files without version-2 features.
+pub const FORMAT_VERSION_ISOTROPIC: u32 = 1;
 
 /// What a serde_json syntax error means to the user: non-finite numbers (`NaN`, `Infinity`,
 /// which Python's json module writes) are named, the rest reported as corrupt JSON.
@@ -41,6 +46,8 @@ struct FileIn {
     name: String,
     layers: Vec<Layer>,
     #[serde(default)]
+    anisotropic: bool,
+    #[serde(default)]
     sampling: Option<SamplingParams>,
     #[serde(default)]
     provenance: serde_json::Value,
@@ -52,14 +59,18 @@ struct FileOut<'a> {
     version: u32,
     name: &'a str,
     layers: &'a [Layer; 3],
+    /// Written (as true) only by version 2.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    anisotropic: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     sampling: &'a Option<SamplingParams>,
     provenance: &'a serde_json::Value,
 }
 
 /// Checks the `format` and `version` fields before anything else, so that a file of another
-/// kind or version is reported as such rather than as a missing field further in.
-fn check_header(root: &serde_json::Value) -> std::result::Result<(), String> {
+/// kind or version is reported as such rather than as a missing field further in; returns the
+/// version.
+fn check_header(root: &serde_json::Value) -> std::result::Result<u32, String> {
     let object = root
         .as_object()
         .ok_or("the top level is not a JSON object")?;
@@ -74,10 +85,12 @@ fn check_header(root: &serde_json::Value) -> std::result::Result<(), String> {
     }
     match object.get("version") {
         None => Err("missing field \"version\"".to_string()),
-        Some(v) if v.as_u64() == Some(u64::from(FORMAT_VERSION)) => Ok(()),
-        Some(v) => Err(format!(
-            "unsupported version {v} (this build reads version {FORMAT_VERSION})"
-        )),
+        Some(v) => match v.as_u64() {
+            Some(n) if (1..=u64::from(FORMAT_VERSION)).contains(&n) => Ok(n as u32),
+            _ => Err(format!(
+                "unsupported version {v} (this build reads versions 1 to {FORMAT_VERSION})"
+            )),
+        },
     }
 }
 
@@ -189,9 +202,16 @@ impl Nbrdf {
         let fail = |message: String| NbrdfError::format(origin, message);
         let root: serde_json::Value =
             serde_json::from_str(text).map_err(|e| fail(describe_json_error(text, &e)))?;
-        check_header(&root).map_err(fail)?;
+        let version = check_header(&root).map_err(fail)?;
         let file: FileIn = serde_json::from_value(root)
             .map_err(|e| fail(format!("not a valid NBRDF network: {e}")))?;
+        if file.anisotropic && version < 2 {
+            // A version-1 reader would ignore the flag and evaluate the network wrongly.
+            return Err(fail(
+                "\"anisotropic\": true needs format version 2 (version 1 networks are isotropic)"
+                    .to_string(),
+            ));
+        }
         if let Some(message) = shape_problem(&file.layers) {
             return Err(fail(message));
         }
@@ -205,6 +225,7 @@ impl Nbrdf {
         let net = Nbrdf {
             name: file.name,
             layers,
+            anisotropic: file.anisotropic,
             sampling: file.sampling,
             provenance: if file.provenance.is_null() {
                 empty_object()
@@ -221,9 +242,14 @@ impl Nbrdf {
     pub fn to_json_string(&self) -> String {
         let out = FileOut {
             format: FORMAT_NAME,
-            version: FORMAT_VERSION,
+            version: if self.anisotropic {
+                FORMAT_VERSION
+            } else {
+                FORMAT_VERSION_ISOTROPIC
+            },
             name: &self.name,
             layers: &self.layers,
+            anisotropic: self.anisotropic,
             sampling: &self.sampling,
             provenance: &self.provenance,
         };

@@ -8,7 +8,7 @@
 use super::format::shape_problem;
 use super::{Layer, Nbrdf};
 use crate::brdf::{Directions, RgbMut};
-use crate::coords::network_input_components;
+use crate::coords::network_input_components_for;
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
 use crate::fastmath::Fused;
 use crate::fastmath::{expm1_with, relu, MulAdd, Unfused};
@@ -147,8 +147,9 @@ unsafe fn eval_input_avx2(
 type Row = [f32; LANES];
 
 /// The weights transposed to `outputs x inputs` so that each output's weights are contiguous,
-/// with the always-zero input `x[1]` dropped from the first layer.
+/// with the always-zero input `x[1]` of isotropic networks dropped from the first layer.
 pub(super) struct Packed {
+    anisotropic: bool,
     w1: Vec<f32>,
     b1: Vec<f32>,
     w2: Vec<f32>,
@@ -159,8 +160,21 @@ pub(super) struct Packed {
     hidden2: usize,
 }
 
-/// The input features the kernel uses: `x` without the constant `x[1] = 0`.
+/// The input features the kernel uses for an isotropic network: `x` without the constant
+/// `x[1] = 0`.
 const USED_INPUTS: [usize; 5] = [0, 2, 3, 4, 5];
+/// An anisotropic network uses all six (`x[1] = sin theta_h sin phi_h`).
+const ALL_INPUTS: [usize; 6] = [0, 1, 2, 3, 4, 5];
+
+/// The input features of the first layer.
+#[inline(always)]
+fn used_inputs(anisotropic: bool) -> &'static [usize] {
+    if anisotropic {
+        &ALL_INPUTS
+    } else {
+        &USED_INPUTS
+    }
+}
 
 impl Packed {
     pub(super) fn new(net: &Nbrdf) -> Option<Self> {
@@ -178,7 +192,8 @@ impl Packed {
         };
         let all = |layer: &Layer| (0..layer.inputs).collect::<Vec<_>>();
         Some(Packed {
-            w1: transpose(l1, &USED_INPUTS),
+            anisotropic: net.anisotropic,
+            w1: transpose(l1, used_inputs(net.anisotropic)),
             b1: l1.bias.clone(),
             w2: transpose(l2, &all(l2)),
             b2: l2.bias.clone(),
@@ -231,23 +246,27 @@ pub(super) fn eval_task_generic<M: MulAdd>(
     if packed.hidden1.max(packed.hidden2) <= MAX_STACK_HIDDEN {
         let mut h1 = [[0.0f32; LANES]; MAX_STACK_HIDDEN];
         let mut h2 = [[0.0f32; LANES]; MAX_STACK_HIDDEN];
-        eval_chunks::<M>(
-            packed,
-            view,
-            light,
-            out,
-            &mut h1[..packed.hidden1],
-            &mut h2[..packed.hidden2],
-        );
+        let (h1, h2) = (&mut h1[..packed.hidden1], &mut h2[..packed.hidden2]);
+        // The input layout is a compile-time constant of each kernel copy, so that the lane
+        // loop of `build_inputs` has no branch on it.
+        if packed.anisotropic {
+            eval_chunks::<M, true>(packed, view, light, out, h1, h2);
+        } else {
+            eval_chunks::<M, false>(packed, view, light, out, h1, h2);
+        }
     } else {
         let mut h1 = vec![[0.0f32; LANES]; packed.hidden1];
         let mut h2 = vec![[0.0f32; LANES]; packed.hidden2];
-        eval_chunks::<M>(packed, view, light, out, &mut h1, &mut h2);
+        if packed.anisotropic {
+            eval_chunks::<M, true>(packed, view, light, out, &mut h1, &mut h2);
+        } else {
+            eval_chunks::<M, false>(packed, view, light, out, &mut h1, &mut h2);
+        }
     }
 }
 
 #[inline(always)]
-fn eval_chunks<M: MulAdd>(
+fn eval_chunks<M: MulAdd, const ANISO: bool>(
     packed: &Packed,
     view: Directions<'_>,
     light: Directions<'_>,
@@ -260,7 +279,8 @@ fn eval_chunks<M: MulAdd>(
     let [r, g, b] = out;
     // Per-task buffers, reused by every chunk.
     let mut padded = [[0.0f32; LANES]; 6];
-    let mut x = [[0.0f32; LANES]; 5];
+    let mut x = [[0.0f32; LANES]; 6];
+    let inputs = used_inputs(ANISO).len();
     let mut cos = [0.0f32; LANES];
     let mut rgb = [[0.0f32; LANES]; 3];
     let mut start = 0;
@@ -271,16 +291,16 @@ fn eval_chunks<M: MulAdd>(
         // normalise in float32, go through padded copies (zero vectors are invalid and give 0),
         // so the lane loops always have a constant trip count.
         let in_place = full_rows(&sources, start);
-        let done = in_place.is_some_and(|rows| build_inputs(rows, &mut x, &mut cos));
+        let done = in_place.is_some_and(|rows| build_inputs::<ANISO>(rows, &mut x, &mut cos));
         if !done {
             for (row, src) in padded.iter_mut().zip(sources) {
                 row.fill(0.0);
                 row[..m].copy_from_slice(&src[start..end]);
             }
             rescale_out_of_range(&mut padded);
-            build_inputs(padded.each_ref(), &mut x, &mut cos);
+            build_inputs::<ANISO>(padded.each_ref(), &mut x, &mut cos);
         }
-        dense_relu_chunk::<M>(&packed.w1, &packed.b1, &x, h1);
+        dense_relu_chunk::<M>(&packed.w1, &packed.b1, &x[..inputs], h1);
         dense_relu_chunk::<M>(&packed.w2, &packed.b2, h1, h2);
         let direct =
             [&mut *r, &mut *g, &mut *b].map(|c| <&mut Row>::try_from(&mut c[start..end]).ok());
@@ -321,13 +341,13 @@ fn len2_in_range(len2: f32) -> bool {
 // Lane-indexed loops over several rows at once are the shape that vectorises here.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn build_inputs(dirs: [&Row; 6], x: &mut [Row; 5], cos: &mut Row) -> bool {
+fn build_inputs<const ANISO: bool>(dirs: [&Row; 6], x: &mut [Row; 6], cos: &mut Row) -> bool {
     let mut out_of_range = 0u32;
     for j in 0..LANES {
         let [lx, ly, lz, vx, vy, vz] = dirs.map(|row| row[j]);
-        let input = network_input_components(vx, vy, vz, lx, ly, lz);
-        for (row, value) in x.iter_mut().zip(USED_INPUTS.map(|k| input[k])) {
-            row[j] = value;
+        let input = network_input_components_for(ANISO, vx, vy, vz, lx, ly, lz);
+        for (row, &k) in x.iter_mut().zip(used_inputs(ANISO)) {
+            row[j] = input[k];
         }
         let l_len2 = lx * lx + ly * ly + lz * lz;
         let v_len2 = vx * vx + vy * vy + vz * vz;

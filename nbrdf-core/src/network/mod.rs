@@ -1,5 +1,6 @@
 //! The NBRDF network (docs/design.md section 4): `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1`,
-//! clamped at 0, with `x` the isotropic Rusinkiewicz input of [`crate::coords::network_input`].
+//! clamped at 0, with `x` the Rusinkiewicz input of [`crate::coords::network_input_for`]
+//! (isotropic, `phi_h = 0`, unless the network is anisotropic).
 //! Any hidden width.
 //!
 //! * this file: the [`Nbrdf`] type, its [`Layer`]s (the one dense-layer definition of the crate,
@@ -12,11 +13,11 @@ mod kernel;
 #[cfg(test)]
 mod tests;
 
-pub use format::{FORMAT_NAME, FORMAT_VERSION};
+pub use format::{FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_ISOTROPIC};
 pub use kernel::LANES;
 
 use crate::brdf::{Brdf, Directions, RgbMut};
-use crate::coords::network_input;
+use crate::coords::network_input_for;
 use crate::error::{NbrdfError, Result};
 use crate::fastmath::MulAdd;
 use crate::rng::{SplitMix64, Stream};
@@ -158,6 +159,10 @@ impl SamplingParams {
 pub struct Nbrdf {
     pub name: String,
     pub layers: [Layer; 3],
+    /// Whether the input carries the half vector's azimuth `phi_h`
+    /// ([`crate::coords::network_input_for`]): an anisotropic network, file format version 2.
+    /// Isotropic networks (the paper's, every version-1 file) see `phi_h = 0`.
+    pub anisotropic: bool,
     pub sampling: Option<SamplingParams>,
     pub provenance: serde_json::Value,
 }
@@ -230,6 +235,7 @@ impl Nbrdf {
         let net = Nbrdf {
             name: name.to_string(),
             layers,
+            anisotropic: false,
             sampling: None,
             provenance: empty_object(),
         };
@@ -253,6 +259,7 @@ impl Nbrdf {
         Nbrdf {
             name: name.to_string(),
             layers: paper_init(hidden.max(1), seed),
+            anisotropic: false,
             sampling: None,
             provenance: serde_json::json!({
                 "initialisation": INITIALISATION,
@@ -274,13 +281,18 @@ impl Nbrdf {
             .sum()
     }
 
-    /// `f_r` at a set of angles (`phi_h` ignored) through the float32 directions a renderer would
-    /// hand the network, so that it equals [`Brdf::eval`] there. (Tabulation uses
-    /// [`crate::coords::network_input_from_angles`] instead, exact where `theta_h` is tiny.)
+    /// `f_r` at a set of angles (`phi_h` ignored by isotropic networks) through the float32
+    /// directions a renderer would hand the network, so that it equals [`Brdf::eval`] there.
+    /// (Tabulation uses [`crate::coords::network_input_from_angles`] instead, exact where
+    /// `theta_h` is tiny.)
     pub fn eval_at_angles(&self, angles: &crate::coords::RusinkiewiczAngles) -> [f64; 3] {
         let (view, light) = crate::coords::from_rusinkiewicz(angles);
-        self.eval_input(network_input(view.as_vec3(), light.as_vec3()))
-            .map(f64::from)
+        self.eval_input(network_input_for(
+            self.anisotropic,
+            view.as_vec3(),
+            light.as_vec3(),
+        ))
+        .map(f64::from)
     }
 
     /// The stored sampling strategy, if the file has one and it is valid.
@@ -299,8 +311,12 @@ impl Nbrdf {
             if light.z <= 0.0 || view.z <= 0.0 {
                 return [f64::NAN; 3];
             }
-            self.eval_input(crate::coords::network_input_from_angles(angles))
-                .map(f64::from)
+            // MERL angles have phi_h = 0: an anisotropic network is tabulated along that azimuth.
+            self.eval_input(crate::coords::network_input_from_angles_for(
+                self.anisotropic,
+                angles,
+            ))
+            .map(f64::from)
         })
     }
 }
@@ -317,7 +333,7 @@ impl Brdf for Nbrdf {
         if l.z <= 0.0 || v.z <= 0.0 {
             return [0.0; 3];
         }
-        self.eval_input(network_input(v, l))
+        self.eval_input(network_input_for(self.anisotropic, v, l))
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {

@@ -3,6 +3,7 @@
 
 use super::kernel::{eval_input_generic, eval_task_generic, Packed, MAX_STACK_HIDDEN, TASK_LANES};
 use super::*;
+use crate::coords::network_input;
 use crate::fastmath::Unfused;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -107,7 +108,7 @@ fn reference_cos(net: &Nbrdf, v: Vec3, l: Vec3) -> Reference {
             rounding: [0.0; 3],
         };
     }
-    reference_f64(net, network_input(v, l)).scaled(ln.z)
+    reference_f64(net, network_input_for(net.anisotropic, v, l)).scaled(ln.z)
 }
 
 /// A network with weights like a trained one: fan-in scaled, biases non-zero, outputs from
@@ -249,8 +250,17 @@ fn tabulation_holds_the_network_at_cell_centres_and_nothing_below_the_horizon() 
 
 #[test]
 fn batched_eval_matches_f64_reference_and_eval_input() {
-    for hidden in [4, 21, 40, 100] {
-        let net = test_net(hidden, 11 + hidden as u64);
+    let widths = [
+        (4, false),
+        (21, false),
+        (40, false),
+        (100, false),
+        (21, true),
+        (40, true),
+    ];
+    for (hidden, anisotropic) in widths {
+        let mut net = test_net(hidden, 11 + hidden as u64);
+        net.anisotropic = anisotropic;
         // More lanes than one rayon task so that the threaded split and the tail both run.
         let mut pairs = direction_pairs(1700, 3 * hidden as u64);
         pairs.truncate(TASK_LANES + LANES + 13);
@@ -260,7 +270,7 @@ fn batched_eval_matches_f64_reference_and_eval_input() {
         for ((l, v), g) in pairs.iter().zip(&got) {
             let want = reference_cos(&net, *v, *l);
             // Same input vector: the scalar path must agree with the batched one.
-            let single = net.eval_input(network_input(*v, *l));
+            let single = net.eval_input(network_input_for(anisotropic, *v, *l));
             let cos = crate::brdf::cos_theta_light(*l);
             let context = format!("width {hidden} l={l} v={v}: {g:?} vs {:?}", want.value);
             for c in 0..3 {
@@ -282,8 +292,9 @@ fn batched_eval_matches_f64_reference_and_eval_input() {
 /// elsewhere) are checked here directly.
 #[test]
 fn portable_kernels_match_reference() {
-    for hidden in [4, 21, 100] {
-        let net = test_net(hidden, 5 + hidden as u64);
+    for (hidden, anisotropic) in [(4, false), (21, false), (100, false), (21, true)] {
+        let mut net = test_net(hidden, 5 + hidden as u64);
+        net.anisotropic = anisotropic;
         let packed = Packed::new(&net).unwrap();
         let mut pairs = direction_pairs(60, hidden as u64);
         pairs.push((Vec3::new(1e-25, 0.0, 2e-25), Vec3::new(3e20, 0.0, 1e25)));
@@ -327,7 +338,7 @@ fn portable_kernels_match_reference() {
             for (c, got) in [r[i], g[i], b[i]].into_iter().enumerate() {
                 tally.check(got, &want, c, &context);
             }
-            let x = network_input(*v, *l);
+            let x = network_input_for(anisotropic, *v, *l);
             if x.iter().all(|c| c.is_finite()) {
                 let single = eval_input_generic::<Unfused>(&net.layers, &x, &mut h1, &mut h2);
                 let want = reference_f64(&net, x);
@@ -484,6 +495,75 @@ fn json_round_trip_is_exact() {
     );
 }
 
+/// Isotropic networks stay version-1 files (no `anisotropic` key); anisotropic ones are version 2
+/// and round-trip; a version-2 file without the key is isotropic.
+#[test]
+fn anisotropic_networks_are_version_2_and_isotropic_ones_version_1() {
+    let iso = test_net(21, 4);
+    let iso_text = iso.to_json_string();
+    assert!(iso_text.contains("\"version\": 1") && !iso_text.contains("anisotropic"));
+    let mut aniso = iso.clone();
+    aniso.anisotropic = true;
+    let text = aniso.to_json_string();
+    assert!(text.contains("\"version\": 2") && text.contains("\"anisotropic\": true"));
+    let back = Nbrdf::from_json_str(&text, Path::new("a")).unwrap();
+    assert_eq!(back, aniso);
+    let mut v2: serde_json::Value = serde_json::from_str(&iso_text).unwrap();
+    v2["version"] = 2.into();
+    let back = Nbrdf::from_json_str(&v2.to_string(), Path::new("b")).unwrap();
+    assert_eq!(back, iso);
+}
+
+/// The anisotropic input is the half vector's full Cartesian form: rotating view and light
+/// together about the normal changes an anisotropic network's value exactly as feeding it the
+/// rotated half vector does, and leaves an isotropic network's value unchanged.
+#[test]
+fn rotation_about_the_normal_moves_only_anisotropic_networks() {
+    let iso = test_net(21, 8);
+    let mut aniso = iso.clone();
+    aniso.anisotropic = true;
+    let (v, l) = (hemisphere(0.5, 0.3), hemisphere(0.6, 2.9));
+    let mut moved = 0.0f32;
+    for k in 1..8 {
+        let rot = glam::Quat::from_rotation_z(k as f32 * 0.7);
+        let (rv, rl) = (rot * v, rot * l);
+        let (a, b) = (iso.eval(v, l), iso.eval(rv, rl));
+        for c in 0..3 {
+            assert!(
+                (a[c] - b[c]).abs() <= 1e-4 * a[c].abs() + 1e-6,
+                "{a:?} {b:?}"
+            );
+        }
+        // Closed form of the rotated input: half vector rotated, difference vector unchanged.
+        let hd = crate::coords::half_diff(v.as_dvec3(), l.as_dvec3());
+        let (s, c) = (f64::from(k as f32 * 0.7)).sin_cos();
+        let h = hd.half;
+        let x = [
+            c * h.x - s * h.y,
+            s * h.x + c * h.y,
+            h.z,
+            hd.diff.x,
+            hd.diff.y,
+            hd.diff.z,
+        ]
+        .map(|t| t as f32);
+        let want = reference_f64(&aniso, x).value;
+        let got = aniso.eval(rv, rl);
+        for ch in 0..3 {
+            assert!(
+                (f64::from(got[ch]) - want[ch]).abs() <= 1e-3 * want[ch] + 1e-5,
+                "{k}: {got:?} vs {want:?}"
+            );
+        }
+        let base = aniso.eval(v, l);
+        moved = moved.max((got[0] - base[0]).abs() / base[0].max(1e-6));
+    }
+    assert!(
+        moved > 0.05,
+        "the anisotropic network hardly depends on phi_h: {moved}"
+    );
+}
+
 #[test]
 fn malformed_files_are_rejected_with_the_file_name() {
     let good: serde_json::Value = serde_json::from_str(&{
@@ -505,7 +585,12 @@ fn malformed_files_are_rejected_with_the_file_name() {
         ("missing field \"format\"", |v| {
             v.as_object_mut().unwrap().remove("format");
         }),
-        ("unsupported version 2", |v| v["version"] = 2.into()),
+        ("unsupported version 3", |v| v["version"] = 3.into()),
+        ("needs format version 2", |v| v["anisotropic"] = true.into()),
+        ("invalid type: string \"yes\", expected a boolean", |v| {
+            v["version"] = 2.into();
+            v["anisotropic"] = "yes".into();
+        }),
         ("unsupported version \"1\"", |v| v["version"] = "1".into()),
         ("expected 3 layers, found 2", |v| {
             v["layers"].as_array_mut().unwrap().pop();

@@ -4,7 +4,7 @@ use super::{file_stem, with_threads};
 use crate::error::Result;
 use crate::merl::PhiFold;
 use crate::source::{rgl_target, RglFold, TrainingSource};
-use crate::train::{self, EpochStats, TrainConfig, TrainReport};
+use crate::train::{self, Anisotropy, EpochStats, TrainConfig, TrainReport};
 use std::fmt;
 use std::path::PathBuf;
 
@@ -21,7 +21,14 @@ pub struct TrainRequest {
     pub output: Option<PathBuf>,
     /// Stored in the network; default: the table's file name without extensions.
     pub name: Option<String>,
+    /// `config.anisotropic` is replaced by this decision, made with the source.
     pub config: TrainConfig,
+    /// Isotropic or anisotropic network: from the source ([`Anisotropy::Auto`]) or forced.
+    pub anisotropy: Anisotropy,
+    /// Whether `config.samples` is a default, multiplied by
+    /// [`train::ANISOTROPIC_SAMPLE_FACTOR`] for an anisotropic network (false: the user's count,
+    /// used as given).
+    pub scale_samples: bool,
     pub threads: Option<usize>,
 }
 
@@ -68,7 +75,11 @@ pub fn train_network(
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{name}.nbrdf.json")));
-    let config = &request.config;
+    let anisotropic = request.anisotropy.resolve(source.is_isotropic());
+    let config = &request
+        .config
+        .clone()
+        .for_anisotropy(anisotropic, request.scale_samples);
     let kind = source.kind();
     let (outcome, fold_key, fold) = match source {
         TrainingSource::Table { table, .. } => {
@@ -98,6 +109,7 @@ pub fn train_network(
     if let Some(p) = network.provenance.as_object_mut() {
         p.insert("source_kind".into(), kind.into());
         p.insert(fold_key.into(), fold.into());
+        p.insert("anisotropy".into(), request.anisotropy.as_str().into());
     }
     network.validate()?;
     network.save(&output)?;

@@ -32,12 +32,14 @@ pub fn sample_directions(config: &TrainConfig) -> Result<(Vec<(Vec3, Vec3)>, usi
     let validation = config.validation_samples();
     let mut pairs = dataset::draw_directions(
         config.sampling,
+        config.anisotropic,
         config.samples,
         config.seed,
         Stream::TrainSamples,
     );
     pairs.extend(dataset::draw_directions(
         config.sampling,
+        config.anisotropic,
         validation,
         config.seed,
         Stream::ValidationSamples,
@@ -88,17 +90,23 @@ impl SampledArrays<'_> {
         Ok(())
     }
 
-    /// Training and validation samples, folded as `fold` says.
-    pub fn data_sets(&self, fold: RglFold) -> Result<(DataSet, DataSet)> {
+    /// Training and validation samples, folded as `fold` says, with the network input of an
+    /// isotropic or `anisotropic` network.
+    pub fn data_sets(&self, fold: RglFold, anisotropic: bool) -> Result<(DataSet, DataSet)> {
         self.check(fold)?;
         let split = self.view.len() - self.validation;
         Ok((
-            self.data_set(0..split, fold)?,
-            self.data_set(split..self.view.len(), fold)?,
+            self.data_set(0..split, fold, anisotropic)?,
+            self.data_set(split..self.view.len(), fold, anisotropic)?,
         ))
     }
 
-    fn data_set(&self, range: std::ops::Range<usize>, fold: RglFold) -> Result<DataSet> {
+    fn data_set(
+        &self,
+        range: std::ops::Range<usize>,
+        fold: RglFold,
+        anisotropic: bool,
+    ) -> Result<DataSet> {
         let mut set = DataSet {
             samples: Vec::with_capacity(range.len()),
             ..DataSet::default()
@@ -138,8 +146,12 @@ impl SampledArrays<'_> {
                     })
                 }
             };
-            set.samples
-                .push(dataset::sample(view, light, f_cos.map(|c| c.max(0.0))));
+            set.samples.push(dataset::sample(
+                anisotropic,
+                view,
+                light,
+                f_cos.map(|c| c.max(0.0)),
+            ));
         }
         Ok(set)
     }
@@ -165,7 +177,7 @@ pub fn train_arrays(
     on_epoch: &mut dyn FnMut(&EpochStats),
 ) -> Result<TrainOutcome> {
     let start = Instant::now();
-    let (train_set, validation) = arrays.data_sets(fold)?;
+    let (train_set, validation) = arrays.data_sets(fold, config.anisotropic)?;
     if train_set.samples.is_empty() || validation.samples.is_empty() {
         return Err(NbrdfError::InvalidArgument(format!(
             "no pair is above the horizon in the {} set",
@@ -253,21 +265,86 @@ mod tests {
     #[test]
     fn sample_directions_are_those_the_trainer_draws() {
         for sampling in [AngularSampling::Adaptive, AngularSampling::Uniform] {
-            let config = TrainConfig {
-                sampling,
-                samples: 3000,
-                ..small_config()
-            };
-            let (pairs, validation) = sample_directions(&config).unwrap();
-            assert_eq!((pairs.len(), validation), (3300, 300));
-            let (train, valid) = crate::train::draw_sets(&|_| Some([0.0; 3]), &config).unwrap();
-            let drawn = train.samples.iter().chain(&valid.samples);
-            for (&(v, l), s) in pairs.iter().zip(drawn) {
-                assert_eq!(crate::coords::network_input(v, l), s.x);
-                assert_eq!(l.z, s.cos_light);
-                assert!(v.z > 0.0 && (v.length() - 1.0).abs() < 1e-6);
+            for anisotropic in [false, true] {
+                let config = TrainConfig {
+                    sampling,
+                    samples: 3000,
+                    anisotropic,
+                    ..small_config()
+                };
+                let (pairs, validation) = sample_directions(&config).unwrap();
+                assert_eq!((pairs.len(), validation), (3300, 300));
+                let (train, valid) = crate::train::draw_sets(&|_| Some([0.0; 3]), &config).unwrap();
+                let drawn = train.samples.iter().chain(&valid.samples);
+                for (&(v, l), s) in pairs.iter().zip(drawn) {
+                    assert_eq!(crate::coords::network_input_for(anisotropic, v, l), s.x);
+                    assert_eq!(l.z, s.cos_light);
+                    assert!(v.z > 0.0 && (v.length() - 1.0).abs() < 1e-6);
+                }
+                // Adaptive sampling draws phi_h only for anisotropic networks: their half
+                // vectors leave the x-z plane.
+                let off_plane = pairs
+                    .iter()
+                    .filter(|(v, l)| (*v + *l).normalize().y.abs() > 0.1)
+                    .count();
+                if sampling == AngularSampling::Adaptive && !anisotropic {
+                    assert_eq!(off_plane, 0);
+                } else {
+                    assert!(off_plane > 1000, "{sampling} {anisotropic} {off_plane}");
+                }
             }
         }
+    }
+
+    /// An elliptical highlight, narrow along x and wide along y (in the half vector's slopes).
+    fn elliptical(view: Vec3, light: Vec3) -> [f64; 3] {
+        let h = (view.as_dvec3() + light.as_dvec3()).normalize();
+        let (sx, sy) = (h.x / h.z, h.y / h.z);
+        let k = 0.1 + 2.0 * (-(sx / 0.15).powi(2) - (sy / 0.6).powi(2)).exp();
+        [k, k, k]
+    }
+
+    #[test]
+    fn anisotropic_arrays_train_a_network_that_follows_phi_h() {
+        let config = TrainConfig {
+            samples: 8000,
+            max_epochs: 40,
+            ..small_config()
+        };
+        let error = |anisotropic: bool| {
+            let config = TrainConfig {
+                anisotropic,
+                ..config.clone()
+            };
+            let owned = sampled(&config, elliptical);
+            let outcome = train_arrays(
+                &owned.arrays(false),
+                RglFold::AsMeasured,
+                &config,
+                "e",
+                &mut |_| {},
+            )
+            .unwrap();
+            assert_eq!(outcome.network.anisotropic, anisotropic);
+            // Log-space error on fresh uniform pairs, computed here from the directions.
+            let test = sampled(
+                &TrainConfig {
+                    sampling: AngularSampling::Uniform,
+                    samples: 3000,
+                    seed: 77,
+                    ..config.clone()
+                },
+                elliptical,
+            );
+            let (set, _) = test
+                .arrays(false)
+                .data_sets(RglFold::AsMeasured, anisotropic)
+                .unwrap();
+            let trainer = Trainer::from_layers(&outcome.network.layers, 64, AdamConfig::default());
+            trainer.validation_loss(&set.samples)
+        };
+        let (aniso, iso) = (error(true), error(false));
+        assert!(aniso < 0.5 * iso, "anisotropic {aniso} vs isotropic {iso}");
     }
 
     #[test]
@@ -289,6 +366,7 @@ mod tests {
         let test = dataset::draw(
             &phong_by_angles,
             AngularSampling::Uniform,
+            false,
             2000,
             99,
             Stream::ValidationSamples,
@@ -333,10 +411,13 @@ mod tests {
             ..small_config()
         };
         let owned = sampled(&config, lopsided);
-        let (as_given, _) = owned.arrays(true).data_sets(RglFold::AsMeasured).unwrap();
+        let (as_given, _) = owned
+            .arrays(true)
+            .data_sets(RglFold::AsMeasured, false)
+            .unwrap();
         let (mean, _) = owned
             .arrays(true)
-            .data_sets(RglFold::ReciprocalMean)
+            .data_sets(RglFold::ReciprocalMean, false)
             .unwrap();
         assert_eq!(as_given.samples.len(), 20_000);
         // Uniform cosines: about 2 % of the pairs have one below 0.01.
@@ -355,7 +436,7 @@ mod tests {
         }
         assert!(owned
             .arrays(false)
-            .data_sets(RglFold::ReciprocalMean)
+            .data_sets(RglFold::ReciprocalMean, false)
             .is_err());
     }
 
@@ -369,7 +450,7 @@ mod tests {
         let error = |owned: &Owned| {
             owned
                 .arrays(false)
-                .data_sets(RglFold::AsMeasured)
+                .data_sets(RglFold::AsMeasured, false)
                 .unwrap_err()
                 .to_string()
         };
@@ -390,7 +471,10 @@ mod tests {
         low.view[3].z = -0.5;
         low.light[4] = Vec3::ZERO;
         low.eval_cos[5] = [-1e-4, 0.0, 0.1];
-        let (train, _) = low.arrays(false).data_sets(RglFold::AsMeasured).unwrap();
+        let (train, _) = low
+            .arrays(false)
+            .data_sets(RglFold::AsMeasured, false)
+            .unwrap();
         assert_eq!((train.below_horizon, train.samples.len()), (2, 98));
         assert_eq!(train.samples[3].log_target[0], 0.0);
     }

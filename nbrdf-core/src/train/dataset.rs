@@ -2,8 +2,12 @@
 //! log-space targets (docs/design.md section 5).
 //!
 //! * Adaptive: `theta_h, theta_d ~ U[0, pi/2]`, `phi_d ~ U[0, 2 pi)`, `phi_h = 0`, uniform in
-//!   the angles, which puts many samples near the specular peak (`theta_h` small).
-//! * Uniform: light and view each uniform over the hemisphere.
+//!   the angles, which puts many samples near the specular peak (`theta_h` small). For an
+//!   anisotropic network `phi_h ~ U[-pi, pi)` as well (the fourth uniform), so all four angles
+//!   are covered.
+//! * Uniform: light and view each uniform over the hemisphere (all four angles already vary).
+//!
+//! Sample inputs are [`crate::coords::network_input_for`] of the network's kind.
 //!
 //! A candidate is dropped when the light or the view is at or below the horizon (the BRDF is 0
 //! there and `cos_light` would be 0) or when the target function reports invalid data; candidates
@@ -66,7 +70,7 @@ pub type TargetFn<'a> = dyn Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> + Sync +
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C)]
 pub struct Sample {
-    /// Network input [`crate::coords::network_input`] of the `f32` directions.
+    /// Network input [`crate::coords::network_input_for`] of the `f32` directions.
     pub x: [f32; INPUTS],
     /// `ln(1 + f_r cos_light)` per channel.
     pub log_target: [f32; OUTPUTS],
@@ -101,6 +105,7 @@ const MAX_CANDIDATES_PER_SAMPLE: u64 = 64;
 pub fn draw(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
+    anisotropic: bool,
     count: usize,
     seed: u64,
     stream: Stream,
@@ -122,7 +127,7 @@ pub fn draw(
         }
         let blocks: Vec<(Vec<Sample>, Vec<Outcome>)> = (next_block..next_block + BLOCKS_PER_ROUND)
             .into_par_iter()
-            .map(|b| draw_block(target, sampling, seed, stream, b))
+            .map(|b| draw_block(target, sampling, anisotropic, seed, stream, b))
             .collect();
         next_block += BLOCKS_PER_ROUND;
         for (samples, outcomes) in blocks {
@@ -146,6 +151,7 @@ pub fn draw(
 fn draw_block(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
+    anisotropic: bool,
     seed: u64,
     stream: Stream,
     block: u64,
@@ -154,7 +160,7 @@ fn draw_block(
     let mut outcomes = Vec::with_capacity(BLOCK as usize);
     for k in block * BLOCK..(block + 1) * BLOCK {
         let u = candidate_uniforms(seed, stream, k);
-        let outcome = match candidate(target, sampling, u) {
+        let outcome = match candidate(target, sampling, anisotropic, u) {
             Ok(sample) => {
                 samples.push(sample);
                 Outcome::Kept
@@ -166,13 +172,22 @@ fn draw_block(
     (samples, outcomes)
 }
 
-/// The view/light pair and angles of four uniforms.
-pub fn directions(sampling: AngularSampling, u: [f64; 4]) -> (DVec3, DVec3, RusinkiewiczAngles) {
+/// The view/light pair and angles of four uniforms; `anisotropic` draws `phi_h` too (adaptive
+/// sampling; uniform sampling covers it anyway).
+pub fn directions(
+    sampling: AngularSampling,
+    anisotropic: bool,
+    u: [f64; 4],
+) -> (DVec3, DVec3, RusinkiewiczAngles) {
     match sampling {
         AngularSampling::Adaptive => {
             let angles = RusinkiewiczAngles {
                 theta_h: u[0] * FRAC_PI_2,
-                phi_h: 0.0,
+                phi_h: if anisotropic {
+                    (2.0 * u[3] - 1.0) * PI
+                } else {
+                    0.0
+                },
                 theta_d: u[1] * FRAC_PI_2,
                 phi_d: u[2] * 2.0 * PI,
             };
@@ -202,9 +217,10 @@ fn uniform_hemisphere(u_cos: f64, u_phi: f64) -> DVec3 {
 /// they decide the horizon.
 fn candidate_directions(
     sampling: AngularSampling,
+    anisotropic: bool,
     u: [f64; 4],
 ) -> Option<(Vec3, Vec3, RusinkiewiczAngles)> {
-    let (view, light, angles) = directions(sampling, u);
+    let (view, light, angles) = directions(sampling, anisotropic, u);
     let (v, l) = (view.as_vec3(), light.as_vec3());
     (l.z > 0.0 && v.z > 0.0).then_some((v, l, angles))
 }
@@ -223,21 +239,24 @@ fn candidate_uniforms(seed: u64, stream: Stream, k: u64) -> [f64; 4] {
 fn candidate(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
+    anisotropic: bool,
     u: [f64; 4],
 ) -> std::result::Result<Sample, Outcome> {
-    let (v, l, angles) = candidate_directions(sampling, u).ok_or(Outcome::BelowHorizon)?;
+    let (v, l, angles) =
+        candidate_directions(sampling, anisotropic, u).ok_or(Outcome::BelowHorizon)?;
     let f = target(&angles).ok_or(Outcome::Invalid)?;
     if !f.iter().all(|c| c.is_finite() && *c >= 0.0) {
         return Err(Outcome::Invalid);
     }
     let cos_light = l.z;
-    Ok(sample(v, l, f.map(|c| c * cos_light as f64)))
+    Ok(sample(anisotropic, v, l, f.map(|c| c * cos_light as f64)))
 }
 
-/// The sample of a view/light pair above the horizon and its `f_r cos_light` (finite, >= 0).
-pub fn sample(view: Vec3, light: Vec3, f_cos_light: [f64; 3]) -> Sample {
+/// The sample of a view/light pair above the horizon and its `f_r cos_light` (finite, >= 0),
+/// with the network input of an isotropic or anisotropic network.
+pub fn sample(anisotropic: bool, view: Vec3, light: Vec3, f_cos_light: [f64; 3]) -> Sample {
     Sample {
-        x: crate::coords::network_input(view, light),
+        x: crate::coords::network_input_for(anisotropic, view, light),
         log_target: f_cos_light.map(|c| c.ln_1p() as f32),
         cos_light: light.z,
     }
@@ -245,10 +264,12 @@ pub fn sample(view: Vec3, light: Vec3, f_cos_light: [f64; 3]) -> Sample {
 
 /// The `(view, light)` pairs that [`draw`] would make samples of, for a target valid
 /// everywhere: the first `count` candidates of stream `stream` of `seed` above the horizon, in
-/// order. A caller that evaluates its own reflectance at them (the distiller,
-/// [`crate::train::arrays`]) trains on the trainer's own sampling.
+/// order (`anisotropic` draws `phi_h` too, as [`draw`] does). A caller that evaluates its own
+/// reflectance at them (the distiller, [`crate::train::arrays`]) trains on the trainer's own
+/// sampling.
 pub fn draw_directions(
     sampling: AngularSampling,
+    anisotropic: bool,
     count: usize,
     seed: u64,
     stream: Stream,
@@ -256,8 +277,8 @@ pub fn draw_directions(
     let mut pairs = Vec::with_capacity(count);
     let mut k = 0u64;
     while pairs.len() < count {
-        if let Some((v, l, _)) = candidate_directions(sampling, candidate_uniforms(seed, stream, k))
-        {
+        let u = candidate_uniforms(seed, stream, k);
+        if let Some((v, l, _)) = candidate_directions(sampling, anisotropic, u) {
             pairs.push((v, l));
         }
         k += 1;
@@ -277,7 +298,7 @@ mod tests {
     #[test]
     fn keeps_only_valid_samples_above_the_horizon() {
         for sampling in [AngularSampling::Adaptive, AngularSampling::Uniform] {
-            let set = draw(&constant, sampling, 5000, 3, Stream::TrainSamples).unwrap();
+            let set = draw(&constant, sampling, false, 5000, 3, Stream::TrainSamples).unwrap();
             assert_eq!(set.samples.len(), 5000);
             assert_eq!(set.candidates, 5000 + set.below_horizon + set.invalid);
             assert!(set.invalid > 0, "{sampling}");
@@ -297,11 +318,33 @@ mod tests {
         }
     }
 
+    /// Anisotropic draws cover phi_h uniformly (the input's `x[1] = sin th sin ph` takes both
+    /// signs, `atan2(x1, x0)` spreads over all four quadrants); isotropic ones keep `x[1] = 0`.
+    #[test]
+    fn anisotropic_draws_cover_phi_h() {
+        for sampling in [AngularSampling::Adaptive, AngularSampling::Uniform] {
+            let iso = draw(&constant, sampling, false, 2000, 5, Stream::TrainSamples).unwrap();
+            assert!(iso.samples.iter().all(|s| s.x[1] == 0.0 && s.x[0] >= 0.0));
+            let aniso = draw(&constant, sampling, true, 4000, 5, Stream::TrainSamples).unwrap();
+            let mut quadrants = [0usize; 4];
+            for s in &aniso.samples {
+                let phi = s.x[1].atan2(s.x[0]);
+                let q = ((phi + std::f32::consts::PI) / std::f32::consts::FRAC_PI_2) as usize;
+                quadrants[q.min(3)] += 1;
+            }
+            assert!(
+                quadrants.iter().all(|&q| q > 800 && q < 1200),
+                "{sampling}: {quadrants:?}"
+            );
+        }
+    }
+
     #[test]
     fn fails_clearly_when_nothing_is_valid() {
         let err = draw(
             &|_: &RusinkiewiczAngles| None,
             AngularSampling::Adaptive,
+            false,
             10,
             0,
             Stream::TrainSamples,
@@ -315,6 +358,7 @@ mod tests {
         let set = draw(
             &constant,
             AngularSampling::Adaptive,
+            false,
             4000,
             9,
             Stream::TrainSamples,

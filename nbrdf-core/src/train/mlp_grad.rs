@@ -753,6 +753,7 @@ mod tests {
         let net = crate::network::Nbrdf {
             name: "t".into(),
             layers: layers.clone(),
+            anisotropic: false,
             sampling: None,
             provenance: serde_json::Value::Null,
         };

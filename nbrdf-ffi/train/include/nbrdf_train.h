@@ -78,6 +78,10 @@ typedef struct NbrdfTrainConfig {
   uint64_t seed;
   // Worker threads; 0: one per core.
   size_t threads;
+  // 1: an anisotropic network (its input carries the half vector's azimuth `phi_h`, and
+  // `nbrdf_train_directions` draws `phi_h` too); 0: isotropic. Other values are errors.
+  // `nbrdf_train_config_for_anisotropy` sets it with the trainer's default sample scaling.
+  int32_t anisotropic;
 } NbrdfTrainConfig;
 
 // Progress after one epoch, passed to the `NbrdfEpochCallback`.
@@ -117,6 +121,17 @@ const char *nbrdf_train_version(void);
 // `out` points to a writable `NbrdfTrainConfig`.
 int32_t nbrdf_train_config_default(struct NbrdfTrainConfig *out);
 
+// Makes `*config` a configuration for an isotropic (`anisotropic` 0) or anisotropic (1)
+// network, as `nbrdf train --anisotropy` does: with `scale_samples` 1, an anisotropic network
+// gets the trainer's default factor (5) times `samples` (for a sample count that is the
+// default rather than the user's); 0 keeps `samples`.
+//
+// # Safety
+// `config` points to a readable and writable `NbrdfTrainConfig`.
+int32_t nbrdf_train_config_for_anisotropy(struct NbrdfTrainConfig *config,
+                                          int32_t anisotropic,
+                                          int32_t scale_samples);
+
 // Stores the number of training and validation pairs of `config` (what
 // `nbrdf_train_directions` writes, training pairs first) after checking its settings.
 //
@@ -129,7 +144,8 @@ int32_t nbrdf_train_sample_counts(const struct NbrdfTrainConfig *config,
 // Writes the trainer's `n` view/light pairs for `config` (planar `3 n` floats each, unit
 // vectors above the horizon): the training pairs, then the validation pairs, as
 // `nbrdf_train_sample_counts` counts them; `n` must be their sum. Directions are full 3D
-// vectors: a caller must not assume any symmetry of them.
+// vectors: a caller must not assume any symmetry of them. With `config.anisotropic` the
+// adaptive pairs cover the half vector's azimuth too (the same config must then train).
 //
 // # Safety
 // `config` points to an `NbrdfTrainConfig`; `out_view` and `out_light` hold `3 n` writable
@@ -150,7 +166,8 @@ int32_t nbrdf_train_directions(const struct NbrdfTrainConfig *config,
 //   read only by `NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN` (`fold`, an `NbrdfTrainFold`); may be null
 //   otherwise.
 // * The last `n_validation` pairs are the validation set (at least 1, fewer than `n`).
-// * `config`: the training settings (its `samples` and `validation_fraction` are not read).
+// * `config`: the training settings (its `samples` and `validation_fraction` are not read);
+//   `config.anisotropic` makes an anisotropic network (file format version 2).
 // * `source`: what the values came from, stored in the provenance; `details_json`: null or a
 //   JSON text stored in the provenance under "distilled_from".
 // * `on_epoch`: null or called after every epoch with `user`.

@@ -102,6 +102,10 @@ pub struct NbrdfTrainConfig {
     pub seed: u64,
     /// Worker threads; 0: one per core.
     pub threads: usize,
+    /// 1: an anisotropic network (its input carries the half vector's azimuth `phi_h`, and
+    /// `nbrdf_train_directions` draws `phi_h` too); 0: isotropic. Other values are errors.
+    /// `nbrdf_train_config_for_anisotropy` sets it with the trainer's default sample scaling.
+    pub anisotropic: i32,
 }
 
 /// Progress after one epoch, passed to the `NbrdfEpochCallback`.
@@ -309,6 +313,7 @@ fn to_c(config: &TrainConfig, threads: usize) -> NbrdfTrainConfig {
         target_loss: config.target_loss,
         seed: config.seed,
         threads,
+        anisotropic: i32::from(config.anisotropic),
     }
 }
 
@@ -327,6 +332,15 @@ unsafe fn read_config(config: *const NbrdfTrainConfig) -> FfiResult<(TrainConfig
         other => {
             return Err(Failure::invalid(format!(
                 "unknown sampling {other} (expected 0 = adaptive, 1 = uniform)"
+            )))
+        }
+    };
+    let anisotropic = match c.anisotropic {
+        0 => false,
+        1 => true,
+        other => {
+            return Err(Failure::invalid(format!(
+                "anisotropic is {other} (expected 0 = isotropic, 1 = anisotropic)"
             )))
         }
     };
@@ -349,6 +363,7 @@ unsafe fn read_config(config: *const NbrdfTrainConfig) -> FfiResult<(TrainConfig
         lr_decay_factor: c.lr_decay_factor,
         target_loss: c.target_loss,
         seed: c.seed,
+        anisotropic,
     };
     Ok((config, (c.threads > 0).then_some(c.threads)))
 }
@@ -413,6 +428,40 @@ pub unsafe extern "C" fn nbrdf_train_config_default(out: *mut NbrdfTrainConfig) 
     })
 }
 
+/// Makes `*config` a configuration for an isotropic (`anisotropic` 0) or anisotropic (1)
+/// network, as `nbrdf train --anisotropy` does: with `scale_samples` 1, an anisotropic network
+/// gets the trainer's default factor (5) times `samples` (for a sample count that is the
+/// default rather than the user's); 0 keeps `samples`.
+///
+/// # Safety
+/// `config` points to a readable and writable `NbrdfTrainConfig`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_train_config_for_anisotropy(
+    config: *mut NbrdfTrainConfig,
+    anisotropic: i32,
+    scale_samples: i32,
+) -> i32 {
+    guard("nbrdf_train_config_for_anisotropy", || {
+        let flag = |value: i32, argument: &str| match value {
+            0 => Ok(false),
+            1 => Ok(true),
+            other => Err(Failure::invalid(format!(
+                "argument `{argument}` is {other} (expected 0 or 1)"
+            ))),
+        };
+        let (anisotropic, scale) = (
+            flag(anisotropic, "anisotropic")?,
+            flag(scale_samples, "scale_samples")?,
+        );
+        // SAFETY: forwarded contract.
+        let (core, threads) = unsafe { read_config(config)? };
+        let core = core.for_anisotropy(anisotropic, scale);
+        // SAFETY: non-null, aligned (read_config), writable by contract.
+        unsafe { config.write(to_c(&core, threads.unwrap_or(0))) };
+        Ok(())
+    })
+}
+
 /// Stores the number of training and validation pairs of `config` (what
 /// `nbrdf_train_directions` writes, training pairs first) after checking its settings.
 ///
@@ -442,7 +491,8 @@ pub unsafe extern "C" fn nbrdf_train_sample_counts(
 /// Writes the trainer's `n` view/light pairs for `config` (planar `3 n` floats each, unit
 /// vectors above the horizon): the training pairs, then the validation pairs, as
 /// `nbrdf_train_sample_counts` counts them; `n` must be their sum. Directions are full 3D
-/// vectors: a caller must not assume any symmetry of them.
+/// vectors: a caller must not assume any symmetry of them. With `config.anisotropic` the
+/// adaptive pairs cover the half vector's azimuth too (the same config must then train).
 ///
 /// # Safety
 /// `config` points to an `NbrdfTrainConfig`; `out_view` and `out_light` hold `3 n` writable
@@ -496,7 +546,8 @@ pub unsafe extern "C" fn nbrdf_train_directions(
 ///   read only by `NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN` (`fold`, an `NbrdfTrainFold`); may be null
 ///   otherwise.
 /// * The last `n_validation` pairs are the validation set (at least 1, fewer than `n`).
-/// * `config`: the training settings (its `samples` and `validation_fraction` are not read).
+/// * `config`: the training settings (its `samples` and `validation_fraction` are not read);
+///   `config.anisotropic` makes an anisotropic network (file format version 2).
 /// * `source`: what the values came from, stored in the provenance; `details_json`: null or a
 ///   JSON text stored in the provenance under "distilled_from".
 /// * `on_epoch`: null or called after every epoch with `user`.

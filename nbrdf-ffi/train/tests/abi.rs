@@ -163,6 +163,67 @@ fn arrays_of_a_lambertian_train_a_network_that_matches_it() {
     }
 }
 
+/// Half vectors off the x-z plane among the first `n` pairs of planar directions.
+fn off_plane_half_vectors(a: &Arrays) -> usize {
+    (0..a.n)
+        .filter(|&i| {
+            let v = glam::Vec3::new(a.view[i], a.view[a.n + i], a.view[2 * a.n + i]);
+            let l = glam::Vec3::new(a.light[i], a.light[a.n + i], a.light[2 * a.n + i]);
+            (v + l).normalize().y.abs() > 0.1
+        })
+        .count()
+}
+
+#[test]
+fn an_anisotropic_config_draws_phi_h_and_trains_an_anisotropic_network() {
+    let mut config = small_config();
+    // SAFETY: a valid config.
+    let status = unsafe { nbrdf_train_config_for_anisotropy(&mut config, 1, 1) };
+    assert_eq!(status, OK, "{}", last_error());
+    assert_eq!((config.anisotropic, config.samples), (1, 5 * 2000));
+    let mut unscaled = small_config();
+    // SAFETY: a valid config.
+    assert_eq!(
+        unsafe { nbrdf_train_config_for_anisotropy(&mut unscaled, 1, 0) },
+        OK
+    );
+    assert_eq!((unscaled.anisotropic, unscaled.samples), (1, 2000));
+    // Adaptive isotropic pairs keep the half vector in the x-z plane; anisotropic ones do not.
+    let isotropic = arrays(&small_config());
+    assert_eq!(off_plane_half_vectors(&isotropic), 0);
+    let a = arrays(&unscaled);
+    assert!(
+        off_plane_half_vectors(&a) > a.n / 2,
+        "{}",
+        off_plane_half_vectors(&a)
+    );
+    let text = train(&unscaled, &a, c"aniso".as_ptr()).unwrap();
+    let network = Nbrdf::from_json_str(&text, Path::new("ffi")).unwrap();
+    assert!(network.anisotropic);
+    let text = train(&small_config(), &isotropic, c"iso".as_ptr()).unwrap();
+    assert!(
+        !Nbrdf::from_json_str(&text, Path::new("ffi"))
+            .unwrap()
+            .anisotropic
+    );
+    // Bad flags are errors that leave the config as it was.
+    let before = unscaled;
+    // SAFETY: a valid config; null is rejected.
+    unsafe {
+        assert_eq!(
+            nbrdf_train_config_for_anisotropy(&mut unscaled, 2, 0),
+            INVALID
+        );
+        assert!(last_error().contains("anisotropic"), "{}", last_error());
+        assert_eq!(
+            nbrdf_train_config_for_anisotropy(&mut unscaled, 0, -1),
+            INVALID
+        );
+        assert_eq!(nbrdf_train_config_for_anisotropy(null_mut(), 0, 0), NULL);
+    }
+    assert_eq!(unscaled, before);
+}
+
 #[test]
 fn bad_calls_return_an_error_status_with_a_message() {
     let config = small_config();
@@ -285,6 +346,10 @@ fn bad_calls_return_an_error_status_with_a_message() {
         },
         NbrdfTrainConfig {
             sampling: 9,
+            ..config
+        },
+        NbrdfTrainConfig {
+            anisotropic: 2,
             ..config
         },
     ] {

@@ -3,6 +3,7 @@
 use super::train_cmd::SamplingArg;
 use super::*;
 use clap::CommandFactory;
+use nbrdf_core::train::Anisotropy;
 
 #[test]
 fn cli_definition_is_consistent() {
@@ -78,7 +79,7 @@ fn train_and_fit_phong_arguments_parse() {
     assert!(matches!(args.sampling, SamplingArg::Uniform));
     assert_eq!(
         (args.samples, args.epochs, args.threads, args.seed),
-        (1000, Some(3), Some(2), 9)
+        (Some(1000), Some(3), Some(2), 9)
     );
     assert_eq!((args.hidden, args.batch), (21, 512));
     assert!(matches!(args.phi_fold, PhiFoldArg::Reciprocal));
@@ -90,6 +91,18 @@ fn train_and_fit_phong_arguments_parse() {
     };
     assert_eq!(PhiFold::from(args.phi_fold), PhiFold::Mirror);
     assert!(Cli::try_parse_from(["nbrdf", "train", "t.binary", "--phi-fold", "odd"]).is_err());
+    assert!(matches!(args.anisotropy, train_cmd::AnisotropyArg::Auto));
+    assert_eq!(args.samples, None);
+    for (flag, want) in [("on", Anisotropy::On), ("off", Anisotropy::Off)] {
+        let Ok(Cli {
+            command: Command::Train(a),
+        }) = Cli::try_parse_from(["nbrdf", "train", "t.bsdf", "--anisotropy", flag])
+        else {
+            panic!("train --anisotropy {flag} must parse")
+        };
+        assert_eq!(Anisotropy::from(a.anisotropy), want);
+    }
+    assert!(Cli::try_parse_from(["nbrdf", "train", "t", "--anisotropy", "maybe"]).is_err());
     let config = train_cmd::train_config(&args);
     assert_eq!(
         (

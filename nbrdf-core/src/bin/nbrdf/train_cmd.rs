@@ -7,7 +7,7 @@ use nbrdf_core::ops::train_network::{train_network, TrainRequest};
 use nbrdf_core::source::RglFold;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
-use nbrdf_core::train::{EpochStats, TrainConfig};
+use nbrdf_core::train::{Anisotropy, EpochStats, TrainConfig};
 use nbrdf_core::Result;
 use std::path::PathBuf;
 
@@ -24,6 +24,27 @@ impl From<SamplingArg> for AngularSampling {
         match s {
             SamplingArg::Adaptive => AngularSampling::Adaptive,
             SamplingArg::Uniform => AngularSampling::Uniform,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum AnisotropyArg {
+    /// Anisotropic exactly when the source is (an anisotropic RGL measurement); MERL tables and
+    /// isotropic measurements give the paper's isotropic network.
+    Auto,
+    /// Always an anisotropic network (input with phi_h, file format version 2).
+    On,
+    /// Always an isotropic network (phi_h = 0, format version 1).
+    Off,
+}
+
+impl From<AnisotropyArg> for Anisotropy {
+    fn from(a: AnisotropyArg) -> Self {
+        match a {
+            AnisotropyArg::Auto => Anisotropy::Auto,
+            AnisotropyArg::On => Anisotropy::On,
+            AnisotropyArg::Off => Anisotropy::Off,
         }
     }
 }
@@ -67,10 +88,15 @@ pub struct TrainArgs {
     #[arg(long, value_enum, default_value_t = RglFoldArg::AsMeasured)]
     pub rgl_fold: RglFoldArg,
     /// Training samples (invalid cells and directions below the horizon are not counted);
-    /// 10% more are drawn for validation. At most 1e8.
-    #[arg(long, default_value_t = TrainConfig::default().samples,
-          value_parser = count_in::<1, MAX_SAMPLES>)]
-    pub samples: usize,
+    /// 10% more are drawn for validation. At most 1e8 [default: 800000; 5x that, 4000000, for
+    /// an anisotropic network].
+    #[arg(long, value_parser = count_in::<1, MAX_SAMPLES>)]
+    pub samples: Option<usize>,
+    /// Isotropic network (the paper's, phi_h = 0) or anisotropic one (input with the half
+    /// vector's azimuth phi_h, format version 2): auto follows the source (anisotropic RGL
+    /// measurements give anisotropic networks; MERL tables are isotropic).
+    #[arg(long, value_enum, default_value_t = AnisotropyArg::Auto)]
+    pub anisotropy: AnisotropyArg,
     /// Maximum number of epochs (at most 1e6) [default: 300; 100 with --fixed-budget].
     #[arg(long, value_parser = count_in::<1, MAX_EPOCHS>)]
     pub epochs: Option<usize>,
@@ -139,7 +165,7 @@ pub fn train_config(args: &TrainArgs) -> TrainConfig {
     };
     TrainConfig {
         sampling: args.sampling.into(),
-        samples: args.samples,
+        samples: args.samples.unwrap_or(base.samples),
         max_epochs: args.epochs.unwrap_or(base.max_epochs),
         hidden: args.hidden,
         batch: args.batch,
@@ -169,6 +195,8 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         output: args.output.clone(),
         name: args.name.clone(),
         config,
+        anisotropy: args.anisotropy.into(),
+        scale_samples: args.samples.is_none(),
         threads: args.threads,
     };
     let report = train_network(&request, &mut |e: &EpochStats| {
