@@ -4,14 +4,17 @@
 //!
 //! Half-vector parametrisation: `t = sqrt(theta_h / (pi/2))` (dense near the normal, like the
 //! MERL grid and [`crate::lobe_fit`]'s quadrature, so sharp peaks get bins of their own) and
-//! `phi = phi_h - phi_v` over `[0, 2 pi)` (the material is isotropic). The row is chosen
-//! deterministically from the view's elevation, `floor(theta_v / (pi/2) * rows)`, and nothing is
-//! interpolated across rows, so the density of a sample is exactly
+//! `phi = phi_h - phi_v` over `[0, 2 pi)` (the material is isotropic). Bins get the mass of
+//! `f_r cos` (mean over RGB) through the half-vector Jacobian; within a bin the half vector is
+//! uniform in solid angle (no singularity at the normal). The row is chosen deterministically
+//! from the view's elevation, `floor(theta_v / (pi/2) * rows)`, and nothing is interpolated
+//! across rows, so the density of a sample is exactly
 //!
-//! `pdf(l) = c l.z / pi + (1 - c) p_row(t, phi) / (pi t sin(theta_h)) / (4 v.h)`
+//! `pdf(l) = c l.z / pi + (1 - c) P_row(bin) / Ω(bin) / (4 v.h)`
 //!
-//! (`dω_h = sin(theta_h) dtheta_h dphi`, `dtheta_h = pi t dt`, `dω_l = 4 v.h dω_h`). Half vectors
-//! whose reflection falls below the horizon are rejected (pdf 0), like the Blinn-Phong lobes.
+//! with `Ω(bin) = (phi_1 - phi_0) (cos theta_0 - cos theta_1)` the bin's solid angle and
+//! `dω_l = 4 v.h dω_h`. Half vectors whose reflection falls below the horizon are rejected
+//! (pdf 0), like the Blinn-Phong lobes.
 //!
 //! The table is built when a material is loaded (a few milliseconds for a network), so the file
 //! format carries no table; `nbrdf fit-phong` stores only which strategy samples best.
@@ -61,8 +64,8 @@ pub struct TabulatedSampler {
     theta_bins: usize,
     phi_bins: usize,
     cosine_weight: f64,
-    /// Density in `(t, phi)` of each bin, row-major `[row][t][phi]`, integrating to 1 per row.
-    density: Vec<f64>,
+    /// Probability of each bin, row-major `[row][t][phi]`, summing to 1 per row.
+    mass: Vec<f64>,
     /// Per row, the CDF over the `t` bins (`theta_bins + 1` entries, 0 to 1).
     marginal_cdf: Vec<f64>,
     /// Per row and `t` bin, the CDF over the `phi` bins (`phi_bins + 1` entries, 0 to 1).
@@ -76,7 +79,7 @@ pub struct TableArrays {
     pub theta_bins: usize,
     pub phi_bins: usize,
     pub cosine_weight: f64,
-    pub density: Vec<f64>,
+    pub mass: Vec<f64>,
     pub marginal_cdf: Vec<f64>,
     pub conditional_cdf: Vec<f64>,
 }
@@ -103,6 +106,14 @@ fn search(cdf: &[f64], u: f64) -> (usize, f64) {
         0.5
     };
     (i, frac)
+}
+
+/// `1 - cos(theta_h)` at the edge `k` of the `t` bins (`theta_h = pi/2 (k/bins)^2`), as
+/// `2 sin^2(theta_h / 2)`, which keeps its precision for the tiny bins near the normal.
+fn bin_one_minus_cos(k: usize, bins: usize) -> f64 {
+    let t = k as f64 / bins as f64;
+    let s = (0.5 * FRAC_PI_2 * t * t).sin();
+    2.0 * s * s
 }
 
 /// Normalised CDF of non-negative weights (`len + 1` entries); uniform when they sum to 0.
@@ -228,8 +239,7 @@ impl TabulatedSampler {
         weights: &[f64],
     ) -> Self {
         let row_len = theta_bins * phi_bins;
-        let bin_area = 1.0 / theta_bins as f64 * TAU / phi_bins as f64;
-        let mut density = Vec::with_capacity(rows * row_len);
+        let mut mass = Vec::with_capacity(rows * row_len);
         let mut marginal_cdf = Vec::with_capacity(rows * (theta_bins + 1));
         let mut conditional_cdf = Vec::with_capacity(rows * theta_bins * (phi_bins + 1));
         for row in weights.chunks_exact(row_len).take(rows) {
@@ -245,12 +255,12 @@ impl TabulatedSampler {
             marginal_cdf.extend(cdf_of(&marginal));
             for (i, c) in clean.chunks_exact(phi_bins).enumerate() {
                 conditional_cdf.extend(cdf_of(c));
-                // The density the two CDFs sample: P(t bin) P(phi bin | t bin) / bin area.
+                // What the two CDFs sample: P(t bin) P(phi bin | t bin).
                 let m = &marginal_cdf[marginal_cdf.len() - theta_bins - 1..];
                 let p_t = m[i + 1] - m[i];
                 let cc = &conditional_cdf[conditional_cdf.len() - phi_bins - 1..];
                 for j in 0..phi_bins {
-                    density.push(p_t * (cc[j + 1] - cc[j]) / bin_area);
+                    mass.push(p_t * (cc[j + 1] - cc[j]));
                 }
             }
             debug_assert!(total >= 0.0);
@@ -260,7 +270,7 @@ impl TabulatedSampler {
             theta_bins,
             phi_bins,
             cosine_weight,
-            density,
+            mass,
             marginal_cdf,
             conditional_cdf,
         }
@@ -273,7 +283,7 @@ impl TabulatedSampler {
             theta_bins: self.theta_bins,
             phi_bins: self.phi_bins,
             cosine_weight: self.cosine_weight,
-            density: self.density.clone(),
+            mass: self.mass.clone(),
             marginal_cdf: self.marginal_cdf.clone(),
             conditional_cdf: self.conditional_cdf.clone(),
         }
@@ -294,10 +304,12 @@ impl TabulatedSampler {
         let (i, ft) = search(&self.marginal_cdf[r * (nt + 1)..(r + 1) * (nt + 1)], u1);
         let c0 = (r * nt + i) * (np + 1);
         let (j, fp) = search(&self.conditional_cdf[c0..c0 + np + 1], u2);
-        let t = (i as f64 + ft) / nt as f64;
+        // Uniform in solid angle within the bin: 1 - cos(theta_h) uniform between its edges.
+        let (o0, o1) = (bin_one_minus_cos(i, nt), bin_one_minus_cos(i + 1, nt));
+        let one_minus_cos = o0 + ft * (o1 - o0);
+        let cos_h = 1.0 - one_minus_cos;
+        let sin_h = (one_minus_cos * (1.0 + cos_h)).max(0.0).sqrt();
         let phi = (j as f64 + fp) / np as f64 * TAU + v.y.atan2(v.x);
-        let theta_h = FRAC_PI_2 * t * t;
-        let (sin_h, cos_h) = theta_h.sin_cos();
         let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
         2.0 * v.dot(h) * h - v
     }
@@ -313,7 +325,7 @@ impl TabulatedSampler {
         let h = sum / len;
         let v_dot_h = v.dot(h);
         let sin_h = h.x.hypot(h.y);
-        if v_dot_h <= 0.0 || sin_h <= 0.0 || h.z <= 0.0 {
+        if v_dot_h <= 0.0 || h.z <= 0.0 {
             return cosine;
         }
         let theta_h = sin_h.atan2(h.z);
@@ -326,8 +338,10 @@ impl TabulatedSampler {
         let i = ((t * nt as f64) as usize).min(nt - 1);
         let j = ((phi / TAU * np as f64) as usize).min(np - 1);
         let r = row_of(v, self.rows);
-        let p = self.density[(r * nt + i) * np + j];
-        cosine + (1.0 - self.cosine_weight) * p / (PI * t * sin_h) / (4.0 * v_dot_h)
+        let p = self.mass[(r * nt + i) * np + j];
+        let solid_angle =
+            (bin_one_minus_cos(i + 1, nt) - bin_one_minus_cos(i, nt)) * TAU / np as f64;
+        cosine + (1.0 - self.cosine_weight) * p / solid_angle / (4.0 * v_dot_h)
     }
 }
 
@@ -476,7 +490,10 @@ mod tests {
         let net = Nbrdf::random("n", 21, 7);
         let t = TabulatedSampler::from_brdf(&net, &TableConfig::default()).unwrap();
         let a = t.tables();
-        assert_eq!(a.density.len(), 16 * 32 * 32);
+        assert_eq!(a.mass.len(), 16 * 32 * 32);
+        for row in a.mass.chunks_exact(32 * 32) {
+            assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
         assert_eq!(a.marginal_cdf.len(), 16 * 33);
         for row in a.marginal_cdf.chunks_exact(33) {
             assert!(row[0] == 0.0 && row[32] == 1.0);
@@ -514,7 +531,7 @@ mod tests {
         ] {
             assert!(TabulatedSampler::build(&f, &config).is_err());
         }
-        // A black material gives a table uniform in (t, phi), still a density (part of its
+        // A black material gives equal bin masses, still a density (part of its
         // mass reflects below the horizon).
         let black = |_: DVec3, _: DVec3| 0.0;
         let s = strategy(&black);

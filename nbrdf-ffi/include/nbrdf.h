@@ -102,8 +102,8 @@ typedef struct NbrdfMixtureSampler {
   float specular_weight2;
 } NbrdfMixtureSampler;
 
-// Shape of an `NbrdfTable` (`nbrdf_table_info`): `density` has `rows * theta_bins * phi_bins`
-// values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
+// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability) has
+// `rows * theta_bins * phi_bins` values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
 // `rows * theta_bins * (phi_bins + 1)` (`nbrdf_table_arrays`).
 typedef struct NbrdfTableInfo {
   uint32_t rows;
@@ -339,7 +339,7 @@ int32_t nbrdf_table_info(const struct NbrdfTable *table,
 // # Safety
 // `table` is a live handle; the outputs point to writable buffers of the documented sizes.
 int32_t nbrdf_table_arrays(const struct NbrdfTable *table,
-                           float *out_density,
+                           float *out_mass,
                            float *out_marginal_cdf,
                            float *out_conditional_cdf);
 

@@ -128,8 +128,8 @@ pub struct NbrdfTable {
     sampler: Arc<TabulatedSampler>,
 }
 
-/// Shape of an `NbrdfTable` (`nbrdf_table_info`): `density` has `rows * theta_bins * phi_bins`
-/// values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
+/// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability) has
+/// `rows * theta_bins * phi_bins` values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
 /// `rows * theta_bins * (phi_bins + 1)` (`nbrdf_table_arrays`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -1153,19 +1153,19 @@ pub unsafe extern "C" fn nbrdf_table_info(
 #[no_mangle]
 pub unsafe extern "C" fn nbrdf_table_arrays(
     table: *const NbrdfTable,
-    out_density: *mut f32,
+    out_mass: *mut f32,
     out_marginal_cdf: *mut f32,
     out_conditional_cdf: *mut f32,
 ) -> i32 {
     guard("nbrdf_table_arrays", || {
         // SAFETY: forwarded contract.
         let table = unsafe { reference(table, "table")? };
-        check_array(out_density, "out_density")?;
+        check_array(out_mass, "out_mass")?;
         check_array(out_marginal_cdf, "out_marginal_cdf")?;
         check_array(out_conditional_cdf, "out_conditional_cdf")?;
         let arrays = table.sampler.tables();
         for (src, dst) in [
-            (&arrays.density, out_density),
+            (&arrays.mass, out_mass),
             (&arrays.marginal_cdf, out_marginal_cdf),
             (&arrays.conditional_cdf, out_conditional_cdf),
         ] {
