@@ -157,8 +157,8 @@ impl TabulatedSampler {
         Self::build(&f, config)
     }
 
-    /// Tabulates `mean_f(v, l) l.z 4 (v.h) pi t sin(theta_h)` averaged over each bin, at the
-    /// central view of each row (views lie in the xz plane).
+    /// Tabulates `mean_f(v, l) l.z 4 (v.h) pi t sin(theta_h)` averaged over each bin and over
+    /// views across each row's band (views lie in the xz plane).
     pub fn build(mean_f: &MeanBrdf<'_>, config: &TableConfig) -> Result<Self> {
         let TableConfig {
             rows,
@@ -184,28 +184,34 @@ impl TabulatedSampler {
             .into_par_iter()
             .map(|k| {
                 let (r, i, j) = (k / (theta_bins * half), (k / half) % theta_bins, k % half);
-                let theta_v = (r as f64 + 0.5) / rows as f64 * FRAC_PI_2;
-                let v = DVec3::new(theta_v.sin(), 0.0, theta_v.cos());
                 let mut sum = 0.0;
-                for a in 0..subsamples {
-                    let t = (i as f64 + (a as f64 + 0.5) / subsamples as f64) * dt;
-                    let theta_h = FRAC_PI_2 * t * t;
-                    let (sin_h, cos_h) = theta_h.sin_cos();
-                    for b in 0..subsamples {
-                        let phi = (j as f64 + (b as f64 + 0.5) / subsamples as f64) * dphi;
-                        let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
-                        let v_dot_h = v.dot(h);
-                        let l = 2.0 * v_dot_h * h - v;
-                        if v_dot_h <= 0.0 || l.z <= 0.0 {
-                            continue;
-                        }
-                        let g = mean_f(v, l) * l.z * 4.0 * v_dot_h * PI * t * sin_h;
-                        if g.is_finite() && g > 0.0 {
-                            sum += g;
+                // Views across the whole band: a bin whose reflection is above the horizon for
+                // any view of the row gets mass (at the band's centre alone, grazing rows would
+                // leave bins that lower views reach to the cosine component only).
+                for c in 0..subsamples {
+                    let theta_v =
+                        (r as f64 + (c as f64 + 0.5) / subsamples as f64) / rows as f64 * FRAC_PI_2;
+                    let v = DVec3::new(theta_v.sin(), 0.0, theta_v.cos());
+                    for a in 0..subsamples {
+                        let t = (i as f64 + (a as f64 + 0.5) / subsamples as f64) * dt;
+                        let theta_h = FRAC_PI_2 * t * t;
+                        let (sin_h, cos_h) = theta_h.sin_cos();
+                        for b in 0..subsamples {
+                            let phi = (j as f64 + (b as f64 + 0.5) / subsamples as f64) * dphi;
+                            let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+                            let v_dot_h = v.dot(h);
+                            let l = 2.0 * v_dot_h * h - v;
+                            if v_dot_h <= 0.0 || l.z <= 0.0 {
+                                continue;
+                            }
+                            let g = mean_f(v, l) * l.z * 4.0 * v_dot_h * PI * t * sin_h;
+                            if g.is_finite() && g > 0.0 {
+                                sum += g;
+                            }
                         }
                     }
                 }
-                sum / (subsamples * subsamples) as f64
+                sum / subsamples.pow(3) as f64
             })
             .collect();
         // Isotropy: bin j over [0, pi) and bin phi_bins - 1 - j over [pi, 2 pi) are mirror images.
