@@ -168,3 +168,26 @@ def test_file_default_is_the_plugin_default(llvm_variant, tmp_path, network_file
     path.write_text(json.dumps(data))
     with pytest.raises(RuntimeError, match="unknown sampling default 'ggx'"):
         mi.load_dict({"type": "nbrdf", "filename": str(path)})
+
+
+def test_fit_phong_stores_the_lowest_variance_strategy(llvm_variant, tmp_path, network_file):
+    """`nbrdf fit-phong` measures the table beside the lobes and stores the lowest as
+    `sampling.default`, which the plugin then uses."""
+    import subprocess
+
+    from conftest import _cli
+
+    cli = _cli()
+    if cli is None:
+        pytest.skip("the nbrdf CLI is not built (cargo build --release --features cli)")
+    out = tmp_path / "fitted.nbrdf.json"
+    report = json.loads(subprocess.run([str(cli), "fit-phong", str(network_file), "--lobes", "1", "--json",
+                                        "-o", str(out)], check=True, capture_output=True, text=True).stdout)
+    variance = report["relative_variance"]
+    candidates = {"cosine": variance["cosine"], "phong": variance["variance_lobe"],
+                  "tabulated": variance["tabulated"]}
+    best = min(candidates, key=candidates.get)
+    assert report["default_sampling"] == best
+    stored = json.loads(out.read_text())["sampling"]
+    assert stored["default"] == best and stored["relative_variance"]["tabulated"] == variance["tabulated"]
+    assert f"sampling = {best}" in str(mi.load_dict({"type": "nbrdf", "filename": str(out)}))
