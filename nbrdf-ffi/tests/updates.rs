@@ -28,6 +28,7 @@ fn any_sampler() -> impl Strategy<Value = NbrdfSampler> {
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_PHONG),
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_PHONG),
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE),
+        Just(NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED),
     ];
     (kind, exponent, weight).prop_map(|(kind, exponent, specular_weight)| NbrdfSampler {
         kind,
@@ -47,6 +48,8 @@ fn core_accepts(s: &NbrdfSampler) -> bool {
         // The one-lobe struct has no second lobe: two-lobe samplers go through
         // NbrdfMixtureSampler, and this struct refuses the kind.
         NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE => return false,
+        // Tabulated sampling needs an NbrdfTable (the *_table functions).
+        NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED => return false,
     };
     strategy.validated().is_ok()
 }

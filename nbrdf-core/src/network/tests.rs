@@ -469,6 +469,7 @@ fn json_round_trip_is_exact() {
         source: "fit".into(),
         second_lobe: None,
         relative_variance: None,
+        default: None,
     });
     net.provenance = serde_json::json!({"epochs": 12, "loss": 0.0123, "table": "gold.binary"});
     let path = temp_path("roundtrip");
@@ -575,6 +576,7 @@ fn malformed_files_are_rejected_with_the_file_name() {
             source: "manual".into(),
             second_lobe: None,
             relative_variance: None,
+            default: None,
         });
         n.to_json_string()
     })
@@ -711,6 +713,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
         source: "fit".into(),
         second_lobe: None,
         relative_variance: None,
+        default: None,
     };
     net.sampling = Some(one.clone());
     // A one-lobe file writes no new fields and samples with the one-lobe mixture.
@@ -732,6 +735,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
             one_lobe: 2.5,
             two_lobe: Some(1.25),
             cosine: 40.0,
+            tabulated: None,
         }),
         ..one
     });

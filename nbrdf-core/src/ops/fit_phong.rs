@@ -2,15 +2,18 @@
 
 use super::with_threads;
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, TwoLobeFit};
+use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, LobeQuadrature, TwoLobeFit};
 use crate::merl::PhiFold;
 use crate::metrics::Material;
 use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
 use crate::phong_fit::FitConfig;
+use crate::sampling::SamplingStrategy;
+use crate::tabulated::{TableConfig, TabulatedSampler};
 use crate::target::material_target;
 use serde::Serialize;
 use std::fmt;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// The settings of a fit.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,6 +63,8 @@ pub struct RelativeVariances {
     /// The two-lobe mixture's, when it was searched (`--lobes auto|2` with `--lobe variance`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub two_lobe: Option<f64>,
+    /// The tabulated sampler's (built from the material as the plugin builds it at load time).
+    pub tabulated: f64,
 }
 
 /// What `fit-phong` found (and wrote).
@@ -85,6 +90,9 @@ pub struct FitPhongReport {
     pub relative_variance: RelativeVariances,
     /// The network file written, if the input was a network.
     pub written: Option<String>,
+    /// The strategy with the lowest relative variance (the plugin's `sampling` name), stored
+    /// as the file's `sampling.default`.
+    pub default_sampling: &'static str,
     #[serde(skip)]
     pub choice: LobeChoice,
 }
@@ -117,6 +125,11 @@ impl fmt::Display for FitPhongReport {
                 if self.second_lobe.is_some() { "stored" } else { "not stored: one lobe does as well" },
             )?;
         }
+        writeln!(
+            f,
+            "tabulated sampler: relative variance {:.4e}\ndefault sampling (lowest variance): {}",
+            v.tabulated, self.default_sampling
+        )?;
         if let Some(out) = &self.written {
             writeln!(f, "updated the sampling of {out}")?;
         }
@@ -142,16 +155,20 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
     }
     let search_two = request.lobes != LobeCount::One && request.lobe == LobeChoice::LowestVariance;
     let lobe_config = LobeFitConfig::default();
-    let (analysis, two_lobes) = with_threads(request.threads, || -> Result<_> {
+    let (analysis, two_lobes, tabulated) = with_threads(request.threads, || -> Result<_> {
         let target = material_target(&material);
+        let table = TabulatedSampler::from_target(&*target, &TableConfig::default())?;
+        let tabulated = LobeQuadrature::new(&*target, &lobe_config)?
+            .strategy_relative_variance(&SamplingStrategy::Tabulated(Arc::new(table)));
         if search_two {
             let (analysis, two) =
                 LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
-            Ok((analysis, Some(two)))
+            Ok((analysis, Some(two), tabulated))
         } else {
             Ok((
                 LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
                 None,
+                tabulated,
             ))
         }
     })?
@@ -179,6 +196,20 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         ),
         None => (exponent, specular_weight, None),
     };
+    let cosine_variance = analysis.lowest_variance.cosine_relative_variance;
+    let stored_lobes_variance = match stored_two {
+        Some(two) => ("two_lobe", two.relative_variance),
+        None => ("phong", one_lobe_variance),
+    };
+    let default_sampling = [
+        ("cosine", cosine_variance),
+        stored_lobes_variance,
+        ("tabulated", tabulated),
+    ]
+    .into_iter()
+    .filter(|(_, v)| v.is_finite())
+    .min_by(|a, b| a.1.total_cmp(&b.1))
+    .map_or("cosine", |(name, _)| name);
     let sampling = SamplingParams {
         model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
         exponent: exponent as f32,
@@ -188,8 +219,10 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         relative_variance: Some(SamplingVariances {
             one_lobe: one_lobe_variance,
             two_lobe: two_lobes.map(|two| two.relative_variance),
-            cosine: analysis.lowest_variance.cosine_relative_variance,
+            cosine: cosine_variance,
+            tabulated: Some(tabulated),
         }),
+        default: Some(default_sampling.to_string()),
     };
     let mut written = None;
     if let Material::Network(mut net) = material {
@@ -221,8 +254,10 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
             model_lobe: analysis.model_relative_variance,
             cosine: analysis.lowest_variance.cosine_relative_variance,
             two_lobe: two_lobes.map(|two| two.relative_variance),
+            tabulated,
         },
         written,
+        default_sampling,
         choice: request.lobe,
     })
 }

@@ -503,6 +503,7 @@ pub fn predict_phong(
         source: "predicted".to_string(),
         second_lobe: None,
         relative_variance: None,
+        default: None,
     });
     net.validate()?;
     let out = output.unwrap_or(input);
