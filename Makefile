@@ -7,8 +7,9 @@ CARGO ?= cargo
 VENV := .venv
 PY := $(VENV)/bin/python
 LIB := target/release/libnbrdf_ffi.so
+TRAIN_LIB := target/release/libnbrdf_train.so
 CLI := target/release/nbrdf
-PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*') mitsuba-plugin/pyproject.toml nbrdf-ffi/include/nbrdf.h
+PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*') mitsuba-plugin/pyproject.toml nbrdf-ffi/include/nbrdf.h nbrdf-ffi/train/include/nbrdf_train.h
 
 .PHONY: setup build install demo test test-rust test-python bench lint clean FORCE
 
@@ -23,16 +24,19 @@ $(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e ./python
 	touch $@
 
-# Two release builds: the C ABI library without nbrdf-core's training stack and CLI dependencies
-# (as mitsuba-plugin/setup.py builds it), and the CLI (target/release/nbrdf, feature `cli`).
+# Three release builds, each its own cargo call so that features do not unify: the C ABI library
+# without nbrdf-core's training stack and CLI dependencies (as mitsuba-plugin/setup.py builds it),
+# the trainer's C ABI for `python -m nbrdf_mitsuba.distill` (libnbrdf_train, nbrdf-ffi/train), and
+# the CLI (target/release/nbrdf, feature `cli`).
 build: $(LIB)
 $(LIB): FORCE
 	$(CARGO) build --release -p nbrdf-ffi
+	$(CARGO) build --release -p nbrdf-train-ffi
 	$(CARGO) build --release -p nbrdf-core --features cli --bin nbrdf
 
-# The plugin package, bundling the library just built (no second cargo build).
+# The plugin package, bundling the libraries just built (no second cargo build).
 $(VENV)/.plugin-installed: $(VENV)/.deps-installed $(LIB) $(PLUGIN_SOURCES)
-	NBRDF_LIBRARY=$(abspath $(LIB)) $(PY) -m pip install -q --no-deps --no-build-isolation --force-reinstall ./mitsuba-plugin
+	NBRDF_LIBRARY=$(abspath $(LIB)) NBRDF_TRAIN_LIBRARY=$(abspath $(TRAIN_LIB)) $(PY) -m pip install -q --no-deps --no-build-isolation --force-reinstall ./mitsuba-plugin
 	touch $@
 
 # Dr.Jit's LLVM backend needs libLLVM >= 16; install Debian's libllvm19 only when none is found.

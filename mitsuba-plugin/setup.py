@@ -5,6 +5,10 @@
 * The C library ``libnbrdf_ffi``, which the plugin loads through cffi in ABI mode (so it is not a
   CPython extension module), is built with ``cargo build --release -p nbrdf-ffi`` and copied into
   the package with its header ``nbrdf.h``.
+* The trainer's C library ``libnbrdf_train`` (nbrdf-ffi/train, which ``python -m
+  nbrdf_mitsuba.distill`` alone loads) is built with its own ``cargo build --release -p
+  nbrdf-train-ffi`` (one call per library, so that the rendering library's features stay its own)
+  and bundled with its header ``nbrdf_train.h``.
 * The Cargo workspace is the parent of this directory in a checkout; the sdist carries a copy
   of it under ``rust/`` (only what the two crates need), so that it builds on its own.
 * The wheel is tagged ``py3-none-<platform>``: any Python 3, this platform. ``auditwheel repair``
@@ -15,6 +19,8 @@ Environment:
 * NBRDF_LIBRARY   - a prebuilt libnbrdf_ffi (.so/.dylib/.dll): copied instead of building;
 * NBRDF_HEADER    - the header to bundle (default: <workspace>/nbrdf-ffi/include/nbrdf.h, or
                     nbrdf.h next to NBRDF_LIBRARY);
+* NBRDF_TRAIN_LIBRARY - a prebuilt libnbrdf_train (default: the one next to NBRDF_LIBRARY when
+                    that is set and it exists, else built);
 * NBRDF_WORKSPACE - the Cargo workspace (default: ./rust in an sdist, else the parent folder);
 * CARGO, CARGO_TARGET_DIR and the other Cargo variables are honoured (the output directory is
   asked from ``cargo metadata``).
@@ -46,11 +52,11 @@ WORKSPACE_FILES = ["Cargo.toml", "Cargo.lock", "LICENSE"]
 IGNORED_IN_CRATES = shutil.ignore_patterns("target", "__pycache__", "*.orig", "*.rej")
 
 if sys.platform == "win32":
-    LIBRARY = "nbrdf_ffi.dll"
+    LIBRARY, TRAIN_LIBRARY = "nbrdf_ffi.dll", "nbrdf_train.dll"
 elif sys.platform == "darwin":
-    LIBRARY = "libnbrdf_ffi.dylib"
+    LIBRARY, TRAIN_LIBRARY = "libnbrdf_ffi.dylib", "libnbrdf_train.dylib"
 else:
-    LIBRARY = "libnbrdf_ffi.so"
+    LIBRARY, TRAIN_LIBRARY = "libnbrdf_ffi.so", "libnbrdf_train.so"
 
 
 def _fail(message):
@@ -69,11 +75,11 @@ def _workspace():
     return next((c.resolve() for c in candidates if _is_workspace(c)), None)
 
 
-def _cargo_build(workspace):
+def _cargo_build(workspace, package="nbrdf-ffi", library_name=LIBRARY):
     cargo = os.environ.get("CARGO", "cargo")
-    # Without nbrdf-core's `cli` (or `train`) feature: the library the renderer loads carries
-    # neither the command line's dependencies nor the training stack.
-    command = [cargo, "build", "--release", "-p", "nbrdf-ffi"]
+    # For nbrdf-ffi, without nbrdf-core's `cli` (or `train`) feature: the library the renderer
+    # loads carries neither the command line's dependencies nor the training stack.
+    command = [cargo, "build", "--release", "-p", package]
     print(f"nbrdf-mitsuba build: running {' '.join(command)} in {workspace}", flush=True)
     try:
         subprocess.run(command, cwd=workspace, check=True)
@@ -86,7 +92,7 @@ def _cargo_build(workspace):
     except subprocess.CalledProcessError as error:
         _fail(f"`{' '.join(error.cmd)}` failed with status {error.returncode}")
     target = Path(json.loads(metadata.stdout)["target_directory"])
-    library = target / "release" / LIBRARY
+    library = target / "release" / library_name
     if not library.is_file():
         _fail(f"cargo succeeded but {library} does not exist")
     return library
@@ -119,19 +125,46 @@ def native_files():
     return library, header
 
 
+def train_native_files(library: Path):
+    """(libnbrdf_train, nbrdf_train.h) to bundle, next to the rendering ``library``."""
+    workspace = _workspace()
+    prebuilt = os.environ.get("NBRDF_TRAIN_LIBRARY")
+    beside = library.parent / TRAIN_LIBRARY
+    if prebuilt:
+        train = Path(prebuilt).resolve()
+        if not train.is_file():
+            _fail(f"NBRDF_TRAIN_LIBRARY={prebuilt} does not exist")
+    elif os.environ.get("NBRDF_LIBRARY") and beside.is_file():
+        train = beside
+    elif workspace is not None:
+        train = _cargo_build(workspace, "nbrdf-train-ffi", TRAIN_LIBRARY)
+    else:
+        _no_workspace()
+    candidates = [workspace / "nbrdf-ffi" / "train" / "include" / "nbrdf_train.h"] if workspace else []
+    candidates.append(train.parent / "nbrdf_train.h")
+    header = next((c for c in candidates if c.is_file()), None)
+    if header is None:
+        _fail("nbrdf_train.h not found")
+    return train, header
+
+
 class build_py(_build_py):
     """Also builds and bundles the native library and its header."""
 
     def run(self):
         super().run()
         library, header = native_files()
+        train_library, train_header = train_native_files(library)
         # Editable installs import the package from the source tree.
         targets = [HERE / PACKAGE] if getattr(self, "editable_mode", False) else [Path(self.build_lib) / PACKAGE]
         for target in targets:
             target.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(library, target / LIBRARY)
             shutil.copyfile(header, target / "nbrdf.h")
-            print(f"nbrdf-mitsuba build: bundled {library} and {header} into {target}", flush=True)
+            shutil.copyfile(train_library, target / TRAIN_LIBRARY)
+            shutil.copyfile(train_header, target / "nbrdf_train.h")
+            print(f"nbrdf-mitsuba build: bundled {library}, {train_library} and their headers into {target}",
+                  flush=True)
 
 
 def workspace_members(workspace: Path) -> list:
@@ -161,7 +194,9 @@ class sdist(_sdist):
                 if name == "LICENSE":  # the licence also belongs beside the Python metadata
                     shutil.copyfile(workspace / name, Path(base_dir) / name)
         for member in workspace_members(workspace):
-            shutil.copytree(member, target / member.relative_to(workspace), ignore=IGNORED_IN_CRATES)
+            # A member nested in another (nbrdf-ffi/train) came with its parent already.
+            shutil.copytree(member, target / member.relative_to(workspace), ignore=IGNORED_IN_CRATES,
+                            dirs_exist_ok=True)
         print(f"nbrdf-mitsuba sdist: copied the Cargo workspace {workspace} into {target}", flush=True)
 
 

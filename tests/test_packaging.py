@@ -1,6 +1,6 @@
 """The package as a user gets it: sdist -> wheel -> manylinux wheel -> a fresh venv, in which
-`nbrdf --version`, `nbrdf synth` + `nbrdf train`, `nbrdf predict-phong` (the built-in models) and
-`python -m nbrdf_mitsuba render` work.
+`nbrdf --version`, `nbrdf synth` + `nbrdf train`, `nbrdf predict-phong` (the built-in models),
+`python -m nbrdf_mitsuba render` and `python -m nbrdf_mitsuba.distill` work.
 
 * The sdist is built with `python -m build --sdist`, unpacked outside the repository and built
   into a wheel there: it must carry the Cargo workspace it needs (nothing is read from the
@@ -37,7 +37,8 @@ SDIST_MUST_HOLD = ["setup.py", "pyproject.toml", "README.md", "nbrdf_mitsuba/__i
                    # the built-in latent models the command embeds (nbrdf-core/src/bin/nbrdf/pretrained.rs)
                    "rust/nbrdf-core/data/models/autoencoder.json", "rust/nbrdf-core/data/models/predictor.json",
                    "rust/nbrdf-ffi/Cargo.toml", "rust/nbrdf-ffi/build.rs", "rust/nbrdf-ffi/src/lib.rs",
-                   "rust/nbrdf-ffi/include/nbrdf.h"]
+                   "rust/nbrdf-ffi/include/nbrdf.h", "rust/nbrdf-ffi/train/Cargo.toml",
+                   "rust/nbrdf-ffi/train/src/lib.rs", "rust/nbrdf-ffi/train/include/nbrdf_train.h"]
 
 pytestmark = [
     pytest.mark.skipif(sys.platform != "linux" or platform.machine() not in ("x86_64", "aarch64"),
@@ -126,6 +127,7 @@ def test_wheel_is_manylinux_and_complete(wheel):
         metadata = archive.read(f"{dist_info}/METADATA").decode()
     assert tags and all(re.fullmatch(r"py3-none-(manylinux_\d+_\d+|manylinux\d+)_(x86_64|aarch64)", t) for t in tags)
     assert "nbrdf_mitsuba/libnbrdf_ffi.so" in names and "nbrdf_mitsuba/nbrdf.h" in names
+    assert "nbrdf_mitsuba/libnbrdf_train.so" in names and "nbrdf_mitsuba/nbrdf_train.h" in names
     assert f"nbrdf_mitsuba-{VERSION}.data/scripts/nbrdf" in names
     assert "License-Expression: MIT" in metadata
     assert "Project-URL: " in metadata and "Keywords: " in metadata
@@ -163,3 +165,12 @@ def test_fresh_venv_has_the_command_and_the_renderer(venv, tmp_path):
                  "print(np.array(mi.Bitmap(sys.argv[1])).mean())", tmp_path / "out.exr"], env=env, cwd=tmp_path)
     assert np.isfinite(float(check.stdout)) and float(check.stdout) > 0.01
     assert (tmp_path / "out.png").is_file()
+
+    # The distiller loads the bundled training library (libnbrdf_train) from the venv.
+    (tmp_path / "plastic.json").write_text('{"type": "roughplastic", "alpha": 0.2}')
+    distilled = run([python, "-m", "nbrdf_mitsuba.distill", "plastic.json", "-o", "plastic.nbrdf.json",
+                     "--samples", "2000", "--epochs", "2", "-q"], env=env, cwd=tmp_path)
+    assert "wrote plastic.nbrdf.json" in distilled.stdout
+    where = run([python, "-c", "import nbrdf_mitsuba._train_native as n; print(n.library_path())"],
+                env=env, cwd=tmp_path).stdout.strip()
+    assert where.startswith(str(venv)), where

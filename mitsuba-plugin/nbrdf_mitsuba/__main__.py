@@ -3,6 +3,7 @@
     render        render a scene with the nbrdf/merl BSDFs (see nbrdf_mitsuba.render)
     import-keras  convert the authors' Keras NBRDFs (see nbrdf_mitsuba.import_keras)
     tabulate-rgl  tabulate an RGL measured BSDF (see nbrdf_mitsuba.tabulate_rgl)
+    distill       train a neural BRDF from any Mitsuba BSDF (see nbrdf_mitsuba.distill)
     llvm          which libLLVM Dr.Jit uses (see nbrdf_mitsuba.llvm)
 """
 
@@ -15,6 +16,7 @@ COMMANDS = {
     "render": ("nbrdf_mitsuba.render", "render a Mitsuba scene with the nbrdf and merl BSDFs"),
     "import-keras": ("nbrdf_mitsuba.import_keras", "convert the authors' Keras NBRDFs (.h5) to *.nbrdf.json"),
     "tabulate-rgl": ("nbrdf_mitsuba.tabulate_rgl", "tabulate an RGL measured BSDF (.bsdf) onto the MERL grid"),
+    "distill": ("nbrdf_mitsuba.distill", "train a neural BRDF from any Mitsuba 3 BSDF (.xml, .json, .bsdf)"),
     "llvm": ("nbrdf_mitsuba.llvm", "report which libLLVM Dr.Jit's LLVM backend uses"),
 }
 

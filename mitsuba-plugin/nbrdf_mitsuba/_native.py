@@ -27,7 +27,9 @@ STATUS_NAMES = {
 }
 
 #: ``NbrdfSamplingKind`` values by the names the BSDF plugins accept.
-SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2, "two_lobe": 3, "anisotropic_phong": 4}
+SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2, "two_lobe": 3, "anisotropic_phong": 5}
+#: ``nbrdf_network_default_sampling`` values by name (the data-driven table is kind 4).
+DEFAULT_SAMPLING_KINDS = {1: "cosine", 2: "phong", 3: "two_lobe", 4: "tabulated"}
 
 
 class NbrdfError(RuntimeError):
@@ -157,8 +159,34 @@ def pdf(sampler_, view, light) -> np.ndarray:
         raise ValueError(f"view {view.shape} and light {light.shape} differ in shape")
     n = view.shape[-1]
     out = np.empty(n, dtype=np.float32)
-    check(lib.nbrdf_mixture_sampler_pdf(sampler_, _in(view), _in(light), n, _out(out)))
+    if isinstance(sampler_, Table):
+        check(lib.nbrdf_table_pdf(sampler_.ptr, _in(view), _in(light), n, _out(out)))
+    else:
+        check(lib.nbrdf_mixture_sampler_pdf(sampler_, _in(view), _in(light), n, _out(out)))
     return out
+
+
+class Table:
+    """The tabulated sampler of a loaded network or MERL table (``sampling`` = ``tabulated``),
+    built by the library from the material; pass it where a sampler goes."""
+
+    def __init__(self, handle: _Handle):
+        out = ffi.new("NbrdfTable **")
+        check(getattr(lib, handle._build_table_fn)(handle._ptr, out))
+        self.ptr = ffi.gc(out[0], lib.nbrdf_table_free)
+        info = ffi.new("NbrdfTableInfo *")
+        check(lib.nbrdf_table_info(self.ptr, info))
+        self.rows, self.theta_bins, self.phi_bins = int(info.rows), int(info.theta_bins), int(info.phi_bins)
+        self.cosine_weight = float(info.cosine_weight)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(mass, marginal_cdf, conditional_cdf)`` as float32 (``nbrdf_table_arrays``)."""
+        r, t, p = self.rows, self.theta_bins, self.phi_bins
+        mass = np.empty(r * t * p, dtype=np.float32)
+        marginal = np.empty(r * (t + 1), dtype=np.float32)
+        conditional = np.empty(r * t * (p + 1), dtype=np.float32)
+        check(lib.nbrdf_table_arrays(self.ptr, _out(mass), _out(marginal), _out(conditional)))
+        return mass, marginal, conditional
 
 
 class _Handle:
@@ -195,8 +223,10 @@ class _Handle:
         light = np.empty((3, n), dtype=np.float32)
         weight = np.empty((3, n), dtype=np.float32)
         pdf_ = np.empty(n, dtype=np.float32)
+        function, sampler_ = ((self._sample_table_fn, sampler_.ptr) if isinstance(sampler_, Table)
+                              else (self._sample_fn, sampler_))
         check(
-            getattr(lib, self._sample_fn)(
+            getattr(lib, function)(
                 self._ptr, sampler_, _in(view), _in(u), n, _out(light), _out(weight), _out(pdf_)
             )
         )
@@ -208,6 +238,7 @@ class Network(_Handle):
 
     _load_fn, _free_fn = "nbrdf_network_load", "nbrdf_network_free"
     _eval_fn, _sample_fn = "nbrdf_network_eval", "nbrdf_network_sample_mixture"
+    _sample_table_fn, _build_table_fn = "nbrdf_network_sample_table", "nbrdf_network_build_table"
     _ctype = "NbrdfNetwork"
 
     def __init__(self, path):
@@ -230,9 +261,13 @@ class Network(_Handle):
         check(lib.nbrdf_network_stored_sampler(self._ptr, stored))
         #: "two_lobe" when the file stores a second lobe, "anisotropic_phong" for an anisotropic
         #: lobe (exponent2 is then n_v), "phong" for one, None for none.
-        self.stored_sampling = {2: "phong", 3: "two_lobe", 4: "anisotropic_phong"}.get(int(stored.kind))
+        self.stored_sampling = {2: "phong", 3: "two_lobe", 5: "anisotropic_phong"}.get(int(stored.kind))
         self.exponent2 = float(stored.exponent2)
         self.specular_weight2 = float(stored.specular_weight2)
+        default = ffi.new("int32_t *")
+        check(lib.nbrdf_network_default_sampling(self._ptr, default))
+        #: The file's ``sampling.default`` (lowest measured variance), or None.
+        self.default_sampling = DEFAULT_SAMPLING_KINDS.get(int(default[0]))
 
 
 class MerlTable(_Handle):
@@ -240,4 +275,5 @@ class MerlTable(_Handle):
 
     _load_fn, _free_fn = "nbrdf_merl_load", "nbrdf_merl_free"
     _eval_fn, _sample_fn = "nbrdf_merl_eval", "nbrdf_merl_sample_mixture"
+    _sample_table_fn, _build_table_fn = "nbrdf_merl_sample_table", "nbrdf_merl_build_table"
     _ctype = "NbrdfMerl"

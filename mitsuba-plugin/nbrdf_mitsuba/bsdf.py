@@ -44,7 +44,7 @@ import numpy as np
 
 from . import _llvm, _native, jit
 
-SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
+SAMPLING_NAMES = (*_native.SAMPLING_KINDS, "tabulated")
 BACKENDS = ("auto", "jit", "rust")
 # How the traced backend puts the weights into kernels: "literal" constants (fastest renders;
 # one compile per scene, an update recompiles) or "opaque" kernel parameters (updates without
@@ -336,7 +336,13 @@ class _NativeBSDFMixin:
         if problem:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: {problem}')
         try:
-            self._sampler = _native.sampler(self._sampling, exponent, weight, exponent2, weight2)
+            if self._sampling == "tabulated":
+                # Built once from the material; the lobe parameters do not enter it.
+                if getattr(self, "_table", None) is None:
+                    self._table = _native.Table(self._native)
+                self._sampler = self._table
+            else:
+                self._sampler = _native.sampler(self._sampling, exponent, weight, exponent2, weight2)
         except _native.NbrdfError as error:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: '
                              f"{_strip_function(error)}") from None
@@ -351,6 +357,10 @@ class _NativeBSDFMixin:
         self._exponent2_jit = mi.Float(self._exponent2_value)
         self._weight2_jit = mi.Float(self._weight2_value)
         dr.make_opaque(self._exponent_jit, self._weight_jit, self._exponent2_jit, self._weight2_jit)
+        if self._sampling == "tabulated" and getattr(self, "_traced_table", None) is None:
+            t = self._table
+            self._traced_table = jit.TracedTable(t.rows, t.theta_bins, t.phi_bins, t.cosine_weight,
+                                                 *t.arrays())
 
     # -- Mitsuba interface --------------------------------------------------------------------
 
@@ -362,13 +372,14 @@ class _NativeBSDFMixin:
 
     def _jit_pdf(self, si, wo, active):
         pdf = jit.pdf(self._sampling, si.wi, wo, self._exponent_jit, self._weight_jit,
-                      self._exponent2_jit, self._weight2_jit)
+                      self._exponent2_jit, self._weight2_jit, getattr(self, "_traced_table", None))
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def _jit_sample(self, ctx, si, sample1, sample2, active):
         bs = dr.zeros(mi.BSDFSample3f)
         light, pdf = jit.sample(self._sampling, si.wi, sample1, sample2.x, sample2.y,
-                                self._exponent_jit, self._weight_jit, self._exponent2_jit, self._weight2_jit)
+                                self._exponent_jit, self._weight_jit, self._exponent2_jit, self._weight2_jit,
+                                getattr(self, "_traced_table", None))
         active = active & ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (pdf > 0)
         bs.wo = light
@@ -549,12 +560,14 @@ class _NativeBSDFMixin:
 class NbrdfMixin(_NativeBSDFMixin):
     """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file.
 
-    Parameters: ``filename``; ``sampling`` = ``two_lobe`` (default when the file stores two
-    Blinn-Phong lobes) | ``anisotropic_phong`` (default when it stores an anisotropic lobe,
-    ``sampling.exponent_v``: ``exponent2`` is then ``n_v``) | ``phong`` (default when it stores
-    one; with a two-lobe file, its first lobe) | ``cosine`` (default otherwise) | ``uniform``;
-    ``exponent``, ``specular_weight``, ``exponent2`` and ``specular_weight2`` override the stored
-    lobes.
+    Parameters: ``filename``; ``sampling`` = the file's ``sampling.default`` when it names one
+    (the strategy ``nbrdf fit-phong`` measured with the lowest variance) | ``tabulated`` (a
+    half-vector table built from the network at load time) | ``two_lobe`` (default when the
+    file stores two Blinn-Phong lobes) | ``anisotropic_phong`` (default when it stores an
+    anisotropic lobe, ``sampling.exponent_v``: ``exponent2`` is then ``n_v``) | ``phong``
+    (default when it stores one; with a two-lobe file, its first lobe) | ``cosine`` (default
+    otherwise) | ``uniform``; ``exponent``, ``specular_weight``, ``exponent2`` and
+    ``specular_weight2`` override the stored lobes.
     """
 
     PLUGIN = "nbrdf"
@@ -619,6 +632,9 @@ class NbrdfMixin(_NativeBSDFMixin):
                 f"(jit) backend evaluates in reasonable time (JIT_MAX_HIDDEN_WIDTH)")
 
     def _default_sampling(self, exponent, weight, second=(None, None)) -> str:
+        # The file's measured best (nbrdf fit-phong), unless the scene gives lobe parameters.
+        if self._native.default_sampling and exponent is None and weight is None:
+            return self._native.default_sampling
         if self._native.stored_sampling in ("two_lobe", "anisotropic_phong"):
             return self._native.stored_sampling
         if self._native.has_sampling or (exponent is not None and weight is not None):
@@ -651,7 +667,8 @@ class NbrdfMixin(_NativeBSDFMixin):
 class MerlMixin(_NativeBSDFMixin):
     """``merl``: a MERL-format table (``.binary``), trilinearly interpolated.
 
-    Parameters: ``filename``; ``sampling`` = ``cosine`` (default) | ``uniform`` | ``phong``
+    Parameters: ``filename``; ``sampling`` = ``cosine`` (default) | ``uniform`` | ``tabulated``
+    (a half-vector table built from the table at load time) | ``phong``
     (requires ``exponent`` and ``specular_weight``) | ``two_lobe`` (requires those and
     ``exponent2``, ``specular_weight2``).
     """

@@ -24,7 +24,10 @@ reference). Its twins, and the tests that hold the two together:
   (``anisotropic_mixture_density``, ``anisotropic_half_vector``); ``exponent2`` is ``n_v``.
   Held to the library by ``tests/test_anisotropic.py`` (``test_anisotropic_lobe_backends_agree``)
   and Mitsuba's chi^2 test there;
-* :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``.
+* :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``;
+* :class:`TracedTable` (``sampling`` = ``tabulated``) - ``nbrdf-core/src/tabulated.rs``
+  ``TabulatedSampler::sample_direction`` / ``density_f64`` (held together by
+  ``tests/test_tabulated.py``).
 
 Tests: ``tests/test_backends.py`` (eval, pdf, samples and renders of both backends, and a
 float64 NumPy oracle), ``tests/test_sampling.py`` (chi^2, quadrature, the design formula) and
@@ -383,12 +386,85 @@ def anisotropic_half_vector(exponent_u, exponent_v, u1, u2) -> mi.Vector3f:
     return mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
 
 
-STRATEGIES = ("uniform", "cosine", "phong", "two_lobe", "anisotropic_phong")
+STRATEGIES = ("uniform", "cosine", "phong", "two_lobe", "anisotropic_phong", "tabulated")
+
+
+class TracedTable:
+    """The tabulated half-vector sampler (``tabulated.rs``) from the library's arrays
+    (``_native.Table.arrays``): the view's elevation picks a row, a binary search in the row's
+    CDFs a bin in ``t = sqrt(theta_h / (pi/2))`` and in ``phi_h - phi_v``, the half vector uniform
+    in solid angle within the bin; mixed with cosine. The pdf is the bin's mass over its solid
+    angle through the half-vector Jacobian (``density_f64``)."""
+
+    def __init__(self, rows: int, theta_bins: int, phi_bins: int, cosine_weight: float,
+                 mass: np.ndarray, marginal_cdf: np.ndarray, conditional_cdf: np.ndarray):
+        self.rows, self.theta_bins, self.phi_bins = int(rows), int(theta_bins), int(phi_bins)
+        self.cosine_weight = float(cosine_weight)
+        self.mass = mi.Float(np.asarray(mass, dtype=np.float32))
+        # 1 - cos(theta_h) at the t-bin edges, 2 sin^2(theta_h / 2) (tabulated.rs bin_one_minus_cos).
+        t = np.arange(self.theta_bins + 1, dtype=np.float64) / self.theta_bins
+        self.edges = mi.Float((2.0 * np.sin(0.25 * np.pi * t * t) ** 2).astype(np.float32))
+        self.marginal_cdf = mi.Float(np.asarray(marginal_cdf, dtype=np.float32))
+        self.conditional_cdf = mi.Float(np.asarray(conditional_cdf, dtype=np.float32))
+
+    def _row(self, v: mi.Vector3f):
+        theta_v = dr.atan2(dr.sqrt(dr.fma(v.x, v.x, v.y * v.y)), v.z)
+        return dr.minimum(mi.UInt32(dr.maximum(theta_v * (2.0 / math.pi) * self.rows, 0.0)), self.rows - 1)
+
+    def _search(self, cdf, base, bins: int, u):
+        """``tabulated.rs`` ``search``: the first bin ``i`` with ``cdf[i + 1] > u`` (at most
+        ``bins - 1``) and ``u`` rescaled into it."""
+        i = dr.binary_search(0, bins - 1, lambda k: dr.gather(mi.Float, cdf, base + k + 1) <= u)
+        lo = dr.gather(mi.Float, cdf, base + i)
+        hi = dr.gather(mi.Float, cdf, base + i + 1)
+        width = hi - lo
+        frac = dr.select(width > 0, dr.clip((u - lo) / dr.select(width > 0, width, 1.0), 0.0, 1.0), 0.5)
+        return i, frac
+
+    def sample_direction(self, v: mi.Vector3f, u0, u1, u2) -> mi.Vector3f:
+        nt, np_ = self.theta_bins, self.phi_bins
+        r = self._row(v)
+        i, ft = self._search(self.marginal_cdf, r * (nt + 1), nt, u1)
+        j, fp = self._search(self.conditional_cdf, (r * nt + i) * (np_ + 1), np_, u2)
+        o0, o1 = dr.gather(mi.Float, self.edges, i), dr.gather(mi.Float, self.edges, i + 1)
+        one_minus_cos = dr.fma(ft, o1 - o0, o0)
+        cos_h = 1.0 - one_minus_cos
+        sin_h = dr.safe_sqrt(one_minus_cos * (1.0 + cos_h))
+        phi = (mi.Float(j) + fp) / np_ * (2.0 * math.pi) + dr.atan2(v.y, v.x)
+        sin_p, cos_p = dr.sincos(phi)
+        h = mi.Vector3f(sin_h * cos_p, sin_h * sin_p, cos_h)
+        reflected = 2.0 * dr.dot(v, h) * h - v
+        return dr.select(u0 < self.cosine_weight, cosine_hemisphere(u1, u2), reflected)
+
+    def pdf(self, view: mi.Vector3f, light: mi.Vector3f):
+        v, v_ok = _unit(view)
+        l, l_ok = _unit(light)
+        cosine = self.cosine_weight * dr.maximum(l.z, 0.0) / math.pi
+        s = v + l
+        h = dr.normalize(s)
+        v_dot_h = dr.dot(v, h)
+        sin_h = dr.sqrt(dr.fma(h.x, h.x, h.y * h.y))
+        valid = (dr.squared_norm(s) > 0) & (v_dot_h > 0) & (h.z > 0)
+        t = dr.sqrt(dr.atan2(sin_h, h.z) * (2.0 / math.pi))
+        phi = dr.atan2(h.y, h.x) - dr.atan2(v.y, v.x)
+        phi = phi - 2.0 * math.pi * dr.floor(phi / (2.0 * math.pi))
+        nt, np_ = self.theta_bins, self.phi_bins
+        i = dr.minimum(mi.UInt32(t * nt), nt - 1)
+        j = dr.minimum(mi.UInt32(dr.maximum(phi / (2.0 * math.pi) * np_, 0.0)), np_ - 1)
+        p = dr.gather(mi.Float, self.mass, (self._row(v) * nt + i) * np_ + j, valid)
+        solid_angle = (dr.gather(mi.Float, self.edges, i + 1) - dr.gather(mi.Float, self.edges, i)) * (
+            2.0 * math.pi / np_)
+        table = p / solid_angle / (4.0 * v_dot_h)
+        pdf = cosine + (1.0 - self.cosine_weight) * dr.select(valid, table, 0.0)
+        return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
 def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0, exponent2=0.0,
-        specular_weight2=0.0):
-    """Density of ``light`` given ``view`` for a strategy of ``STRATEGIES``."""
+        specular_weight2=0.0, table: TracedTable | None = None):
+    """Density of ``light`` given ``view`` for a strategy of ``STRATEGIES`` (``tabulated``
+    needs ``table``)."""
+    if strategy == "tabulated":
+        return table.pdf(view, light)
     if strategy == "phong":
         return mixture_pdf(view, light, exponent, specular_weight)
     if strategy == "two_lobe":
@@ -402,7 +478,7 @@ def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0, exponent2
 
 
 def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0, exponent2=0.0,
-           specular_weight2=0.0):
+           specular_weight2=0.0, table: TracedTable | None = None):
     """Draws a light direction like ``SamplingStrategy::sample``: ``(light, pdf)`` with pdf 0
     for invalid samples (a specular reflection below the horizon, a view below it)."""
     u0, u1, u2 = unit_interval(u0), unit_interval(u1), unit_interval(u2)
@@ -434,13 +510,16 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0, e
         reflected = 2.0 * dr.dot(v, h) * h - v
         specular = (u0 < specular_weight) | (specular_weight >= 1.0)
         light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
+    elif strategy == "tabulated":
+        v, _ = _unit(view)
+        light = table.sample_direction(v, u0, u1, u2)
     else:
         raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
     _, view_ok = _unit(view)
     light, light_ok = _unit(light)
     # As SamplingStrategy::sample: +z (with pdf 0) when there is no direction to return.
     light = dr.select(view_ok & light_ok, light, mi.Vector3f(0.0, 0.0, 1.0))
-    return light, pdf(strategy, view, light, exponent, specular_weight, exponent2, specular_weight2)
+    return light, pdf(strategy, view, light, exponent, specular_weight, exponent2, specular_weight2, table)
 
 
 # MERL grid (docs/design.md section 3), as in nbrdf-core's merl.rs.

@@ -51,6 +51,7 @@ pub mod rgl;
 pub mod rng;
 pub mod sampling;
 pub mod source;
+pub mod tabulated;
 
 #[cfg(feature = "train")]
 pub mod analytic;

@@ -91,6 +91,9 @@ struct ViewQuadrature {
     cosine_pdf: Vec<f64>,
     /// `(int g)^2`.
     integral_sq: f64,
+    /// The view and the light direction of each point, for densities other than lobes.
+    view: DVec3,
+    lights: Vec<DVec3>,
 }
 
 /// Relative second moment `R` of the lobe `(n, w)` for a view.
@@ -121,6 +124,8 @@ fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) ->
         inv_jacobian: Vec::new(),
         cosine_pdf: Vec::new(),
         integral_sq: 0.0,
+        view,
+        lights: Vec::new(),
     };
     let mut integral = 0.0;
     for i in 0..config.s_bins {
@@ -153,6 +158,7 @@ fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) ->
             q.ln_cos_h.push(cos_h.max(1e-300).ln());
             q.inv_jacobian.push(0.25 / v_dot_h);
             q.cosine_pdf.push(light.z * FRAC_1_PI);
+            q.lights.push(light);
         }
     }
     q.integral_sq = integral * integral;
@@ -185,6 +191,27 @@ impl LobeQuadrature {
     /// Mean relative variance `R - 1` over the views of sampling with the lobe `(n, w)`.
     pub fn relative_variance(&self, exponent: f64, specular_weight: f64) -> f64 {
         self.mean_second_moment(exponent, specular_weight) - 1.0
+    }
+
+    /// Mean relative variance `R - 1` over the views of sampling with any strategy (its
+    /// [`SamplingStrategy::pdf_f64`]): how `nbrdf fit-phong` scores the tabulated sampler
+    /// against the lobes on the same quadrature.
+    pub fn strategy_relative_variance(&self, strategy: &SamplingStrategy) -> f64 {
+        let moments = self.views.par_iter().map(|q| {
+            if q.integral_sq <= 0.0 {
+                return 1.0;
+            }
+            let mut sum = 0.0;
+            for (g2_dw, &l) in q.g2_dw.iter().zip(&q.lights) {
+                let pdf = strategy.pdf_f64(q.view, l);
+                if pdf <= 0.0 {
+                    return f64::INFINITY;
+                }
+                sum += g2_dw / pdf;
+            }
+            sum / q.integral_sq
+        });
+        moments.sum::<f64>() / self.views.len() as f64 - 1.0
     }
 
     fn mean_second_moment(&self, exponent: f64, weight: f64) -> f64 {

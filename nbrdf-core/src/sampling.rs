@@ -15,6 +15,9 @@ use crate::error::{NbrdfError, Result};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_1_PI, TAU};
+use std::sync::Arc;
+
+pub use crate::tabulated::TabulatedSampler;
 
 /// Lanes per rayon task in the batched functions.
 const TASK_LANES: usize = 4096;
@@ -29,7 +32,7 @@ pub fn exponent_in_range(n: f64) -> bool {
 }
 
 /// A sampling strategy for the light direction given the view direction.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum SamplingStrategy {
     Uniform,
     Cosine,
@@ -58,6 +61,9 @@ pub enum SamplingStrategy {
         exponent_v: f64,
         specular_weight: f64,
     },
+    /// The data-driven half-vector table of a material with a defensive cosine component
+    /// ([`crate::tabulated`]).
+    Tabulated(Arc<TabulatedSampler>),
 }
 
 impl SamplingStrategy {
@@ -198,6 +204,7 @@ impl SamplingStrategy {
         match *self {
             SamplingStrategy::Uniform => uniform_hemisphere(u1, u2),
             SamplingStrategy::Cosine => cosine_hemisphere(u1, u2),
+            SamplingStrategy::Tabulated(ref table) => table.sample_direction(v, [u0, u1, u2]),
             SamplingStrategy::BlinnPhong {
                 exponent,
                 specular_weight,
@@ -256,6 +263,7 @@ impl SamplingStrategy {
         match *self {
             SamplingStrategy::Uniform => 0.5 * FRAC_1_PI,
             SamplingStrategy::Cosine => l.z * FRAC_1_PI,
+            SamplingStrategy::Tabulated(ref table) => table.density_f64(v, l),
             SamplingStrategy::BlinnPhong {
                 exponent,
                 specular_weight,
@@ -728,7 +736,7 @@ mod tests {
             bp(1.0, f64::NAN),
         ] {
             assert!(
-                matches!(bad.validated(), Err(NbrdfError::InvalidArgument(_))),
+                matches!(bad.clone().validated(), Err(NbrdfError::InvalidArgument(_))),
                 "{bad:?}"
             );
             // Unvalidated bad parameters still give finite output.
@@ -1160,7 +1168,7 @@ mod tests {
             two_lobe(10.0, 0.1, 1.0, f64::NAN),
         ] {
             assert!(
-                matches!(bad.validated(), Err(NbrdfError::InvalidArgument(_))),
+                matches!(bad.clone().validated(), Err(NbrdfError::InvalidArgument(_))),
                 "{bad:?}"
             );
             let s = bad.sample(Vec3::Z, [0.5; 3]);

@@ -30,11 +30,14 @@ typedef enum NbrdfSamplingKind {
   // `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
   // Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
   NBRDF_SAMPLING_TWO_LOBE = 3,
+  // The material's data-driven table (an `NbrdfTable` and the `*_table` functions); not
+  // accepted in an `NbrdfSampler` or `NbrdfMixtureSampler`.
+  NBRDF_SAMPLING_TABULATED = 4,
   // Anisotropic Blinn-Phong lobe (Ashikhmin-Shirley: `exponent` = `n_u` along the tangent x,
   // `exponent2` = `n_v` across it, weight `specular_weight`) mixed with a cosine lobe; for
   // anisotropic networks, whose directions are in the shading frame. Only in an
   // `NbrdfMixtureSampler`; `specular_weight2` is not read.
-  NBRDF_SAMPLING_ANISOTROPIC_PHONG = 4,
+  NBRDF_SAMPLING_ANISOTROPIC_PHONG = 5,
 } NbrdfSamplingKind;
 
 // Status code returned (as `int32_t`) by every fallible function. On any value other than
@@ -61,6 +64,12 @@ typedef struct NbrdfMerl NbrdfMerl;
 // A neural BRDF loaded from an `*.nbrdf.json` file. Immutable: one handle may be used by many
 // threads at once.
 typedef struct NbrdfNetwork NbrdfNetwork;
+
+// The data-driven sampler of a material (`sampling` = `tabulated`): per band of view elevation,
+// a piecewise-constant half-vector density tabulated from the material, mixed with cosine
+// (nbrdf-core `tabulated`). Built by `nbrdf_network_build_table` or `nbrdf_merl_build_table`;
+// immutable, so one handle may be used by many threads at once.
+typedef struct NbrdfTable NbrdfTable;
 
 // Summary of a loaded network.
 typedef struct NbrdfNetworkInfo {
@@ -98,6 +107,17 @@ typedef struct NbrdfMixtureSampler {
   float exponent2;
   float specular_weight2;
 } NbrdfMixtureSampler;
+
+// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability) has
+// `rows * theta_bins * phi_bins` values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
+// `rows * theta_bins * (phi_bins + 1)` (`nbrdf_table_arrays`).
+typedef struct NbrdfTableInfo {
+  uint32_t rows;
+  uint32_t theta_bins;
+  uint32_t phi_bins;
+  // Weight of the defensive cosine component of the mixture.
+  float cosine_weight;
+} NbrdfTableInfo;
 
 #ifdef __cplusplus
 extern "C" {
@@ -291,6 +311,89 @@ int32_t nbrdf_mixture_sampler_validate(const struct NbrdfMixtureSampler *sampler
 // `network` is a live handle; `out` points to a writable `NbrdfMixtureSampler`.
 int32_t nbrdf_network_stored_sampler(const struct NbrdfNetwork *network,
                                      struct NbrdfMixtureSampler *out);
+
+// Writes to `*out` the sampling strategy the file names as the material's best
+// (`sampling.default`, chosen by `nbrdf fit-phong` for the lowest measured variance), as an
+// `NbrdfSamplingKind` value (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none.
+//
+// # Safety
+// `network` is a live handle; `out` points to a writable `int32_t`.
+int32_t nbrdf_network_default_sampling(const struct NbrdfNetwork *network,
+                                       int32_t *out);
+
+// Tabulates the network for `sampling` = `tabulated` (about 150k evaluations, milliseconds);
+// free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
+//
+// # Safety
+// `network` is a live handle; `out` points to a writable pointer.
+int32_t nbrdf_network_build_table(const struct NbrdfNetwork *network,
+                                  struct NbrdfTable **out);
+
+// Tabulates a MERL table for `sampling` = `tabulated`, as `nbrdf_network_build_table`.
+//
+// # Safety
+// `merl` is a live handle; `out` points to a writable pointer.
+int32_t nbrdf_merl_build_table(const struct NbrdfMerl *merl,
+                               struct NbrdfTable **out);
+
+// Frees a table; NULL is a no-op.
+//
+// # Safety
+// `table` is NULL or came from a `*_build_table` function and was not freed yet.
+void nbrdf_table_free(struct NbrdfTable *table);
+
+// Fills `*out` with the table's shape and cosine weight.
+//
+// # Safety
+// `table` is a live handle; `out` points to a writable `NbrdfTableInfo`.
+int32_t nbrdf_table_info(const struct NbrdfTable *table,
+                         struct NbrdfTableInfo *out);
+
+// Copies the table's arrays (as float32) into caller buffers of the sizes `NbrdfTableInfo`
+// gives, for a second implementation of the sampler (the plugin's Dr.Jit path).
+//
+// # Safety
+// `table` is a live handle; the outputs point to writable buffers of the documented sizes.
+int32_t nbrdf_table_arrays(const struct NbrdfTable *table,
+                           float *out_mass,
+                           float *out_marginal_cdf,
+                           float *out_conditional_cdf);
+
+// `nbrdf_network_sample` with the tabulated sampler `table`.
+//
+// # Safety
+// As `nbrdf_network_sample`, with `table` a live `NbrdfTable`.
+int32_t nbrdf_network_sample_table(const struct NbrdfNetwork *network,
+                                   const struct NbrdfTable *table,
+                                   const float *view,
+                                   const float *u,
+                                   size_t n,
+                                   float *out_light,
+                                   float *out_weight,
+                                   float *out_pdf);
+
+// `nbrdf_merl_sample` with the tabulated sampler `table`.
+//
+// # Safety
+// As `nbrdf_merl_sample`, with `table` a live `NbrdfTable`.
+int32_t nbrdf_merl_sample_table(const struct NbrdfMerl *merl,
+                                const struct NbrdfTable *table,
+                                const float *view,
+                                const float *u,
+                                size_t n,
+                                float *out_light,
+                                float *out_weight,
+                                float *out_pdf);
+
+// `nbrdf_sampler_pdf` of the tabulated sampler `table`.
+//
+// # Safety
+// As `nbrdf_sampler_pdf`, with `table` a live `NbrdfTable`.
+int32_t nbrdf_table_pdf(const struct NbrdfTable *table,
+                        const float *view,
+                        const float *light,
+                        size_t n,
+                        float *out_pdf);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -15,12 +15,14 @@
 
 use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 use nbrdf_core::sampling::{self, SamplingStrategy};
+use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
 use std::any::Any;
 use std::cell::{Cell, RefCell};
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::Once;
 
 /// Status code returned (as `int32_t`) by every fallible function. On any value other than
@@ -58,11 +60,14 @@ pub enum NbrdfSamplingKind {
     /// `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
     /// Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
     NBRDF_SAMPLING_TWO_LOBE = 3,
+    /// The material's data-driven table (an `NbrdfTable` and the `*_table` functions); not
+    /// accepted in an `NbrdfSampler` or `NbrdfMixtureSampler`.
+    NBRDF_SAMPLING_TABULATED = 4,
     /// Anisotropic Blinn-Phong lobe (Ashikhmin-Shirley: `exponent` = `n_u` along the tangent x,
     /// `exponent2` = `n_v` across it, weight `specular_weight`) mixed with a cosine lobe; for
     /// anisotropic networks, whose directions are in the shading frame. Only in an
     /// `NbrdfMixtureSampler`; `specular_weight2` is not read.
-    NBRDF_SAMPLING_ANISOTROPIC_PHONG = 4,
+    NBRDF_SAMPLING_ANISOTROPIC_PHONG = 5,
 }
 
 /// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
@@ -119,6 +124,27 @@ pub struct NbrdfNetwork {
 /// many threads at once.
 pub struct NbrdfMerl {
     table: MerlTable,
+}
+
+/// The data-driven sampler of a material (`sampling` = `tabulated`): per band of view elevation,
+/// a piecewise-constant half-vector density tabulated from the material, mixed with cosine
+/// (nbrdf-core `tabulated`). Built by `nbrdf_network_build_table` or `nbrdf_merl_build_table`;
+/// immutable, so one handle may be used by many threads at once.
+pub struct NbrdfTable {
+    sampler: Arc<TabulatedSampler>,
+}
+
+/// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability) has
+/// `rows * theta_bins * phi_bins` values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
+/// `rows * theta_bins * (phi_bins + 1)` (`nbrdf_table_arrays`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NbrdfTableInfo {
+    pub rows: u32,
+    pub theta_bins: u32,
+    pub phi_bins: u32,
+    /// Weight of the defensive cosine component of the mixture.
+    pub cosine_weight: f32,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -329,11 +355,17 @@ unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrate
             exponent: f64::from(exponent),
             specular_weight: f64::from(specular_weight),
         },
-        3 | 4 => {
+        3 | 5 => {
             return Err(Failure::invalid(format!(
             "sampling kind {kind} ({}) needs an NbrdfMixtureSampler and the *_mixture functions",
             if kind == 3 { "two-lobe" } else { "anisotropic phong" }
         )))
+        }
+        4 => {
+            return Err(Failure::invalid(
+                "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions"
+                    .to_string(),
+            ))
         }
         other => {
             return Err(Failure::invalid(format!(
@@ -373,14 +405,17 @@ unsafe fn read_mixture_sampler(sampler: *const NbrdfMixtureSampler) -> FfiResult
             exponent2: f64::from(exponent2),
             weight2: f64::from(specular_weight2),
         },
-        4 => SamplingStrategy::anisotropic(
+        4 => return Err(Failure::invalid(
+            "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions".to_string(),
+        )),
+        5 => SamplingStrategy::anisotropic(
             f64::from(exponent),
             f64::from(exponent2),
             f64::from(specular_weight),
         ),
         other => {
             return Err(Failure::invalid(format!(
-                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 4 = anisotropic phong)"
+                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 5 = anisotropic phong; 4 = tabulated needs an NbrdfTable)"
             )))
         }
     };
@@ -398,6 +433,14 @@ impl SamplerArg for NbrdfSampler {
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
         // SAFETY: forwarded contract.
         unsafe { read_sampler(sampler) }
+    }
+}
+
+impl SamplerArg for NbrdfTable {
+    unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
+        // SAFETY: forwarded contract.
+        let table = unsafe { reference(sampler, "table")? };
+        Ok(SamplingStrategy::Tabulated(Arc::clone(&table.sampler)))
     }
 }
 
@@ -1025,6 +1068,238 @@ pub unsafe extern "C" fn nbrdf_network_stored_sampler(
         unsafe { out.write(sampler) };
         Ok(())
     })
+}
+
+/// Value of `nbrdf_network_default_sampling` when the file names no default.
+const NO_DEFAULT_SAMPLING: i32 = -1;
+
+/// Writes to `*out` the sampling strategy the file names as the material's best
+/// (`sampling.default`, chosen by `nbrdf fit-phong` for the lowest measured variance), as an
+/// `NbrdfSamplingKind` value (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none.
+///
+/// # Safety
+/// `network` is a live handle; `out` points to a writable `int32_t`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_default_sampling(
+    network: *const NbrdfNetwork,
+    out: *mut i32,
+) -> i32 {
+    guard("nbrdf_network_default_sampling", || {
+        // SAFETY: forwarded contract.
+        let network = &unsafe { reference(network, "network")? }.network;
+        check_array(out, "out")?;
+        let kind = match network.sampling.as_ref().and_then(|s| s.default.as_deref()) {
+            Some("cosine") => NbrdfSamplingKind::NBRDF_SAMPLING_COSINE as i32,
+            Some("phong") => NbrdfSamplingKind::NBRDF_SAMPLING_PHONG as i32,
+            Some("two_lobe") => NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE as i32,
+            Some("tabulated") => NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED as i32,
+            _ => NO_DEFAULT_SAMPLING,
+        };
+        // SAFETY: non-null, aligned, writable by contract.
+        unsafe { out.write(kind) };
+        Ok(())
+    })
+}
+
+/// # Safety
+/// See the exported `*_build_table` functions.
+unsafe fn build_table_impl<H: BrdfHandle>(
+    function: &str,
+    handle: *const H,
+    out: *mut *mut NbrdfTable,
+) -> i32 {
+    guard(function, || {
+        if out.is_null() {
+            return Err(Failure::null("out"));
+        }
+        // SAFETY: non-null and writable by contract; cleared first so that it never holds a
+        // stale pointer after a failure.
+        unsafe { out.write(std::ptr::null_mut()) };
+        // SAFETY: forwarded contract.
+        let handle = unsafe { reference(handle, H::ARGUMENT)? };
+        let sampler = TabulatedSampler::from_brdf(handle.brdf(), &TableConfig::default())?;
+        let table = NbrdfTable {
+            sampler: Arc::new(sampler),
+        };
+        // SAFETY: as above.
+        unsafe { out.write(Box::into_raw(Box::new(table))) };
+        Ok(())
+    })
+}
+
+/// Tabulates the network for `sampling` = `tabulated` (about 150k evaluations, milliseconds);
+/// free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
+///
+/// # Safety
+/// `network` is a live handle; `out` points to a writable pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_build_table(
+    network: *const NbrdfNetwork,
+    out: *mut *mut NbrdfTable,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe { build_table_impl("nbrdf_network_build_table", network, out) }
+}
+
+/// Tabulates a MERL table for `sampling` = `tabulated`, as `nbrdf_network_build_table`.
+///
+/// # Safety
+/// `merl` is a live handle; `out` points to a writable pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_build_table(
+    merl: *const NbrdfMerl,
+    out: *mut *mut NbrdfTable,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe { build_table_impl("nbrdf_merl_build_table", merl, out) }
+}
+
+/// Frees a table; NULL is a no-op.
+///
+/// # Safety
+/// `table` is NULL or came from a `*_build_table` function and was not freed yet.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_table_free(table: *mut NbrdfTable) {
+    // SAFETY: forwarded contract.
+    unsafe { free_impl(table) }
+}
+
+/// Fills `*out` with the table's shape and cosine weight.
+///
+/// # Safety
+/// `table` is a live handle; `out` points to a writable `NbrdfTableInfo`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_table_info(
+    table: *const NbrdfTable,
+    out: *mut NbrdfTableInfo,
+) -> i32 {
+    guard("nbrdf_table_info", || {
+        // SAFETY: forwarded contract.
+        let table = unsafe { reference(table, "table")? };
+        check_array(out, "out")?;
+        let arrays = table.sampler.tables();
+        let info = NbrdfTableInfo {
+            rows: arrays.rows as u32,
+            theta_bins: arrays.theta_bins as u32,
+            phi_bins: arrays.phi_bins as u32,
+            cosine_weight: arrays.cosine_weight as f32,
+        };
+        // SAFETY: non-null, aligned, writable by contract.
+        unsafe { out.write(info) };
+        Ok(())
+    })
+}
+
+/// Copies the table's arrays (as float32) into caller buffers of the sizes `NbrdfTableInfo`
+/// gives, for a second implementation of the sampler (the plugin's Dr.Jit path).
+///
+/// # Safety
+/// `table` is a live handle; the outputs point to writable buffers of the documented sizes.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_table_arrays(
+    table: *const NbrdfTable,
+    out_mass: *mut f32,
+    out_marginal_cdf: *mut f32,
+    out_conditional_cdf: *mut f32,
+) -> i32 {
+    guard("nbrdf_table_arrays", || {
+        // SAFETY: forwarded contract.
+        let table = unsafe { reference(table, "table")? };
+        check_array(out_mass, "out_mass")?;
+        check_array(out_marginal_cdf, "out_marginal_cdf")?;
+        check_array(out_conditional_cdf, "out_conditional_cdf")?;
+        let arrays = table.sampler.tables();
+        for (src, dst) in [
+            (&arrays.mass, out_mass),
+            (&arrays.marginal_cdf, out_marginal_cdf),
+            (&arrays.conditional_cdf, out_conditional_cdf),
+        ] {
+            // SAFETY: checked above; the size is the caller's contract.
+            let dst = unsafe { output(dst, src.len()) };
+            for (d, &v) in dst.iter_mut().zip(src) {
+                *d = v as f32;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// `nbrdf_network_sample` with the tabulated sampler `table`.
+///
+/// # Safety
+/// As `nbrdf_network_sample`, with `table` a live `NbrdfTable`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_sample_table(
+    network: *const NbrdfNetwork,
+    table: *const NbrdfTable,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        sample_impl(
+            "nbrdf_network_sample_table",
+            network,
+            table,
+            view,
+            u,
+            n,
+            out_light,
+            out_weight,
+            out_pdf,
+        )
+    }
+}
+
+/// `nbrdf_merl_sample` with the tabulated sampler `table`.
+///
+/// # Safety
+/// As `nbrdf_merl_sample`, with `table` a live `NbrdfTable`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_merl_sample_table(
+    merl: *const NbrdfMerl,
+    table: *const NbrdfTable,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe {
+        sample_impl(
+            "nbrdf_merl_sample_table",
+            merl,
+            table,
+            view,
+            u,
+            n,
+            out_light,
+            out_weight,
+            out_pdf,
+        )
+    }
+}
+
+/// `nbrdf_sampler_pdf` of the tabulated sampler `table`.
+///
+/// # Safety
+/// As `nbrdf_sampler_pdf`, with `table` a live `NbrdfTable`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_table_pdf(
+    table: *const NbrdfTable,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_pdf: *mut f32,
+) -> i32 {
+    // SAFETY: forwarded contract.
+    unsafe { pdf_impl("nbrdf_table_pdf", table, view, light, n, out_pdf) }
 }
 
 #[cfg(test)]

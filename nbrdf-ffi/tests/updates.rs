@@ -29,6 +29,7 @@ fn any_sampler() -> impl Strategy<Value = NbrdfSampler> {
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_PHONG),
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE),
         Just(NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG),
+        Just(NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED),
     ];
     (kind, exponent, weight).prop_map(|(kind, exponent, specular_weight)| NbrdfSampler {
         kind,
@@ -49,6 +50,8 @@ fn core_accepts(s: &NbrdfSampler) -> bool {
         // NbrdfMixtureSampler, and this struct refuses the kind.
         NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE
         | NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG => return false,
+        // Tabulated sampling needs an NbrdfTable (the *_table functions).
+        NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED => return false,
     };
     strategy.validated().is_ok()
 }

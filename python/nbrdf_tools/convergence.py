@@ -73,9 +73,9 @@ from nbrdf_tools.materials import VEACH_MERL, VEACH_RGL, Artefacts, Material
 from nbrdf_tools.paths import SCENES, MissingDataError, default_cli, default_out, shared_path
 from nbrdf_tools.progress import bar, log
 from nbrdf_tools.render import render_passes, timed_render, warm_up, write_exr, write_png
-STRATEGIES = ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "measured")
+STRATEGIES = ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "tabulated", "measured")
 NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong", "two-lobe-fit": "two_lobe",
-                  "phong-predicted": "phong"}
+                  "phong-predicted": "phong", "tabulated": "tabulated"}
 REFERENCE_SEED = 1_000_000  # references use seeds from here on; test renders stay far below
 QUICK_TRAIN_ARGS = ["--samples", "40000", "--epochs", "3", "--min-epochs", "1"]
 

@@ -14,6 +14,9 @@ over the masked pixels and all channels.
 * ``psnr_peak_ref`` = 20 log10(max(reference) / RMSE) dB: peak = the reference's maximum; the
   sphere images' PSNR of ``nbrdf compare`` and :mod:`nbrdf_tools.compare_materials`
 
+* ``mae_tonemapped`` / ``rmse_tonemapped`` = ``mae`` / ``rmse`` of the ``tone_map``-ped images
+  (display values in [0, 1]: highlights above white count as white)
+
 Whole-image metrics (no mask):
 
 * ``ssim`` - scikit-image's ``structural_similarity`` with Wang et al.'s (2004) settings
@@ -91,6 +94,14 @@ def relative_rmse(reference, image, mask=None) -> float:
 def tone_map(image: np.ndarray) -> np.ndarray:
     """``min(max(x, 1e-12)^(1/2.2), 1)`` of a linear image (float64)."""
     return np.minimum(np.maximum(np.asarray(image, dtype=np.float64), 1e-12) ** (1.0 / GAMMA), 1.0)
+
+
+def mae_tonemapped(reference, image, mask=None) -> float:
+    return mae(tone_map(reference), tone_map(image), mask)
+
+
+def rmse_tonemapped(reference, image, mask=None) -> float:
+    return rmse(tone_map(reference), tone_map(image), mask)
 
 
 def ssim(reference, image, channel_axis: int = -1) -> float:

@@ -81,7 +81,15 @@ pub struct SamplingParams {
     /// What the lobe search measured when it chose these parameters (informational).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_variance: Option<SamplingVariances>,
+    /// The strategy that sampled this material with the lowest measured variance, by the
+    /// plugin's `sampling` name (one of [`DEFAULT_SAMPLING_NAMES`]); the plugin uses it when a
+    /// scene gives no `sampling`. Optional: files without it sample as before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub default: Option<String>,
 }
+
+/// The values [`SamplingParams::default`] may take.
+pub const DEFAULT_SAMPLING_NAMES: [&str; 4] = ["cosine", "phong", "two_lobe", "tabulated"];
 
 /// The second lobe of a two-lobe sampling mixture.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -102,6 +110,9 @@ pub struct SamplingVariances {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub anisotropic: Option<f64>,
     pub cosine: f64,
+    /// The tabulated sampler's ([`crate::tabulated`]), when it was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tabulated: Option<f64>,
 }
 
 impl SamplingParams {
@@ -136,6 +147,17 @@ impl SamplingParams {
                     "sampling: exponent_v (an anisotropic lobe) and second_lobe do not combine"
                         .into(),
                 );
+            }
+        }
+        if let Some(name) = &self.default {
+            if !DEFAULT_SAMPLING_NAMES.contains(&name.as_str()) {
+                return Some(format!(
+                    "unknown sampling default '{name}' (one of {})",
+                    DEFAULT_SAMPLING_NAMES.join(", ")
+                ));
+            }
+            if name == "two_lobe" && self.second_lobe.is_none() {
+                return Some("sampling default 'two_lobe' needs a second_lobe".to_string());
             }
         }
         if self.second_lobe.is_some() {

@@ -470,6 +470,7 @@ fn json_round_trip_is_exact() {
         second_lobe: None,
         exponent_v: None,
         relative_variance: None,
+        default: None,
     });
     net.provenance = serde_json::json!({"epochs": 12, "loss": 0.0123, "table": "gold.binary"});
     let path = temp_path("roundtrip");
@@ -577,6 +578,7 @@ fn malformed_files_are_rejected_with_the_file_name() {
             second_lobe: None,
             exponent_v: None,
             relative_variance: None,
+            default: None,
         });
         n.to_json_string()
     })
@@ -714,6 +716,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
         second_lobe: None,
         exponent_v: None,
         relative_variance: None,
+        default: None,
     };
     net.sampling = Some(one.clone());
     // A one-lobe file writes no new fields and samples with the one-lobe mixture.
@@ -736,6 +739,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
             two_lobe: Some(1.25),
             anisotropic: None,
             cosine: 40.0,
+            tabulated: None,
         }),
         ..one
     });
@@ -764,6 +768,7 @@ fn anisotropic_sampling_lobe_round_trips_and_is_checked_on_load() {
         second_lobe: None,
         exponent_v: Some(25.0),
         relative_variance: None,
+        default: None,
     };
     net.sampling = Some(lobe.clone());
     let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();

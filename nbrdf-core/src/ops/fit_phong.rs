@@ -5,15 +5,18 @@ use crate::anisotropic_lobe_fit::{
     fit_anisotropic_lobe, AnisotropicLobeFit, AnisotropicLobeFitConfig,
 };
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, TwoLobeFit};
+use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, LobeQuadrature, TwoLobeFit};
 use crate::merl::PhiFold;
 use crate::metrics::Material;
 use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
 use crate::phong_fit::FitConfig;
+use crate::sampling::SamplingStrategy;
+use crate::tabulated::{TableConfig, TabulatedSampler};
 use crate::target::material_target;
 use serde::Serialize;
 use std::fmt;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// The settings of a fit.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,6 +71,8 @@ pub struct RelativeVariances {
     /// azimuths.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub anisotropic: Option<f64>,
+    /// The tabulated sampler's (built from the material as the plugin builds it at load time).
+    pub tabulated: f64,
 }
 
 /// What `fit-phong` found (and wrote).
@@ -95,6 +100,9 @@ pub struct FitPhongReport {
     pub relative_variance: RelativeVariances,
     /// The network file written, if the input was a network.
     pub written: Option<String>,
+    /// The strategy with the lowest relative variance (the plugin's `sampling` name), stored
+    /// as the file's `sampling.default`.
+    pub default_sampling: &'static str,
     #[serde(skip)]
     pub choice: LobeChoice,
 }
@@ -135,6 +143,11 @@ impl fmt::Display for FitPhongReport {
                 if self.second_lobe.is_some() { "stored" } else { "not stored: one lobe does as well" },
             )?;
         }
+        writeln!(
+            f,
+            "tabulated sampler: relative variance {:.4e}\ndefault sampling (lowest variance): {}",
+            v.tabulated, self.default_sampling
+        )?;
         if let Some(out) = &self.written {
             writeln!(f, "updated the sampling of {out}")?;
         }
@@ -166,29 +179,34 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         && request.lobe == LobeChoice::LowestVariance
         && !search_anisotropic;
     let lobe_config = LobeFitConfig::default();
-    let (analysis, two_lobes, anisotropic) = with_threads(request.threads, || -> Result<_> {
-        let target = material_target(&material);
-        let anisotropic: Option<AnisotropicLobeFit> = if search_anisotropic {
-            Some(fit_anisotropic_lobe(
-                &*target,
-                &AnisotropicLobeFitConfig::default(),
-            )?)
-        } else {
-            None
-        };
-        if search_two {
-            let (analysis, two) =
-                LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
-            Ok((analysis, Some(two), anisotropic))
-        } else {
-            Ok((
-                LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
-                None,
-                anisotropic,
-            ))
-        }
-    })?
-    .map_err(super::about_data(&request.input.display().to_string()))?;
+    let (analysis, two_lobes, anisotropic, tabulated) =
+        with_threads(request.threads, || -> Result<_> {
+            let target = material_target(&material);
+            let anisotropic: Option<AnisotropicLobeFit> = if search_anisotropic {
+                Some(fit_anisotropic_lobe(
+                    &*target,
+                    &AnisotropicLobeFitConfig::default(),
+                )?)
+            } else {
+                None
+            };
+            let table = TabulatedSampler::from_target(&*target, &TableConfig::default())?;
+            let tabulated = LobeQuadrature::new(&*target, &lobe_config)?
+                .strategy_relative_variance(&SamplingStrategy::Tabulated(Arc::new(table)));
+            if search_two {
+                let (analysis, two) =
+                    LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
+                Ok((analysis, Some(two), anisotropic, tabulated))
+            } else {
+                Ok((
+                    LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
+                    None,
+                    anisotropic,
+                    tabulated,
+                ))
+            }
+        })?
+        .map_err(super::about_data(&request.input.display().to_string()))?;
     let (exponent, specular_weight) = analysis.lobe(request.lobe);
     let one_lobe_variance = match request.lobe {
         LobeChoice::LowestVariance => analysis.lowest_variance.relative_variance,
@@ -212,6 +230,28 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         ),
         None => (exponent, specular_weight, None),
     };
+    let cosine_variance = analysis.lowest_variance.cosine_relative_variance;
+    let stored_lobes_variance = match stored_two {
+        Some(two) => ("two_lobe", two.relative_variance),
+        None => ("phong", one_lobe_variance),
+    };
+    // The table is built over the half vector's azimuth relative to the view's (an isotropic
+    // material's); an anisotropic network samples with its anisotropic lobe, the stored lobe
+    // the plugin picks when the file names no default.
+    let default_sampling = if anisotropic.is_some() {
+        "anisotropic_phong"
+    } else {
+        [
+            ("cosine", cosine_variance),
+            stored_lobes_variance,
+            ("tabulated", tabulated),
+        ]
+        .into_iter()
+        .filter(|(_, v)| v.is_finite())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or("cosine", |(name, _)| name)
+    };
+    let stored_default = (anisotropic.is_none()).then(|| default_sampling.to_string());
     let sampling = match anisotropic {
         Some(a) => SamplingParams {
             model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
@@ -225,7 +265,9 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 two_lobe: None,
                 anisotropic: Some(a.relative_variance),
                 cosine: a.cosine_relative_variance,
+                tabulated: None,
             }),
+            default: stored_default,
         },
         None => SamplingParams {
             model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
@@ -238,8 +280,10 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 one_lobe: one_lobe_variance,
                 two_lobe: two_lobes.map(|two| two.relative_variance),
                 anisotropic: None,
-                cosine: analysis.lowest_variance.cosine_relative_variance,
+                cosine: cosine_variance,
+                tabulated: Some(tabulated),
             }),
+            default: stored_default,
         },
     };
     let mut written = None;
@@ -278,8 +322,10 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
             }),
             two_lobe: two_lobes.map(|two| two.relative_variance),
             anisotropic: anisotropic.map(|a| a.relative_variance),
+            tabulated,
         },
         written,
+        default_sampling,
         choice: request.lobe,
     })
 }

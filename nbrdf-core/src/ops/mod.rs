@@ -4,7 +4,7 @@
 //!
 //! * `list-materials`, `synth`: [`catalogue`].
 //! * `info`, `tabulate`: [`table`].
-//! * `train`: [`train_network`].
+//! * `train`: [`train_network`]; the distiller of Mitsuba BSDFs (through the C ABI): [`distill`].
 //! * `fit-phong`: [`fit_phong`].
 //! * `compare`: [`compare`].
 //! * `ae train|encode|decode|eval`, `interpolate`: [`autoencoder`].
@@ -17,6 +17,7 @@
 pub mod autoencoder;
 pub mod catalogue;
 pub mod compare;
+pub mod distill;
 pub mod fit_phong;
 pub mod limits;
 pub mod predictor;

@@ -504,6 +504,7 @@ pub fn predict_phong(
         second_lobe: None,
         exponent_v: None,
         relative_variance: None,
+        default: None,
     });
     net.validate()?;
     let out = output.unwrap_or(input);

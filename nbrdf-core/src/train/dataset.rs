@@ -19,7 +19,7 @@ use crate::coords::{from_rusinkiewicz, to_rusinkiewicz, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
 use crate::network::{INPUTS, OUTPUTS};
 use crate::rng::{SplitMix64, Stream};
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt;
@@ -70,7 +70,7 @@ pub type TargetFn<'a> = dyn Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> + Sync +
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C)]
 pub struct Sample {
-    /// Network input [`crate::coords::network_input`] of the `f32` directions.
+    /// Network input [`crate::coords::network_input_for`] of the `f32` directions.
     pub x: [f32; INPUTS],
     /// `ln(1 + f_r cos_light)` per channel.
     pub log_target: [f32; OUTPUTS],
@@ -159,13 +159,7 @@ fn draw_block(
     let mut samples = Vec::with_capacity(BLOCK as usize);
     let mut outcomes = Vec::with_capacity(BLOCK as usize);
     for k in block * BLOCK..(block + 1) * BLOCK {
-        let mut rng = SplitMix64::new(seed, stream, 4 * k);
-        let u = [
-            rng.next_f64(),
-            rng.next_f64(),
-            rng.next_f64(),
-            rng.next_f64(),
-        ];
+        let u = candidate_uniforms(seed, stream, k);
         let outcome = match candidate(target, sampling, anisotropic, u) {
             Ok(sample) => {
                 samples.push(sample);
@@ -218,29 +212,78 @@ fn uniform_hemisphere(u_cos: f64, u_phi: f64) -> DVec3 {
     DVec3::new(sin * c, sin * s, cos)
 }
 
+/// The `f32` view and light of candidate uniforms `u` with their angles, or `None` when either
+/// is at or below the horizon: the f32 directions are what a renderer hands the network, so
+/// they decide the horizon.
+fn candidate_directions(
+    sampling: AngularSampling,
+    anisotropic: bool,
+    u: [f64; 4],
+) -> Option<(Vec3, Vec3, RusinkiewiczAngles)> {
+    let (view, light, angles) = directions(sampling, anisotropic, u);
+    let (v, l) = (view.as_vec3(), light.as_vec3());
+    (l.z > 0.0 && v.z > 0.0).then_some((v, l, angles))
+}
+
+/// The uniforms of candidate `k` of stream `stream` of `seed`.
+fn candidate_uniforms(seed: u64, stream: Stream, k: u64) -> [f64; 4] {
+    let mut rng = SplitMix64::new(seed, stream, 4 * k);
+    [
+        rng.next_f64(),
+        rng.next_f64(),
+        rng.next_f64(),
+        rng.next_f64(),
+    ]
+}
+
 fn candidate(
     target: &TargetFn<'_>,
     sampling: AngularSampling,
     anisotropic: bool,
     u: [f64; 4],
 ) -> std::result::Result<Sample, Outcome> {
-    let (view, light, angles) = directions(sampling, anisotropic, u);
-    let (l, v) = (light.as_vec3(), view.as_vec3());
-    // The f32 directions are what a renderer hands the network, so they decide the horizon.
-    if l.z <= 0.0 || v.z <= 0.0 {
-        return Err(Outcome::BelowHorizon);
-    }
+    let (v, l, angles) =
+        candidate_directions(sampling, anisotropic, u).ok_or(Outcome::BelowHorizon)?;
     let f = target(&angles).ok_or(Outcome::Invalid)?;
     if !f.iter().all(|c| c.is_finite() && *c >= 0.0) {
         return Err(Outcome::Invalid);
     }
     let cos_light = l.z;
-    let log_target = f.map(|c| (c * cos_light as f64).ln_1p() as f32);
-    Ok(Sample {
-        x: crate::coords::network_input_for(anisotropic, v, l),
-        log_target,
-        cos_light,
-    })
+    Ok(sample(anisotropic, v, l, f.map(|c| c * cos_light as f64)))
+}
+
+/// The sample of a view/light pair above the horizon and its `f_r cos_light` (finite, >= 0),
+/// with the network input of an isotropic or anisotropic network.
+pub fn sample(anisotropic: bool, view: Vec3, light: Vec3, f_cos_light: [f64; 3]) -> Sample {
+    Sample {
+        x: crate::coords::network_input_for(anisotropic, view, light),
+        log_target: f_cos_light.map(|c| c.ln_1p() as f32),
+        cos_light: light.z,
+    }
+}
+
+/// The `(view, light)` pairs that [`draw`] would make samples of, for a target valid
+/// everywhere: the first `count` candidates of stream `stream` of `seed` above the horizon, in
+/// order (`anisotropic` draws `phi_h` too, as [`draw`] does). A caller that evaluates its own
+/// reflectance at them (the distiller, [`crate::train::arrays`]) trains on the trainer's own
+/// sampling.
+pub fn draw_directions(
+    sampling: AngularSampling,
+    anisotropic: bool,
+    count: usize,
+    seed: u64,
+    stream: Stream,
+) -> Vec<(Vec3, Vec3)> {
+    let mut pairs = Vec::with_capacity(count);
+    let mut k = 0u64;
+    while pairs.len() < count {
+        let u = candidate_uniforms(seed, stream, k);
+        if let Some((v, l, _)) = candidate_directions(sampling, anisotropic, u) {
+            pairs.push((v, l));
+        }
+        k += 1;
+    }
+    pairs
 }
 
 #[cfg(test)]

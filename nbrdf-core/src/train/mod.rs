@@ -10,6 +10,7 @@
 //! differently).
 
 pub mod adam;
+pub mod arrays;
 pub mod dataset;
 pub mod gemm;
 pub mod mlp_grad;
@@ -169,7 +170,7 @@ impl TrainConfig {
         }
     }
 
-    fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         let bad = |what: &str| Err(NbrdfError::InvalidArgument(what.to_string()));
         if self.samples == 0 || self.batch == 0 || self.hidden == 0 || self.max_epochs == 0 {
             return bad("samples, batch, hidden width and epochs must be at least 1");
@@ -193,7 +194,8 @@ impl TrainConfig {
         Ok(())
     }
 
-    fn validation_samples(&self) -> usize {
+    /// Validation samples drawn with `samples` training samples (at least 1).
+    pub fn validation_samples(&self) -> usize {
         ((self.samples as f64 * self.validation_fraction).ceil() as usize).max(1)
     }
 }
@@ -246,6 +248,25 @@ pub fn train(
 ) -> Result<TrainOutcome> {
     let start = Instant::now();
     let (train_set, validation) = draw_sets(target, config)?;
+    train_on_sets(&train_set, &validation, config, name, start, on_epoch)
+}
+
+/// The optimisation of [`train`] on samples drawn already (`config.samples` and
+/// `config.validation_fraction` are not read); `start` is when the run began, for its timings.
+pub fn train_on_sets(
+    train_set: &DataSet,
+    validation: &DataSet,
+    config: &TrainConfig,
+    name: &str,
+    start: Instant,
+    on_epoch: &mut dyn FnMut(&EpochStats),
+) -> Result<TrainOutcome> {
+    config.validate()?;
+    if train_set.samples.is_empty() || validation.samples.is_empty() {
+        return Err(NbrdfError::InvalidArgument(
+            "training needs at least one training and one validation sample".into(),
+        ));
+    }
     let mut trainer = Trainer::new(config.hidden, config.batch, config.adam, config.seed);
     let mut order: Vec<u32> = Vec::new();
     let mut best = (f64::INFINITY, 0usize, trainer.weights.p.clone());

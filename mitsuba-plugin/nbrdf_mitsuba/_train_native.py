@@ -1,0 +1,134 @@
+"""Loads the bundled ``libnbrdf_train`` (the trainer's C ABI, nbrdf-ffi/train) through cffi.
+
+Only :mod:`nbrdf_mitsuba.distill` imports this module: rendering loads ``libnbrdf_ffi`` alone,
+which carries no training code. The library is found as :mod:`nbrdf_mitsuba._native` finds its
+own: ``$NBRDF_TRAIN_LIBRARY`` if set, else the copy bundled into the package by its build
+(setup.py), with the header ``nbrdf_train.h`` beside it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import cffi
+import numpy as np
+
+from ._native import strip_preprocessor
+
+_HERE = Path(__file__).resolve().parent
+
+#: ``NbrdfTrainSampling`` values by name.
+SAMPLINGS = {"adaptive": 0, "uniform": 1}
+#: ``NbrdfTrainFold`` values by name (the names of nbrdf-core's ``RglFold``).
+FOLDS = {"as-measured": 0, "reciprocal-mean": 1}
+
+
+class TrainError(RuntimeError):
+    """A call into libnbrdf_train failed; ``status`` is the NbrdfTrainStatus code."""
+
+    def __init__(self, message: str, status: int):
+        super().__init__(message)
+        self.status = status
+
+
+def _library_name() -> str:
+    if sys.platform == "win32":
+        return "nbrdf_train.dll"
+    if sys.platform == "darwin":
+        return "libnbrdf_train.dylib"
+    return "libnbrdf_train.so"
+
+
+def library_path() -> Path:
+    override = os.environ.get("NBRDF_TRAIN_LIBRARY")
+    return Path(override) if override else _HERE / _library_name()
+
+
+def header_path() -> Path:
+    return _HERE / "nbrdf_train.h"
+
+
+def _load():
+    header, library = header_path(), library_path()
+    for path, what in ((header, "C header"), (library, "training library")):
+        if not path.is_file():
+            raise ImportError(
+                f"nbrdf_mitsuba: the {what} {path} is missing; reinstall the package "
+                "(`pip install ./mitsuba-plugin`, which runs `cargo build --release -p nbrdf-train-ffi`) "
+                "or point NBRDF_TRAIN_LIBRARY at a built libnbrdf_train"
+            )
+    ffi = cffi.FFI()
+    ffi.cdef(strip_preprocessor(header.read_text(encoding="utf-8")))
+    return ffi, ffi.dlopen(str(library))
+
+
+ffi, lib = _load()
+
+
+def last_error() -> str:
+    return ffi.string(lib.nbrdf_train_last_error()).decode("utf-8", "replace")
+
+
+def check(status: int) -> None:
+    if status != 0:
+        raise TrainError(last_error() or f"status {status}", status)
+
+
+def default_config():
+    """An ``NbrdfTrainConfig`` holding the trainer's defaults (those of ``nbrdf train``)."""
+    config = ffi.new("NbrdfTrainConfig *")
+    check(lib.nbrdf_train_config_default(config))
+    return config
+
+
+def for_anisotropy(config, anisotropic: bool, scale_samples: bool) -> None:
+    """Makes ``config`` one for an isotropic or anisotropic network, in place; with
+    ``scale_samples`` an anisotropic one gets the trainer's default factor times the samples."""
+    check(lib.nbrdf_train_config_for_anisotropy(config, int(anisotropic), int(scale_samples)))
+
+
+def sample_directions(config) -> tuple[np.ndarray, np.ndarray, int]:
+    """The trainer's planar (3, n) float32 ``view`` and ``light`` directions for ``config``
+    (training pairs first) and how many of the last are for validation."""
+    n_train, n_validation = ffi.new("size_t *"), ffi.new("size_t *")
+    check(lib.nbrdf_train_sample_counts(config, n_train, n_validation))
+    n = n_train[0] + n_validation[0]
+    view, light = np.zeros((3, n), np.float32), np.zeros((3, n), np.float32)
+    check(lib.nbrdf_train_directions(config, n, ffi.from_buffer("float[]", view, require_writable=True),
+                                     ffi.from_buffer("float[]", light, require_writable=True)))
+    return view, light, int(n_validation[0])
+
+
+def train_from_arrays(config, view: np.ndarray, light: np.ndarray, eval_cos: np.ndarray, n_validation: int,
+                      name: str, source: str, details: dict | None = None, swapped_eval_cos: np.ndarray | None = None,
+                      fold: str = "as-measured", on_epoch=None) -> str:
+    """The JSON text of a network trained on planar (3, n) arrays (see ``nbrdf_train_from_arrays``
+    in nbrdf_train.h); ``on_epoch(stats)`` gets an ``NbrdfEpochStats`` after every epoch."""
+    arrays = [np.ascontiguousarray(a, dtype=np.float32) for a in (view, light, eval_cos)]
+    n = arrays[0].shape[1]
+    if any(a.shape != (3, n) for a in arrays):
+        raise ValueError(f"expected planar (3, n) arrays, got shapes {[a.shape for a in arrays]}")
+    swapped = ffi.NULL
+    if swapped_eval_cos is not None:
+        swapped_array = np.ascontiguousarray(swapped_eval_cos, dtype=np.float32)
+        if swapped_array.shape != (3, n):
+            raise ValueError(f"expected planar (3, {n}) swapped values, got shape {swapped_array.shape}")
+        swapped = ffi.from_buffer("float[]", swapped_array)
+    callback = ffi.NULL
+    if on_epoch is not None:
+        @ffi.callback("void(void *, const NbrdfEpochStats *)")
+        def callback(_user, stats):
+            on_epoch(stats)
+    out = ffi.new("char **")
+    details_text = json.dumps(details).encode() if details is not None else ffi.NULL
+    status = lib.nbrdf_train_from_arrays(
+        config, FOLDS[fold], *(ffi.from_buffer("float[]", a) for a in arrays), swapped, n, n_validation,
+        name.encode(), source.encode(), details_text, callback, ffi.NULL, out)
+    check(status)
+    try:
+        return ffi.string(out[0]).decode()
+    finally:
+        lib.nbrdf_train_string_free(out[0])

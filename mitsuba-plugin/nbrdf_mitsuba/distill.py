@@ -1,0 +1,382 @@
+"""``python -m nbrdf_mitsuba.distill SOURCE -o OUT.nbrdf.json``: a neural BRDF learnt from any
+Mitsuba 3 BSDF.
+
+SOURCE is a scene XML file holding one BSDF (or a bare ``<bsdf>`` element), a JSON dictionary
+for ``mi.load_dict``, or an RGL measurement (``.bsdf``, loaded as Mitsuba's ``measured``). The
+trainer (``libnbrdf_train``, the C ABI of nbrdf-ffi/train) hands out its own sample directions;
+Mitsuba evaluates the BSDF there and the values go back to the trainer, which learns a network
+exactly as ``nbrdf train`` does (same sampling, loss, validation split and early stopping).
+
+* Values: ``bsdf.eval(ctx, si, wo)`` with ``si.wi = view`` and ``wo = light`` in the local frame
+  (``si.sh_frame`` the identity), which is ``f_r cos(theta_light)``: the very quantity the loss
+  compares (``ln(1 + f cos_light)``), so it is never divided by the cosine and nothing blows up
+  near the horizon.
+* Reciprocity: by default the network learns ``f(view, light)`` as the BSDF evaluates it (what
+  a scene with it renders); ``--reciprocal`` also evaluates the swapped pairs and learns
+  ``(f(v, l) + f(l, v)) / 2``, dropping pairs with a cosine below 0.01 (as ``nbrdf train
+  --rgl-fold reciprocal-mean`` does for RGL measurements).
+* A BSDF returning NaN or infinity is an error (its first bad direction is named); slightly
+  negative values are clamped to 0 by the trainer.
+* Anisotropy (``--anisotropy auto|on|off``, as ``nbrdf train``): an anisotropic network also
+  takes the half vector's azimuth ``phi_h`` (file format version 2) and is trained on the
+  trainer's anisotropic directions with 5x the default samples. ``auto`` makes one when the
+  BSDF's flags say ``Anisotropic`` or when its values change as view and light turn together
+  about the normal (:func:`rotation_difference`): a Python BSDF may not set the flag.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import _llvm
+
+_llvm.configure()  # must precede the first import of drjit
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+FORMATS = {".xml": "xml", ".json": "json", ".bsdf": "rgl"}
+#: Pairs per Mitsuba call in JIT variants (bounds the kernel's memory).
+CHUNK = 1 << 20
+
+
+class DistillError(Exception):
+    """A user error: printed as one line, exit status 1."""
+
+
+# -- the source ----------------------------------------------------------------------------------
+
+
+def pick_variant(requested: str | None = None) -> str:
+    """``requested``, else ``llvm_ad_rgb`` when Dr.Jit's LLVM backend works, else ``scalar_rgb``."""
+    available = mi.variants()
+    if requested:
+        if requested not in available:
+            raise DistillError(f"Mitsuba variant '{requested}' is not available (these are: {', '.join(available)})")
+        if not requested.endswith("_rgb"):
+            raise DistillError(f"variant '{requested}': the network learns RGB, use an *_rgb variant")
+        return requested
+    if "llvm_ad_rgb" in available and _llvm.problem() is None:
+        return "llvm_ad_rgb"
+    return "scalar_rgb"
+
+
+def top_level_bsdfs(root) -> list:
+    """The BSDFs of a loaded object that are not nested in another BSDF, in load order."""
+    if isinstance(root, mi.BSDF):
+        return [root]
+    hierarchy = mi.traverse(root).hierarchy
+    return [obj for obj, (parent, _) in hierarchy.items()
+            if isinstance(obj, mi.BSDF) and not isinstance(parent, mi.BSDF)]
+
+
+def load_bsdf(source: Path, bsdf_id: str | None = None):
+    """(BSDF, format) of SOURCE; a :class:`DistillError` for anything a user can fix."""
+    if not source.is_file():
+        raise DistillError(f"{source}: no such file")
+    kind = FORMATS.get(source.suffix.lower())
+    if kind is None:
+        raise DistillError(f"{source}: unknown kind of source (expected .xml, .json or .bsdf)")
+    try:
+        if kind == "rgl":
+            root = mi.load_dict({"type": "measured", "filename": str(source)})
+        elif kind == "json":
+            try:
+                spec = json.loads(source.read_text(encoding="utf-8"))
+            except (UnicodeDecodeError, json.JSONDecodeError) as error:
+                raise DistillError(f"{source}: not JSON: {error}") from None
+            if not isinstance(spec, dict) or "type" not in spec:
+                raise DistillError(f"{source}: expected a JSON object for mi.load_dict, with a \"type\"")
+            root = mi.load_dict(spec)
+        else:
+            root = mi.load_file(str(source))
+    except DistillError:
+        raise
+    except Exception as error:  # Mitsuba reports malformed scenes as plain exceptions
+        message = str(error).strip().splitlines()
+        raise DistillError(f"{source}: Mitsuba cannot load it: {message[-1] if message else error}") from None
+    bsdfs = top_level_bsdfs(root)
+    if bsdf_id is not None:
+        bsdfs = [b for b in bsdfs if b.id() == bsdf_id]
+        if not bsdfs:
+            raise DistillError(f"{source}: no BSDF with id '{bsdf_id}'")
+    if not bsdfs:
+        raise DistillError(f"{source}: holds no BSDF")
+    if len(bsdfs) > 1:
+        ids = ", ".join(b.id() or type(b).__name__ for b in bsdfs)
+        raise DistillError(f"{source}: holds {len(bsdfs)} BSDFs ({ids}); keep one, or pick one with --bsdf ID")
+    return bsdfs[0], kind
+
+
+# -- evaluation ----------------------------------------------------------------------------------
+
+
+def eval_cos(bsdf, view: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """Planar (3, n) float64 ``bsdf.eval`` (``f_r cos(theta_light)``) at planar (3, n) ``view``
+    (``si.wi``) and ``light`` (``wo``) in the local frame, in the current variant."""
+    ctx = mi.BSDFContext()
+    n = view.shape[1]
+    out = np.empty((3, n))
+    if dr.is_jit_v(mi.Float):
+        for start in range(0, n, CHUNK):
+            stop = min(start + CHUNK, n)
+            si = dr.zeros(mi.SurfaceInteraction3f, stop - start)
+            si.sh_frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
+            si.n = mi.Normal3f(0, 0, 1)
+            si.uv = mi.Point2f(0.5, 0.5)
+            si.wi = mi.Vector3f(np.ascontiguousarray(view[:, start:stop], dtype=np.float32))
+            value = bsdf.eval(ctx, si, mi.Vector3f(np.ascontiguousarray(light[:, start:stop], dtype=np.float32)))
+            out[:, start:stop] = np.asarray(value.numpy(), dtype=np.float64).reshape(3, -1)
+        return out
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.sh_frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
+    si.n = mi.Normal3f(0, 0, 1)
+    si.uv = mi.Point2f(0.5, 0.5)
+    for i in range(n):
+        si.wi = mi.Vector3f(*map(float, view[:, i]))
+        out[:, i] = np.asarray(bsdf.eval(ctx, si, mi.Vector3f(*map(float, light[:, i]))), dtype=np.float64)
+    return out
+
+
+def check_finite(values: np.ndarray, view: np.ndarray, light: np.ndarray, what: str) -> None:
+    bad = ~np.all(np.isfinite(values), axis=0)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise DistillError(
+            f"the BSDF returned {int(bad.sum())} {what} that are not finite numbers (first: {values[:, i].tolist()} "
+            f"at view {view[:, i].tolist()}, light {light[:, i].tolist()}); a BSDF must evaluate to finite values")
+
+
+# -- anisotropy ----------------------------------------------------------------------------------
+
+#: ``--anisotropy auto`` calls a BSDF anisotropic above this :func:`rotation_difference`. An
+#: isotropic BSDF differs by float32 rounding only (about 1e-6; a few 1e-4 for a very sharp
+#: highlight); roughconductor with alpha_u 0.05, alpha_v 0.3 by about 0.5.
+ROTATION_TOLERANCE = 1e-2
+ANISOTROPY = ("auto", "on", "off")
+#: Random pairs of the rotation check.
+ROTATION_PAIRS = 4096
+
+
+def rotation_difference(bsdf, pairs: int = ROTATION_PAIRS, seed: int = 7) -> float:
+    """``sum |f(R v, R l) - f(v, l)| / sum (f(R v, R l) + f(v, l))`` (all channels) over random
+    view/light pairs above the horizon, each turned by its own random angle about the normal:
+    0 for an isotropic BSDF, up to 1 for one whose highlight depends on the azimuth."""
+    rng = np.random.default_rng(seed)
+
+    def hemisphere(n):
+        cos = rng.uniform(0.05, 1.0, n)  # not grazing: a horizon cut would dominate rounding
+        sin, phi = np.sqrt(1 - cos * cos), rng.uniform(0, 2 * np.pi, n)
+        return np.stack([sin * np.cos(phi), sin * np.sin(phi), cos])
+
+    view, light = hemisphere(pairs), hemisphere(pairs)
+    # Half the pairs near the mirror direction, where a highlight's shape shows.
+    mirror = pairs // 2
+    light[:, :mirror] = view[:, :mirror] * np.array([[-1], [-1], [1]])
+    light[:2, :mirror] += rng.normal(0, 0.15, (2, mirror))
+    light[2, :mirror] = np.abs(light[2, :mirror]) + 0.05
+    light /= np.linalg.norm(light, axis=0)
+    angle = rng.uniform(0.3, 2 * np.pi - 0.3, pairs)
+    c, s = np.cos(angle), np.sin(angle)
+
+    def turn(d):
+        return np.stack([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]])
+
+    a, b = eval_cos(bsdf, view, light), eval_cos(bsdf, turn(view), turn(light))
+    check_finite(a, view, light, "values")
+    check_finite(b, turn(view), turn(light), "values")
+    total = float(np.sum(np.abs(a) + np.abs(b)))
+    return 0.0 if total == 0 else float(np.sum(np.abs(a - b)) / total)
+
+
+def decide_anisotropy(bsdf, requested: str) -> tuple[bool, dict]:
+    """Whether to train an anisotropic network for ``--anisotropy requested``, and why (stored in
+    the provenance)."""
+    if requested not in ANISOTROPY:
+        raise DistillError(f"--anisotropy {requested!r}: expected one of {', '.join(ANISOTROPY)}")
+    flagged = bool(bsdf.flags() & mi.BSDFFlags.Anisotropic)
+    why = {"requested": requested, "bsdf_flag_anisotropic": flagged}
+    if requested != "auto":
+        return requested == "on", why
+    difference = rotation_difference(bsdf)
+    why["rotation_difference"] = round(difference, 6)
+    return flagged or difference > ROTATION_TOLERANCE, why
+
+
+# -- the command ---------------------------------------------------------------------------------
+
+
+def network_name(output: Path) -> str:
+    """The output's file name without extensions (``gold.nbrdf.json`` gives ``gold``)."""
+    return output.name.split(".")[0] or "nbrdf"
+
+
+def config_from(args):
+    from . import _train_native as native
+
+    config = native.default_config()
+    for field, value in (("samples", args.samples), ("max_epochs", args.epochs), ("hidden", args.hidden),
+                         ("batch", args.batch), ("seed", args.seed), ("threads", args.threads),
+                         ("learning_rate", args.learning_rate), ("target_loss", args.target_loss)):
+        if value is not None:
+            option = {"max_epochs": "--epochs"}.get(field, f"--{field.replace('_', '-')}")
+            try:
+                if isinstance(value, int) and value < 0:
+                    raise OverflowError
+                setattr(config, field, value)
+            except OverflowError:
+                raise DistillError(f"{option} {value} is out of range") from None
+    if args.sampling is not None:
+        config.sampling = native.SAMPLINGS[args.sampling]
+    return config
+
+
+def distill(args) -> dict:
+    """Runs the command; returns a summary (printed by :func:`main`)."""
+    output = args.output
+    if output.is_dir():
+        raise DistillError(f"{output}: is a directory; name the network file, e.g. {output / 'out.nbrdf.json'}")
+    if not output.parent.is_dir() or not os.access(output.parent, os.W_OK):
+        raise DistillError(f"{output}: cannot write there (the folder {output.parent} does not exist or is not writable)")
+    variant = pick_variant(args.variant)
+    mi.set_variant(variant)
+    bsdf, kind = load_bsdf(args.source, args.bsdf)
+    from . import _train_native as native
+
+    config = config_from(args)
+    anisotropic, anisotropy = decide_anisotropy(bsdf, args.anisotropy)
+    try:
+        # The trainer's default sample count grows for anisotropic networks; a user's stays.
+        native.for_anisotropy(config, anisotropic, scale_samples=args.samples is None)
+    except native.TrainError as error:
+        raise DistillError(str(error)) from None
+    start = time.perf_counter()
+    try:
+        view, light, n_validation = native.sample_directions(config)
+    except native.TrainError as error:
+        raise DistillError(str(error)) from None
+    values = eval_cos(bsdf, view, light)
+    check_finite(values, view, light, "values")
+    swapped = None
+    if args.reciprocal:
+        swapped = eval_cos(bsdf, light, view)
+        check_finite(swapped, light, view, "swapped values")
+    evaluation_seconds = time.perf_counter() - start
+    details = {
+        "renderer": f"Mitsuba {mi.__version__}",
+        "variant": variant,
+        "format": kind,
+        "file": str(args.source),
+        "bsdf": str(bsdf),
+        "values": "BSDF.eval(si.wi = view, wo = light) = f_r cos(theta_light), local frame",
+        "evaluation_seconds": round(evaluation_seconds, 3),
+        "anisotropy": anisotropy,
+    }
+    progress = _progress(args.quiet, config.max_epochs)
+    try:
+        text = native.train_from_arrays(
+            config, view, light, values, n_validation, name=args.name or network_name(output),
+            source=f"Mitsuba BSDF {args.source}", details=details, swapped_eval_cos=swapped,
+            fold="reciprocal-mean" if args.reciprocal else "as-measured", on_epoch=progress.update)
+    except native.TrainError as error:
+        raise DistillError(str(error)) from None
+    finally:
+        progress.close()
+    try:
+        output.write_text(text, encoding="utf-8")
+    except OSError as error:
+        raise DistillError(f"{output}: cannot write the network: {error.strerror or error}") from None
+    provenance = json.loads(text)["provenance"]
+    return {
+        "output": output, "pairs": view.shape[1], "validation": n_validation, "variant": variant,
+        "evaluation_seconds": evaluation_seconds, "seconds": time.perf_counter() - start,
+        "epochs": provenance["epochs"], "loss": provenance["best_validation_loss"],
+        "anisotropic": anisotropic,
+    }
+
+
+class _progress:
+    """A tqdm bar over the epochs when tqdm is installed and the output is a terminal."""
+
+    def __init__(self, quiet: bool, epochs: int):
+        self.bar = None
+        if not quiet and sys.stderr.isatty():
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                return
+            self.bar = tqdm(total=epochs, unit="epoch", desc="training")
+
+    def update(self, stats) -> None:
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix(loss=f"{stats.validation_loss:.3e}")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m nbrdf_mitsuba.distill",
+        description="Train a neural BRDF (*.nbrdf.json) from any Mitsuba 3 BSDF: Mitsuba evaluates it at the "
+                    "trainer's sample directions, and nbrdf's trainer learns the values (as `nbrdf train`).")
+    p.add_argument("source", type=Path,
+                   help="the BSDF: a scene .xml holding one BSDF (or a bare <bsdf> element), a .json dictionary "
+                        "for mi.load_dict, or an RGL measurement .bsdf")
+    p.add_argument("-o", "--output", type=Path, required=True, help="the network file to write, e.g. OUT.nbrdf.json")
+    p.add_argument("--name", help="name stored in the network (default: the output's file name without extensions)")
+    p.add_argument("--bsdf", metavar="ID", help="the id of the BSDF to distil when SOURCE holds several")
+    p.add_argument("--variant", help="Mitsuba variant, an *_rgb one (default: llvm_ad_rgb when available, else "
+                                     "scalar_rgb, which is much slower)")
+    p.add_argument("--reciprocal", action="store_true",
+                   help="learn (f(view, light) + f(light, view)) / 2 instead of the BSDF as it evaluates")
+    p.add_argument("--anisotropy", default="auto", choices=ANISOTROPY,
+                   help="an anisotropic network (its input carries the half vector's azimuth; 5x the default "
+                        "samples): on, off, or auto (default): when the BSDF's flags say Anisotropic or its values "
+                        "change as view and light turn together about the normal")
+    p.add_argument("--samples", type=int, help="training pairs (default: the trainer's, 800000; 4000000 for "
+                                               "an anisotropic network)")
+    p.add_argument("--epochs", type=int, help="most epochs (default: the trainer's, 300, with early stopping)")
+    p.add_argument("--hidden", type=int, help="hidden layer width (default: 21, the paper's)")
+    p.add_argument("--batch", type=int, help="mini-batch size (default: 512)")
+    p.add_argument("--learning-rate", type=float, help="Adam's step size (default: 1e-3)")
+    p.add_argument("--target-loss", type=float, help="stop once the validation loss is at most this (default: 2e-4)")
+    p.add_argument("--sampling", choices=["adaptive", "uniform"], help="how pairs are drawn (default: adaptive)")
+    p.add_argument("--seed", type=int, help="random seed (default: 0)")
+    p.add_argument("--threads", type=int, help="training threads (default: one per core)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        summary = distill(args)
+    except DistillError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    except ImportError as error:  # the training library is missing
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:  # delivered once the running Mitsuba or trainer call returns
+        print("error: interrupted; no network written", file=sys.stderr)
+        return 130
+    kind = "anisotropic" if summary["anisotropic"] else "isotropic"
+    print(f"wrote {summary['output']} ({kind}): {summary['pairs'] - summary['validation']} samples "
+          f"(+{summary['validation']} validation) evaluated by Mitsuba ({summary['variant']}) in "
+          f"{summary['evaluation_seconds']:.1f} s; {summary['epochs']} epochs, best validation loss "
+          f"{summary['loss']:.4e}; {summary['seconds']:.1f} s in all")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

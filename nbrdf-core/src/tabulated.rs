@@ -1,0 +1,547 @@
+//! A data-driven sampler: per band of view elevations, a piecewise-constant density over the
+//! half vector, tabulated from the material itself (`f_r cos` times the Jacobian), mixed with a
+//! little cosine sampling so the pdf is positive wherever `f_r cos` can be.
+//!
+//! Half-vector parametrisation: `t = sqrt(theta_h / (pi/2))` (dense near the normal, like the
+//! MERL grid and [`crate::lobe_fit`]'s quadrature, so sharp peaks get bins of their own) and
+//! `phi = phi_h - phi_v` over `[0, 2 pi)` (the material is isotropic). Bins get the mass of
+//! `f_r cos` (mean over RGB) through the half-vector Jacobian; within a bin the half vector is
+//! uniform in solid angle (no singularity at the normal). The row is chosen deterministically
+//! from the view's elevation, `floor(theta_v / (pi/2) * rows)`, and nothing is interpolated
+//! across rows, so the density of a sample is exactly
+//!
+//! `pdf(l) = c l.z / pi + (1 - c) P_row(bin) / Ω(bin) / (4 v.h)`
+//!
+//! with `Ω(bin) = (phi_1 - phi_0) (cos theta_0 - cos theta_1)` the bin's solid angle and
+//! `dω_l = 4 v.h dω_h`. Half vectors whose reflection falls below the horizon are rejected
+//! (pdf 0), like the Blinn-Phong lobes.
+//!
+//! The table is built when a material is loaded (a few milliseconds for a network), so the file
+//! format carries no table; `nbrdf fit-phong` stores only which strategy samples best.
+//!
+//! Twin: `mitsuba-plugin/nbrdf_mitsuba/jit.py` `TracedTable` (sampling and pdf from the exported
+//! [`TabulatedSampler::tables`]); held together by `tests/test_tabulated.py`.
+
+use crate::brdf::Brdf;
+use crate::error::{NbrdfError, Result};
+use crate::sampling::cosine_hemisphere;
+#[cfg(feature = "train")]
+use crate::train::dataset::TargetFn;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
+
+/// Table size and mixture weight of a [`TabulatedSampler`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TableConfig {
+    /// Bands of view elevation, uniform in `theta_v` over `[0, pi/2)`.
+    pub rows: usize,
+    /// Bins in `t = sqrt(theta_h / (pi/2))` and in `phi_h - phi_v` over `[0, 2 pi)` (even).
+    pub theta_bins: usize,
+    pub phi_bins: usize,
+    /// Points per bin side when averaging the material over a bin.
+    pub subsamples: usize,
+    /// Weight of the defensive cosine component.
+    pub cosine_weight: f64,
+}
+
+impl Default for TableConfig {
+    fn default() -> Self {
+        TableConfig {
+            rows: 16,
+            theta_bins: 32,
+            phi_bins: 32,
+            subsamples: 3,
+            cosine_weight: 0.1,
+        }
+    }
+}
+
+/// The tabulated half-vector sampler (module docs). Immutable once built.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TabulatedSampler {
+    rows: usize,
+    theta_bins: usize,
+    phi_bins: usize,
+    cosine_weight: f64,
+    /// Probability of each bin, row-major `[row][t][phi]`, summing to 1 per row.
+    mass: Vec<f64>,
+    /// Per row, the CDF over the `t` bins (`theta_bins + 1` entries, 0 to 1).
+    marginal_cdf: Vec<f64>,
+    /// Per row and `t` bin, the CDF over the `phi` bins (`phi_bins + 1` entries, 0 to 1).
+    conditional_cdf: Vec<f64>,
+}
+
+/// The exported arrays of a [`TabulatedSampler`] (float32 copies for the Dr.Jit path).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableArrays {
+    pub rows: usize,
+    pub theta_bins: usize,
+    pub phi_bins: usize,
+    pub cosine_weight: f64,
+    pub mass: Vec<f64>,
+    pub marginal_cdf: Vec<f64>,
+    pub conditional_cdf: Vec<f64>,
+}
+
+/// Mean over RGB of `f_r(view, light)`, the quantity the table follows.
+pub type MeanBrdf<'a> = dyn Fn(DVec3, DVec3) -> f64 + Sync + 'a;
+
+/// The elevation row of a unit view direction (`v.z > 0`).
+fn row_of(v: DVec3, rows: usize) -> usize {
+    let theta_v = v.x.hypot(v.y).atan2(v.z);
+    ((theta_v / FRAC_PI_2 * rows as f64) as usize).min(rows - 1)
+}
+
+/// The index `i` of the bin of `cdf` (`bins + 1` entries) holding `u`: the first `i` with
+/// `cdf[i + 1] > u` (which skips empty bins), at most `bins - 1`; and `u` rescaled into that
+/// bin. The Dr.Jit twin does the same binary search (`jit.py` `TracedTable`).
+fn search(cdf: &[f64], u: f64) -> (usize, f64) {
+    let bins = cdf.len() - 1;
+    let i = cdf[1..].partition_point(|&c| c <= u).min(bins - 1);
+    let width = cdf[i + 1] - cdf[i];
+    let frac = if width > 0.0 {
+        ((u - cdf[i]) / width).clamp(0.0, 1.0)
+    } else {
+        0.5
+    };
+    (i, frac)
+}
+
+/// `1 - cos(theta_h)` at the edge `k` of the `t` bins (`theta_h = pi/2 (k/bins)^2`), as
+/// `2 sin^2(theta_h / 2)`, which keeps its precision for the tiny bins near the normal.
+fn bin_one_minus_cos(k: usize, bins: usize) -> f64 {
+    let t = k as f64 / bins as f64;
+    let s = (0.5 * FRAC_PI_2 * t * t).sin();
+    2.0 * s * s
+}
+
+/// Normalised CDF of non-negative weights (`len + 1` entries); uniform when they sum to 0.
+fn cdf_of(weights: &[f64]) -> Vec<f64> {
+    let total: f64 = weights.iter().sum();
+    let mut cdf = Vec::with_capacity(weights.len() + 1);
+    cdf.push(0.0);
+    let mut acc = 0.0;
+    for (k, &w) in weights.iter().enumerate() {
+        acc += if total > 0.0 {
+            w / total
+        } else {
+            1.0 / weights.len() as f64
+        };
+        cdf.push(if k + 1 == weights.len() {
+            1.0
+        } else {
+            acc.min(1.0)
+        });
+    }
+    cdf
+}
+
+impl TabulatedSampler {
+    /// Tabulates `f_r cos` of a BRDF (mean over RGB) for sampling.
+    pub fn from_brdf(brdf: &dyn Brdf, config: &TableConfig) -> Result<Self> {
+        let f = |v: DVec3, l: DVec3| {
+            let rgb = brdf.eval(v.as_vec3(), l.as_vec3());
+            rgb.iter().map(|&c| f64::from(c.max(0.0))).sum::<f64>() / 3.0
+        };
+        Self::build(&f, config)
+    }
+
+    /// Tabulates a material given by Rusinkiewicz angles (what `nbrdf fit-phong` reads).
+    #[cfg(feature = "train")]
+    pub fn from_target(target: &TargetFn<'_>, config: &TableConfig) -> Result<Self> {
+        let f = |v: DVec3, l: DVec3| {
+            let a = crate::coords::to_rusinkiewicz(v, l);
+            target(&a).map_or(0.0, |rgb| rgb.iter().map(|c| c.max(0.0)).sum::<f64>() / 3.0)
+        };
+        Self::build(&f, config)
+    }
+
+    /// Tabulates `mean_f(v, l) l.z 4 (v.h) pi t sin(theta_h)` averaged over each bin and over
+    /// views across each row's band (views lie in the xz plane).
+    pub fn build(mean_f: &MeanBrdf<'_>, config: &TableConfig) -> Result<Self> {
+        let TableConfig {
+            rows,
+            theta_bins,
+            phi_bins,
+            subsamples,
+            cosine_weight,
+        } = *config;
+        if rows == 0 || theta_bins == 0 || phi_bins < 2 || phi_bins % 2 != 0 || subsamples == 0 {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "tabulated sampler: needs rows, theta bins, an even number of phi bins and \
+                 subsamples (got {config:?})"
+            )));
+        }
+        if !(0.0..1.0).contains(&cosine_weight) {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "tabulated sampler: cosine weight {cosine_weight} must be in [0, 1)"
+            )));
+        }
+        let half = phi_bins / 2;
+        let (dt, dphi) = (1.0 / theta_bins as f64, TAU / phi_bins as f64);
+        let cells: Vec<f64> = (0..rows * theta_bins * half)
+            .into_par_iter()
+            .map(|k| {
+                let (r, i, j) = (k / (theta_bins * half), (k / half) % theta_bins, k % half);
+                let mut sum = 0.0;
+                // Views across the whole band: a bin whose reflection is above the horizon for
+                // any view of the row gets mass (at the band's centre alone, grazing rows would
+                // leave bins that lower views reach to the cosine component only).
+                for c in 0..subsamples {
+                    let theta_v =
+                        (r as f64 + (c as f64 + 0.5) / subsamples as f64) / rows as f64 * FRAC_PI_2;
+                    let v = DVec3::new(theta_v.sin(), 0.0, theta_v.cos());
+                    for a in 0..subsamples {
+                        let t = (i as f64 + (a as f64 + 0.5) / subsamples as f64) * dt;
+                        let theta_h = FRAC_PI_2 * t * t;
+                        let (sin_h, cos_h) = theta_h.sin_cos();
+                        for b in 0..subsamples {
+                            let phi = (j as f64 + (b as f64 + 0.5) / subsamples as f64) * dphi;
+                            let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+                            let v_dot_h = v.dot(h);
+                            let l = 2.0 * v_dot_h * h - v;
+                            if v_dot_h <= 0.0 || l.z <= 0.0 {
+                                continue;
+                            }
+                            let g = mean_f(v, l) * l.z * 4.0 * v_dot_h * PI * t * sin_h;
+                            if g.is_finite() && g > 0.0 {
+                                sum += g;
+                            }
+                        }
+                    }
+                }
+                sum / subsamples.pow(3) as f64
+            })
+            .collect();
+        // Isotropy: bin j over [0, pi) and bin phi_bins - 1 - j over [pi, 2 pi) are mirror images.
+        let mut weights = vec![0.0; rows * theta_bins * phi_bins];
+        for r in 0..rows {
+            for i in 0..theta_bins {
+                for j in 0..half {
+                    let c = cells[(r * theta_bins + i) * half + j];
+                    let base = (r * theta_bins + i) * phi_bins;
+                    weights[base + j] = c;
+                    weights[base + phi_bins - 1 - j] = c;
+                }
+            }
+        }
+        Ok(Self::from_weights(
+            rows,
+            theta_bins,
+            phi_bins,
+            cosine_weight,
+            &weights,
+        ))
+    }
+
+    /// The sampler of non-negative bin weights `[row][t][phi]` (rows that sum to 0 become
+    /// uniform in `(t, phi)`).
+    pub fn from_weights(
+        rows: usize,
+        theta_bins: usize,
+        phi_bins: usize,
+        cosine_weight: f64,
+        weights: &[f64],
+    ) -> Self {
+        let row_len = theta_bins * phi_bins;
+        let mut mass = Vec::with_capacity(rows * row_len);
+        let mut marginal_cdf = Vec::with_capacity(rows * (theta_bins + 1));
+        let mut conditional_cdf = Vec::with_capacity(rows * theta_bins * (phi_bins + 1));
+        for row in weights.chunks_exact(row_len).take(rows) {
+            let clean: Vec<f64> = row
+                .iter()
+                .map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 })
+                .collect();
+            let total: f64 = clean.iter().sum();
+            let marginal: Vec<f64> = clean
+                .chunks_exact(phi_bins)
+                .map(|c| c.iter().sum())
+                .collect();
+            marginal_cdf.extend(cdf_of(&marginal));
+            for (i, c) in clean.chunks_exact(phi_bins).enumerate() {
+                conditional_cdf.extend(cdf_of(c));
+                // What the two CDFs sample: P(t bin) P(phi bin | t bin).
+                let m = &marginal_cdf[marginal_cdf.len() - theta_bins - 1..];
+                let p_t = m[i + 1] - m[i];
+                let cc = &conditional_cdf[conditional_cdf.len() - phi_bins - 1..];
+                for j in 0..phi_bins {
+                    mass.push(p_t * (cc[j + 1] - cc[j]));
+                }
+            }
+            debug_assert!(total >= 0.0);
+        }
+        TabulatedSampler {
+            rows,
+            theta_bins,
+            phi_bins,
+            cosine_weight,
+            mass,
+            marginal_cdf,
+            conditional_cdf,
+        }
+    }
+
+    /// The arrays the Dr.Jit twin samples from.
+    pub fn tables(&self) -> TableArrays {
+        TableArrays {
+            rows: self.rows,
+            theta_bins: self.theta_bins,
+            phi_bins: self.phi_bins,
+            cosine_weight: self.cosine_weight,
+            mass: self.mass.clone(),
+            marginal_cdf: self.marginal_cdf.clone(),
+            conditional_cdf: self.conditional_cdf.clone(),
+        }
+    }
+
+    /// Weight of the defensive cosine component.
+    pub fn cosine_weight(&self) -> f64 {
+        self.cosine_weight
+    }
+
+    /// The direction before rounding to float32 (`v` unit, above the horizon; `u` in [0, 1]).
+    pub(crate) fn sample_direction(&self, v: DVec3, [u0, u1, u2]: [f64; 3]) -> DVec3 {
+        if u0 < self.cosine_weight {
+            return cosine_hemisphere(u1, u2);
+        }
+        let r = row_of(v, self.rows);
+        let (nt, np) = (self.theta_bins, self.phi_bins);
+        let (i, ft) = search(&self.marginal_cdf[r * (nt + 1)..(r + 1) * (nt + 1)], u1);
+        let c0 = (r * nt + i) * (np + 1);
+        let (j, fp) = search(&self.conditional_cdf[c0..c0 + np + 1], u2);
+        // Uniform in solid angle within the bin: 1 - cos(theta_h) uniform between its edges.
+        let (o0, o1) = (bin_one_minus_cos(i, nt), bin_one_minus_cos(i + 1, nt));
+        let one_minus_cos = o0 + ft * (o1 - o0);
+        let cos_h = 1.0 - one_minus_cos;
+        let sin_h = (one_minus_cos * (1.0 + cos_h)).max(0.0).sqrt();
+        let phi = (j as f64 + fp) / np as f64 * TAU + v.y.atan2(v.x);
+        let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+        2.0 * v.dot(h) * h - v
+    }
+
+    /// Density per unit solid angle of `l` given `v` (both unit, above the horizon).
+    pub(crate) fn density_f64(&self, v: DVec3, l: DVec3) -> f64 {
+        let cosine = self.cosine_weight * l.z * FRAC_1_PI;
+        let sum = v + l;
+        let len = sum.length();
+        if len.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return cosine;
+        }
+        let h = sum / len;
+        let v_dot_h = v.dot(h);
+        let sin_h = h.x.hypot(h.y);
+        if v_dot_h <= 0.0 || h.z <= 0.0 {
+            return cosine;
+        }
+        let theta_h = sin_h.atan2(h.z);
+        let t = (theta_h / FRAC_PI_2).sqrt();
+        let (nt, np) = (self.theta_bins, self.phi_bins);
+        let mut phi = (h.y.atan2(h.x) - v.y.atan2(v.x)).rem_euclid(TAU);
+        if phi >= TAU {
+            phi = 0.0;
+        }
+        let i = ((t * nt as f64) as usize).min(nt - 1);
+        let j = ((phi / TAU * np as f64) as usize).min(np - 1);
+        let r = row_of(v, self.rows);
+        let p = self.mass[(r * nt + i) * np + j];
+        let solid_angle =
+            (bin_one_minus_cos(i + 1, nt) - bin_one_minus_cos(i, nt)) * TAU / np as f64;
+        cosine + (1.0 - self.cosine_weight) * p / solid_angle / (4.0 * v_dot_h)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::network::Nbrdf;
+    use crate::rng::SplitMix64;
+    use crate::sampling::{uniform_hemisphere, SamplingStrategy};
+    use std::sync::Arc;
+
+    fn dir(theta_deg: f64, phi: f64) -> DVec3 {
+        let t = theta_deg.to_radians();
+        DVec3::new(t.sin() * phi.cos(), t.sin() * phi.sin(), t.cos())
+    }
+
+    /// A Blinn-Phong-like reflectance of exponent `n` over a diffuse base `kd`.
+    fn phong(kd: f64, ks: f64, n: f64) -> impl Fn(DVec3, DVec3) -> f64 + Sync {
+        move |v: DVec3, l: DVec3| {
+            if v.z <= 0.0 || l.z <= 0.0 {
+                return 0.0;
+            }
+            let h = (v + l).normalize();
+            kd / PI + ks * (n + 2.0) / TAU * h.z.max(0.0).powf(n)
+        }
+    }
+
+    fn strategy(f: &MeanBrdf<'_>) -> SamplingStrategy {
+        SamplingStrategy::Tabulated(Arc::new(
+            TabulatedSampler::build(f, &TableConfig::default()).unwrap(),
+        ))
+    }
+
+    /// Integral of the pdf over the hemisphere by quadrature on a `theta` x `phi` grid dense
+    /// near the mirror direction of `v` (midpoints in `t` of the half vector, as the table).
+    fn pdf_integral(s: &SamplingStrategy, v: DVec3) -> f64 {
+        // Over the half vector: pdf(l) 4 (v.h) dω_h, dω_h = pi t sin(theta_h) dt dphi.
+        let (nt, np) = (1200, 720);
+        let mut total = 0.0;
+        for i in 0..nt {
+            let t = (i as f64 + 0.5) / nt as f64;
+            let theta_h = FRAC_PI_2 * t * t;
+            let (sin_h, cos_h) = theta_h.sin_cos();
+            for j in 0..np {
+                let phi = (j as f64 + 0.5) / np as f64 * TAU;
+                let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+                let vh = v.dot(h);
+                let l = 2.0 * vh * h - v;
+                if vh <= 0.0 || l.z <= 0.0 {
+                    continue;
+                }
+                total += s.pdf_f64(v, l) * 4.0 * vh * PI * t * sin_h / nt as f64 * TAU / np as f64;
+            }
+        }
+        total
+    }
+
+    #[test]
+    fn density_integrates_to_the_mass_above_the_horizon() {
+        let glossy = phong(0.2, 0.8, 300.0);
+        let s = strategy(&glossy);
+        for v in [dir(0.0, 0.0), dir(40.0, 1.0), dir(80.0, -2.0)] {
+            let total = pdf_integral(&s, v);
+            // The table puts no mass below the horizon except in bins straddling it.
+            assert!(total <= 1.0 + 2e-3 && total > 0.97, "{v}: {total}");
+        }
+    }
+
+    #[test]
+    fn sampled_pdf_equals_pdf_and_is_positive() {
+        let mut rng = SplitMix64::from_state(4);
+        for f in [phong(0.5, 0.0, 1.0), phong(0.05, 1.0, 2e4)] {
+            let s = strategy(&f);
+            let mut valid = 0;
+            for _ in 0..4000 {
+                let v = uniform_hemisphere(rng.next_f64(), rng.next_f64()).as_vec3();
+                let u = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+                let d = s.sample(v, u);
+                assert!(d.light.is_finite() && d.pdf.is_finite() && d.pdf >= 0.0);
+                assert_eq!(d.pdf, s.pdf(v, d.light));
+                valid += usize::from(d.pdf > 0.0);
+            }
+            assert!(valid > 3000, "{valid}");
+        }
+    }
+
+    /// Mean of `g` under the sampler against quadrature of `g pdf`.
+    #[test]
+    fn sample_means_match_pdf_quadrature() {
+        let sharp = phong(0.1, 1.0, 2000.0);
+        let s = strategy(&sharp);
+        for v in [dir(30.0, 0.5), dir(87.0, 2.0)] {
+            let r = DVec3::new(-v.x, -v.y, v.z);
+            let tests: [&dyn Fn(DVec3) -> f64; 3] = [
+                &|l: DVec3| l.z + 0.5 * l.x * l.x,
+                &|l: DVec3| f64::from(u8::from(l.dot(r) > 0.99)),
+                &|l: DVec3| f64::from(u8::from(l.x > 0.3 && l.y > 0.0)),
+            ];
+            for (k, g) in tests.iter().enumerate() {
+                let (nt, np) = (1200, 720);
+                let mut exact = 0.0;
+                for i in 0..nt {
+                    let t = (i as f64 + 0.5) / nt as f64;
+                    let theta_h = FRAC_PI_2 * t * t;
+                    let (sin_h, cos_h) = theta_h.sin_cos();
+                    for j in 0..np {
+                        let phi = (j as f64 + 0.5) / np as f64 * TAU;
+                        let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+                        let vh = v.dot(h);
+                        let l = 2.0 * vh * h - v;
+                        if vh > 0.0 && l.z > 0.0 {
+                            exact += g(l) * s.pdf_f64(v, l) * 4.0 * vh * PI * t * sin_h / nt as f64
+                                * TAU
+                                / np as f64;
+                        }
+                    }
+                }
+                let mut rng = SplitMix64::from_state(40 + k as u64);
+                let n = 200_000;
+                let (mut m1, mut m2) = (0.0, 0.0);
+                for _ in 0..n {
+                    let d = s.sample(
+                        v.as_vec3(),
+                        [rng.next_f32(), rng.next_f32(), rng.next_f32()],
+                    );
+                    let x = if d.pdf > 0.0 {
+                        g(d.light.as_dvec3())
+                    } else {
+                        0.0
+                    };
+                    m1 += x;
+                    m2 += x * x;
+                }
+                let mean = m1 / n as f64;
+                let sigma = ((m2 / n as f64 - mean * mean) / n as f64).sqrt();
+                assert!(
+                    (mean - exact).abs() < 5.0 * sigma + 2e-3,
+                    "v {v} test {k}: MC {mean} +- {sigma} vs quadrature {exact}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_network_table_builds_and_samples() {
+        let net = Nbrdf::random("n", 21, 7);
+        let t = TabulatedSampler::from_brdf(&net, &TableConfig::default()).unwrap();
+        let a = t.tables();
+        assert_eq!(a.mass.len(), 16 * 32 * 32);
+        for row in a.mass.chunks_exact(32 * 32) {
+            assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(a.marginal_cdf.len(), 16 * 33);
+        for row in a.marginal_cdf.chunks_exact(33) {
+            assert!(row[0] == 0.0 && row[32] == 1.0);
+            assert!(row.windows(2).all(|w| w[0] <= w[1]));
+        }
+        let s = SamplingStrategy::Tabulated(Arc::new(t));
+        let mut rng = SplitMix64::from_state(8);
+        let v = dir(50.0, 0.3).as_vec3();
+        let valid = (0..1000)
+            .filter(|_| {
+                let d = s.sample(v, [rng.next_f32(), rng.next_f32(), rng.next_f32()]);
+                assert_eq!(d.pdf, s.pdf(v, d.light));
+                d.pdf > 0.0
+            })
+            .count();
+        assert!(valid > 800, "{valid}");
+    }
+
+    #[test]
+    fn bad_configs_are_errors() {
+        let f = phong(0.5, 0.0, 1.0);
+        for config in [
+            TableConfig {
+                rows: 0,
+                ..TableConfig::default()
+            },
+            TableConfig {
+                phi_bins: 7,
+                ..TableConfig::default()
+            },
+            TableConfig {
+                cosine_weight: 1.0,
+                ..TableConfig::default()
+            },
+        ] {
+            assert!(TabulatedSampler::build(&f, &config).is_err());
+        }
+        // A black material gives equal bin masses, still a density (part of its
+        // mass reflects below the horizon).
+        let black = |_: DVec3, _: DVec3| 0.0;
+        let s = strategy(&black);
+        let total = pdf_integral(&s, dir(20.0, 0.0));
+        assert!(total > 0.3 && total <= 1.0 + 1e-3, "{total}");
+    }
+}

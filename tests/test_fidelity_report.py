@@ -1,0 +1,148 @@
+"""The fidelity report's fitting code against closed forms and independent implementations, and
+the report end to end on a tiny setting.
+
+* The NumPy GGX conductor against Mitsuba's ``roughconductor`` ``eval``; Mitsuba's
+  ``roughplastic`` is linear in its two reflectances (what the roughplastic fit relies on).
+* The NumPy ABC and SGD forms against the Rust ones: tables written by ``nbrdf synth`` hold
+  ``f_r`` at their cell centres.
+* Fits recover the known parameters of synthetic Blinn-Phong and GGX data from its own samples.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import nbrdf_mitsuba  # noqa: F401  (first: points Dr.Jit at a usable libLLVM)
+import numpy as np
+import pytest
+
+from nbrdf_testing import SCALE, cell_centre_angles, from_angles, read_merl
+from nbrdf_tools import analytic_fit as af
+from nbrdf_tools import compare_materials as cm
+from nbrdf_tools import fidelity_report
+from nbrdf_tools.paths import default_cli
+
+
+def _cli():
+    cli = default_cli()
+    if not cli.is_file():
+        pytest.skip(f"the nbrdf CLI {cli} is not built (make build)")
+    return cli
+
+
+def _directions(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(view, light) uniform over the hemisphere above 1 degree."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(2):
+        z = rng.uniform(0.02, 1.0, n)
+        phi = rng.uniform(0, 2 * np.pi, n)
+        s = np.sqrt(1 - z * z)
+        out.append(np.stack([s * np.cos(phi), s * np.sin(phi), z]))
+    return out[0], out[1]
+
+
+def test_numpy_ggx_matches_mitsuba_roughconductor():
+    cm.set_variant()
+    import mitsuba as mi
+
+    view, light = _directions(4000, 1)
+    for x in ([0.9, 0.5, 0.2, 0.3], [1.0, 1.0, 1.0, 0.02], [0.3, 0.6, 0.9, 0.8]):
+        expect = cm.eval_cos(mi.load_dict(af.roughconductor_dict(x)), view, light)
+        got = af.ggx_conductor_eval_cos(x, view, light)
+        # Mitsuba evaluates in float32: relative 1e-4, plus an absolute floor for the zeros of
+        # a sharp lobe's tails.
+        np.testing.assert_allclose(got, expect, rtol=2e-4, atol=1e-6 * expect.max())
+
+
+def test_roughplastic_is_linear_in_its_reflectances():
+    cm.set_variant()
+    import mitsuba as mi
+
+    view, light = _directions(2000, 2)
+    basis = af.RoughPlasticBasis()
+    x = [0.6, 0.3, 0.1, 0.7, 0.15]
+    expect = cm.eval_cos(mi.load_dict(af.roughplastic_dict(x[:3], x[3], x[4])), view, light)
+    np.testing.assert_allclose(basis.eval_cos(x, view, light), expect, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("model, material", [("abc", "alum-bronze"), ("sgd", "gold-metallic-paint"),
+                                             ("sgd", "black-phenolic")])
+def test_numpy_abc_sgd_match_rust_tables(model, material, tmp_path):
+    cli = _cli()
+    table = tmp_path / f"{material}.binary"
+    subprocess.run([str(cli), "synth", "--model", model, "--material", material, "-o", str(table)], check=True,
+                   capture_output=True)
+    stored = read_merl(table)
+    rng = np.random.default_rng(3)
+    idx = [rng.integers(0, n, 3000) for n in (90, 90, 180)]
+    light, view = from_angles(cell_centre_angles(*idx)[0], 0.0, *cell_centre_angles(*idx)[1:])
+    keep = (light[2] > 1e-3) & (view[2] > 1e-3)
+    expect = stored[:, idx[0], idx[1], idx[2]][:, keep] * SCALE[:, None]
+    abc, sgd = af.published_fits()
+    x = dict(abc if model == "abc" else sgd)[material]
+    form = af.abc_eval_cos if model == "abc" else af.sgd_eval_cos
+    got = form(x, view[:, keep], light[:, keep]) / light[2, keep]
+    np.testing.assert_allclose(got, expect, rtol=1e-9, atol=1e-12)
+
+
+def _synthetic(form, x, n=6000):
+    view, light = af.fit_directions(n, seed=5)
+    return af.FitData(view, light, form(np.asarray(x, float), view, light))
+
+
+def test_fit_recovers_blinn_phong():
+    truth = [0.2, 0.1, 0.05, 0.3, 0.4, 0.5, 80.0]
+    fit = af.fit_model(af.blinn_phong_model(), _synthetic(af.blinn_phong_eval_cos, truth))
+    np.testing.assert_allclose(fit.x, truth, rtol=1e-3)
+    assert fit.loss < 1e-10
+
+
+def test_fit_recovers_ggx_conductor():
+    truth = [0.8, 0.6, 0.3, 0.15]
+    fit = af.fit_model(af.ggx_conductor_model(), _synthetic(af.ggx_conductor_eval_cos, truth))
+    np.testing.assert_allclose(fit.x, truth, rtol=1e-3)
+    assert fit.loss < 1e-10
+
+
+def test_numpy_bsdf_renders_its_form():
+    cm.set_variant()
+    x = np.array([0.2, 0.1, 0.05, 0.3, 0.4, 0.5, 80.0])
+    view, light = _directions(500, 4)
+    bsdf = af.mitsuba_bsdf("blinn_phong", x)
+    np.testing.assert_allclose(cm.eval_cos(bsdf, view, light), af.blinn_phong_eval_cos(x, view, light),
+                               rtol=1e-6, atol=1e-9)
+
+
+def test_weight_counts():
+    # 6-21-21-3, the paper's network: 675 weights.
+    assert fidelity_report.weight_count(21) == 675
+    assert fidelity_report.weight_count(4) == 6 * 4 + 4 + 16 + 4 + 12 + 3
+
+
+def test_report_runs_end_to_end(merl_table, tmp_path):
+    cli = _cli()
+    report = tmp_path / "doc" / "fid.md"
+    argv = ["--merl", str(merl_table), "--hidden", "4", "--uniform-hidden", "4", "--table-hidden", "4",
+            "--samples", "4000", "--epochs", "2", "--models", "roughconductor,blinn_phong", "--fit-samples", "400",
+            "--resolution", "16", "--metric-samples", "400", "--out", str(tmp_path / "work"), "--report", str(report),
+            "--cli", str(cli), "--no-progress"]
+    assert fidelity_report.main(argv) == 0
+    text = report.read_text()
+    assert text.splitlines()[2:4] == ["```sh", "python -m nbrdf_tools.fidelity_report " + " ".join(argv)]
+    assert "No anisotropic material was given" in text
+    document = json.loads(report.with_suffix(".json").read_text())
+    rows = {r["method"]: r for r in document["rows"]}
+    assert set(rows) == {"merl-table", "roughconductor", "blinn_phong", "nbrdf-adaptive-h4", "nbrdf-uniform-h4"}
+    assert rows["nbrdf-adaptive-h4"]["memory_bytes"] == 4 * 63
+    assert rows["blinn_phong"]["memory_bytes"] == 4 * 7
+    for r in rows.values():
+        if r["kind"] != "reference":
+            assert all(np.isfinite(v) for v in r["metrics"].values())
+            assert 0 < r["metrics"]["ssim"] <= 1
+    assert report.with_suffix(".png").stat().st_size > 0
+    # A rerun reuses every row (no training, no fitting): the same numbers.
+    assert fidelity_report.main(argv) == 0
+    again = {r["method"]: r for r in json.loads(report.with_suffix(".json").read_text())["rows"]}
+    assert again == rows
