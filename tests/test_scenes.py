@@ -310,7 +310,8 @@ def test_convergence_quick_json(tmp_path):
         assert {"scene", "material", "strategy", "spp", "seconds", "mae", "rmse", "relmse", "mape",
                 "psnr_peak1"} <= set(row)
         assert row["scene"] == "veach"
-        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "measured")
+        assert row["strategy"] in ("uniform", "cosine", "phong-fit", "two-lobe-fit", "tabulated", "phong-predicted",
+                                   "measured")
         assert row["seconds"] > 0 and np.isfinite(row["rmse"])
     assert {r["strategy"] for r in rows} >= {"uniform", "cosine", "phong-predicted"}
     if " fit-phong " in help_text:
@@ -348,7 +349,7 @@ def test_convergence_rgl_path_against_measured(tmp_path, shared):
     report = json.loads(out.read_text())
     assert {r["material"] for r in report["results"]} == {"my_paint"}
     assert {r["strategy"] for r in report["results"]} == {"uniform", "cosine", "phong-fit", "two-lobe-fit",
-                                                          "measured"}
+                                                          "tabulated", "measured"}
     assert {r["seed"] for r in report["results"]} == {0, 1, 2}
     summary = report["equal_time"][0]
     assert summary["statistic"] == "median over seeds" and summary["seeds"] == 3
