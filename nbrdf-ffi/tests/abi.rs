@@ -21,9 +21,15 @@ fn last_error() -> String {
         .into_owned()
 }
 
-/// A scratch directory unique to this test process and `name`.
+/// A scratch directory unique to this call: tests run in parallel threads, and two of them
+/// writing the same file let one read it half written.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nbrdf-ffi-test-{}-{name}", std::process::id()));
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!(
+        "nbrdf-ffi-test-{}-{name}-{call}",
+        std::process::id()
+    ));
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
