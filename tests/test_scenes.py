@@ -353,7 +353,7 @@ def test_convergence_rgl_path_against_measured(tmp_path, shared):
     assert {r["seed"] for r in report["results"]} == {0, 1, 2}
     summary = report["equal_time"][0]
     assert summary["statistic"] == "median over seeds" and summary["seeds"] == 3
-    assert set(summary["vs_measured"]) == {"uniform", "cosine", "phong-fit", "two-lobe-fit"}
+    assert set(summary["vs_measured"]) == {"uniform", "cosine", "phong-fit", "two-lobe-fit", "tabulated"}
     assert summary["best_vs_measured"] == min(summary["vs_measured"].values())
     assert summary["vs_measured"][summary["best_nbrdf"]] == summary["best_vs_measured"]
     text = (tmp_path / "out" / "veach" / "summary.md").read_text()
