@@ -384,6 +384,11 @@ mod tests {
     /// Integral of the pdf over the hemisphere by quadrature on a `theta` x `phi` grid dense
     /// near the mirror direction of `v` (midpoints in `t` of the half vector, as the table).
     fn pdf_integral(s: &SamplingStrategy, v: DVec3) -> f64 {
+        weighted_pdf_integral(s, v, &|_| 1.0)
+    }
+
+    /// `int g(l) pdf(l) dl` over light directions above the horizon, by the same midpoint rule.
+    fn weighted_pdf_integral(s: &SamplingStrategy, v: DVec3, g: &dyn Fn(DVec3) -> f64) -> f64 {
         // Over the half vector: pdf(l) 4 (v.h) dω_h, dω_h = pi t sin(theta_h) dt dphi.
         let (nt, np) = (1200, 720);
         let mut total = 0.0;
@@ -399,7 +404,8 @@ mod tests {
                 if vh <= 0.0 || l.z <= 0.0 {
                     continue;
                 }
-                total += s.pdf_f64(v, l) * 4.0 * vh * PI * t * sin_h / nt as f64 * TAU / np as f64;
+                total += g(l) * s.pdf_f64(v, l) * 4.0 * vh * PI * t * sin_h / nt as f64 * TAU
+                    / np as f64;
             }
         }
         total
@@ -447,24 +453,7 @@ mod tests {
                 &|l: DVec3| f64::from(u8::from(l.x > 0.3 && l.y > 0.0)),
             ];
             for (k, g) in tests.iter().enumerate() {
-                let (nt, np) = (1200, 720);
-                let mut exact = 0.0;
-                for i in 0..nt {
-                    let t = (i as f64 + 0.5) / nt as f64;
-                    let theta_h = FRAC_PI_2 * t * t;
-                    let (sin_h, cos_h) = theta_h.sin_cos();
-                    for j in 0..np {
-                        let phi = (j as f64 + 0.5) / np as f64 * TAU;
-                        let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
-                        let vh = v.dot(h);
-                        let l = 2.0 * vh * h - v;
-                        if vh > 0.0 && l.z > 0.0 {
-                            exact += g(l) * s.pdf_f64(v, l) * 4.0 * vh * PI * t * sin_h / nt as f64
-                                * TAU
-                                / np as f64;
-                        }
-                    }
-                }
+                let exact = weighted_pdf_integral(&s, v, g);
                 let mut rng = SplitMix64::from_state(40 + k as u64);
                 let n = 200_000;
                 let (mut m1, mut m2) = (0.0, 0.0);

@@ -217,17 +217,7 @@ mod tests {
         PHONG.eval(h.z)
     }
 
-    fn small_config() -> TrainConfig {
-        TrainConfig {
-            samples: 4000,
-            max_epochs: 25,
-            hidden: 12,
-            batch: 64,
-            patience: 25,
-            seed: 3,
-            ..TrainConfig::fixed_budget()
-        }
-    }
+    use crate::train::tests::small_config;
 
     struct Owned {
         view: Vec<Vec3>,

@@ -554,7 +554,8 @@ mod tests {
         Some(p.eval(a.theta_h.cos()))
     }
 
-    fn small_config() -> TrainConfig {
+    /// A quick training run (also the arrays tests', so both train alike).
+    pub(super) fn small_config() -> TrainConfig {
         TrainConfig {
             samples: 4000,
             max_epochs: 25,
