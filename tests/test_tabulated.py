@@ -115,7 +115,7 @@ def test_pdf_matches_float64_oracle_and_backends_agree(llvm_variant, material, m
     plugin, path = materials[material]
     handle = _native.Network(path) if plugin == "nbrdf" else _native.MerlTable(path)
     table = _native.Table(handle)
-    assert (table.rows, table.theta_bins, table.phi_bins) == (16, 32, 32)
+    assert (table.rows, table.theta_bins, table.phi_bins) == (16, 48, 32)
     view, light = random_pairs(4000, seed=3)
     gv, gl = grazing_pairs(1000, seed=4)
     view, light = np.concatenate([view, gv], axis=1), np.concatenate([light, gl], axis=1)

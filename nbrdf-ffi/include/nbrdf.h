@@ -321,7 +321,7 @@ int32_t nbrdf_network_stored_sampler(const struct NbrdfNetwork *network,
 int32_t nbrdf_network_default_sampling(const struct NbrdfNetwork *network,
                                        int32_t *out);
 
-// Tabulates the network for `sampling` = `tabulated` (about 150k evaluations, milliseconds);
+// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds);
 // free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
 //
 // # Safety

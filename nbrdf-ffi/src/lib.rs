@@ -1127,7 +1127,7 @@ unsafe fn build_table_impl<H: BrdfHandle>(
     })
 }
 
-/// Tabulates the network for `sampling` = `tabulated` (about 150k evaluations, milliseconds);
+/// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds);
 /// free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
 ///
 /// # Safety

@@ -47,6 +47,10 @@ VEACH_MERL = (
     "green-metallic-paint", "nickel", "red-specular-plastic", "pink-fabric",
 )
 VEACH_RGL = ("cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb")
+#: Revision of nbrdf-core's tabulated sampler: `nbrdf fit-phong` scores it to choose the file's
+#: `sampling.default`, so cached fits are redone when it changes (2: 48 theta bins, views
+#: normalised per band from its lower edge).
+TABULATED_SAMPLER_REVISION = 2
 
 
 def test_split(names: list[str]) -> list[str]:
@@ -213,7 +217,7 @@ class Artefacts:
         # are redone. The best single lobe (the phong strategies) is fitted into a scratch copy
         # and kept in the record; the two-lobe mixture is stored in the network file.
         inputs = {"command": "nbrdf fit-phong", "lobe": "variance", "lobes": [1, 2],
-                  "network": record.get("network_trained_hash")}
+                  "network": record.get("network_trained_hash"), "tabulated_sampler": TABULATED_SAMPLER_REVISION}
         if record.get("phong_inputs") == inputs and record.get("network_hash") == file_hash(network):
             return
         self.log(f"  {name}: fitting the Blinn-Phong sampling lobes (nbrdf fit-phong --lobes 1, --lobes 2)")
