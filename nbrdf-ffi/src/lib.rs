@@ -422,8 +422,11 @@ unsafe fn read_mixture_sampler(sampler: *const NbrdfMixtureSampler) -> FfiResult
     Ok(strategy.validated()?)
 }
 
-/// A sampler argument of the exported functions: `NbrdfSampler` or `NbrdfMixtureSampler`.
+/// A sampler argument of the exported functions: `NbrdfSampler`, `NbrdfMixtureSampler` or
+/// `NbrdfTable`.
 trait SamplerArg {
+    /// The name of the argument in the C signatures and error messages.
+    const ARGUMENT: &'static str = "sampler";
     /// # Safety
     /// A non-null pointer must point to a live value of the type.
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy>;
@@ -437,9 +440,11 @@ impl SamplerArg for NbrdfSampler {
 }
 
 impl SamplerArg for NbrdfTable {
+    const ARGUMENT: &'static str = "table";
+
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
         // SAFETY: forwarded contract.
-        let table = unsafe { reference(sampler, "table")? };
+        let table = unsafe { reference(sampler, Self::ARGUMENT)? };
         Ok(SamplingStrategy::Tabulated(Arc::clone(&table.sampler)))
     }
 }
@@ -580,7 +585,7 @@ unsafe fn sample_impl<H: BrdfHandle, S: SamplerArg>(
     guard(function, || {
         // SAFETY: forwarded contract.
         let handle = unsafe { reference(handle, H::ARGUMENT)? };
-        check_array(sampler, "sampler")?;
+        check_array(sampler, S::ARGUMENT)?;
         check_array(view, "view")?;
         check_array(u, "u")?;
         check_array(out_light, "out_light")?;
@@ -894,7 +899,7 @@ unsafe fn pdf_impl<S: SamplerArg>(
     out_pdf: *mut f32,
 ) -> i32 {
     guard(function, || {
-        check_array(sampler, "sampler")?;
+        check_array(sampler, S::ARGUMENT)?;
         check_array(view, "view")?;
         check_array(light, "light")?;
         check_array(out_pdf, "out_pdf")?;
