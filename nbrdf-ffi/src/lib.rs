@@ -174,95 +174,61 @@ fn directions(buffer: &[f32]) -> Directions<'_> {
     Directions::from_planar(buffer).expect("planar buffers have length 3 n")
 }
 
-/// Reads a sampler passed by C and validates it with the core.
-///
-/// # Safety
-/// A non-null `sampler` must point to a live `NbrdfSampler`.
-unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrategy> {
-    check_pointer(sampler, "sampler")?;
-    // Read the fields through the raw pointer and the kind as a plain integer: C may store any
-    // int there, and materialising an out-of-range Rust enum would be undefined behaviour.
-    // SAFETY: non-null and aligned (checked), initialised by contract; `NbrdfSamplingKind` is a
-    // repr(C) fieldless enum, laid out as a C int.
-    let (kind, exponent, specular_weight) = unsafe {
-        (
-            std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
-            std::ptr::addr_of!((*sampler).exponent).read(),
-            std::ptr::addr_of!((*sampler).specular_weight).read(),
-        )
-    };
-    let strategy = match kind {
-        0 => SamplingStrategy::Uniform,
-        1 => SamplingStrategy::Cosine,
-        2 => SamplingStrategy::BlinnPhong {
-            exponent: f64::from(exponent),
-            specular_weight: f64::from(specular_weight),
-        },
-        3 | 5 => {
-            return Err(Failure::invalid(format!(
-            "sampling kind {kind} ({}) needs an NbrdfMixtureSampler and the *_mixture functions",
-            if kind == 3 { "two-lobe" } else { "anisotropic phong" }
-        )))
-        }
-        4 => {
-            return Err(Failure::invalid(
-                "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions"
-                    .to_string(),
-            ))
-        }
-        other => {
-            return Err(Failure::invalid(format!(
-                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
-            )))
-        }
-    };
-    Ok(strategy.validated()?)
+/// The fields of a sampler struct passed by C, the kind as a plain integer.
+struct SamplerFields {
+    kind: i32,
+    exponent: f32,
+    specular_weight: f32,
+    /// `exponent2` and `specular_weight2` of an `NbrdfMixtureSampler`; `None` for an
+    /// `NbrdfSampler`, which refuses the kinds that read them.
+    second: Option<(f32, f32)>,
 }
 
-/// Reads an `NbrdfMixtureSampler` passed by C and validates it with the core.
-///
-/// # Safety
-/// A non-null `sampler` must point to a live `NbrdfMixtureSampler`.
-unsafe fn read_mixture_sampler(sampler: *const NbrdfMixtureSampler) -> FfiResult<SamplingStrategy> {
-    check_pointer(sampler, "sampler")?;
-    // SAFETY: as in `read_sampler`; the kind is read as a plain C int.
-    let (kind, exponent, specular_weight, exponent2, specular_weight2) = unsafe {
-        (
-            std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
-            std::ptr::addr_of!((*sampler).exponent).read(),
-            std::ptr::addr_of!((*sampler).specular_weight).read(),
-            std::ptr::addr_of!((*sampler).exponent2).read(),
-            std::ptr::addr_of!((*sampler).specular_weight2).read(),
-        )
-    };
-    let strategy = match kind {
-        0 => SamplingStrategy::Uniform,
-        1 => SamplingStrategy::Cosine,
-        2 => SamplingStrategy::BlinnPhong {
-            exponent: f64::from(exponent),
-            specular_weight: f64::from(specular_weight),
-        },
-        3 => SamplingStrategy::TwoLobe {
-            exponent1: f64::from(exponent),
-            weight1: f64::from(specular_weight),
-            exponent2: f64::from(exponent2),
-            weight2: f64::from(specular_weight2),
-        },
-        4 => return Err(Failure::invalid(
-            "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions".to_string(),
-        )),
-        5 => SamplingStrategy::anisotropic(
-            f64::from(exponent),
-            f64::from(exponent2),
-            f64::from(specular_weight),
-        ),
-        other => {
-            return Err(Failure::invalid(format!(
-                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 5 = anisotropic phong; 4 = tabulated needs an NbrdfTable)"
-            )))
-        }
-    };
-    Ok(strategy.validated()?)
+impl SamplerFields {
+    /// The strategy the fields describe, validated by the core.
+    fn strategy(&self) -> FfiResult<SamplingStrategy> {
+        let (exponent, specular_weight) =
+            (f64::from(self.exponent), f64::from(self.specular_weight));
+        let strategy = match (self.kind, self.second) {
+            (0, _) => SamplingStrategy::Uniform,
+            (1, _) => SamplingStrategy::Cosine,
+            (2, _) => SamplingStrategy::BlinnPhong {
+                exponent,
+                specular_weight,
+            },
+            (3, Some((exponent2, weight2))) => SamplingStrategy::TwoLobe {
+                exponent1: exponent,
+                weight1: specular_weight,
+                exponent2: f64::from(exponent2),
+                weight2: f64::from(weight2),
+            },
+            (5, Some((exponent_v, _))) => {
+                SamplingStrategy::anisotropic(exponent, f64::from(exponent_v), specular_weight)
+            }
+            (kind @ (3 | 5), None) => {
+                return Err(Failure::invalid(format!(
+                    "sampling kind {kind} ({}) needs an NbrdfMixtureSampler and the *_mixture functions",
+                    if kind == 3 { "two-lobe" } else { "anisotropic phong" }
+                )))
+            }
+            (4, _) => {
+                return Err(Failure::invalid(
+                    "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions",
+                ))
+            }
+            (other, None) => {
+                return Err(Failure::invalid(format!(
+                    "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
+                )))
+            }
+            (other, Some(_)) => {
+                return Err(Failure::invalid(format!(
+                    "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 5 = anisotropic phong; 4 = tabulated needs an NbrdfTable)"
+                )))
+            }
+        };
+        Ok(strategy.validated()?)
+    }
 }
 
 /// A sampler argument of the exported functions: `NbrdfSampler`, `NbrdfMixtureSampler` or
@@ -277,8 +243,21 @@ trait SamplerArg {
 
 impl SamplerArg for NbrdfSampler {
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
-        // SAFETY: forwarded contract.
-        unsafe { read_sampler(sampler) }
+        check_pointer(sampler, Self::ARGUMENT)?;
+        // Read the fields through the raw pointer and the kind as a plain integer: C may store
+        // any int there, and materialising an out-of-range Rust enum would be undefined
+        // behaviour.
+        // SAFETY: non-null and aligned (checked), initialised by contract; `NbrdfSamplingKind`
+        // is a repr(C) fieldless enum, laid out as a C int.
+        let fields = unsafe {
+            SamplerFields {
+                kind: std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
+                exponent: std::ptr::addr_of!((*sampler).exponent).read(),
+                specular_weight: std::ptr::addr_of!((*sampler).specular_weight).read(),
+                second: None,
+            }
+        };
+        fields.strategy()
     }
 }
 
@@ -294,8 +273,20 @@ impl SamplerArg for NbrdfTable {
 
 impl SamplerArg for NbrdfMixtureSampler {
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
-        // SAFETY: forwarded contract.
-        unsafe { read_mixture_sampler(sampler) }
+        check_pointer(sampler, Self::ARGUMENT)?;
+        // SAFETY: as for `NbrdfSampler`; the kind is read as a plain C int.
+        let fields = unsafe {
+            SamplerFields {
+                kind: std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
+                exponent: std::ptr::addr_of!((*sampler).exponent).read(),
+                specular_weight: std::ptr::addr_of!((*sampler).specular_weight).read(),
+                second: Some((
+                    std::ptr::addr_of!((*sampler).exponent2).read(),
+                    std::ptr::addr_of!((*sampler).specular_weight2).read(),
+                )),
+            }
+        };
+        fields.strategy()
     }
 }
 
@@ -767,7 +758,7 @@ unsafe fn pdf_impl<S: SamplerArg>(
 pub unsafe extern "C" fn nbrdf_sampler_validate(sampler: *const NbrdfSampler) -> i32 {
     // SAFETY: forwarded contract.
     guard("nbrdf_sampler_validate", || {
-        unsafe { read_sampler(sampler) }.map(drop)
+        unsafe { NbrdfSampler::strategy(sampler) }.map(drop)
     })
 }
 
@@ -869,7 +860,7 @@ pub unsafe extern "C" fn nbrdf_mixture_sampler_validate(
 ) -> i32 {
     // SAFETY: forwarded contract.
     guard("nbrdf_mixture_sampler_validate", || {
-        unsafe { read_mixture_sampler(sampler) }.map(drop)
+        unsafe { NbrdfMixtureSampler::strategy(sampler) }.map(drop)
     })
 }
 
