@@ -490,6 +490,117 @@ fn merl_batches_are_planar() {
     );
 }
 
+/// Samples `sampler` for `views` through `nbrdf_network_sample_mixture`, asks the pdfs of the
+/// samples again through `nbrdf_mixture_sampler_pdf`, and checks both lane by lane against the
+/// core's `expected` strategy.
+fn check_mixture_sampling(
+    sampler: &NbrdfMixtureSampler,
+    expected: &SamplingStrategy,
+    views: &[Vec3],
+) {
+    let (network, _) = load_network(4);
+    let n = views.len();
+    let us: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let k = i as f32;
+            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
+        })
+        .collect();
+    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
+    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
+    let mut pdf_again = vec![0.0; n];
+    // SAFETY: valid pointers and sizes.
+    unsafe {
+        assert_eq!(
+            nbrdf_mixture_sampler_validate(sampler),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_network_sample_mixture(
+                network.0,
+                sampler,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                light.as_mut_ptr(),
+                weight.as_mut_ptr(),
+                pdf.as_mut_ptr()
+            ),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_mixture_sampler_pdf(
+                sampler,
+                view.as_ptr(),
+                light.as_ptr(),
+                n,
+                pdf_again.as_mut_ptr()
+            ),
+            OK
+        );
+    }
+    assert_eq!(pdf, pdf_again);
+    for i in 0..n {
+        let s = expected.sample(views[i], us[i].to_array());
+        assert_eq!(s.light, lane(&light, n, i), "lane {i}");
+        assert_eq!(s.pdf, pdf[i], "lane {i}");
+    }
+}
+
+/// `kind` needs the fields of an `NbrdfMixtureSampler`: the one-lobe struct refuses it.
+fn assert_one_lobe_struct_refuses(kind: NbrdfSamplingKind) {
+    let one = NbrdfSampler {
+        kind,
+        exponent: 10.0,
+        specular_weight: 0.5,
+    };
+    // SAFETY: a valid pointer.
+    assert_eq!(unsafe { nbrdf_sampler_validate(&one) }, INVALID);
+    assert!(
+        last_error().contains("NbrdfMixtureSampler"),
+        "{}",
+        last_error()
+    );
+}
+
+/// `bad` variations of a mixture sampler are invalid arguments.
+fn assert_invalid_mixtures(bad: &[NbrdfMixtureSampler]) {
+    for bad in bad {
+        // SAFETY: a valid pointer.
+        assert_eq!(
+            unsafe { nbrdf_mixture_sampler_validate(bad) },
+            INVALID,
+            "{bad:?}"
+        );
+        assert!(
+            last_error().starts_with("nbrdf_mixture_sampler_validate: "),
+            "{}",
+            last_error()
+        );
+    }
+}
+
+/// What `nbrdf_network_stored_sampler` reports for the network file `json`.
+fn stored_sampler(json: &str, name: &str) -> NbrdfMixtureSampler {
+    let (network, _) = load_network_text(json, name);
+    let mut stored = std::mem::MaybeUninit::<NbrdfMixtureSampler>::uninit();
+    // SAFETY: a live handle and a writable sampler; initialised by a successful call.
+    unsafe {
+        assert_eq!(
+            nbrdf_network_stored_sampler(network.0, stored.as_mut_ptr()),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(nbrdf_network_stored_sampler(network.0, null_mut()), NULL);
+        stored.assume_init()
+    }
+}
+
 #[test]
 fn two_lobe_samplers_go_through_the_mixture_functions() {
     let two = NbrdfMixtureSampler {
@@ -505,7 +616,6 @@ fn two_lobe_samplers_go_through_the_mixture_functions() {
         exponent2: 20.0,
         weight2: f64::from(0.35f32),
     };
-    let (network, _) = load_network(4);
     let n = 64;
     let views: Vec<Vec3> = (0..n)
         .map(|i| {
@@ -513,105 +623,32 @@ fn two_lobe_samplers_go_through_the_mixture_functions() {
             Vec3::new(t.sin(), 0.0, t.cos())
         })
         .collect();
-    let us: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let k = i as f32;
-            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
-        })
-        .collect();
-    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
-    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
-    let mut pdf_again = vec![0.0; n];
-    // SAFETY: valid pointers and sizes.
-    unsafe {
-        assert_eq!(nbrdf_mixture_sampler_validate(&two), OK, "{}", last_error());
-        assert_eq!(
-            nbrdf_network_sample_mixture(
-                network.0,
-                &two,
-                view.as_ptr(),
-                u.as_ptr(),
-                n,
-                light.as_mut_ptr(),
-                weight.as_mut_ptr(),
-                pdf.as_mut_ptr()
-            ),
-            OK,
-            "{}",
-            last_error()
-        );
-        assert_eq!(
-            nbrdf_mixture_sampler_pdf(
-                &two,
-                view.as_ptr(),
-                light.as_ptr(),
-                n,
-                pdf_again.as_mut_ptr()
-            ),
-            OK
-        );
-    }
-    assert_eq!(pdf, pdf_again);
-    for i in 0..n {
-        let s = core.sample(views[i], us[i].to_array());
-        assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
-        assert_eq!(s.pdf, pdf[i]);
-    }
-    // The one-lobe struct refuses kind 3; bad two-lobe parameters are invalid arguments.
-    let one = NbrdfSampler {
-        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE,
-        exponent: 10.0,
-        specular_weight: 0.5,
-    };
-    // SAFETY: valid pointers.
-    unsafe {
-        assert_eq!(nbrdf_sampler_validate(&one), INVALID);
-        assert!(
-            last_error().contains("NbrdfMixtureSampler"),
-            "{}",
-            last_error()
-        );
-        for bad in [
-            NbrdfMixtureSampler {
-                specular_weight2: 0.7,
-                ..two
-            },
-            NbrdfMixtureSampler {
-                exponent2: 2e6,
-                ..two
-            },
-            NbrdfMixtureSampler {
-                exponent: f32::NAN,
-                ..two
-            },
-        ] {
-            assert_eq!(nbrdf_mixture_sampler_validate(&bad), INVALID, "{bad:?}");
-            assert!(last_error().starts_with("nbrdf_mixture_sampler_validate: "));
-        }
-    }
+    check_mixture_sampling(&two, &core, &views);
+    assert_one_lobe_struct_refuses(NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE);
+    assert_invalid_mixtures(&[
+        NbrdfMixtureSampler {
+            specular_weight2: 0.7,
+            ..two
+        },
+        NbrdfMixtureSampler {
+            exponent2: 2e6,
+            ..two
+        },
+        NbrdfMixtureSampler {
+            exponent: f32::NAN,
+            ..two
+        },
+    ]);
     // What the file stores: one lobe here, two after adding a second lobe.
-    let mut stored = two;
-    // SAFETY: valid pointers.
-    unsafe {
-        assert_eq!(nbrdf_network_stored_sampler(network.0, &mut stored), OK);
-    }
+    let stored = stored_sampler(&network_json(4), "one-lobe");
     assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_PHONG);
     assert_eq!((stored.exponent, stored.specular_weight), (40.0, 0.25));
     assert_eq!((stored.exponent2, stored.specular_weight2), (0.0, 0.0));
-    let path = scratch("two-lobe").join("two.nbrdf.json");
     let text = network_json(4).replace(
         r#""source": "manual"}"#,
         r#""source": "manual", "second_lobe": {"exponent": 8.0, "specular_weight": 0.5}}"#,
     );
-    std::fs::write(&path, text).unwrap();
-    let mut handle = null_mut();
-    // SAFETY: valid path and pointers.
-    unsafe {
-        assert_eq!(nbrdf_network_load(c_path(&path).as_ptr(), &mut handle), OK);
-        let two_file = Network(handle);
-        assert_eq!(nbrdf_network_stored_sampler(two_file.0, &mut stored), OK);
-        assert_eq!(nbrdf_network_stored_sampler(two_file.0, null_mut()), NULL);
-    }
+    let stored = stored_sampler(&text, "two-lobe");
     assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE);
     assert_eq!((stored.exponent2, stored.specular_weight2), (8.0, 0.5));
 }
@@ -633,93 +670,20 @@ fn anisotropic_samplers_go_through_the_mixture_functions() {
             Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
         })
         .collect();
-    let us: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let k = i as f32;
-            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
-        })
-        .collect();
-    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
-    let (network, _) = load_network(4);
-    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
-    let mut pdf_again = vec![0.0; n];
-    // SAFETY: valid pointers and sizes.
-    unsafe {
-        assert_eq!(
-            nbrdf_mixture_sampler_validate(&aniso),
-            OK,
-            "{}",
-            last_error()
-        );
-        assert_eq!(
-            nbrdf_network_sample_mixture(
-                network.0,
-                &aniso,
-                view.as_ptr(),
-                u.as_ptr(),
-                n,
-                light.as_mut_ptr(),
-                weight.as_mut_ptr(),
-                pdf.as_mut_ptr()
-            ),
-            OK,
-            "{}",
-            last_error()
-        );
-        assert_eq!(
-            nbrdf_mixture_sampler_pdf(
-                &aniso,
-                view.as_ptr(),
-                light.as_ptr(),
-                n,
-                pdf_again.as_mut_ptr()
-            ),
-            OK
-        );
-    }
-    assert_eq!(pdf, pdf_again);
-    for i in 0..n {
-        let s = core.sample(views[i], us[i].to_array());
-        assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
-        assert_eq!(s.pdf, pdf[i]);
-    }
-    let one = NbrdfSampler {
-        kind: NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG,
-        exponent: 10.0,
-        specular_weight: 0.5,
-    };
-    // SAFETY: valid pointers.
-    unsafe {
-        assert_eq!(nbrdf_sampler_validate(&one), INVALID);
-        assert!(last_error().contains("NbrdfMixtureSampler"));
-        let bad = NbrdfMixtureSampler {
-            exponent2: 2e6,
-            ..aniso
-        };
-        assert_eq!(nbrdf_mixture_sampler_validate(&bad), INVALID);
-    }
+    check_mixture_sampling(&aniso, &core, &views);
+    assert_one_lobe_struct_refuses(NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG);
+    assert_invalid_mixtures(&[NbrdfMixtureSampler {
+        exponent2: 2e6,
+        ..aniso
+    }]);
     // A file storing exponent_v reports the anisotropic kind with n_v in exponent2.
-    let path = scratch("aniso-lobe").join("aniso.nbrdf.json");
     let text = network_json(4)
         .replace(r#""version": 1,"#, r#""version": 2, "anisotropic": true,"#)
         .replace(
             r#""source": "manual"}"#,
             r#""source": "manual", "exponent_v": 7.5}"#,
         );
-    std::fs::write(&path, text).unwrap();
-    let mut handle = null_mut();
-    let mut stored = aniso;
-    // SAFETY: valid path and pointers.
-    unsafe {
-        assert_eq!(
-            nbrdf_network_load(c_path(&path).as_ptr(), &mut handle),
-            OK,
-            "{}",
-            last_error()
-        );
-        let file = Network(handle);
-        assert_eq!(nbrdf_network_stored_sampler(file.0, &mut stored), OK);
-    }
+    let stored = stored_sampler(&text, "aniso-lobe");
     assert_eq!(
         stored.kind,
         NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG
