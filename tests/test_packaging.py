@@ -38,7 +38,9 @@ SDIST_MUST_HOLD = ["setup.py", "pyproject.toml", "README.md", "nbrdf_mitsuba/__i
                    "rust/nbrdf-core/data/models/autoencoder.json", "rust/nbrdf-core/data/models/predictor.json",
                    "rust/nbrdf-ffi/Cargo.toml", "rust/nbrdf-ffi/build.rs", "rust/nbrdf-ffi/src/lib.rs",
                    "rust/nbrdf-ffi/include/nbrdf.h", "rust/nbrdf-ffi/train/Cargo.toml",
-                   "rust/nbrdf-ffi/train/src/lib.rs", "rust/nbrdf-ffi/train/include/nbrdf_train.h"]
+                   "rust/nbrdf-ffi/train/src/lib.rs", "rust/nbrdf-ffi/train/include/nbrdf_train.h",
+                   # the error plumbing both libraries link
+                   "rust/nbrdf-ffi/common/Cargo.toml", "rust/nbrdf-ffi/common/src/lib.rs"]
 
 pytestmark = [
     pytest.mark.skipif(sys.platform != "linux" or platform.machine() not in ("x86_64", "aarch64"),

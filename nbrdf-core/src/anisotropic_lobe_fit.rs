@@ -10,14 +10,14 @@
 //! The isotropic start is a candidate, so the result never samples worse than it on the
 //! quadrature.
 
-use crate::coords::to_rusinkiewicz;
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::LobeFitConfig;
+use crate::lobe_fit::{visit_half_vectors, LobeFitConfig};
+use crate::pattern_search::{PatternSearch, SearchPoint};
 use crate::sampling::{SamplingStrategy, MAX_EXPONENT};
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
+use std::f64::consts::{FRAC_1_PI, PI, TAU};
 
 /// Settings of the anisotropic search.
 #[derive(Clone, Debug, PartialEq)]
@@ -101,8 +101,6 @@ fn view_quadrature(
         theta_v.sin() * phi_v.sin(),
         theta_v.cos(),
     );
-    let ds = 1.0 / config.s_bins as f64;
-    let dphi = TAU / config.phi_bins as f64;
     let mut q = ViewQuadrature {
         g2_dw: Vec::new(),
         ln_cos_h: Vec::new(),
@@ -112,38 +110,16 @@ fn view_quadrature(
         integral_sq: 0.0,
     };
     let mut integral = 0.0;
-    for i in 0..config.s_bins {
-        let s = (i as f64 + 0.5) * ds;
-        let theta_h = FRAC_PI_2 * s * s;
-        let (sin_h, cos_h) = theta_h.sin_cos();
-        // As in crate::lobe_fit, without the isotropic fold of phi_h.
-        let dw_h = sin_h * PI * s * ds * dphi;
-        for j in 0..config.phi_bins {
-            let phi_h = (j as f64 + 0.5) * dphi;
-            let (sin_p, cos_p) = phi_h.sin_cos();
-            let half = DVec3::new(sin_h * cos_p, sin_h * sin_p, cos_h);
-            let v_dot_h = view.dot(half);
-            if v_dot_h <= 0.0 {
-                continue;
-            }
-            let light = 2.0 * v_dot_h * half - view;
-            if light.z <= 0.0 {
-                continue;
-            }
-            let f = target(&to_rusinkiewicz(view, light)).unwrap_or([0.0; 3]);
-            let g = f.iter().map(|x| x.max(0.0)).sum::<f64>() / 3.0 * light.z;
-            if !(g.is_finite() && g > 0.0) {
-                continue;
-            }
-            let dw_l = 4.0 * v_dot_h * dw_h;
-            integral += g * dw_l;
-            q.g2_dw.push(g * g * dw_l);
-            q.ln_cos_h.push(cos_h.max(1e-300).ln());
-            q.cos2_phi_h.push(cos_p * cos_p);
-            q.inv_jacobian.push(0.25 / v_dot_h);
-            q.cosine_pdf.push(light.z * FRAC_1_PI);
-        }
-    }
+    // That of crate::lobe_fit, without the isotropic fold of phi_h.
+    let bins = (config.s_bins, config.phi_bins);
+    visit_half_vectors(target, view, bins, TAU, 1.0, |p| {
+        integral += p.g * p.dw_l;
+        q.g2_dw.push(p.g * p.g * p.dw_l);
+        q.ln_cos_h.push(p.cos_h.max(1e-300).ln());
+        q.cos2_phi_h.push(p.cos_phi_h * p.cos_phi_h);
+        q.inv_jacobian.push(0.25 / p.v_dot_h);
+        q.cosine_pdf.push(p.light.z * FRAC_1_PI);
+    });
     q.integral_sq = integral * integral;
     q
 }
@@ -255,46 +231,44 @@ impl AnisotropicLobeQuadrature {
             .par_iter()
             .map(|&(nu, nv)| self.score(nu, nv, iso.3))
             .collect();
-        let mut current = best(grid.into_iter(), iso);
+        let start = best(grid.into_iter(), iso);
         // Pattern search in (ln(1 + n_u), ln(1 + n_v), w); steps start at a grid spacing.
-        let (mut step_log, mut step_w) = (0.5 * 10f64.ln() / 4.0, 0.05);
+        let step_log = 0.5 * 10f64.ln() / 4.0;
+        let search = PatternSearch {
+            moves: vec![
+                [1.0, 0.0, 0.0],
+                [-1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, -1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [-1.0, -1.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [0.0, 0.0, -1.0],
+            ],
+            steps: [step_log, step_log, 0.05],
+            levels: config.refine_levels,
+            max_passes: usize::MAX,
+        };
+        let coordinates = |(nu, nv, w): (f64, f64, f64)| [nu.ln_1p(), nv.ln_1p(), w];
         let max_log = MAX_EXPONENT.ln_1p();
-        for _ in 0..config.refine_levels {
-            loop {
-                let (lu, lv, w) = (current.1.ln_1p(), current.2.ln_1p(), current.3);
-                let moves: Vec<(f64, f64, f64)> = [
-                    (step_log, 0.0, 0.0),
-                    (-step_log, 0.0, 0.0),
-                    (0.0, step_log, 0.0),
-                    (0.0, -step_log, 0.0),
-                    (step_log, step_log, 0.0),
-                    (-step_log, -step_log, 0.0),
-                    (0.0, 0.0, step_w),
-                    (0.0, 0.0, -step_w),
-                ]
-                .iter()
-                .map(|&(du, dv, dw)| {
-                    (
-                        (lu + du).clamp(0.0, max_log).exp_m1(),
-                        (lv + dv).clamp(0.0, max_log).exp_m1(),
-                        (w + dw).clamp(0.0, 1.0),
-                    )
-                })
-                .collect();
-                let scored: Vec<Candidate> = moves
-                    .par_iter()
-                    .map(|&(nu, nv, w)| self.score(nu.min(MAX_EXPONENT), nv.min(MAX_EXPONENT), w))
-                    .collect();
-                let next = best(scored.into_iter(), current);
-                if next.0 < current.0 {
-                    current = next;
-                } else {
-                    break;
-                }
-            }
-            step_log *= 0.5;
-            step_w *= 0.5;
-        }
+        let end = search.minimise(
+            SearchPoint {
+                score: start.0,
+                params: (start.1, start.2, start.3),
+                x: coordinates((start.1, start.2, start.3)),
+            },
+            // Moves are clamped into the domain.
+            |y| {
+                let lobe = (
+                    y[0].clamp(0.0, max_log).exp_m1().min(MAX_EXPONENT),
+                    y[1].clamp(0.0, max_log).exp_m1().min(MAX_EXPONENT),
+                    y[2].clamp(0.0, 1.0),
+                );
+                Some((lobe, coordinates(lobe)))
+            },
+            |&(nu, nv, w)| self.relative_variance(nu, nv, w),
+        );
+        let current = (end.score, end.params.0, end.params.1, end.params.2);
         Ok(AnisotropicLobeFit {
             exponent_u: current.1,
             exponent_v: current.2,
@@ -318,7 +292,7 @@ pub fn fit_anisotropic_lobe(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::coords::RusinkiewiczAngles;
+    use crate::coords::{to_rusinkiewicz, RusinkiewiczAngles};
     use crate::rng::SplitMix64;
     use crate::sampling::anisotropic_lobe_density;
 

@@ -66,6 +66,8 @@ pub mod metrics;
 #[cfg(feature = "train")]
 pub mod ops;
 #[cfg(feature = "train")]
+mod pattern_search;
+#[cfg(feature = "train")]
 pub mod phong_fit;
 #[cfg(feature = "train")]
 pub mod target;

@@ -28,6 +28,7 @@
 
 use crate::coords::to_rusinkiewicz;
 use crate::error::{NbrdfError, Result};
+use crate::pattern_search::{PatternSearch, SearchPoint};
 use crate::phong_fit::{self, FitConfig, PhongFit, PhongParams};
 use crate::sampling::{SamplingStrategy, MAX_EXPONENT};
 use crate::train::dataset::TargetFn;
@@ -114,30 +115,45 @@ fn second_moment(q: &ViewQuadrature, exponent: f64, weight: f64) -> f64 {
     sum / q.integral_sq
 }
 
-fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) -> ViewQuadrature {
-    let view = DVec3::new(view_theta.sin(), 0.0, view_theta.cos());
-    let ds = 1.0 / config.s_bins as f64;
-    let dphi = PI / config.phi_bins as f64;
-    let mut q = ViewQuadrature {
-        g2_dw: Vec::new(),
-        ln_cos_h: Vec::new(),
-        inv_jacobian: Vec::new(),
-        cosine_pdf: Vec::new(),
-        integral_sq: 0.0,
-        view,
-        lights: Vec::new(),
-    };
-    let mut integral = 0.0;
-    for i in 0..config.s_bins {
+/// A point of the half-vector quadrature of one view where `g = f_r cos(theta_l)` (mean over
+/// RGB) is positive.
+pub(crate) struct HalfVectorPoint {
+    pub light: DVec3,
+    pub g: f64,
+    /// The light directions' solid angle of the point, `4 (v.h) dω_h`.
+    pub dw_l: f64,
+    pub cos_h: f64,
+    pub cos_phi_h: f64,
+    pub v_dot_h: f64,
+}
+
+/// Visits the points of the midpoint quadrature of `view` over the half vector:
+/// `s = sqrt(theta_h / (pi/2))` in `s_bins` bins (dense near the normal like the MERL grid, so
+/// lobes of `n ~ 1e5` are resolved) and `phi_h` in `phi_bins` bins over `[0, phi_span)`, each
+/// point counting `multiplicity` times (2 where `phi_h` over `[0, pi]` stands for the whole
+/// circle of an isotropic material seen from the xz plane). Points whose light is at or below
+/// the horizon, or where `g` is not positive, are skipped. The one quadrature of
+/// [`LobeQuadrature`] and [`crate::anisotropic_lobe_fit`].
+pub(crate) fn visit_half_vectors(
+    target: &TargetFn<'_>,
+    view: DVec3,
+    (s_bins, phi_bins): (usize, usize),
+    phi_span: f64,
+    multiplicity: f64,
+    mut visit: impl FnMut(&HalfVectorPoint),
+) {
+    let ds = 1.0 / s_bins as f64;
+    let dphi = phi_span / phi_bins as f64;
+    for i in 0..s_bins {
         let s = (i as f64 + 0.5) * ds;
         let theta_h = FRAC_PI_2 * s * s;
         let (sin_h, cos_h) = theta_h.sin_cos();
-        // dω_h = sin(theta_h) dtheta_h dphi_h, dtheta_h = pi s ds; phi_h over [0, pi] counts twice
-        // (the view lies in the xz plane and the material is isotropic).
-        let dw_h = 2.0 * sin_h * PI * s * ds * dphi;
-        for j in 0..config.phi_bins {
+        // dω_h = sin(theta_h) dtheta_h dphi_h, dtheta_h = pi s ds.
+        let dw_h = multiplicity * sin_h * PI * s * ds * dphi;
+        for j in 0..phi_bins {
             let phi_h = (j as f64 + 0.5) * dphi;
-            let half = DVec3::new(sin_h * phi_h.cos(), sin_h * phi_h.sin(), cos_h);
+            let (sin_p, cos_p) = phi_h.sin_cos();
+            let half = DVec3::new(sin_h * cos_p, sin_h * sin_p, cos_h);
             let v_dot_h = view.dot(half);
             if v_dot_h <= 0.0 {
                 continue;
@@ -152,15 +168,41 @@ fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) ->
             if !(g.is_finite() && g > 0.0) {
                 continue;
             }
-            let dw_l = 4.0 * v_dot_h * dw_h;
-            integral += g * dw_l;
-            q.g2_dw.push(g * g * dw_l);
-            q.ln_cos_h.push(cos_h.max(1e-300).ln());
-            q.inv_jacobian.push(0.25 / v_dot_h);
-            q.cosine_pdf.push(light.z * FRAC_1_PI);
-            q.lights.push(light);
+            visit(&HalfVectorPoint {
+                light,
+                g,
+                dw_l: 4.0 * v_dot_h * dw_h,
+                cos_h,
+                cos_phi_h: cos_p,
+                v_dot_h,
+            });
         }
     }
+}
+
+fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) -> ViewQuadrature {
+    let view = DVec3::new(view_theta.sin(), 0.0, view_theta.cos());
+    let mut q = ViewQuadrature {
+        g2_dw: Vec::new(),
+        ln_cos_h: Vec::new(),
+        inv_jacobian: Vec::new(),
+        cosine_pdf: Vec::new(),
+        integral_sq: 0.0,
+        view,
+        lights: Vec::new(),
+    };
+    let mut integral = 0.0;
+    // phi_h over [0, pi] counts twice: the view lies in the xz plane and the material is
+    // isotropic.
+    let bins = (config.s_bins, config.phi_bins);
+    visit_half_vectors(target, view, bins, PI, 2.0, |p| {
+        integral += p.g * p.dw_l;
+        q.g2_dw.push(p.g * p.g * p.dw_l);
+        q.ln_cos_h.push(p.cos_h.max(1e-300).ln());
+        q.inv_jacobian.push(0.25 / p.v_dot_h);
+        q.cosine_pdf.push(p.light.z * FRAC_1_PI);
+        q.lights.push(p.light);
+    });
     q.integral_sq = integral * integral;
     q
 }
@@ -454,56 +496,37 @@ impl LobeQuadrature {
         })
     }
 
-    /// Coordinate pattern search from `start`; moves stay in the valid domain.
+    /// Coordinate pattern search from `start` in `(log10(1 + n1), log10(1 + n2), w1, w2)`;
+    /// moves stay in the valid domain.
     fn refine_two_lobes(&self, start: TwoLobeCandidate) -> TwoLobeCandidate {
         let to_t = |n: f64| (1.0 + n).log10();
         let to_n = |t: f64| (10f64.powf(t) - 1.0).clamp(0.0, MAX_EXPONENT);
         let t_max = to_t(MAX_EXPONENT);
-        let mut best = start;
-        let mut x = [to_t(start.1[0]), to_t(start.1[1]), start.2[0], start.2[1]];
-        let (mut t_step, mut w_step) = (0.125, 0.025);
-        for _ in 0..TWO_LOBE_REFINE_LEVELS {
+        let search = PatternSearch {
+            moves: PatternSearch::<4>::axis_moves(),
+            steps: [0.125, 0.125, 0.025, 0.025],
+            levels: TWO_LOBE_REFINE_LEVELS,
             // At most a few passes per level: each accepted move restarts the pass.
-            for _ in 0..8 {
-                let moves: Vec<[f64; 4]> = (0..4)
-                    .flat_map(|k| {
-                        let step = if k < 2 { t_step } else { w_step };
-                        [-step, step].map(|d| {
-                            let mut y = x;
-                            y[k] += d;
-                            y
-                        })
-                    })
-                    .filter(|y| {
-                        y[0] >= 0.0
-                            && y[1] >= 0.0
-                            && y[0] <= t_max
-                            && y[1] <= t_max
-                            && y[2] >= 0.0
-                            && y[3] >= 0.0
-                            && y[2] + y[3] <= 1.0
-                    })
-                    .collect();
-                let found = moves
-                    .par_iter()
-                    .map(|y| {
-                        let (n, w) = ([to_n(y[0]), to_n(y[1])], [y[2], y[3]]);
-                        ((self.two_lobe_relative_variance(n, w), n, w), *y)
-                    })
-                    .filter(|(c, _)| c.0.is_finite())
-                    .reduce_with(|a, b| if b.0 .0 < a.0 .0 { b } else { a });
-                match found {
-                    Some((candidate, y)) if candidate.0 < best.0 => {
-                        best = candidate;
-                        x = y;
-                    }
-                    _ => break,
-                }
-            }
-            t_step *= 0.5;
-            w_step *= 0.5;
-        }
-        best
+            max_passes: 8,
+        };
+        let start = SearchPoint {
+            score: start.0,
+            params: (start.1, start.2),
+            x: [to_t(start.1[0]), to_t(start.1[1]), start.2[0], start.2[1]],
+        };
+        let in_domain = |y: &[f64; 4]| {
+            (0.0..=t_max).contains(&y[0])
+                && (0.0..=t_max).contains(&y[1])
+                && y[2] >= 0.0
+                && y[3] >= 0.0
+                && y[2] + y[3] <= 1.0
+        };
+        let end = search.minimise(
+            start,
+            |y| in_domain(&y).then(|| (([to_n(y[0]), to_n(y[1])], [y[2], y[3]]), y)),
+            |&(n, w)| self.two_lobe_relative_variance(n, w),
+        );
+        (end.score, end.params.0, end.params.1)
     }
 }
 

@@ -17,13 +17,13 @@ use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 use nbrdf_core::sampling::{self, SamplingStrategy};
 use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
-use std::any::Any;
-use std::cell::{Cell, RefCell};
+use nbrdf_ffi_common::{
+    array_len, check_pointer, input, output, reference, Failure, FailureKind, FfiResult, Status,
+};
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::Once;
 
 /// Status code returned (as `int32_t`) by every fallible function. On any value other than
 /// `NBRDF_OK`, `nbrdf_last_error()` describes the failure.
@@ -148,282 +148,94 @@ pub struct NbrdfTableInfo {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Errors and the panic guard.
+// Errors (the plumbing is nbrdf-ffi-common's, shared with libnbrdf_train).
 
-thread_local! {
-    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
-}
+impl Status for NbrdfStatus {
+    const OK: i32 = NbrdfStatus::NBRDF_OK as i32;
 
-/// A failed call: the status to return and the message for `nbrdf_last_error`.
-#[derive(Debug)]
-struct Failure {
-    status: NbrdfStatus,
-    message: String,
-}
-
-type FfiResult<T> = Result<T, Failure>;
-
-impl Failure {
-    fn null(argument: &str) -> Self {
-        Failure {
-            status: NbrdfStatus::NBRDF_ERROR_NULL_POINTER,
-            message: format!("argument `{argument}` is a null pointer"),
-        }
+    fn code(kind: FailureKind) -> i32 {
+        (match kind {
+            FailureKind::NullPointer => NbrdfStatus::NBRDF_ERROR_NULL_POINTER,
+            FailureKind::InvalidArgument => NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT,
+            FailureKind::Io => NbrdfStatus::NBRDF_ERROR_IO,
+            FailureKind::Format => NbrdfStatus::NBRDF_ERROR_FORMAT,
+            FailureKind::Panic => NbrdfStatus::NBRDF_ERROR_PANIC,
+        }) as i32
     }
-
-    fn invalid(message: impl Into<String>) -> Self {
-        Failure {
-            status: NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT,
-            message: message.into(),
-        }
-    }
-}
-
-impl From<NbrdfError> for Failure {
-    fn from(error: NbrdfError) -> Self {
-        let status = match &error {
-            // Reading text that is not UTF-8 fails with InvalidData: the file was readable but
-            // its content is wrong, which is a format error to the caller.
-            NbrdfError::Io { source, .. } if source.kind() == std::io::ErrorKind::InvalidData => {
-                NbrdfStatus::NBRDF_ERROR_FORMAT
-            }
-            NbrdfError::Io { .. } => NbrdfStatus::NBRDF_ERROR_IO,
-            NbrdfError::Format { .. } => NbrdfStatus::NBRDF_ERROR_FORMAT,
-            _ => NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT,
-        };
-        Failure {
-            status,
-            message: error.to_string(),
-        }
-    }
-}
-
-fn set_last_error(message: String) {
-    let message = CString::new(message.replace('\0', "\\0")).unwrap_or_default();
-    // `try_with` fails only while the thread is being torn down; there is nobody to tell then.
-    let _ = LAST_ERROR.try_with(|cell| *cell.borrow_mut() = message);
-}
-
-fn panic_message(payload: &(dyn Any + Send)) -> &str {
-    if let Some(message) = payload.downcast_ref::<&'static str>() {
-        message
-    } else if let Some(message) = payload.downcast_ref::<String>() {
-        message
-    } else {
-        "(panic payload is not a string)"
-    }
-}
-
-thread_local! {
-    /// True while this thread runs inside [`guard`].
-    static IN_GUARD: Cell<bool> = const { Cell::new(false) };
-    /// Where the last panic inside [`guard`] on this thread happened.
-    static PANIC_LOCATION: RefCell<Option<String>> = const { RefCell::new(None) };
-}
-
-static PANIC_HOOK: Once = Once::new();
-
-/// Chains a panic hook that keeps panics caught by [`guard`] quiet (their message and location
-/// go to `nbrdf_last_error` instead of the host's stderr); other panics, and all of them when
-/// `RUST_BACKTRACE` is set to anything but 0, still reach the previous hook.
-fn install_panic_hook() {
-    PANIC_HOOK.call_once(|| {
-        let previous = std::panic::take_hook();
-        let verbose = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
-        std::panic::set_hook(Box::new(move |info| {
-            let guarded = IN_GUARD.try_with(Cell::get).unwrap_or(false);
-            if guarded {
-                let location = info.location().map(|l| l.to_string());
-                let _ = PANIC_LOCATION.try_with(|cell| *cell.borrow_mut() = location);
-            }
-            if !guarded || verbose {
-                previous(info);
-            }
-        }));
-    });
 }
 
 /// Runs `body`, catching panics; returns the status code and records the message of a failure
 /// (prefixed with `function`) for `nbrdf_last_error`.
 fn guard(function: &str, body: impl FnOnce() -> FfiResult<()>) -> i32 {
-    install_panic_hook();
-    let outer = IN_GUARD.with(|g| g.replace(true));
-    let result = catch_unwind(AssertUnwindSafe(body));
-    IN_GUARD.with(|g| g.set(outer));
-    let failure = match result {
-        Ok(Ok(())) => return NbrdfStatus::NBRDF_OK as i32,
-        Ok(Err(failure)) => failure,
-        Err(payload) => {
-            let location = PANIC_LOCATION.with(|cell| cell.borrow_mut().take());
-            let at = location.map(|l| format!(" (at {l})")).unwrap_or_default();
-            Failure {
-                status: NbrdfStatus::NBRDF_ERROR_PANIC,
-                message: format!(
-                    "internal error (panic): {}{at}",
-                    panic_message(payload.as_ref())
-                ),
-            }
-        }
-    };
-    set_last_error(format!("{function}: {}", failure.message));
-    failure.status as i32
-}
-
-// ---------------------------------------------------------------------------------------------
-// Pointer and slice checks.
-
-/// A shared reference to `*ptr`, or an error naming `argument` when null or misaligned.
-///
-/// # Safety
-/// A non-null `ptr` must point to a live, initialised `T` for the lifetime `'a`.
-unsafe fn reference<'a, T>(ptr: *const T, argument: &str) -> FfiResult<&'a T> {
-    if ptr.is_null() {
-        return Err(Failure::null(argument));
-    }
-    if !ptr.is_aligned() {
-        return Err(Failure::invalid(format!(
-            "argument `{argument}` is misaligned"
-        )));
-    }
-    // SAFETY: non-null and aligned; validity is the caller's contract.
-    Ok(unsafe { &*ptr })
-}
-
-/// Checks an array argument for null and alignment.
-fn check_array<T>(ptr: *const T, argument: &str) -> FfiResult<()> {
-    if ptr.is_null() {
-        return Err(Failure::null(argument));
-    }
-    if !ptr.is_aligned() {
-        return Err(Failure::invalid(format!(
-            "array `{argument}` is not aligned to {} bytes",
-            align_of::<T>()
-        )));
-    }
-    Ok(())
-}
-
-/// `factor * n` floats, checked against overflow and the largest possible allocation.
-fn array_len(n: usize, factor: usize) -> FfiResult<usize> {
-    n.checked_mul(factor)
-        .filter(|len| {
-            len.checked_mul(size_of::<f32>())
-                .is_some_and(|bytes| bytes <= isize::MAX as usize)
-        })
-        .ok_or_else(|| Failure::invalid(format!("batch size n = {n} is too large")))
-}
-
-/// # Safety
-/// `ptr` passed [`check_array`] and points to `len` readable floats.
-unsafe fn input<'a>(ptr: *const f32, len: usize) -> &'a [f32] {
-    // SAFETY: the caller's contract; `len` fits in isize (array_len).
-    unsafe { std::slice::from_raw_parts(ptr, len) }
-}
-
-/// # Safety
-/// `ptr` passed [`check_array`] and points to `len` writable floats that no other slice aliases.
-unsafe fn output<'a>(ptr: *mut f32, len: usize) -> &'a mut [f32] {
-    // SAFETY: the caller's contract; `len` fits in isize (array_len).
-    unsafe { std::slice::from_raw_parts_mut(ptr, len) }
+    nbrdf_ffi_common::guard::<NbrdfStatus>(function, body)
 }
 
 fn directions(buffer: &[f32]) -> Directions<'_> {
     Directions::from_planar(buffer).expect("planar buffers have length 3 n")
 }
 
-/// Reads a sampler passed by C and validates it with the core.
-///
-/// # Safety
-/// A non-null `sampler` must point to a live `NbrdfSampler`.
-unsafe fn read_sampler(sampler: *const NbrdfSampler) -> FfiResult<SamplingStrategy> {
-    check_array(sampler, "sampler")?;
-    // Read the fields through the raw pointer and the kind as a plain integer: C may store any
-    // int there, and materialising an out-of-range Rust enum would be undefined behaviour.
-    // SAFETY: non-null and aligned (checked), initialised by contract; `NbrdfSamplingKind` is a
-    // repr(C) fieldless enum, laid out as a C int.
-    let (kind, exponent, specular_weight) = unsafe {
-        (
-            std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
-            std::ptr::addr_of!((*sampler).exponent).read(),
-            std::ptr::addr_of!((*sampler).specular_weight).read(),
-        )
-    };
-    let strategy = match kind {
-        0 => SamplingStrategy::Uniform,
-        1 => SamplingStrategy::Cosine,
-        2 => SamplingStrategy::BlinnPhong {
-            exponent: f64::from(exponent),
-            specular_weight: f64::from(specular_weight),
-        },
-        3 | 5 => {
-            return Err(Failure::invalid(format!(
-            "sampling kind {kind} ({}) needs an NbrdfMixtureSampler and the *_mixture functions",
-            if kind == 3 { "two-lobe" } else { "anisotropic phong" }
-        )))
-        }
-        4 => {
-            return Err(Failure::invalid(
-                "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions"
-                    .to_string(),
-            ))
-        }
-        other => {
-            return Err(Failure::invalid(format!(
-                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
-            )))
-        }
-    };
-    Ok(strategy.validated()?)
+/// The fields of a sampler struct passed by C, the kind as a plain integer.
+struct SamplerFields {
+    kind: i32,
+    exponent: f32,
+    specular_weight: f32,
+    /// `exponent2` and `specular_weight2` of an `NbrdfMixtureSampler`; `None` for an
+    /// `NbrdfSampler`, which refuses the kinds that read them.
+    second: Option<(f32, f32)>,
 }
 
-/// Reads an `NbrdfMixtureSampler` passed by C and validates it with the core.
-///
-/// # Safety
-/// A non-null `sampler` must point to a live `NbrdfMixtureSampler`.
-unsafe fn read_mixture_sampler(sampler: *const NbrdfMixtureSampler) -> FfiResult<SamplingStrategy> {
-    check_array(sampler, "sampler")?;
-    // SAFETY: as in `read_sampler`; the kind is read as a plain C int.
-    let (kind, exponent, specular_weight, exponent2, specular_weight2) = unsafe {
-        (
-            std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
-            std::ptr::addr_of!((*sampler).exponent).read(),
-            std::ptr::addr_of!((*sampler).specular_weight).read(),
-            std::ptr::addr_of!((*sampler).exponent2).read(),
-            std::ptr::addr_of!((*sampler).specular_weight2).read(),
-        )
-    };
-    let strategy = match kind {
-        0 => SamplingStrategy::Uniform,
-        1 => SamplingStrategy::Cosine,
-        2 => SamplingStrategy::BlinnPhong {
-            exponent: f64::from(exponent),
-            specular_weight: f64::from(specular_weight),
-        },
-        3 => SamplingStrategy::TwoLobe {
-            exponent1: f64::from(exponent),
-            weight1: f64::from(specular_weight),
-            exponent2: f64::from(exponent2),
-            weight2: f64::from(specular_weight2),
-        },
-        4 => return Err(Failure::invalid(
-            "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions".to_string(),
-        )),
-        5 => SamplingStrategy::anisotropic(
-            f64::from(exponent),
-            f64::from(exponent2),
-            f64::from(specular_weight),
-        ),
-        other => {
-            return Err(Failure::invalid(format!(
-                "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 5 = anisotropic phong; 4 = tabulated needs an NbrdfTable)"
-            )))
-        }
-    };
-    Ok(strategy.validated()?)
+impl SamplerFields {
+    /// The strategy the fields describe, validated by the core.
+    fn strategy(&self) -> FfiResult<SamplingStrategy> {
+        let (exponent, specular_weight) =
+            (f64::from(self.exponent), f64::from(self.specular_weight));
+        let strategy = match (self.kind, self.second) {
+            (0, _) => SamplingStrategy::Uniform,
+            (1, _) => SamplingStrategy::Cosine,
+            (2, _) => SamplingStrategy::BlinnPhong {
+                exponent,
+                specular_weight,
+            },
+            (3, Some((exponent2, weight2))) => SamplingStrategy::TwoLobe {
+                exponent1: exponent,
+                weight1: specular_weight,
+                exponent2: f64::from(exponent2),
+                weight2: f64::from(weight2),
+            },
+            (5, Some((exponent_v, _))) => {
+                SamplingStrategy::anisotropic(exponent, f64::from(exponent_v), specular_weight)
+            }
+            (kind @ (3 | 5), None) => {
+                return Err(Failure::invalid(format!(
+                    "sampling kind {kind} ({}) needs an NbrdfMixtureSampler and the *_mixture functions",
+                    if kind == 3 { "two-lobe" } else { "anisotropic phong" }
+                )))
+            }
+            (4, _) => {
+                return Err(Failure::invalid(
+                    "sampling kind 4 (tabulated) needs an NbrdfTable and the *_table functions",
+                ))
+            }
+            (other, None) => {
+                return Err(Failure::invalid(format!(
+                    "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong)"
+                )))
+            }
+            (other, Some(_)) => {
+                return Err(Failure::invalid(format!(
+                    "unknown sampling kind {other} (expected 0 = uniform, 1 = cosine, 2 = phong, 3 = two-lobe, 5 = anisotropic phong; 4 = tabulated needs an NbrdfTable)"
+                )))
+            }
+        };
+        Ok(strategy.validated()?)
+    }
 }
 
-/// A sampler argument of the exported functions: `NbrdfSampler` or `NbrdfMixtureSampler`.
+/// A sampler argument of the exported functions: `NbrdfSampler`, `NbrdfMixtureSampler` or
+/// `NbrdfTable`.
 trait SamplerArg {
+    /// The name of the argument in the C signatures and error messages.
+    const ARGUMENT: &'static str = "sampler";
     /// # Safety
     /// A non-null pointer must point to a live value of the type.
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy>;
@@ -431,23 +243,50 @@ trait SamplerArg {
 
 impl SamplerArg for NbrdfSampler {
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
-        // SAFETY: forwarded contract.
-        unsafe { read_sampler(sampler) }
+        check_pointer(sampler, Self::ARGUMENT)?;
+        // Read the fields through the raw pointer and the kind as a plain integer: C may store
+        // any int there, and materialising an out-of-range Rust enum would be undefined
+        // behaviour.
+        // SAFETY: non-null and aligned (checked), initialised by contract; `NbrdfSamplingKind`
+        // is a repr(C) fieldless enum, laid out as a C int.
+        let fields = unsafe {
+            SamplerFields {
+                kind: std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
+                exponent: std::ptr::addr_of!((*sampler).exponent).read(),
+                specular_weight: std::ptr::addr_of!((*sampler).specular_weight).read(),
+                second: None,
+            }
+        };
+        fields.strategy()
     }
 }
 
 impl SamplerArg for NbrdfTable {
+    const ARGUMENT: &'static str = "table";
+
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
         // SAFETY: forwarded contract.
-        let table = unsafe { reference(sampler, "table")? };
+        let table = unsafe { reference(sampler, Self::ARGUMENT)? };
         Ok(SamplingStrategy::Tabulated(Arc::clone(&table.sampler)))
     }
 }
 
 impl SamplerArg for NbrdfMixtureSampler {
     unsafe fn strategy(sampler: *const Self) -> FfiResult<SamplingStrategy> {
-        // SAFETY: forwarded contract.
-        unsafe { read_mixture_sampler(sampler) }
+        check_pointer(sampler, Self::ARGUMENT)?;
+        // SAFETY: as for `NbrdfSampler`; the kind is read as a plain C int.
+        let fields = unsafe {
+            SamplerFields {
+                kind: std::ptr::addr_of!((*sampler).kind).cast::<i32>().read(),
+                exponent: std::ptr::addr_of!((*sampler).exponent).read(),
+                specular_weight: std::ptr::addr_of!((*sampler).specular_weight).read(),
+                second: Some((
+                    std::ptr::addr_of!((*sampler).exponent2).read(),
+                    std::ptr::addr_of!((*sampler).specular_weight2).read(),
+                )),
+            }
+        };
+        fields.strategy()
     }
 }
 
@@ -545,9 +384,9 @@ unsafe fn eval_impl<H: BrdfHandle>(
     guard(function, || {
         // SAFETY: forwarded contract.
         let handle = unsafe { reference(handle, H::ARGUMENT)? };
-        check_array(view, "view")?;
-        check_array(light, "light")?;
-        check_array(out_rgb, "out_rgb")?;
+        check_pointer(view, "view")?;
+        check_pointer(light, "light")?;
+        check_pointer(out_rgb, "out_rgb")?;
         let len = array_len(n, 3)?;
         if n == 0 {
             return Ok(());
@@ -580,12 +419,12 @@ unsafe fn sample_impl<H: BrdfHandle, S: SamplerArg>(
     guard(function, || {
         // SAFETY: forwarded contract.
         let handle = unsafe { reference(handle, H::ARGUMENT)? };
-        check_array(sampler, "sampler")?;
-        check_array(view, "view")?;
-        check_array(u, "u")?;
-        check_array(out_light, "out_light")?;
-        check_array(out_weight, "out_weight")?;
-        check_array(out_pdf, "out_pdf")?;
+        check_pointer(sampler, S::ARGUMENT)?;
+        check_pointer(view, "view")?;
+        check_pointer(u, "u")?;
+        check_pointer(out_light, "out_light")?;
+        check_pointer(out_weight, "out_weight")?;
+        check_pointer(out_pdf, "out_pdf")?;
         // SAFETY: forwarded contract.
         let strategy = unsafe { S::strategy(sampler)? };
         let len = array_len(n, 3)?;
@@ -623,9 +462,7 @@ unsafe fn sample_impl<H: BrdfHandle, S: SamplerArg>(
 /// unchanged. The pointer stays valid until the next call into this library on the same thread.
 #[no_mangle]
 pub extern "C" fn nbrdf_last_error() -> *const c_char {
-    LAST_ERROR
-        .try_with(|cell| cell.borrow().as_ptr())
-        .unwrap_or(c"".as_ptr())
+    nbrdf_ffi_common::last_error()
 }
 
 /// Version of the library (the crate version, e.g. "0.1.0"); a static string.
@@ -676,7 +513,7 @@ pub unsafe extern "C" fn nbrdf_network_info(
     guard("nbrdf_network_info", || {
         // SAFETY: forwarded contract.
         let network = &unsafe { reference(network, "network")? }.network;
-        check_array(out, "out")?;
+        check_pointer(out, "out")?;
         let to_u32 = |value: usize| u32::try_from(value).unwrap_or(u32::MAX);
         let sampling = network.sampling.as_ref();
         let info = NbrdfNetworkInfo {
@@ -706,7 +543,7 @@ pub unsafe extern "C" fn nbrdf_network_is_anisotropic(
     guard("nbrdf_network_is_anisotropic", || {
         // SAFETY: forwarded contract.
         let network = &unsafe { reference(network, "network")? }.network;
-        check_array(out, "out")?;
+        check_pointer(out, "out")?;
         // SAFETY: non-null, aligned, writable by contract.
         unsafe { out.write(u32::from(network.anisotropic)) };
         Ok(())
@@ -726,7 +563,7 @@ pub unsafe extern "C" fn nbrdf_network_name(
     guard("nbrdf_network_name", || {
         // SAFETY: forwarded contract.
         let network = unsafe { reference(network, "network")? };
-        check_array(out_name, "out_name")?;
+        check_pointer(out_name, "out_name")?;
         // SAFETY: non-null, aligned, writable by contract.
         unsafe { out_name.write(network.name.as_ptr()) };
         Ok(())
@@ -894,10 +731,10 @@ unsafe fn pdf_impl<S: SamplerArg>(
     out_pdf: *mut f32,
 ) -> i32 {
     guard(function, || {
-        check_array(sampler, "sampler")?;
-        check_array(view, "view")?;
-        check_array(light, "light")?;
-        check_array(out_pdf, "out_pdf")?;
+        check_pointer(sampler, S::ARGUMENT)?;
+        check_pointer(view, "view")?;
+        check_pointer(light, "light")?;
+        check_pointer(out_pdf, "out_pdf")?;
         // SAFETY: forwarded contract.
         let strategy = unsafe { S::strategy(sampler)? };
         let len = array_len(n, 3)?;
@@ -921,7 +758,7 @@ unsafe fn pdf_impl<S: SamplerArg>(
 pub unsafe extern "C" fn nbrdf_sampler_validate(sampler: *const NbrdfSampler) -> i32 {
     // SAFETY: forwarded contract.
     guard("nbrdf_sampler_validate", || {
-        unsafe { read_sampler(sampler) }.map(drop)
+        unsafe { NbrdfSampler::strategy(sampler) }.map(drop)
     })
 }
 
@@ -1023,7 +860,7 @@ pub unsafe extern "C" fn nbrdf_mixture_sampler_validate(
 ) -> i32 {
     // SAFETY: forwarded contract.
     guard("nbrdf_mixture_sampler_validate", || {
-        unsafe { read_mixture_sampler(sampler) }.map(drop)
+        unsafe { NbrdfMixtureSampler::strategy(sampler) }.map(drop)
     })
 }
 
@@ -1042,7 +879,7 @@ pub unsafe extern "C" fn nbrdf_network_stored_sampler(
     guard("nbrdf_network_stored_sampler", || {
         // SAFETY: forwarded contract.
         let network = &unsafe { reference(network, "network")? }.network;
-        check_array(out, "out")?;
+        check_pointer(out, "out")?;
         let mut sampler = NbrdfMixtureSampler {
             kind: NbrdfSamplingKind::NBRDF_SAMPLING_COSINE,
             exponent: 0.0,
@@ -1087,7 +924,7 @@ pub unsafe extern "C" fn nbrdf_network_default_sampling(
     guard("nbrdf_network_default_sampling", || {
         // SAFETY: forwarded contract.
         let network = &unsafe { reference(network, "network")? }.network;
-        check_array(out, "out")?;
+        check_pointer(out, "out")?;
         let kind = match network.sampling.as_ref().and_then(|s| s.default.as_deref()) {
             Some("cosine") => NbrdfSamplingKind::NBRDF_SAMPLING_COSINE as i32,
             Some("phong") => NbrdfSamplingKind::NBRDF_SAMPLING_PHONG as i32,
@@ -1176,7 +1013,7 @@ pub unsafe extern "C" fn nbrdf_table_info(
     guard("nbrdf_table_info", || {
         // SAFETY: forwarded contract.
         let table = unsafe { reference(table, "table")? };
-        check_array(out, "out")?;
+        check_pointer(out, "out")?;
         let arrays = table.sampler.tables();
         let info = NbrdfTableInfo {
             rows: arrays.rows as u32,
@@ -1205,9 +1042,9 @@ pub unsafe extern "C" fn nbrdf_table_arrays(
     guard("nbrdf_table_arrays", || {
         // SAFETY: forwarded contract.
         let table = unsafe { reference(table, "table")? };
-        check_array(out_mass, "out_mass")?;
-        check_array(out_marginal_cdf, "out_marginal_cdf")?;
-        check_array(out_conditional_cdf, "out_conditional_cdf")?;
+        check_pointer(out_mass, "out_mass")?;
+        check_pointer(out_marginal_cdf, "out_marginal_cdf")?;
+        check_pointer(out_conditional_cdf, "out_conditional_cdf")?;
         let arrays = table.sampler.tables();
         for (src, dst) in [
             (&arrays.mass, out_mass),
@@ -1314,59 +1151,39 @@ mod tests {
     }
 
     #[test]
-    fn guard_catches_panics_with_their_message() {
+    fn guarded_failures_return_the_status_and_set_the_message() {
         let status = guard("some_function", || panic!("boom {}", 42));
         assert_eq!(status, NbrdfStatus::NBRDF_ERROR_PANIC as i32);
-        let message = last_error();
-        let expected = "some_function: internal error (panic): boom 42 (at nbrdf-ffi/src/lib.rs:";
-        assert!(message.starts_with(expected), "{message}");
-        let status = guard("other", || std::panic::panic_any(7_u8));
-        assert_eq!(status, NbrdfStatus::NBRDF_ERROR_PANIC as i32);
-        assert!(last_error().contains("not a string"), "{}", last_error());
-    }
-
-    #[test]
-    fn guard_keeps_the_last_failure_across_successes() {
+        assert!(
+            last_error().starts_with("some_function: internal error (panic): boom 42"),
+            "{}",
+            last_error()
+        );
         guard("f", || Err(Failure::invalid("bad")));
-        assert_eq!(guard("g", || Ok(())), 0);
+        assert_eq!(guard("g", || Ok(())), NbrdfStatus::NBRDF_OK as i32);
         assert_eq!(last_error(), "f: bad");
     }
 
     #[test]
-    fn messages_with_nul_bytes_survive() {
-        guard("f", || Err(Failure::invalid("a\0b")));
-        assert_eq!(last_error(), "f: a\\0b");
-    }
-
-    #[test]
     fn core_errors_map_to_status_codes() {
+        let status = |error: NbrdfError| guard("f", || Err(error.into()));
         let io = NbrdfError::io("x.json", std::io::Error::from(std::io::ErrorKind::NotFound));
-        assert_eq!(Failure::from(io).status, NbrdfStatus::NBRDF_ERROR_IO);
+        assert_eq!(status(io), NbrdfStatus::NBRDF_ERROR_IO as i32);
         let binary = NbrdfError::io(
             "x.json",
             std::io::Error::from(std::io::ErrorKind::InvalidData),
         );
-        assert_eq!(
-            Failure::from(binary).status,
-            NbrdfStatus::NBRDF_ERROR_FORMAT
-        );
+        assert_eq!(status(binary), NbrdfStatus::NBRDF_ERROR_FORMAT as i32);
         let format = NbrdfError::format("x.json", "bad");
-        assert_eq!(
-            Failure::from(format).status,
-            NbrdfStatus::NBRDF_ERROR_FORMAT
-        );
+        assert_eq!(status(format), NbrdfStatus::NBRDF_ERROR_FORMAT as i32);
         let invalid = NbrdfError::InvalidArgument("n".into());
         assert_eq!(
-            Failure::from(invalid).status,
-            NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT
+            status(invalid),
+            NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT as i32
         );
-    }
-
-    #[test]
-    fn array_len_rejects_overflow() {
-        assert_eq!(array_len(4, 3).unwrap(), 12);
-        assert!(array_len(usize::MAX / 2, 3).is_err());
-        assert!(array_len(usize::MAX / 4, 1).is_err());
-        assert!(array_len(usize::MAX / 8, 1).is_ok());
+        assert_eq!(
+            guard("f", || Err(Failure::null("x"))),
+            NbrdfStatus::NBRDF_ERROR_NULL_POINTER as i32
+        );
     }
 }

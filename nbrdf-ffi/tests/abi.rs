@@ -1,91 +1,14 @@
 //! The C ABI as a C caller sees it: status codes, messages, null pointers, planar layouts.
 
+mod support;
+
 use glam::Vec3;
 use nbrdf_core::brdf::Brdf;
-use nbrdf_core::{MerlTable, Nbrdf, SamplingStrategy};
+use nbrdf_core::{Nbrdf, SamplingStrategy};
 use nbrdf_ffi::*;
-use std::ffi::{c_char, CStr, CString};
-use std::path::{Path, PathBuf};
+use std::ffi::{c_char, CStr};
 use std::ptr::{null, null_mut};
-
-const OK: i32 = NbrdfStatus::NBRDF_OK as i32;
-const NULL: i32 = NbrdfStatus::NBRDF_ERROR_NULL_POINTER as i32;
-const INVALID: i32 = NbrdfStatus::NBRDF_ERROR_INVALID_ARGUMENT as i32;
-const IO: i32 = NbrdfStatus::NBRDF_ERROR_IO as i32;
-const FORMAT: i32 = NbrdfStatus::NBRDF_ERROR_FORMAT as i32;
-
-fn last_error() -> String {
-    // SAFETY: the library returns a valid NUL-terminated string.
-    unsafe { CStr::from_ptr(nbrdf_last_error()) }
-        .to_string_lossy()
-        .into_owned()
-}
-
-/// A scratch directory unique to this call: tests run in parallel threads, and two of them
-/// writing the same file let one read it half written.
-fn scratch(name: &str) -> PathBuf {
-    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let dir = std::env::temp_dir().join(format!(
-        "nbrdf-ffi-test-{}-{name}-{call}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn c_path(path: &Path) -> CString {
-    CString::new(path.to_str().unwrap()).unwrap()
-}
-
-/// A small deterministic network of hidden width 4 with Blinn-Phong parameters, as JSON text.
-fn network_json(hidden: usize) -> String {
-    let mut state = 12345_u32;
-    let mut next = move || {
-        state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
-        ((state >> 8) as f32 / (1u32 << 24) as f32 - 0.5) * 0.8
-    };
-    let layer = |inputs: usize, outputs: usize, next: &mut dyn FnMut() -> f32| {
-        let weights: Vec<String> = (0..inputs * outputs).map(|_| next().to_string()).collect();
-        let bias: Vec<String> = (0..outputs).map(|_| next().to_string()).collect();
-        format!(
-            r#"{{"inputs": {inputs}, "outputs": {outputs}, "weights": [{}], "bias": [{}]}}"#,
-            weights.join(", "),
-            bias.join(", ")
-        )
-    };
-    let layers = [
-        layer(6, hidden, &mut next),
-        layer(hidden, hidden, &mut next),
-        layer(hidden, 3, &mut next),
-    ];
-    format!(
-        r#"{{"format": "nbrdf", "version": 1, "name": "ffi-test", "layers": [{}],
-            "sampling": {{"model": "blinn-phong", "exponent": 40.0, "specular_weight": 0.25, "source": "manual"}},
-            "provenance": {{"source": "nbrdf-ffi tests"}}}}"#,
-        layers.join(", ")
-    )
-}
-
-struct Network(*mut NbrdfNetwork);
-
-impl Drop for Network {
-    fn drop(&mut self) {
-        // SAFETY: the handle came from nbrdf_network_load.
-        unsafe { nbrdf_network_free(self.0) }
-    }
-}
-
-fn load_network(hidden: usize) -> (Network, PathBuf) {
-    let path = scratch(&format!("net{hidden}")).join("test.nbrdf.json");
-    std::fs::write(&path, network_json(hidden)).unwrap();
-    let mut handle = null_mut();
-    // SAFETY: valid path and out pointer.
-    let status = unsafe { nbrdf_network_load(c_path(&path).as_ptr(), &mut handle) };
-    assert_eq!(status, OK, "{}", last_error());
-    assert!(!handle.is_null());
-    (Network(handle), path)
-}
+use support::*;
 
 /// Directions on the upper hemisphere plus grazing and degenerate ones.
 fn direction_pairs() -> Vec<(Vec3, Vec3)> {
@@ -110,17 +33,6 @@ fn direction_pairs() -> Vec<(Vec3, Vec3)> {
     pairs.push((Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 1.0)));
     pairs.push((Vec3::Z, Vec3::new(0.3, 0.0, -0.5)));
     pairs
-}
-
-fn planar(vectors: impl Iterator<Item = Vec3> + Clone) -> Vec<f32> {
-    let xs = vectors.clone().map(|v| v.x);
-    let ys = vectors.clone().map(|v| v.y);
-    let zs = vectors.map(|v| v.z);
-    xs.chain(ys).chain(zs).collect()
-}
-
-fn assert_close(a: f32, b: f32, what: &str) {
-    assert!((a - b).abs() <= 1e-6 + 1e-5 * b.abs(), "{what}: {a} vs {b}");
 }
 
 #[test]
@@ -555,30 +467,8 @@ fn network_batches_are_planar() {
 
 #[test]
 fn merl_batches_are_planar() {
-    // A smooth table: value grows along each axis, with one unmeasured region.
-    let cells = nbrdf_core::merl::CELLS;
-    let mut stored = vec![0.0_f64; 3 * cells];
-    for (i, value) in stored.iter_mut().enumerate() {
-        let (c, cell) = (i / cells, i % cells);
-        *value = 100.0
-            + (cell % 180) as f64 * 0.5
-            + ((cell / 180) % 90) as f64
-            + (cell / 16200) as f64 * 3.0
-            + c as f64;
-    }
-    stored[..180].iter_mut().for_each(|v| *v = -1.0);
-    let table = MerlTable::from_stored(stored).unwrap();
-    let path = scratch("merl").join("smooth.binary");
-    table.write(&path).unwrap();
-    let mut handle = null_mut();
-    // SAFETY: valid pointers.
-    assert_eq!(
-        unsafe { nbrdf_merl_load(c_path(&path).as_ptr(), &mut handle) },
-        OK,
-        "{}",
-        last_error()
-    );
-    let handle = handle.cast_const();
+    let (merl, table) = load_smooth_merl();
+    let handle = merl.0.cast_const();
     check_layouts(
         &table,
         // SAFETY: slices of the documented sizes.
@@ -598,9 +488,117 @@ fn merl_batches_are_planar() {
             )
         },
     );
-    // SAFETY: handle from nbrdf_merl_load.
-    unsafe { nbrdf_merl_free(handle.cast_mut()) };
-    std::fs::remove_file(&path).unwrap();
+}
+
+/// Samples `sampler` for `views` through `nbrdf_network_sample_mixture`, asks the pdfs of the
+/// samples again through `nbrdf_mixture_sampler_pdf`, and checks both lane by lane against the
+/// core's `expected` strategy.
+fn check_mixture_sampling(
+    sampler: &NbrdfMixtureSampler,
+    expected: &SamplingStrategy,
+    views: &[Vec3],
+) {
+    let (network, _) = load_network(4);
+    let n = views.len();
+    let us: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let k = i as f32;
+            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
+        })
+        .collect();
+    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
+    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
+    let mut pdf_again = vec![0.0; n];
+    // SAFETY: valid pointers and sizes.
+    unsafe {
+        assert_eq!(
+            nbrdf_mixture_sampler_validate(sampler),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_network_sample_mixture(
+                network.0,
+                sampler,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                light.as_mut_ptr(),
+                weight.as_mut_ptr(),
+                pdf.as_mut_ptr()
+            ),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_mixture_sampler_pdf(
+                sampler,
+                view.as_ptr(),
+                light.as_ptr(),
+                n,
+                pdf_again.as_mut_ptr()
+            ),
+            OK
+        );
+    }
+    assert_eq!(pdf, pdf_again);
+    for i in 0..n {
+        let s = expected.sample(views[i], us[i].to_array());
+        assert_eq!(s.light, lane(&light, n, i), "lane {i}");
+        assert_eq!(s.pdf, pdf[i], "lane {i}");
+    }
+}
+
+/// `kind` needs the fields of an `NbrdfMixtureSampler`: the one-lobe struct refuses it.
+fn assert_one_lobe_struct_refuses(kind: NbrdfSamplingKind) {
+    let one = NbrdfSampler {
+        kind,
+        exponent: 10.0,
+        specular_weight: 0.5,
+    };
+    // SAFETY: a valid pointer.
+    assert_eq!(unsafe { nbrdf_sampler_validate(&one) }, INVALID);
+    assert!(
+        last_error().contains("NbrdfMixtureSampler"),
+        "{}",
+        last_error()
+    );
+}
+
+/// `bad` variations of a mixture sampler are invalid arguments.
+fn assert_invalid_mixtures(bad: &[NbrdfMixtureSampler]) {
+    for bad in bad {
+        // SAFETY: a valid pointer.
+        assert_eq!(
+            unsafe { nbrdf_mixture_sampler_validate(bad) },
+            INVALID,
+            "{bad:?}"
+        );
+        assert!(
+            last_error().starts_with("nbrdf_mixture_sampler_validate: "),
+            "{}",
+            last_error()
+        );
+    }
+}
+
+/// What `nbrdf_network_stored_sampler` reports for the network file `json`.
+fn stored_sampler(json: &str, name: &str) -> NbrdfMixtureSampler {
+    let (network, _) = load_network_text(json, name);
+    let mut stored = std::mem::MaybeUninit::<NbrdfMixtureSampler>::uninit();
+    // SAFETY: a live handle and a writable sampler; initialised by a successful call.
+    unsafe {
+        assert_eq!(
+            nbrdf_network_stored_sampler(network.0, stored.as_mut_ptr()),
+            OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(nbrdf_network_stored_sampler(network.0, null_mut()), NULL);
+        stored.assume_init()
+    }
 }
 
 #[test]
@@ -618,7 +616,6 @@ fn two_lobe_samplers_go_through_the_mixture_functions() {
         exponent2: 20.0,
         weight2: f64::from(0.35f32),
     };
-    let (network, _) = load_network(4);
     let n = 64;
     let views: Vec<Vec3> = (0..n)
         .map(|i| {
@@ -626,105 +623,32 @@ fn two_lobe_samplers_go_through_the_mixture_functions() {
             Vec3::new(t.sin(), 0.0, t.cos())
         })
         .collect();
-    let us: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let k = i as f32;
-            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
-        })
-        .collect();
-    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
-    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
-    let mut pdf_again = vec![0.0; n];
-    // SAFETY: valid pointers and sizes.
-    unsafe {
-        assert_eq!(nbrdf_mixture_sampler_validate(&two), OK, "{}", last_error());
-        assert_eq!(
-            nbrdf_network_sample_mixture(
-                network.0,
-                &two,
-                view.as_ptr(),
-                u.as_ptr(),
-                n,
-                light.as_mut_ptr(),
-                weight.as_mut_ptr(),
-                pdf.as_mut_ptr()
-            ),
-            OK,
-            "{}",
-            last_error()
-        );
-        assert_eq!(
-            nbrdf_mixture_sampler_pdf(
-                &two,
-                view.as_ptr(),
-                light.as_ptr(),
-                n,
-                pdf_again.as_mut_ptr()
-            ),
-            OK
-        );
-    }
-    assert_eq!(pdf, pdf_again);
-    for i in 0..n {
-        let s = core.sample(views[i], us[i].to_array());
-        assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
-        assert_eq!(s.pdf, pdf[i]);
-    }
-    // The one-lobe struct refuses kind 3; bad two-lobe parameters are invalid arguments.
-    let one = NbrdfSampler {
-        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE,
-        exponent: 10.0,
-        specular_weight: 0.5,
-    };
-    // SAFETY: valid pointers.
-    unsafe {
-        assert_eq!(nbrdf_sampler_validate(&one), INVALID);
-        assert!(
-            last_error().contains("NbrdfMixtureSampler"),
-            "{}",
-            last_error()
-        );
-        for bad in [
-            NbrdfMixtureSampler {
-                specular_weight2: 0.7,
-                ..two
-            },
-            NbrdfMixtureSampler {
-                exponent2: 2e6,
-                ..two
-            },
-            NbrdfMixtureSampler {
-                exponent: f32::NAN,
-                ..two
-            },
-        ] {
-            assert_eq!(nbrdf_mixture_sampler_validate(&bad), INVALID, "{bad:?}");
-            assert!(last_error().starts_with("nbrdf_mixture_sampler_validate: "));
-        }
-    }
+    check_mixture_sampling(&two, &core, &views);
+    assert_one_lobe_struct_refuses(NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE);
+    assert_invalid_mixtures(&[
+        NbrdfMixtureSampler {
+            specular_weight2: 0.7,
+            ..two
+        },
+        NbrdfMixtureSampler {
+            exponent2: 2e6,
+            ..two
+        },
+        NbrdfMixtureSampler {
+            exponent: f32::NAN,
+            ..two
+        },
+    ]);
     // What the file stores: one lobe here, two after adding a second lobe.
-    let mut stored = two;
-    // SAFETY: valid pointers.
-    unsafe {
-        assert_eq!(nbrdf_network_stored_sampler(network.0, &mut stored), OK);
-    }
+    let stored = stored_sampler(&network_json(4), "one-lobe");
     assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_PHONG);
     assert_eq!((stored.exponent, stored.specular_weight), (40.0, 0.25));
     assert_eq!((stored.exponent2, stored.specular_weight2), (0.0, 0.0));
-    let path = scratch("two-lobe").join("two.nbrdf.json");
     let text = network_json(4).replace(
         r#""source": "manual"}"#,
         r#""source": "manual", "second_lobe": {"exponent": 8.0, "specular_weight": 0.5}}"#,
     );
-    std::fs::write(&path, text).unwrap();
-    let mut handle = null_mut();
-    // SAFETY: valid path and pointers.
-    unsafe {
-        assert_eq!(nbrdf_network_load(c_path(&path).as_ptr(), &mut handle), OK);
-        let two_file = Network(handle);
-        assert_eq!(nbrdf_network_stored_sampler(two_file.0, &mut stored), OK);
-        assert_eq!(nbrdf_network_stored_sampler(two_file.0, null_mut()), NULL);
-    }
+    let stored = stored_sampler(&text, "two-lobe");
     assert_eq!(stored.kind, NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE);
     assert_eq!((stored.exponent2, stored.specular_weight2), (8.0, 0.5));
 }
@@ -746,93 +670,20 @@ fn anisotropic_samplers_go_through_the_mixture_functions() {
             Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
         })
         .collect();
-    let us: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let k = i as f32;
-            Vec3::new((k * 0.37).fract(), (k * 0.61).fract(), (k * 0.83).fract())
-        })
-        .collect();
-    let (view, u) = (planar(views.iter().copied()), planar(us.iter().copied()));
-    let (network, _) = load_network(4);
-    let (mut light, mut weight, mut pdf) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; n]);
-    let mut pdf_again = vec![0.0; n];
-    // SAFETY: valid pointers and sizes.
-    unsafe {
-        assert_eq!(
-            nbrdf_mixture_sampler_validate(&aniso),
-            OK,
-            "{}",
-            last_error()
-        );
-        assert_eq!(
-            nbrdf_network_sample_mixture(
-                network.0,
-                &aniso,
-                view.as_ptr(),
-                u.as_ptr(),
-                n,
-                light.as_mut_ptr(),
-                weight.as_mut_ptr(),
-                pdf.as_mut_ptr()
-            ),
-            OK,
-            "{}",
-            last_error()
-        );
-        assert_eq!(
-            nbrdf_mixture_sampler_pdf(
-                &aniso,
-                view.as_ptr(),
-                light.as_ptr(),
-                n,
-                pdf_again.as_mut_ptr()
-            ),
-            OK
-        );
-    }
-    assert_eq!(pdf, pdf_again);
-    for i in 0..n {
-        let s = core.sample(views[i], us[i].to_array());
-        assert_eq!(s.light, Vec3::new(light[i], light[n + i], light[2 * n + i]));
-        assert_eq!(s.pdf, pdf[i]);
-    }
-    let one = NbrdfSampler {
-        kind: NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG,
-        exponent: 10.0,
-        specular_weight: 0.5,
-    };
-    // SAFETY: valid pointers.
-    unsafe {
-        assert_eq!(nbrdf_sampler_validate(&one), INVALID);
-        assert!(last_error().contains("NbrdfMixtureSampler"));
-        let bad = NbrdfMixtureSampler {
-            exponent2: 2e6,
-            ..aniso
-        };
-        assert_eq!(nbrdf_mixture_sampler_validate(&bad), INVALID);
-    }
+    check_mixture_sampling(&aniso, &core, &views);
+    assert_one_lobe_struct_refuses(NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG);
+    assert_invalid_mixtures(&[NbrdfMixtureSampler {
+        exponent2: 2e6,
+        ..aniso
+    }]);
     // A file storing exponent_v reports the anisotropic kind with n_v in exponent2.
-    let path = scratch("aniso-lobe").join("aniso.nbrdf.json");
     let text = network_json(4)
         .replace(r#""version": 1,"#, r#""version": 2, "anisotropic": true,"#)
         .replace(
             r#""source": "manual"}"#,
             r#""source": "manual", "exponent_v": 7.5}"#,
         );
-    std::fs::write(&path, text).unwrap();
-    let mut handle = null_mut();
-    let mut stored = aniso;
-    // SAFETY: valid path and pointers.
-    unsafe {
-        assert_eq!(
-            nbrdf_network_load(c_path(&path).as_ptr(), &mut handle),
-            OK,
-            "{}",
-            last_error()
-        );
-        let file = Network(handle);
-        assert_eq!(nbrdf_network_stored_sampler(file.0, &mut stored), OK);
-    }
+    let stored = stored_sampler(&text, "aniso-lobe");
     assert_eq!(
         stored.kind,
         NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG

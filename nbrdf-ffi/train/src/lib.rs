@@ -7,8 +7,8 @@
 //! (`NBRDF_BLESS=1 cargo test -p nbrdf-train-ffi --test header` regenerates it). The crate is a
 //! thin shell around `nbrdf_core::ops::distill`: it checks pointers and lengths, turns errors
 //! and panics into status codes with a thread-local message, and converts planar arrays. The
-//! error plumbing (status, last error, panic guard) follows nbrdf-ffi's `lib.rs`, its twin; both
-//! are held to the same contract by their `tests/abi.rs`.
+//! error plumbing (failures, last error, panic guard, pointer checks) is nbrdf-ffi-common's,
+//! shared with nbrdf-ffi.
 //!
 //! Conventions, those of nbrdf-ffi: planar arrays (`3 n` floats `[x.., y.., z..]` for
 //! directions, `[r.., g.., b..]` for colours), local shading frame with z the normal, `view`
@@ -24,12 +24,8 @@ use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::arrays::SampledArrays;
 use nbrdf_core::train::dataset::AngularSampling;
 use nbrdf_core::train::{EpochStats, TrainConfig};
-use nbrdf_core::NbrdfError;
-use std::any::Any;
-use std::cell::{Cell, RefCell};
+use nbrdf_ffi_common::{array_len, check_pointer, input, Failure, FailureKind, FfiResult, Status};
 use std::ffi::{c_char, c_void, CStr, CString};
-use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::Once;
 
 /// Status code returned (as `int32_t`) by every fallible function; the values are those of
 /// nbrdf-ffi's `NbrdfStatus`. On any value other than `NBRDF_TRAIN_OK`,
@@ -129,141 +125,31 @@ pub type NbrdfEpochCallback =
     Option<unsafe extern "C" fn(user: *mut c_void, stats: *const NbrdfEpochStats)>;
 
 // ---------------------------------------------------------------------------------------------
-// Errors and the panic guard (as in nbrdf-ffi).
+// Errors (the plumbing is nbrdf-ffi-common's, shared with nbrdf-ffi).
 
-thread_local! {
-    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
-    /// True while this thread runs inside [`guard`].
-    static IN_GUARD: Cell<bool> = const { Cell::new(false) };
-    /// Where the last panic inside [`guard`] on this thread happened.
-    static PANIC_LOCATION: RefCell<Option<String>> = const { RefCell::new(None) };
-}
+impl Status for NbrdfTrainStatus {
+    const OK: i32 = NbrdfTrainStatus::NBRDF_TRAIN_OK as i32;
 
-static PANIC_HOOK: Once = Once::new();
-
-#[derive(Debug)]
-struct Failure {
-    status: NbrdfTrainStatus,
-    message: String,
-}
-
-type FfiResult<T> = Result<T, Failure>;
-
-impl Failure {
-    fn null(argument: &str) -> Self {
-        Failure {
-            status: NbrdfTrainStatus::NBRDF_TRAIN_ERROR_NULL_POINTER,
-            message: format!("argument `{argument}` is a null pointer"),
-        }
-    }
-
-    fn invalid(message: impl Into<String>) -> Self {
-        Failure {
-            status: NbrdfTrainStatus::NBRDF_TRAIN_ERROR_INVALID_ARGUMENT,
-            message: message.into(),
-        }
-    }
-}
-
-impl From<NbrdfError> for Failure {
-    fn from(error: NbrdfError) -> Self {
-        Failure::invalid(error.to_string())
-    }
-}
-
-fn set_last_error(message: String) {
-    let message = CString::new(message.replace('\0', "\\0")).unwrap_or_default();
-    let _ = LAST_ERROR.try_with(|cell| *cell.borrow_mut() = message);
-}
-
-fn panic_message(payload: &(dyn Any + Send)) -> &str {
-    if let Some(message) = payload.downcast_ref::<&'static str>() {
-        message
-    } else if let Some(message) = payload.downcast_ref::<String>() {
-        message
-    } else {
-        "(panic payload is not a string)"
-    }
-}
-
-/// Keeps panics caught by [`guard`] quiet (their message goes to `nbrdf_train_last_error`),
-/// unless `RUST_BACKTRACE` is set to anything but 0; other panics reach the previous hook.
-fn install_panic_hook() {
-    PANIC_HOOK.call_once(|| {
-        let previous = std::panic::take_hook();
-        let verbose = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
-        std::panic::set_hook(Box::new(move |info| {
-            let guarded = IN_GUARD.try_with(Cell::get).unwrap_or(false);
-            if guarded {
-                let location = info.location().map(|l| l.to_string());
-                let _ = PANIC_LOCATION.try_with(|cell| *cell.borrow_mut() = location);
+    /// The trainer reads no files: what the core reports as a file's failure is an argument's.
+    fn code(kind: FailureKind) -> i32 {
+        (match kind {
+            FailureKind::NullPointer => NbrdfTrainStatus::NBRDF_TRAIN_ERROR_NULL_POINTER,
+            FailureKind::InvalidArgument | FailureKind::Io | FailureKind::Format => {
+                NbrdfTrainStatus::NBRDF_TRAIN_ERROR_INVALID_ARGUMENT
             }
-            if !guarded || verbose {
-                previous(info);
-            }
-        }));
-    });
+            FailureKind::Panic => NbrdfTrainStatus::NBRDF_TRAIN_ERROR_PANIC,
+        }) as i32
+    }
 }
 
 /// Runs `body`, catching panics; returns the status code and records the message of a failure
 /// (prefixed with `function`) for `nbrdf_train_last_error`.
 fn guard(function: &str, body: impl FnOnce() -> FfiResult<()>) -> i32 {
-    install_panic_hook();
-    let outer = IN_GUARD.with(|g| g.replace(true));
-    let result = catch_unwind(AssertUnwindSafe(body));
-    IN_GUARD.with(|g| g.set(outer));
-    let failure = match result {
-        Ok(Ok(())) => return NbrdfTrainStatus::NBRDF_TRAIN_OK as i32,
-        Ok(Err(failure)) => failure,
-        Err(payload) => {
-            let location = PANIC_LOCATION.with(|cell| cell.borrow_mut().take());
-            let at = location.map(|l| format!(" (at {l})")).unwrap_or_default();
-            Failure {
-                status: NbrdfTrainStatus::NBRDF_TRAIN_ERROR_PANIC,
-                message: format!(
-                    "internal error (panic): {}{at}",
-                    panic_message(payload.as_ref())
-                ),
-            }
-        }
-    };
-    set_last_error(format!("{function}: {}", failure.message));
-    failure.status as i32
+    nbrdf_ffi_common::guard::<NbrdfTrainStatus>(function, body)
 }
 
 // ---------------------------------------------------------------------------------------------
 // Arguments.
-
-/// Checks a pointer argument for null and alignment.
-fn check_pointer<T>(ptr: *const T, argument: &str) -> FfiResult<()> {
-    if ptr.is_null() {
-        return Err(Failure::null(argument));
-    }
-    if !ptr.is_aligned() {
-        return Err(Failure::invalid(format!(
-            "argument `{argument}` is not aligned to {} bytes",
-            align_of::<T>()
-        )));
-    }
-    Ok(())
-}
-
-/// `3 n` floats, checked against overflow and the largest possible allocation.
-fn planar_len(n: usize) -> FfiResult<usize> {
-    n.checked_mul(3)
-        .filter(|len| {
-            len.checked_mul(size_of::<f32>())
-                .is_some_and(|bytes| bytes <= isize::MAX as usize)
-        })
-        .ok_or_else(|| Failure::invalid(format!("n = {n} pairs is too many")))
-}
-
-/// # Safety
-/// `ptr` passed [`check_pointer`] and points to `len` readable floats.
-unsafe fn input<'a>(ptr: *const f32, len: usize) -> &'a [f32] {
-    // SAFETY: the caller's contract; `len` fits in isize (planar_len).
-    unsafe { std::slice::from_raw_parts(ptr, len) }
-}
 
 fn planar_vectors(planar: &[f32]) -> Vec<Vec3> {
     let n = planar.len() / 3;
@@ -402,9 +288,7 @@ impl Callback {
 /// the next call into this library on the same thread.
 #[no_mangle]
 pub extern "C" fn nbrdf_train_last_error() -> *const c_char {
-    LAST_ERROR
-        .try_with(|cell| cell.borrow().as_ptr())
-        .unwrap_or(c"".as_ptr())
+    nbrdf_ffi_common::last_error()
 }
 
 /// Version of the library (the crate version, e.g. "0.1.0"); a static string.
@@ -509,7 +393,7 @@ pub unsafe extern "C" fn nbrdf_train_directions(
         let (config, threads) = unsafe { read_config(config)? };
         check_pointer(out_view, "out_view")?;
         check_pointer(out_light, "out_light")?;
-        let len = planar_len(n)?;
+        let len = array_len(n, 3)?;
         let (pairs, _) =
             nbrdf_core::ops::with_threads(threads, || distill::sample_directions(&config))??;
         if pairs.len() != n {
@@ -587,7 +471,7 @@ pub unsafe extern "C" fn nbrdf_train_from_arrays(
                 )))
             }
         };
-        let len = planar_len(n)?;
+        let len = array_len(n, 3)?;
         for (ptr, argument) in [(view, "view"), (light, "light"), (eval_cos, "eval_cos")] {
             check_pointer(ptr, argument)?;
         }

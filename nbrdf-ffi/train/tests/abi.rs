@@ -316,7 +316,7 @@ fn bad_calls_return_an_error_status_with_a_message() {
         (
             boxed(|| call(&config, 0, v, l, f, usize::MAX, nv, out_ptr)),
             INVALID,
-            "too many",
+            "too large",
         ),
     ];
     for (i, (case, expect, needle)) in cases.into_iter().enumerate() {

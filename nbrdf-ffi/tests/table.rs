@@ -1,0 +1,680 @@
+//! The tabulated sampler (`NbrdfTable`, `NBRDF_SAMPLING_TABULATED`) as a C caller sees it: built
+//! from a network and from a MERL table, its samples, pdfs and arrays against nbrdf-core's
+//! `tabulated` module called directly, its pdf against a quadrature over the sphere and the rate
+//! of valid samples, and bad calls (error status and message, no panic).
+//!
+//! The checks hold for any table size and cosine weight: they read the shape from
+//! `nbrdf_table_info`, never from constants of nbrdf-core.
+
+mod support;
+
+use glam::Vec3;
+use nbrdf_core::brdf::Brdf;
+use nbrdf_core::rng::SplitMix64;
+use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
+use nbrdf_core::{Nbrdf, SamplingStrategy};
+use nbrdf_ffi::*;
+use std::f64::consts::TAU;
+use std::marker::PhantomData;
+use std::ptr::{null, null_mut};
+use std::sync::Arc;
+use support::*;
+
+/// A table handle, freed on drop.
+struct Table(*mut NbrdfTable);
+
+impl Drop for Table {
+    fn drop(&mut self) {
+        // SAFETY: the handle came from a `*_build_table` function.
+        unsafe { nbrdf_table_free(self.0) }
+    }
+}
+
+// SAFETY: the C contract: a table is immutable, so one handle may be used by many threads.
+unsafe impl Sync for Table {}
+
+/// `build(out)` is one of the `*_build_table` functions with its handle bound.
+fn build_table(build: impl FnOnce(*mut *mut NbrdfTable) -> i32) -> Table {
+    let mut out = null_mut();
+    assert_eq!(build(&mut out), OK, "{}", last_error());
+    assert!(!out.is_null());
+    Table(out)
+}
+
+fn network_table(network: &Network) -> Table {
+    // SAFETY: a live handle and a writable out pointer.
+    build_table(|out| unsafe { nbrdf_network_build_table(network.0, out) })
+}
+
+fn merl_table(merl: &Merl) -> Table {
+    // SAFETY: a live handle and a writable out pointer.
+    build_table(|out| unsafe { nbrdf_merl_build_table(merl.0, out) })
+}
+
+/// A `*_sample_table` function.
+type SampleTableFn<H> = unsafe extern "C" fn(
+    *const H,
+    *const NbrdfTable,
+    *const f32,
+    *const f32,
+    usize,
+    *mut f32,
+    *mut f32,
+    *mut f32,
+) -> i32;
+
+/// A `*_sample_table` function with its material bound.
+struct Sampler<'a, H> {
+    handle: *const H,
+    function: SampleTableFn<H>,
+    _handle: PhantomData<&'a H>,
+}
+
+// SAFETY: the C contract: handles are immutable, so one may be used by many threads.
+unsafe impl<H> Sync for Sampler<'_, H> {}
+
+fn network_sampler(network: &Network) -> Sampler<'_, NbrdfNetwork> {
+    Sampler {
+        handle: network.0,
+        function: nbrdf_network_sample_table,
+        _handle: PhantomData,
+    }
+}
+
+fn merl_sampler(merl: &Merl) -> Sampler<'_, NbrdfMerl> {
+    Sampler {
+        handle: merl.0,
+        function: nbrdf_merl_sample_table,
+        _handle: PhantomData,
+    }
+}
+
+/// The outputs of a `*_sample_table` call.
+struct Samples {
+    light: Vec<f32>,
+    weight: Vec<f32>,
+    pdf: Vec<f32>,
+}
+
+impl<H> Sampler<'_, H> {
+    /// Samples with `table` for planar `view` and `u`; asserts success.
+    fn sample(&self, table: &Table, view: &[f32], u: &[f32]) -> Samples {
+        let n = view.len() / 3;
+        let mut s = Samples {
+            light: vec![f32::NAN; 3 * n],
+            weight: vec![f32::NAN; 3 * n],
+            pdf: vec![f32::NAN; n],
+        };
+        // SAFETY: live handles, 3 n floats per array but the pdfs' n.
+        let status = unsafe {
+            (self.function)(
+                self.handle,
+                table.0,
+                view.as_ptr(),
+                u.as_ptr(),
+                n,
+                s.light.as_mut_ptr(),
+                s.weight.as_mut_ptr(),
+                s.pdf.as_mut_ptr(),
+            )
+        };
+        assert_eq!(status, OK, "{}", last_error());
+        s
+    }
+}
+
+/// `nbrdf_table_pdf` of planar `view` and `light` (`n` lanes).
+fn table_pdf(table: &Table, view: &[f32], light: &[f32], n: usize) -> Vec<f32> {
+    let mut pdf = vec![f32::NAN; n];
+    // SAFETY: a live handle, 3 n floats per input and n for the output.
+    let status =
+        unsafe { nbrdf_table_pdf(table.0, view.as_ptr(), light.as_ptr(), n, pdf.as_mut_ptr()) };
+    assert_eq!(status, OK, "{}", last_error());
+    pdf
+}
+
+fn spherical(theta: f64, phi: f64) -> Vec3 {
+    Vec3::new(
+        (theta.sin() * phi.cos()) as f32,
+        (theta.sin() * phi.sin()) as f32,
+        theta.cos() as f32,
+    )
+}
+
+/// Views over the hemisphere, from the normal to grazing, at several azimuths (the sampler
+/// rotates with the view's azimuth).
+fn views(n: usize) -> Vec<Vec3> {
+    (0..n)
+        .map(|i| {
+            let t = (i as f64 + 0.5) / n as f64;
+            spherical(t * 1.56, 2.39996 * i as f64)
+        })
+        .collect()
+}
+
+fn uniforms(n: usize, seed: u64) -> Vec<Vec3> {
+    let mut rng = SplitMix64::from_state(seed);
+    (0..n)
+        .map(|_| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()))
+        .collect()
+}
+
+/// Shape, arrays, samples, weights and pdfs of a table built through the C ABI agree with
+/// nbrdf-core's `TabulatedSampler` built from the same material; the pdf of each sample, asked
+/// again, is the pdf the sample returned.
+fn check_against_core<H>(brdf: &dyn Brdf, table: &Table, sampler: &Sampler<'_, H>) {
+    let core = TabulatedSampler::from_brdf(brdf, &TableConfig::default()).unwrap();
+    let arrays = core.tables();
+
+    let mut info = NbrdfTableInfo::default();
+    // SAFETY: a live handle and a writable info.
+    assert_eq!(unsafe { nbrdf_table_info(table.0, &mut info) }, OK);
+    assert_eq!(
+        info,
+        NbrdfTableInfo {
+            rows: arrays.rows as u32,
+            theta_bins: arrays.theta_bins as u32,
+            phi_bins: arrays.phi_bins as u32,
+            cosine_weight: arrays.cosine_weight as f32,
+        }
+    );
+    check_arrays(table, &info, &arrays);
+
+    let strategy = SamplingStrategy::Tabulated(Arc::new(core));
+    let n = 512;
+    let (vs, us) = (views(n), uniforms(n, 11));
+    let (view, u) = (planar(vs.iter().copied()), planar(us.iter().copied()));
+    let s = sampler.sample(table, &view, &u);
+    let mut valid = 0;
+    for i in 0..n {
+        let expected = strategy.sample(vs[i], us[i].to_array());
+        let light = lane(&s.light, n, i);
+        assert_eq!(light, expected.light, "lane {i}");
+        assert_eq!(s.pdf[i], expected.pdf, "lane {i}");
+        let f = brdf.eval(vs[i], light);
+        let cos = nbrdf_core::brdf::cos_theta_light(light);
+        for (c, f) in f.iter().enumerate() {
+            let w = s.weight[c * n + i];
+            if expected.pdf > 0.0 {
+                assert_close(w, f * cos / expected.pdf, &format!("lane {i} weight {c}"));
+            } else {
+                assert_eq!(w, 0.0, "lane {i}: an invalid sample has weight 0");
+            }
+        }
+        valid += usize::from(expected.pdf > 0.0);
+    }
+    assert!(valid > n / 2, "{valid} valid samples of {n}");
+    assert_eq!(table_pdf(table, &view, &s.light, n), s.pdf);
+
+    // Light directions other than the samples, some of them below the horizon.
+    let lights = uniforms(n, 12)
+        .into_iter()
+        .map(|r| spherical(f64::from(r.x).acos() * 2.0 - 0.3, f64::from(r.y) * TAU))
+        .collect::<Vec<_>>();
+    let pdf = table_pdf(table, &view, &planar(lights.iter().copied()), n);
+    for i in 0..n {
+        assert_eq!(pdf[i], strategy.pdf(vs[i], lights[i]), "lane {i}");
+        if lights[i].z <= 0.0 {
+            assert_eq!(pdf[i], 0.0, "lane {i} below the horizon");
+        }
+    }
+}
+
+/// `nbrdf_table_arrays` writes exactly the documented sizes, the core's values as float32, and
+/// per row a probability distribution and its CDFs.
+fn check_arrays(table: &Table, info: &NbrdfTableInfo, core: &nbrdf_core::tabulated::TableArrays) {
+    let (rows, nt, np) = (
+        info.rows as usize,
+        info.theta_bins as usize,
+        info.phi_bins as usize,
+    );
+    let sizes = [rows * nt * np, rows * (nt + 1), rows * nt * (np + 1)];
+    // One sentinel past each documented size: the call must not write there.
+    let mut buffers: Vec<Vec<f32>> = sizes.iter().map(|&len| vec![-7.0; len + 1]).collect();
+    let [mass, marginal, conditional] = &mut buffers[..] else {
+        unreachable!()
+    };
+    // SAFETY: a live handle and buffers of the documented sizes.
+    let status = unsafe {
+        nbrdf_table_arrays(
+            table.0,
+            mass.as_mut_ptr(),
+            marginal.as_mut_ptr(),
+            conditional.as_mut_ptr(),
+        )
+    };
+    assert_eq!(status, OK, "{}", last_error());
+    for (buffer, expected) in
+        buffers
+            .iter()
+            .zip([&core.mass, &core.marginal_cdf, &core.conditional_cdf])
+    {
+        let (values, sentinel) = buffer.split_at(buffer.len() - 1);
+        assert_eq!(sentinel, [-7.0], "written past the documented size");
+        let expected: Vec<f32> = expected.iter().map(|&v| v as f32).collect();
+        assert_eq!(values, &expected[..]);
+    }
+    let is_cdf = |cdf: &[f32]| {
+        cdf[0] == 0.0 && cdf[cdf.len() - 1] == 1.0 && cdf.windows(2).all(|w| w[0] <= w[1])
+    };
+    for r in 0..rows {
+        let row_mass = &buffers[0][r * nt * np..(r + 1) * nt * np];
+        let total: f64 = row_mass.iter().map(|&m| f64::from(m)).sum();
+        assert!((total - 1.0).abs() < 1e-5, "row {r}: mass {total}");
+        assert!(row_mass.iter().all(|&m| m >= 0.0));
+        let marginal = &buffers[1][r * (nt + 1)..(r + 1) * (nt + 1)];
+        assert!(is_cdf(marginal), "row {r}: marginal {marginal:?}");
+        for i in 0..nt {
+            let start = (r * nt + i) * (np + 1);
+            let conditional = &buffers[2][start..start + np + 1];
+            assert!(is_cdf(conditional), "row {r} bin {i}: {conditional:?}");
+            // What the two CDFs sample is the bin's mass.
+            let p_t = marginal[i + 1] - marginal[i];
+            for j in 0..np {
+                let p = p_t * (conditional[j + 1] - conditional[j]);
+                let m = row_mass[i * np + j];
+                assert!((p - m).abs() <= 1e-6, "row {r} bin ({i}, {j}): {p} vs {m}");
+            }
+        }
+    }
+}
+
+/// `int pdf(l) dl` over the whole sphere by the midpoint rule in `(cos theta, phi)` (the
+/// directions below the horizon included: the pdf must be 0 there), through `nbrdf_table_pdf`.
+fn sphere_integral(table: &Table, view: Vec3) -> f64 {
+    let (n_cos, n_phi) = (500, 1000);
+    let lights: Vec<Vec3> = (0..n_cos * n_phi)
+        .map(|k| {
+            let (a, b) = (k / n_phi, k % n_phi);
+            let cos = -1.0 + 2.0 * (a as f64 + 0.5) / n_cos as f64;
+            spherical(cos.acos(), TAU * (b as f64 + 0.5) / n_phi as f64)
+        })
+        .collect();
+    let n = lights.len();
+    let view = planar(std::iter::repeat(view).take(n));
+    let pdf = table_pdf(table, &view, &planar(lights.iter().copied()), n);
+    let cell = 2.0 / n_cos as f64 * TAU / n_phi as f64;
+    let mut total = 0.0;
+    for (l, &p) in lights.iter().zip(&pdf) {
+        assert!(p.is_finite() && p >= 0.0, "pdf {p} at {l}");
+        if l.z <= 0.0 {
+            assert_eq!(p, 0.0, "pdf below the horizon at {l}");
+        }
+        total += f64::from(p) * cell;
+    }
+    total
+}
+
+/// The pdf integrates over the sphere to the probability that a sample is valid (samples whose
+/// half vector reflects below the horizon have pdf 0), which is close to 1; that rate is
+/// measured from `*_sample_table`.
+fn check_pdf_integral<H>(table: &Table, sampler: &Sampler<'_, H>) {
+    for view in [
+        spherical(0.15, 0.4),
+        spherical(0.8, 2.0),
+        spherical(1.3, -1.0),
+    ] {
+        let integral = sphere_integral(table, view);
+        let m = 100_000;
+        let u = planar(uniforms(m, 21).into_iter());
+        let s = sampler.sample(table, &planar(std::iter::repeat(view).take(m)), &u);
+        let rate = s.pdf.iter().filter(|&&p| p > 0.0).count() as f64 / m as f64;
+        let sigma = (rate * (1.0 - rate) / m as f64).sqrt();
+        assert!(
+            (integral - rate).abs() < 4.0 * sigma + 1e-3,
+            "view {view}: integral {integral}, valid samples {rate} +- {sigma}"
+        );
+        assert!(
+            integral > 0.98 && integral < 1.001,
+            "view {view}: {integral}"
+        );
+    }
+}
+
+#[test]
+fn network_tables_agree_with_the_core() {
+    let (network, path) = load_network(5);
+    let table = network_table(&network);
+    let core = Nbrdf::load(&path).unwrap();
+    check_against_core(&core, &table, &network_sampler(&network));
+}
+
+#[test]
+fn merl_tables_agree_with_the_core() {
+    let (merl, core) = load_smooth_merl();
+    let table = merl_table(&merl);
+    check_against_core(&core, &table, &merl_sampler(&merl));
+}
+
+#[test]
+fn network_table_pdf_integrates_to_the_valid_sample_rate() {
+    let (network, _) = load_network(5);
+    let table = network_table(&network);
+    check_pdf_integral(&table, &network_sampler(&network));
+}
+
+#[test]
+fn merl_table_pdf_integrates_to_the_valid_sample_rate() {
+    let (merl, _) = load_smooth_merl();
+    let table = merl_table(&merl);
+    check_pdf_integral(&table, &merl_sampler(&merl));
+}
+
+/// One table serves another material's sampling too (the table is only a density): the weights
+/// are then those of the other material.
+#[test]
+fn a_table_samples_any_material() {
+    let (network, path) = load_network(5);
+    let (merl, merl_core) = load_smooth_merl();
+    let table = network_table(&network);
+    let n = 64;
+    let (view, u) = (
+        planar(views(n).into_iter()),
+        planar(uniforms(n, 5).into_iter()),
+    );
+    let from_network = network_sampler(&network).sample(&table, &view, &u);
+    let from_merl = merl_sampler(&merl).sample(&table, &view, &u);
+    assert_eq!(from_network.light, from_merl.light);
+    assert_eq!(from_network.pdf, from_merl.pdf);
+    let network_core = Nbrdf::load(&path).unwrap();
+    for i in (0..n).filter(|&i| from_merl.pdf[i] > 0.0) {
+        let (v, l) = (lane(&view, n, i), lane(&from_merl.light, n, i));
+        let cos = nbrdf_core::brdf::cos_theta_light(l);
+        for (weights, brdf) in [
+            (&from_network.weight, &network_core as &dyn Brdf),
+            (&from_merl.weight, &merl_core),
+        ] {
+            let f = brdf.eval(v, l);
+            for c in 0..3 {
+                let expected = f[c] * cos / from_merl.pdf[i];
+                assert_close(
+                    weights[c * n + i],
+                    expected,
+                    &format!("lane {i} channel {c}"),
+                );
+            }
+        }
+    }
+}
+
+/// Directions that are not finite or not above the horizon are invalid lanes (pdf 0, weight 0),
+/// as with every other sampler: the call succeeds, and so do the other lanes of the batch. NaN
+/// uniforms are clamped like any out-of-range uniform (the core's `sample`).
+#[test]
+fn non_finite_lanes_are_invalid_samples_not_failures() {
+    let (network, path) = load_network(5);
+    let table = network_table(&network);
+    let core =
+        TabulatedSampler::from_brdf(&Nbrdf::load(&path).unwrap(), &TableConfig::default()).unwrap();
+    let strategy = SamplingStrategy::Tabulated(Arc::new(core));
+    let nan = f32::NAN;
+    let views = [
+        Vec3::new(nan, 0.0, 1.0),
+        Vec3::new(0.0, 0.0, f32::INFINITY),
+        Vec3::new(0.3, 0.1, -0.9),
+        Vec3::ZERO,
+        Vec3::new(0.3, 0.1, 0.9),
+        Vec3::new(0.3, 0.1, 0.9),
+    ];
+    let us = [
+        Vec3::splat(0.5),
+        Vec3::splat(0.5),
+        Vec3::splat(0.5),
+        Vec3::splat(0.5),
+        Vec3::new(nan, nan, nan),
+        Vec3::new(0.7, 0.2, 0.9),
+    ];
+    let n = views.len();
+    let (view, u) = (planar(views.into_iter()), planar(us.into_iter()));
+    let s = network_sampler(&network).sample(&table, &view, &u);
+    for i in 0..4 {
+        assert_eq!(s.pdf[i], 0.0, "lane {i}");
+        assert!((0..3).all(|c| s.weight[c * n + i] == 0.0), "lane {i}");
+    }
+    for i in 4..n {
+        let expected = strategy.sample(views[i], us[i].to_array());
+        assert_eq!(lane(&s.light, n, i), expected.light, "lane {i}");
+        assert_eq!(s.pdf[i], expected.pdf, "lane {i}");
+        assert!((0..3).all(|c| s.weight[c * n + i].is_finite()), "lane {i}");
+    }
+    let lights = [
+        Vec3::new(nan, 0.0, 1.0),
+        Vec3::new(0.0, nan, 1.0),
+        Vec3::new(0.0, 0.0, f32::INFINITY),
+        Vec3::new(0.0, 0.0, -1.0),
+        Vec3::ZERO,
+        Vec3::Z,
+    ];
+    let pdf = table_pdf(&table, &view, &planar(lights.into_iter()), n);
+    for i in 0..n {
+        assert_eq!(pdf[i], strategy.pdf(views[i], lights[i]), "lane {i}");
+        assert!(pdf[i].is_finite(), "lane {i}");
+    }
+    assert!(pdf[..5].iter().all(|&p| p == 0.0), "{pdf:?}");
+    assert!(pdf[5] > 0.0);
+}
+
+#[test]
+fn null_pointers_name_the_argument() {
+    let (network, _) = load_network(4);
+    let (merl, _) = load_smooth_merl();
+    let table = network_table(&network);
+    let (net, mer, tab) = (
+        network.0.cast_const(),
+        merl.0.cast_const(),
+        table.0.cast_const(),
+    );
+    let check = |status: i32, argument: &str| {
+        assert_eq!(status, NULL, "argument {argument}: {}", last_error());
+        let message = last_error();
+        assert!(message.contains(&format!("`{argument}`")), "{message}");
+    };
+    let v = [0.0_f32, 0.0, 1.0];
+    let (mut l, mut w, mut p) = ([0.0_f32; 3], [0.0_f32; 3], [0.0_f32; 1]);
+    let (vp, lp, wp, pp) = (v.as_ptr(), l.as_mut_ptr(), w.as_mut_ptr(), p.as_mut_ptr());
+    let mut info = NbrdfTableInfo::default();
+    let mut buf = [0.0_f32; 1];
+    let bp = buf.as_mut_ptr();
+    // SAFETY: every pointer is null or valid; the calls fail before touching the arrays' sizes.
+    unsafe {
+        // A failed build leaves NULL in `*out`, never a stale pointer.
+        let mut out = 1 as *mut NbrdfTable;
+        check(nbrdf_network_build_table(null(), &mut out), "network");
+        assert!(out.is_null());
+        out = 1 as *mut NbrdfTable;
+        check(nbrdf_merl_build_table(null(), &mut out), "merl");
+        assert!(out.is_null());
+        check(nbrdf_network_build_table(net, null_mut()), "out");
+        check(nbrdf_merl_build_table(mer, null_mut()), "out");
+
+        check(nbrdf_table_info(null(), &mut info), "table");
+        check(nbrdf_table_info(tab, null_mut()), "out");
+        check(nbrdf_table_arrays(null(), bp, bp, bp), "table");
+        check(nbrdf_table_arrays(tab, null_mut(), bp, bp), "out_mass");
+        check(
+            nbrdf_table_arrays(tab, bp, null_mut(), bp),
+            "out_marginal_cdf",
+        );
+        check(
+            nbrdf_table_arrays(tab, bp, bp, null_mut()),
+            "out_conditional_cdf",
+        );
+
+        let sample = |net, t, view, u, light, weight, pdf| {
+            nbrdf_network_sample_table(net, t, view, u, 1, light, weight, pdf)
+        };
+        check(sample(null(), tab, vp, vp, lp, wp, pp), "network");
+        check(sample(net, null(), vp, vp, lp, wp, pp), "table");
+        check(sample(net, tab, null(), vp, lp, wp, pp), "view");
+        check(sample(net, tab, vp, null(), lp, wp, pp), "u");
+        check(sample(net, tab, vp, vp, null_mut(), wp, pp), "out_light");
+        check(sample(net, tab, vp, vp, lp, null_mut(), pp), "out_weight");
+        check(sample(net, tab, vp, vp, lp, wp, null_mut()), "out_pdf");
+        check(
+            nbrdf_merl_sample_table(null(), tab, vp, vp, 1, lp, wp, pp),
+            "merl",
+        );
+        check(
+            nbrdf_merl_sample_table(mer, null(), vp, vp, 1, lp, wp, pp),
+            "table",
+        );
+
+        check(nbrdf_table_pdf(null(), vp, vp, 1, pp), "table");
+        check(nbrdf_table_pdf(tab, null(), vp, 1, pp), "view");
+        check(nbrdf_table_pdf(tab, vp, null(), 1, pp), "light");
+        check(nbrdf_table_pdf(tab, vp, vp, 1, null_mut()), "out_pdf");
+        assert!(
+            last_error().starts_with("nbrdf_table_pdf: "),
+            "{}",
+            last_error()
+        );
+
+        // Freeing NULL is a no-op.
+        nbrdf_table_free(null_mut());
+    }
+}
+
+#[test]
+fn bad_sizes_and_alignment_are_invalid_arguments() {
+    let (network, _) = load_network(4);
+    let table = network_table(&network);
+    let buf = [0.0_f32; 8];
+    let mut out = [0.0_f32; 8];
+    let (b, o) = (buf.as_ptr(), out.as_mut_ptr());
+    let misaligned = b.cast::<u8>().wrapping_add(1).cast::<f32>();
+    let huge = usize::MAX / 2;
+    // SAFETY: every call is rejected before any array is read or written.
+    unsafe {
+        assert_eq!(nbrdf_table_pdf(table.0, b, b, huge, o), INVALID);
+        assert!(
+            last_error().starts_with("nbrdf_table_pdf: "),
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            nbrdf_network_sample_table(network.0, table.0, b, b, huge, o, o, o),
+            INVALID
+        );
+        assert!(
+            last_error().starts_with("nbrdf_network_sample_table: "),
+            "{}",
+            last_error()
+        );
+        assert_eq!(nbrdf_table_pdf(table.0, misaligned, b, 1, o), INVALID);
+        assert!(last_error().contains("`view`"), "{}", last_error());
+        let misaligned_table = table.0.cast::<u8>().wrapping_add(1).cast::<NbrdfTable>();
+        assert_eq!(nbrdf_table_pdf(misaligned_table, b, b, 1, o), INVALID);
+        assert!(last_error().contains("`table`"), "{}", last_error());
+        // Empty batches touch nothing and succeed.
+        assert_eq!(nbrdf_table_pdf(table.0, b, b, 0, o), OK);
+        assert_eq!(
+            nbrdf_network_sample_table(network.0, table.0, b, b, 0, o, o, o),
+            OK
+        );
+    }
+}
+
+/// Kind 4 names the tabulated strategy, which needs a table: the generic sampler structs refuse
+/// it in every entry point with a message pointing to `NbrdfTable`.
+#[test]
+fn the_tabulated_kind_needs_a_table() {
+    let (network, _) = load_network(4);
+    let (merl, _) = load_smooth_merl();
+    let one = NbrdfSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED,
+        exponent: 10.0,
+        specular_weight: 0.5,
+    };
+    let mixture = NbrdfMixtureSampler {
+        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED,
+        exponent: 10.0,
+        specular_weight: 0.5,
+        exponent2: 0.0,
+        specular_weight2: 0.0,
+    };
+    let v = [0.0_f32, 0.0, 1.0];
+    let (mut l, mut w, mut p) = ([7.0_f32; 3], [7.0_f32; 3], [7.0_f32; 1]);
+    let (vp, lp, wp, pp) = (v.as_ptr(), l.as_mut_ptr(), w.as_mut_ptr(), p.as_mut_ptr());
+    let check = |status: i32, function: &str| {
+        assert_eq!(status, INVALID, "{function}: {}", last_error());
+        let message = last_error();
+        assert!(message.starts_with(&format!("{function}: ")), "{message}");
+        assert!(message.contains("NbrdfTable"), "{message}");
+    };
+    // SAFETY: valid pointers and sizes.
+    unsafe {
+        check(nbrdf_sampler_validate(&one), "nbrdf_sampler_validate");
+        check(nbrdf_sampler_pdf(&one, vp, vp, 1, pp), "nbrdf_sampler_pdf");
+        check(
+            nbrdf_network_sample(network.0, &one, vp, vp, 1, lp, wp, pp),
+            "nbrdf_network_sample",
+        );
+        check(
+            nbrdf_merl_sample(merl.0, &one, vp, vp, 1, lp, wp, pp),
+            "nbrdf_merl_sample",
+        );
+        check(
+            nbrdf_mixture_sampler_validate(&mixture),
+            "nbrdf_mixture_sampler_validate",
+        );
+        check(
+            nbrdf_mixture_sampler_pdf(&mixture, vp, vp, 1, pp),
+            "nbrdf_mixture_sampler_pdf",
+        );
+        check(
+            nbrdf_network_sample_mixture(network.0, &mixture, vp, vp, 1, lp, wp, pp),
+            "nbrdf_network_sample_mixture",
+        );
+        check(
+            nbrdf_merl_sample_mixture(merl.0, &mixture, vp, vp, 1, lp, wp, pp),
+            "nbrdf_merl_sample_mixture",
+        );
+    }
+    // A refused call writes nothing.
+    assert_eq!((l, w, p), ([7.0; 3], [7.0; 3], [7.0]));
+}
+
+/// A file whose sampling names `tabulated` as its default reports kind 4, the kind whose
+/// functions are the `*_table` ones; a file naming none reports -1.
+#[test]
+fn the_default_sampling_may_be_tabulated() {
+    let text = network_json(4).replace(
+        r#""source": "manual"}"#,
+        r#""source": "manual", "default": "tabulated"}"#,
+    );
+    let (tabulated, _) = load_network_text(&text, "default-tabulated");
+    let (plain, _) = load_network(4);
+    let (mut kind, mut none) = (0, 0);
+    // SAFETY: live handles and writable ints.
+    unsafe {
+        assert_eq!(nbrdf_network_default_sampling(tabulated.0, &mut kind), OK);
+        assert_eq!(nbrdf_network_default_sampling(plain.0, &mut none), OK);
+        assert_eq!(nbrdf_network_default_sampling(plain.0, null_mut()), NULL);
+    }
+    assert_eq!(kind, NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED as i32);
+    assert_eq!(none, -1);
+}
+
+/// A table is immutable: threads sampling and evaluating the same handle at once get what one
+/// thread gets alone.
+#[test]
+fn one_table_serves_many_threads() {
+    let (network, _) = load_network(4);
+    let table = network_table(&network);
+    let n = 256;
+    let (view, u) = (
+        planar(views(n).into_iter()),
+        planar(uniforms(n, 9).into_iter()),
+    );
+    let sampler = network_sampler(&network);
+    let alone = sampler.sample(&table, &view, &u);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..4)
+            .map(|_| scope.spawn(|| sampler.sample(&table, &view, &u)))
+            .collect();
+        for handle in handles {
+            let s = handle.join().unwrap();
+            assert_eq!((s.light, s.pdf), (alone.light.clone(), alone.pdf.clone()));
+        }
+    });
+}
