@@ -299,7 +299,8 @@ def test_convergence_quick_json(tmp_path):
     env = {**os.environ, "NBRDF_SHARED": str(tmp_path / "nonexistent")} if can_train else None
     run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
                           "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress",
-                          "--seeds", "2",
+                          "--seeds", "2", "--strategies",
+                          "uniform,cosine,phong-fit,two-lobe-fit,phong-predicted,tabulated,default",
                           "--ae", str(ae), "--predictor", str(predictor)],
                          capture_output=True, text=True, timeout=300, env=env)
     assert run.returncode == 0, run.stderr[-3000:]
@@ -311,11 +312,17 @@ def test_convergence_quick_json(tmp_path):
                 "psnr_peak1"} <= set(row)
         assert row["scene"] == "veach"
         assert row["strategy"] in ("uniform", "cosine", "phong-fit", "two-lobe-fit", "tabulated", "phong-predicted",
-                                   "measured")
+                                   "default", "measured")
         assert row["seconds"] > 0 and np.isfinite(row["rmse"])
-    assert {r["strategy"] for r in rows} >= {"uniform", "cosine", "phong-predicted"}
+    assert {r["strategy"] for r in rows} >= {"uniform", "cosine", "phong-predicted", "default"}
     if " fit-phong " in help_text:
         assert {"phong-fit", "two-lobe-fit"} <= {r["strategy"] for r in rows}
+        # `default` is the plugin without `sampling`: the file's stored default, one of those
+        # fit-phong chooses from; its ratio to the single lobe is reported.
+        summary = report["equal_time"][0]
+        assert summary["default_sampling"] in ("cosine", "two_lobe", "tabulated")
+        assert set(summary["vs_phong_fit"]) >= {"default", "tabulated", "two-lobe-fit"}
+        assert summary["vs_phong_fit"]["default"] == summary["rmse"]["default"] / summary["rmse"]["phong-fit"]
         exponents, weights = report["equal_time"][0]["two_lobe_exponents"], report["equal_time"][0]["two_lobe_weights"]
         assert len(exponents) == 2 and min(exponents) >= 0 and min(weights) >= 0 and sum(weights) <= 1 + 1e-6
     assert sorted({r["spp"] for r in rows}) == [1, 2, 4]

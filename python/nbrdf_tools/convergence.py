@@ -12,7 +12,10 @@ the uniform hemisphere, the cosine lobe, the best single Blinn-Phong lobe (``nbr
 --lobes 1``) and the two-lobe mixture (``--lobes 2``, stored in the network file);
 ``phong-predicted`` samples the NBRDF through the lobe that the latent-space predictor gives
 (``--ae AE.json --predictor P.json``, from ``nbrdf ae train`` and ``nbrdf predictor train``;
-skipped with a note without them); ``measured`` is Mitsuba's own ``measured`` BSDF with its own
+skipped with a note without them); ``tabulated`` samples the NBRDF's half-vector table (built
+when the plugin loads it); ``default`` (only when named in ``--strategies``) loads the NBRDF with no
+``sampling`` at all, i.e. with the strategy that ``nbrdf fit-phong`` stored as the file's
+``sampling.default`` (named in the JSON's ``default_sampling``); ``measured`` is Mitsuba's own ``measured`` BSDF with its own
 sampling (RGL materials only; it samples the measurement with its data-driven warp).
 
 Several seeds (``--seeds``) handle the heavy-tailed noise of single renders: the equal-time
@@ -73,9 +76,13 @@ from nbrdf_tools.materials import VEACH_MERL, VEACH_RGL, Artefacts, Material
 from nbrdf_tools.paths import SCENES, MissingDataError, default_cli, default_out, shared_path
 from nbrdf_tools.progress import bar, log
 from nbrdf_tools.render import render_passes, timed_render, warm_up, write_exr, write_png
-STRATEGIES = ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "tabulated", "measured")
+STRATEGIES = ("uniform", "cosine", "phong-fit", "two-lobe-fit", "phong-predicted", "tabulated", "default", "measured")
+# None: the BSDF without a ``sampling`` parameter, i.e. the file's ``sampling.default``.
 NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong", "two-lobe-fit": "two_lobe",
-                  "phong-predicted": "phong", "tabulated": "tabulated"}
+                  "phong-predicted": "phong", "tabulated": "tabulated", "default": None}
+#: What ``--strategies`` renders unless told: ``default`` is one of the others under another
+#: name (the one the file names), so it is rendered only on request.
+DEFAULT_STRATEGIES = tuple(s for s in STRATEGIES if s != "default")
 REFERENCE_SEED = 1_000_000  # references use seeds from here on; test renders stay far below
 QUICK_TRAIN_ARGS = ["--samples", "40000", "--epochs", "3", "--min-epochs", "1"]
 
@@ -246,7 +253,7 @@ def equal_time_summary(rows: list[dict]) -> dict:
     """RMSE of every strategy at the longest render time that all strategies reached: the median
     over seeds (``rmse``) and the root mean square over seeds (``rmse_pooled``); with ``measured``
     among them, each strategy's median RMSE over measured's (``vs_measured``) and the best NBRDF
-    strategy's."""
+    strategy's; with ``phong-fit``, each other strategy's over the single lobe's (``vs_phong_fit``)."""
     curves = {strategy: series(rows, strategy) for strategy in dict.fromkeys(r["strategy"] for r in rows)}
     budget = min(float(curve["seconds"].max()) for curve in curves.values())
     summary = {"seconds": budget, "statistic": "median over seeds",
@@ -261,7 +268,20 @@ def equal_time_summary(rows: list[dict]) -> dict:
         if nbrdf:
             best = min(nbrdf, key=nbrdf.get)
             summary.update(best_nbrdf=best, best_vs_measured=nbrdf[best])
+    if "phong-fit" in summary["rmse"]:
+        lobe = summary["rmse"]["phong-fit"]
+        summary["vs_phong_fit"] = {s: r / lobe for s, r in summary["rmse"].items() if s != "phong-fit"}
     return summary
+
+
+def stored_default_sampling(network: Path) -> str | None:
+    """The network file's ``sampling.default`` (what the plugin samples with when the scene names
+    no ``sampling``), None when it names none."""
+    try:
+        sampling = json.loads(Path(network).read_text()).get("sampling") or {}
+    except (OSError, ValueError):
+        return None
+    return sampling.get("default")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -479,6 +499,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
                            "exponent": material.exponent, "specular_weight": material.specular_weight,
                            "two_lobe_exponents": material.two_lobe_exponents,
                            "two_lobe_weights": material.two_lobe_weights,
+                           "default_sampling": stored_default_sampling(material.network),
                            **({"predicted_exponent": predicted_lobes[label][0],
                                "predicted_specular_weight": predicted_lobes[label][1]}
                               if label in predicted_lobes else {}),
@@ -608,6 +629,24 @@ def vs_measured_table(equal_time: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def vs_phong_fit_table(equal_time: list[dict]) -> list[str]:
+    """Markdown lines: per material, each strategy's RMSE over the single lobe's (``phong-fit``)
+    at equal time (median over seeds) and the file's stored default; none without phong-fit."""
+    rows = [e for e in equal_time if "vs_phong_fit" in e]
+    if not rows:
+        return []
+    strategies = [s for s in STRATEGIES if any(s in e["vs_phong_fit"] for e in rows)]
+    lines = ["RMSE of each strategy over the single Blinn-Phong lobe's (`phong-fit`) at the same render time, "
+             "median over seeds; below 1 is better than one lobe; `default` is the network file's "
+             "`sampling.default`:", "",
+             "| material | stored default | " + " | ".join(f"{s} / phong-fit" for s in strategies) + " |",
+             "|" + "---|" * (len(strategies) + 2)]
+    for e in rows:
+        cells = [f"{e['vs_phong_fit'][s]:.2f}" if s in e["vs_phong_fit"] else "-" for s in strategies]
+        lines.append(f"| {e['material']} | {e.get('default_sampling') or '-'} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
 def markdown(report: dict) -> str:
     lines = []
     scene = report["settings"]["scene"]
@@ -644,6 +683,7 @@ def markdown(report: dict) -> str:
                 line += f" {plobe} | {ratio_p} |"
             lines.append(line)
         lines.append("")
+        lines += vs_phong_fit_table(report["equal_time"])
         lines += vs_measured_table(report["equal_time"])
     if report["representation"]:
         lines += [f"Representation error against the ground truth ({report['settings']['gt_spp']} spp, MIS/path, "
@@ -723,9 +763,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, help="image width (Veach: 384, kitchen: from kitchen_materials.json)")
     parser.add_argument("--height", type=int, help="image height (default: 2/3 of the width, kitchen 9/16)")
     parser.add_argument("--max-spp", type=int, default=128, help="highest spp of the series 1, 2, 4, ...")
-    parser.add_argument("--strategies", default=",".join(STRATEGIES),
-                        help="Veach: comma-separated strategies to render, of those available per material "
-                             "(default: %(default)s)")
+    parser.add_argument("--strategies", default=",".join(DEFAULT_STRATEGIES),
+                        help="Veach: comma-separated strategies to render, of those available per material, "
+                             f"of {', '.join(STRATEGIES)} (default: %(default)s)")
     parser.add_argument("--seeds", type=int, default=1,
                         help="independent renders per strategy and spp; the plots show their median and range "
                              "(default: %(default)s)")
