@@ -131,7 +131,7 @@ def test_to_world_rotates_the_highlight_like_roughconductor(llvm_variant, tmp_pa
 
 # -- the anisotropic sampling lobe (sampling = "anisotropic_phong") ---------------------------
 
-LOBE = {"exponent": 300.0, "specular_weight": 0.6, "exponent2": 20.0}
+LOBE = {"exponent": 300.0, "specular_weight": 0.6, "exponent_v": 20.0}
 
 
 def anisotropic_lobe_oracle(view, light, nu, w, nv):
@@ -193,9 +193,53 @@ def test_the_stored_anisotropic_lobe_is_the_default(llvm_variant, tmp_path):
         np.testing.assert_allclose(bsdf_pdf(bsdf, view, light), want, rtol=2e-3, atol=1e-6)
     # Asking for the anisotropic lobe without n_v (a file without one) is an error naming it.
     bare = write_network(tmp_path / "bare.nbrdf.json", anisotropic_layers(), anisotropic=True)
-    with pytest.raises(Exception, match="exponent2"):
+    with pytest.raises(Exception, match="exponent_v"):
         mi.load_dict({"type": "nbrdf", "filename": str(bare), "sampling": "anisotropic_phong",
                       "exponent": 10.0, "specular_weight": 0.5})
+
+
+@pytest.mark.parametrize("backend", ["rust", "jit"])
+def test_exponent_v_is_a_traversed_validated_parameter(llvm_variant, aniso_file, backend):
+    """n_v updates through mi.traverse like exponent: the pdf follows the oracle; a bad value is
+    rejected naming exponent_v and the last good one stays."""
+    from nbrdf_testing import bsdf_pdf
+
+    bsdf = lobe_bsdfs(aniso_file)[backend]
+    assert "exponent_v = 20" in bsdf.to_string()
+    light, view = random_pairs(500, seed=5)
+    params = mi.traverse(bsdf)
+    assert "exponent_v" in params
+    params["exponent_v"] = 60.0
+    params.update()
+    want = anisotropic_lobe_oracle(view, light, 300.0, 0.6, 60.0)
+    np.testing.assert_allclose(bsdf_pdf(bsdf, view, light), want, rtol=2e-3, atol=1e-6)
+    for bad in (-1.0, float("nan"), 2e6):
+        params["exponent_v"] = bad
+        with pytest.raises(Exception, match="exponent_v"):
+            params.update()
+        assert params["exponent_v"] == 60.0
+        np.testing.assert_allclose(bsdf_pdf(bsdf, view, light), want, rtol=2e-3, atol=1e-6)
+
+
+def test_exponent2_is_a_deprecated_alias_of_exponent_v(llvm_variant, aniso_file, capfd):
+    from nbrdf_testing import bsdf_pdf
+
+    light, view = random_pairs(300, seed=6)
+    old = {**LOBE, "exponent2": LOBE["exponent_v"]}
+    del old["exponent_v"]
+    capfd.readouterr()
+    for backend, bsdf in lobe_bsdfs(aniso_file, **old).items():
+        np.testing.assert_allclose(bsdf_pdf(bsdf, view, light), anisotropic_lobe_oracle(view, light, 300.0, 0.6, 20.0),
+                                   rtol=2e-3, atol=1e-6, err_msg=backend)
+        assert "exponent_v = 20" in bsdf.to_string()
+    captured = capfd.readouterr()
+    assert "deprecated" in captured.out + captured.err and "exponent_v" in captured.out + captured.err
+    base = {"type": "nbrdf", "filename": str(aniso_file)}
+    with pytest.raises(Exception, match="exponent_v"):
+        mi.load_dict({**base, "sampling": "anisotropic_phong", **LOBE, "exponent2": 5.0})
+    # exponent_v belongs to the anisotropic lobe only.
+    with pytest.raises(Exception, match="exponent_v"):
+        mi.load_dict({**base, "sampling": "phong", "exponent": 30.0, "specular_weight": 0.5, "exponent_v": 5.0})
 
 
 def _view(theta, phi):
@@ -207,7 +251,7 @@ def test_moderate_anisotropic_lobe_passes_chi2(llvm_variant, aniso_file, backend
     """n_u = 100, n_v = 10 on the full sphere, views at rotated azimuths."""
     from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
-    lobe = {"exponent": 100.0, "specular_weight": 0.7, "exponent2": 10.0}
+    lobe = {"exponent": 100.0, "specular_weight": 0.7, "exponent_v": 10.0}
     description = {"type": "nbrdf", "filename": str(aniso_file), "backend": backend,
                    "sampling": "anisotropic_phong", **lobe}
     for theta, phi in ((0.3, 0.0), (0.7, 2.0), (1.2, 0.9)):
@@ -230,7 +274,7 @@ def _zoomed_anisotropic_chi2(path, backend, theta, phi, nu, nv, pdf_nu=None):
     view = _view(theta, phi)
     domain = MirrorConeDomain(view, t_max=40.0 / nu)
     base = {"type": "nbrdf", "filename": str(path), "backend": backend, "sampling": "anisotropic_phong",
-            "specular_weight": 0.8, "exponent2": nv}
+            "specular_weight": 0.8, "exponent_v": nv}
     wi = mi.Vector3f(*map(float, view))
     sample_func, _ = BSDFAdapter("nbrdf", {**base, "exponent": nu}, wi=wi)
     _, pdf_func = BSDFAdapter("nbrdf", {**base, "exponent": pdf_nu or nu}, wi=wi)

@@ -279,9 +279,49 @@ def test_auto_anisotropy_follows_the_source(llvm_variant, tmp_path, capsys):
                 & mi.BSDFFlags.Anisotropic) == (mi.BSDFFlags.Anisotropic if expected else 0)
 
 
+def test_roughplastic_is_isotropic_in_mitsuba_3():
+    """docs/distill.md: roughplastic takes one alpha (it refuses alpha_u/alpha_v), so it is an
+    isotropic control; auto anisotropy picks isotropic for it (test above)."""
+    mi.set_variant("llvm_ad_rgb")
+    with pytest.raises(Exception, match="anisotropic"):
+        mi.load_dict({"type": "roughplastic", "alpha_u": 0.05, "alpha_v": 0.3})
+    assert not mi.load_dict(ROUGHPLASTIC).flags() & mi.BSDFFlags.Anisotropic
+
+
 def test_a_bad_anisotropy_value_is_an_error(tmp_path):
     source = tmp_path / "source.json"
     source.write_text(json.dumps(ROUGHPLASTIC))
     result = distill(source, "-o", tmp_path / "out.nbrdf.json", "--anisotropy", "maybe")
     assert result.returncode == 2 and "--anisotropy" in result.stderr and "maybe" in result.stderr
     assert "Traceback" not in result.stderr and not (tmp_path / "out.nbrdf.json").exists()
+
+
+# Mitsuba's principled with an anisotropic specular lobe and moderate roughness (as the fidelity
+# report's principled_aniso).
+ANISOTROPIC_PRINCIPLED = {"type": "principled", "base_color": {"type": "rgb", "value": [0.75, 0.4, 0.2]},
+                          "metallic": 0.7, "roughness": 0.35, "anisotropic": 0.8, "specular": 0.5}
+
+
+def test_an_anisotropic_principled_is_learnt_closer_by_an_anisotropic_network(llvm_variant, tmp_path, capsys):
+    """Against Mitsuba's own principled eval at random directions (every azimuth), not against the
+    trainer's: the anisotropic network is clearly closer than the isotropic one of the same size
+    and budget, which can only learn the azimuthal mean."""
+    from nbrdf_mitsuba.distill import rotation_difference
+
+    mi.set_variant("llvm_ad_rgb")
+    principled = mi.load_dict(ANISOTROPIC_PRINCIPLED)
+    assert rotation_difference(principled) > 0.05
+    source = tmp_path / "principled.json"
+    source.write_text(json.dumps(ANISOTROPIC_PRINCIPLED))
+    view, light = random_pairs(20000, 41)
+    expect = bsdf_eval(principled, view, light)
+    errors = {}
+    for anisotropy in ("on", "off"):
+        out = tmp_path / f"{anisotropy}.nbrdf.json"
+        status, err = run_main(capsys, source, "-o", out, "--anisotropy", anisotropy, "--variant", "llvm_ad_rgb",
+                               "--samples", "60000", "--epochs", "40", "--seed", "1", "-q")
+        assert status == 0, err
+        got = bsdf_eval(mi.load_dict({"type": "nbrdf", "filename": str(out)}), view, light)
+        errors[anisotropy] = float(np.mean(np.abs(np.log1p(got) - np.log1p(expect))))
+    # Measured: about 0.006 against 0.09.
+    assert errors["on"] < 0.02 and errors["on"] < 0.25 * errors["off"], errors

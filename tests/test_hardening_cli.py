@@ -115,3 +115,26 @@ def test_data_errors_name_the_file(cli, tmp_path):
                  timeout=60)
     assert result.returncode == 1
     assert "sparse.binary: only" in result.stderr and "valid data" in result.stderr
+
+
+def test_latent_commands_refuse_anisotropic_networks(cli, tmp_path):
+    """The built-in autoencoder and predictor learnt isotropic networks: every latent command
+    refuses an anisotropic one with one line naming it (exit status 1), writing nothing; the
+    same network marked isotropic is accepted."""
+    from nbrdf_testing import write_network
+
+    folder = tmp_path / "nets"
+    folder.mkdir()
+    aniso = write_network(folder / "brushed.nbrdf.json", name="brushed", anisotropic=True)
+    iso = write_network(tmp_path / "plain.nbrdf.json", name="plain")
+    assert run(cli, "ae", "encode", "--no-relearn", iso).returncode == 0
+    for args in (["ae", "encode", aniso], ["predict-phong", aniso, "-o", tmp_path / "out.nbrdf.json"],
+                 ["interpolate", iso, aniso, "-o", tmp_path / "path"],
+                 ["ae", "train", "--nbrdfs", folder, "-o", tmp_path / "ae.json", "--epochs", "1", "--quiet"],
+                 ["ae", "eval", "--nbrdfs", folder]):
+        result = run(cli, *args)
+        assert result.returncode == 1, (args, result.stderr)
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and "brushed" in lines[0] and "is anisotropic" in lines[0], (args, result.stderr)
+    assert not (tmp_path / "out.nbrdf.json").exists() and not (tmp_path / "ae.json").exists()
+    assert not (tmp_path / "path").exists()

@@ -27,8 +27,10 @@ weights outside [0, 1], two-lobe weights summing above 1, NaN or infinite networ
 weights of the wrong count. The second lobe of ``sampling`` = ``two_lobe`` is ``exponent2`` and
 ``specular_weight2`` (the mixture ``w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine``).
 With ``sampling`` = ``anisotropic_phong`` (Ashikhmin-Shirley lobe in the shading frame, mixed with
-cosine), ``exponent`` is ``n_u`` (along the tangent), ``exponent2`` is ``n_v`` (across it) and
-``specular_weight2`` is unused.
+cosine), ``exponent`` is ``n_u`` (along the tangent), ``exponent_v`` is ``n_v`` (across it, the
+file's ``sampling.exponent_v``; validated like ``exponent``) and ``specular_weight2`` is unused;
+``exponent2`` is accepted there as a deprecated alias of ``exponent_v`` at load time (one
+warning). ``exponent_v`` with any other sampling is an error.
 """
 
 from __future__ import annotations
@@ -245,7 +247,7 @@ class _NativeBSDFMixin:
         exponent = _get(props, "exponent")
         weight = _get(props, "specular_weight")
         second = (_get(props, "exponent2"), _get(props, "specular_weight2"))
-        self._configure_sampling(sampling, exponent, weight, second)
+        self._configure_sampling(sampling, exponent, weight, second, _get(props, "exponent_v"))
         self._backend = self._choose_backend(_get(props, "backend", _default_backend))
         if not _is_jit():
             _say_scalar_cost()
@@ -292,7 +294,7 @@ class _NativeBSDFMixin:
     def _type_name(self) -> str:
         return f'{type(self).__name__} (plugin "{self.PLUGIN}")'
 
-    def _configure_sampling(self, sampling, exponent, weight, second=(None, None)) -> None:
+    def _configure_sampling(self, sampling, exponent, weight, second=(None, None), exponent_v=None) -> None:
         if sampling is None:
             sampling = self._default_sampling(exponent, weight, second)
         sampling = str(sampling).strip().lower()
@@ -300,15 +302,37 @@ class _NativeBSDFMixin:
             raise ValueError(f'{self._type_name()} "{self._filename}": unknown sampling "{sampling}" '
                              f"(expected one of: {', '.join(SAMPLING_NAMES)})")
         exponent, weight = self._phong_parameters(sampling, exponent, weight)
+        second = self._second_exponent_names(sampling, second, exponent_v)
         exponent2, weight2 = self._second_lobe(sampling, *second)
         self._sampling = sampling
+        # The sampler's second exponent is n_v for anisotropic_phong, the second lobe's otherwise.
         self._set_sampler(exponent, weight, exponent2, weight2)
         # What traverse exposes: updated in place by SceneParameters, read only by
         # parameters_changed (the kernels use validated copies, see _apply_traced_state).
+        anisotropic = sampling == "anisotropic_phong"
         self.exponent = _parameter(exponent)
         self.specular_weight = _parameter(weight)
-        self.exponent2 = _parameter(exponent2)
+        self.exponent2 = _parameter(0.0 if anisotropic else exponent2)
+        self.exponent_v = _parameter(exponent2 if anisotropic else 0.0)
         self.specular_weight2 = _parameter(weight2)
+
+    def _second_exponent_names(self, sampling, second, exponent_v):
+        """(second exponent, specular_weight2) as the sampler takes them: ``exponent_v`` for
+        anisotropic_phong (``exponent2`` there is its deprecated alias), ``exponent2`` otherwise."""
+        exponent2, weight2 = second
+        if sampling != "anisotropic_phong":
+            if exponent_v is not None:
+                raise ValueError(f'{self._type_name()} "{self._filename}": "exponent_v" (n_v) is a parameter '
+                                 f'of sampling "anisotropic_phong" only (this BSDF uses "{sampling}")')
+            return second
+        if exponent2 is not None:
+            if exponent_v is not None:
+                raise ValueError(f'{self._type_name()} "{self._filename}": give "exponent_v" only ("exponent2" '
+                                 'is its deprecated alias for sampling "anisotropic_phong")')
+            mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": "exponent2" for sampling '
+                                     '"anisotropic_phong" is deprecated; use "exponent_v" (n_v, across the tangent)')
+            exponent_v = exponent2
+        return exponent_v, weight2
 
     def _second_lobe(self, sampling, exponent2, weight2) -> tuple[float, float]:
         """(exponent2, specular_weight2) with file defaults applied; errors when two_lobe lacks
@@ -316,10 +340,12 @@ class _NativeBSDFMixin:
         if sampling == "two_lobe" and (exponent2 is None or weight2 is None):
             raise ValueError(f'{self._type_name()} "{self._filename}": sampling "two_lobe" needs '
                              '"exponent2" and "specular_weight2" (or a file that stores two lobes)')
-        if sampling == "anisotropic_phong" and exponent2 is None:
-            raise ValueError(f'{self._type_name()} "{self._filename}": sampling "anisotropic_phong" '
-                             'needs "exponent2" (n_v, across the tangent; or a file that stores an '
-                             'anisotropic lobe)')
+        if sampling == "anisotropic_phong":
+            if exponent2 is None:
+                raise ValueError(f'{self._type_name()} "{self._filename}": sampling "anisotropic_phong" '
+                                 'needs "exponent_v" (n_v, across the tangent; or a file that stores an '
+                                 'anisotropic lobe)')
+            return _as_float(self, "exponent_v", exponent2, 0.0), _as_float(self, "specular_weight2", weight2, 0.0)
         return (_as_float(self, "exponent2", exponent2, 0.0),
                 _as_float(self, "specular_weight2", weight2, 0.0))
 
@@ -332,7 +358,8 @@ class _NativeBSDFMixin:
 
     def _set_sampler(self, exponent: float, weight: float, exponent2: float = 0.0,
                      weight2: float = 0.0) -> None:
-        problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe")
+        problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe",
+                                    self._second_exponent_name())
         if problem:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: {problem}')
         try:
@@ -348,6 +375,9 @@ class _NativeBSDFMixin:
                              f"{_strip_function(error)}") from None
         self._exponent_value, self._weight_value = exponent, weight
         self._exponent2_value, self._weight2_value = exponent2, weight2
+
+    def _second_exponent_name(self) -> str:
+        return "exponent_v" if self._sampling == "anisotropic_phong" else "exponent2"
 
     def _apply_traced_state(self) -> None:
         """The traced kernels' copies of the validated sampling parameters: kernel parameters
@@ -488,6 +518,7 @@ class _NativeBSDFMixin:
         put("exponent", self.exponent, mi.ParamFlags.NonDifferentiable)
         put("specular_weight", self.specular_weight, mi.ParamFlags.NonDifferentiable)
         put("exponent2", self.exponent2, mi.ParamFlags.NonDifferentiable)
+        put("exponent_v", self.exponent_v, mi.ParamFlags.NonDifferentiable)
         put("specular_weight2", self.specular_weight2, mi.ParamFlags.NonDifferentiable)
         if self._backend == "jit":
             self._traverse_traced(put)
@@ -501,9 +532,14 @@ class _NativeBSDFMixin:
         try:
             exponent = _scalar(self.exponent, "exponent")
             weight = _scalar(self.specular_weight, "specular_weight")
-            exponent2 = _scalar(self.exponent2, "exponent2")
+            name = self._second_exponent_name()
+            exponent2 = _scalar(getattr(self, name), name)
+            # The other one of exponent2 / exponent_v does nothing here; checked all the same.
+            unused = "exponent2" if name == "exponent_v" else "exponent_v"
+            unused_value = _scalar(getattr(self, unused), unused)
             weight2 = _scalar(self.specular_weight2, "specular_weight2")
-            problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe")
+            problem = (_sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe", name)
+                       or _sampling_problem(0.0, 0.0, (unused_value, 0.0), False, unused))
             if problem:
                 raise ValueError(f"invalid sampling parameters: {problem}")
             weights = self._validated_weights(keys) if self._backend == "jit" else None
@@ -515,6 +551,11 @@ class _NativeBSDFMixin:
             self._apply_weights(weights)
         new = (exponent, weight, exponent2, weight2)
         old = (self._exponent_value, self._weight_value, self._exponent2_value, self._weight2_value)
+        if unused_value != self._unused_value():
+            mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": {unused} does nothing with sampling '
+                                     f'"{self._sampling}" (exponent_v is n_v of "anisotropic_phong", exponent2 the '
+                                     'second lobe of "two_lobe")')
+            self._unused_second = unused_value
         if new != old:
             self._set_sampler(*new)  # validated above: cannot fail
             if self._sampling not in ("phong", "two_lobe", "anisotropic_phong") or (
@@ -522,16 +563,23 @@ class _NativeBSDFMixin:
                     self._sampling == "anisotropic_phong" and new[3] != old[3]):
                 mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
                                          f'specular_weight only affect sampling "phong", "two_lobe" and '
-                                         f'"anisotropic_phong", exponent2 only "two_lobe" and '
-                                         f'"anisotropic_phong", specular_weight2 only "two_lobe" (this '
+                                         f'"anisotropic_phong", exponent2 and specular_weight2 only '
+                                         f'"two_lobe", exponent_v only "anisotropic_phong" (this '
                                          f'BSDF uses "{self._sampling}")')
         if hasattr(self, "_traced"):
             self._apply_traced_state()
 
+    def _unused_value(self) -> float:
+        """The last good value of whichever of exponent2 / exponent_v this sampling ignores."""
+        return getattr(self, "_unused_second", 0.0)
+
     def _restore_parameters(self) -> None:
         _assign(self.exponent, self._exponent_value)
         _assign(self.specular_weight, self._weight_value)
-        _assign(self.exponent2, self._exponent2_value)
+        used, unused = ((self.exponent_v, self.exponent2) if self._sampling == "anisotropic_phong"
+                        else (self.exponent2, self.exponent_v))
+        _assign(used, self._exponent2_value)
+        _assign(unused, self._unused_value())
         _assign(self.specular_weight2, self._weight2_value)
         if self._backend == "jit":
             self._restore_weights()
@@ -551,7 +599,7 @@ class _NativeBSDFMixin:
         if self._sampling in ("phong", "two_lobe", "anisotropic_phong"):
             lines += [f"exponent = {self._exponent_value:g}", f"specular_weight = {self._weight_value:g}"]
         if self._sampling == "anisotropic_phong":
-            lines += [f"exponent2 = {self._exponent2_value:g} (n_v)"]
+            lines += [f"exponent_v = {self._exponent2_value:g}"]
         if self._sampling == "two_lobe":
             lines += [f"exponent2 = {self._exponent2_value:g}", f"specular_weight2 = {self._weight2_value:g}"]
         return f"{type(self).__name__}[\n" + ",\n".join("  " + line for line in lines) + "\n]"
@@ -564,10 +612,10 @@ class NbrdfMixin(_NativeBSDFMixin):
     (the strategy ``nbrdf fit-phong`` measured with the lowest variance) | ``tabulated`` (a
     half-vector table built from the network at load time) | ``two_lobe`` (default when the
     file stores two Blinn-Phong lobes) | ``anisotropic_phong`` (default when it stores an
-    anisotropic lobe, ``sampling.exponent_v``: ``exponent2`` is then ``n_v``) | ``phong``
-    (default when it stores one; with a two-lobe file, its first lobe) | ``cosine`` (default
-    otherwise) | ``uniform``; ``exponent``, ``specular_weight``, ``exponent2`` and
-    ``specular_weight2`` override the stored lobes.
+    anisotropic lobe, ``sampling.exponent_v``; ``exponent`` is then ``n_u`` and ``exponent_v``
+    ``n_v``) | ``phong`` (default when it stores one; with a two-lobe file, its first lobe) |
+    ``cosine`` (default otherwise) | ``uniform``; ``exponent``, ``specular_weight``,
+    ``exponent2``, ``specular_weight2`` and ``exponent_v`` override the stored lobes.
     """
 
     PLUGIN = "nbrdf"
@@ -732,23 +780,26 @@ def _non_finite_name(value) -> str:
     return "NaN" if np.isnan(value) else ("+inf" if value > 0 else "-inf")
 
 
-def _sampling_problem(exponent: float, weight: float, second=None, two_lobe: bool = False) -> str | None:
-    """Why (exponent, specular_weight) and the optional second lobe (exponent2,
-    specular_weight2) cannot be used, naming NaN where NaN is the problem; the weights' sum
-    matters only to ``two_lobe`` sampling."""
-    lobes = [("", exponent, weight)] + ([("2", *second)] if second is not None else [])
-    for suffix, n, w in lobes:
+def _sampling_problem(exponent: float, weight: float, second=None, two_lobe: bool = False,
+                      second_exponent: str = "exponent2") -> str | None:
+    """Why (exponent, specular_weight) and the optional second lobe (``second_exponent``:
+    exponent2, or exponent_v of the anisotropic lobe; specular_weight2) cannot be used, naming
+    NaN where NaN is the problem; the weights' sum matters only to ``two_lobe`` sampling."""
+    lobes = [("exponent", "specular_weight", exponent, weight)]
+    if second is not None:
+        lobes.append((second_exponent, "specular_weight2", *second))
+    for exponent_name, weight_name, n, w in lobes:
         if not np.isfinite(n):
-            return f"exponent{suffix} is {_non_finite_name(n)} (must be finite, in [0, {MAX_EXPONENT:g}])"
+            return f"{exponent_name} is {_non_finite_name(n)} (must be finite, in [0, {MAX_EXPONENT:g}])"
         if n < 0:
-            return f"exponent{suffix} {n:g} is negative (must be in [0, {MAX_EXPONENT:g}])"
+            return f"{exponent_name} {n:g} is negative (must be in [0, {MAX_EXPONENT:g}])"
         if n > MAX_EXPONENT:
-            return (f"exponent{suffix} {n:g} is above the maximum {MAX_EXPONENT:g} (MAX_EXPONENT: "
+            return (f"{exponent_name} {n:g} is above the maximum {MAX_EXPONENT:g} (MAX_EXPONENT: "
                     "sharper lobes are not resolved by float32 directions)")
         if not np.isfinite(w):
-            return f"specular_weight{suffix} is {_non_finite_name(w)} (must be in [0, 1])"
+            return f"{weight_name} is {_non_finite_name(w)} (must be in [0, 1])"
         if not 0.0 <= w <= 1.0:
-            return f"specular_weight{suffix} {w:g} is outside [0, 1]"
+            return f"{weight_name} {w:g} is outside [0, 1]"
     # The library's tolerance (sampling.rs WEIGHT_SUM_TOLERANCE): float32 weights may sum to 1 + ulp.
     if two_lobe and second is not None and weight + second[1] > 1.0 + 1e-6:
         return (f"specular_weight {weight:g} + specular_weight2 {second[1]:g} is above 1 (the "

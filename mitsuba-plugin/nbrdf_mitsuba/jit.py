@@ -21,7 +21,8 @@ reference). Its twins, and the tests that hold the two together:
   ``SamplingStrategy::TwoLobe`` (``two_lobe_mixture_density``, ``two_lobe_component``);
 * :func:`anisotropic_pdf`, :func:`anisotropic_half_vector` and the ``anisotropic_phong`` branch of
   :func:`sample` - ``sampling.rs`` ``SamplingStrategy::AnisotropicBlinnPhong``
-  (``anisotropic_mixture_density``, ``anisotropic_half_vector``); ``exponent2`` is ``n_v``.
+  (``anisotropic_mixture_density``, ``anisotropic_half_vector``); ``exponent2`` is ``n_v`` (the
+  plugin parameter ``exponent_v``).
   Held to the library by ``tests/test_anisotropic.py`` (``test_anisotropic_lobe_backends_agree``)
   and Mitsuba's chi^2 test there;
 * :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``;

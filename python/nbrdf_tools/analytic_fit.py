@@ -15,6 +15,9 @@ together (tests/test_fidelity_report.py):
 
 * :func:`ggx_conductor_eval_cos`: Mitsuba's ``roughconductor`` (``distribution ggx``,
   ``material none``: Fresnel 1), ``test_numpy_ggx_matches_mitsuba_roughconductor``;
+* :func:`ggx_aniso_conductor_eval_cos`: the same with ``alpha_u``, ``alpha_v`` (Mitsuba's
+  ``MicrofacetDistribution`` ``eval`` and ``smith_g1``),
+  ``test_numpy_anisotropic_ggx_matches_mitsuba_roughconductor``;
 * :func:`blinn_phong_eval_cos`: ``nbrdf-core/src/phong_fit.rs`` ``PhongParams::eval``
   (``f = kd / pi + ks (n + 2) / (2 pi) cos(theta_h)^n``), closed form checked in
   ``test_fit_recovers_blinn_phong``;
@@ -47,6 +50,8 @@ FITS_JSON = REPO / "nbrdf-core" / "data" / "merl_fits.json"
 MIN_COS = 1e-6
 # Random stream of the fitting directions (compare_materials' metric directions use stream 6).
 FIT_STREAM = 11
+# The azimuths of turned fitting directions (compare_materials' turned metric directions use 13).
+FIT_TURN_STREAM = 14
 # Relative index of roughplastic's dielectric coating (Mitsuba's default polypropylene, 1.49,
 # rounded to the 1.5 of most fits).
 PLASTIC_IOR = 1.5
@@ -109,6 +114,28 @@ def ggx_conductor_eval_cos(x, view, light) -> np.ndarray:
     # G1 is zero where a direction faces away from h; with both above the horizon and h their
     # bisector, it never does.
     lobe = ggx_d(g.h[2], alpha) * ggx_g1(g.v[2], alpha) * ggx_g1(g.l[2], alpha) / (4.0 * g.v[2])
+    return np.where(g.above, _finite_non_negative(r * lobe), 0.0)
+
+
+def ggx_aniso_d(h: np.ndarray, alpha_u: float, alpha_v: float) -> np.ndarray:
+    """Mitsuba's anisotropic GGX ``D(m) = 1 / (pi a_u a_v ((m_x/a_u)^2 + (m_y/a_v)^2 + m_z^2)^2)``."""
+    q = (h[0] / alpha_u) ** 2 + (h[1] / alpha_v) ** 2 + h[2] ** 2
+    return np.where(h[2] > 0, 1.0 / (math.pi * alpha_u * alpha_v * q * q), 0.0)
+
+
+def ggx_aniso_g1(d: np.ndarray, alpha_u: float, alpha_v: float) -> np.ndarray:
+    """Mitsuba's anisotropic GGX Smith ``G1`` of a direction above the horizon (the projected
+    roughness ``(a_u d_x)^2 + (a_v d_y)^2`` over ``d_z^2`` in place of ``alpha^2 tan^2``)."""
+    xy = (alpha_u * d[0]) ** 2 + (alpha_v * d[1]) ** 2
+    return 2.0 / (1.0 + np.sqrt(1.0 + xy / np.maximum(d[2] * d[2], 1e-300)))
+
+
+def ggx_aniso_conductor_eval_cos(x, view, light) -> np.ndarray:
+    """Anisotropic ``roughconductor`` (GGX, ``material none``): ``x = (R_r, R_g, R_b, alpha_u,
+    alpha_v)``, ``alpha_u`` along the tangent (local x); ``f = R D(h) G1(v) G1(l) / (4 v.z l.z)``."""
+    g = Geometry.of(view, light)
+    r, au, av = np.asarray(x[:3])[:, None], float(x[3]), float(x[4])
+    lobe = ggx_aniso_d(g.h, au, av) * ggx_aniso_g1(g.v, au, av) * ggx_aniso_g1(g.l, au, av) / (4.0 * g.v[2])
     return np.where(g.above, _finite_non_negative(r * lobe), 0.0)
 
 
@@ -210,10 +237,12 @@ class FitData:
         return np.log1p(np.maximum(self.target, 0.0))
 
 
-def fit_directions(count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def fit_directions(count: int, seed: int = 0, turned: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(view, light) (3, count): half adaptive, half uniform, both above the horizon, from
-    compare_materials' SplitMix64 stream on a stream of their own."""
-    from nbrdf_tools.compare_materials import sample_directions, splitmix_uniforms
+    compare_materials' SplitMix64 stream on a stream of their own. ``turned`` turns each pair
+    about the normal by its own uniform angle (adaptive pairs have ``phi_h = 0``: an anisotropic
+    fit needs the others)."""
+    from nbrdf_tools.compare_materials import sample_directions, splitmix_uniforms, turn_about_normal
 
     views, lights = [], []
     for k, sampling in enumerate(("adaptive", "uniform")):
@@ -225,7 +254,11 @@ def fit_directions(count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
             raise RuntimeError("too few fitting directions above the horizon")
         views.append(view[:, keep][:, :want])
         lights.append(light[:, keep][:, :want])
-    return np.concatenate(views, axis=1), np.concatenate(lights, axis=1)
+    view, light = np.concatenate(views, axis=1), np.concatenate(lights, axis=1)
+    if turned:
+        angle = 2 * math.pi * splitmix_uniforms(seed, FIT_TURN_STREAM, 0, count)[:, 0]
+        view, light = turn_about_normal(view, angle), turn_about_normal(light, angle)
+    return view, light
 
 
 @dataclass
@@ -355,6 +388,19 @@ def ggx_conductor_model() -> Model:
                  notes="specular_reflectance in [0, 1], material none (Fresnel 1)")
 
 
+def ggx_aniso_conductor_model() -> Model:
+    def starts(data):
+        return [[0.5, 0.5, 0.5, au, av] for au in (0.03, 0.15, 0.5) for av in (0.03, 0.15, 0.5)]
+
+    return Model(name="roughconductor_aniso", label="anisotropic GGX `roughconductor`",
+                 parameters=["specular_reflectance_r", "specular_reflectance_g", "specular_reflectance_b",
+                             "alpha_u", "alpha_v"],
+                 lower=np.array([0.0, 0.0, 0.0, 1e-3, 1e-3]), upper=np.array([1.0, 1.0, 1.0, 1.0, 1.0]),
+                 eval_cos=ggx_aniso_conductor_eval_cos, starts=starts, log=("alpha_u", "alpha_v"),
+                 notes="specular_reflectance in [0, 1], alpha_u along the tangent, alpha_v across it, "
+                       "material none (Fresnel 1)")
+
+
 def blinn_phong_model() -> Model:
     def starts(data):
         kd = _reflectance_scale(data)
@@ -441,7 +487,10 @@ def roughplastic_dict(kd, ks: float, alpha: float) -> dict:
 
 
 def roughconductor_dict(x) -> dict:
-    return {"type": "roughconductor", "distribution": "ggx", "material": "none", "alpha": float(x[3]),
+    """Mitsuba's GGX ``roughconductor`` (``material none``) of ``(R_rgb, alpha)`` or, anisotropic,
+    ``(R_rgb, alpha_u, alpha_v)``."""
+    alphas = {"alpha": float(x[3])} if len(x) == 4 else {"alpha_u": float(x[3]), "alpha_v": float(x[4])}
+    return {"type": "roughconductor", "distribution": "ggx", "material": "none", **alphas,
             "specular_reflectance": {"type": "rgb", "value": [float(c) for c in x[:3]]}}
 
 
@@ -463,13 +512,15 @@ def roughplastic_model() -> Model:
 
 MODELS: dict[str, Callable[[], Model]] = {
     "roughconductor": ggx_conductor_model,
+    "roughconductor_aniso": ggx_aniso_conductor_model,
     "roughplastic": roughplastic_model,
     "blinn_phong": blinn_phong_model,
     "abc": abc_model,
     "sgd": sgd_model,
 }
 # Stored parameters per model (float32 each): what a scene file or shader holds.
-STORED_PARAMETERS = {"roughconductor": 4, "roughplastic": 6, "blinn_phong": 7, "abc": 9, "sgd": 33}
+STORED_PARAMETERS = {"roughconductor": 4, "roughconductor_aniso": 5, "roughplastic": 6, "blinn_phong": 7, "abc": 9,
+                     "sgd": 33}
 
 
 # --------------------------------------------------------------------------------------------
@@ -481,7 +532,7 @@ def mitsuba_bsdf(model: str, x):
     :class:`NumpyBSDF` (eval only) of the NumPy form."""
     import mitsuba as mi
 
-    if model == "roughconductor":
+    if model in ("roughconductor", "roughconductor_aniso"):
         return mi.load_dict(roughconductor_dict(x))
     if model == "roughplastic":
         return mi.load_dict(roughplastic_dict(x[:3], x[3], x[4]))

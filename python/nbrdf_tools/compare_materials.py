@@ -124,9 +124,23 @@ def sphere_geometry(size: int, light_theta: float) -> tuple[np.ndarray, np.ndarr
     return mask, view.astype(f), light
 
 
-def render_spheres(bsdf, size: int = DEFAULT_RESOLUTION, light_thetas_deg=LIGHT_THETAS_DEG) -> np.ndarray:
-    """Linear RGB images (lights, 3, size, size) float32 of the sphere under each light."""
+def turn_about_normal(d: np.ndarray, angle) -> np.ndarray:
+    """Local directions (3, n) turned by ``angle`` (radians; a scalar or one per direction) about
+    the normal: what turning the tangent frame by ``-angle`` does to them."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]).astype(d.dtype)
+
+
+def render_spheres(bsdf, size: int = DEFAULT_RESOLUTION, light_thetas_deg=LIGHT_THETAS_DEG,
+                   frame_turn_deg: float = 0.0) -> np.ndarray:
+    """Linear RGB images (lights, 3, size, size) float32 of the sphere under each light.
+    ``frame_turn_deg`` turns every pixel's tangent frame about its normal (an isotropic BSDF
+    renders the same; an anisotropic one's highlight turns)."""
     geometry = [sphere_geometry(size, math.radians(deg)) for deg in light_thetas_deg]
+    if frame_turn_deg:
+        angle = -math.radians(frame_turn_deg)
+        geometry = [(mask, turn_about_normal(v, angle), turn_about_normal(light, angle))
+                    for mask, v, light in geometry]
     view = np.concatenate([g[1] for g in geometry], axis=1)
     light = np.concatenate([g[2] for g in geometry], axis=1)
     values = eval_cos(bsdf, view, light).astype(np.float32)
@@ -167,6 +181,8 @@ def image_errors(reference: np.ndarray, test: np.ndarray) -> ImageErrors:
 
 _GAMMA = np.uint64(0x9E3779B97F4A7C15)
 _METRICS_STREAM = 6
+# The azimuths of log_error(turned=True) (analytic_fit's fitting directions use 11 and 12).
+_TURN_STREAM = 13
 
 
 def _mix64(z: np.ndarray) -> np.ndarray:
@@ -205,9 +221,11 @@ def sample_directions(sampling: str, u: np.ndarray) -> tuple[np.ndarray, np.ndar
     raise ValueError(f"unknown sampling '{sampling}' (adaptive or uniform)")
 
 
-def log_error(a, b, sampling: str, samples: int = DEFAULT_SAMPLES, seed: int = 0) -> float:
+def log_error(a, b, sampling: str, samples: int = DEFAULT_SAMPLES, seed: int = 0, turned: bool = False) -> float:
     """Mean ``|ln(1 + f_a cos) - ln(1 + f_b cos)|`` over ``samples`` light/view pairs above the
-    horizon and the three channels (BSDFs ``a`` and ``b``)."""
+    horizon and the three channels (BSDFs ``a`` and ``b``). ``turned`` turns each pair about the
+    normal by its own uniform angle (on a stream of its own): adaptive pairs all have their half
+    vector in the xz plane (``phi_h = 0``), which shows nothing of an anisotropic BSDF."""
     lights, views, kept, first = [], [], 0, 0
     while kept < samples:
         count = max(2 * (samples - kept), 1024)
@@ -220,6 +238,9 @@ def log_error(a, b, sampling: str, samples: int = DEFAULT_SAMPLES, seed: int = 0
         kept += int(keep.sum())
     light = np.concatenate(lights, axis=1)[:, :samples]
     view = np.concatenate(views, axis=1)[:, :samples]
+    if turned:
+        angle = 2 * math.pi * splitmix_uniforms(seed, _TURN_STREAM, 0, light.shape[1])[:, 0]
+        light, view = turn_about_normal(light, angle), turn_about_normal(view, angle)
     fa, fb = eval_cos(a, view, light), eval_cos(b, view, light)
     return float(np.mean(np.abs(np.log1p(fa) - np.log1p(fb))))
 

@@ -2,8 +2,9 @@
 measured data itself, and how does its error fall with its size?
 
     python -m nbrdf_tools.fidelity_report [--rgl A.bsdf,B.bsdf] [--merl X.binary,...]
-        [--anisotropic C.bsdf,...] [--hidden 6,8,12,21,32,48,64] [--samples N] [--epochs N]
-        [--report docs/results/fidelity.md] [--out out/fidelity]
+        [--anisotropic C.bsdf,...] [--mitsuba roughconductor_aniso,principled_aniso]
+        [--mitsuba NAME=SCENE.xml|NAME=BSDF.json|NAME={"type": ...}] [--hidden 6,8,12,21,32,48,64]
+        [--samples N] [--epochs N] [--report docs/results/fidelity.md] [--out out/fidelity]
 
 For every material (RGL measurements read by Mitsuba's ``measured`` BSDF, the reference; MERL-
 format tables read by the project's ``merl`` BSDF, the reference):
@@ -18,6 +19,16 @@ format tables read by the project's ``merl`` BSDF, the reference):
 * **references**: Mitsuba's ``measured`` (the size of its ``.bsdf`` file) and the MERL table
   (for RGL measurements tabulated with ``python -m nbrdf_mitsuba.tabulate_rgl``, reciprocal
   fold, and rendered with the ``merl`` BSDF; 33.4 MiB).
+
+Anisotropic materials (``--mitsuba``: Mitsuba BSDFs, the built-in ones of :data:`BUILTIN` or
+any scene XML / ``mi.load_dict`` JSON; ``--anisotropic``: anisotropic RGL measurements) make a
+table of their own, with the BSDF itself as the reference: an anisotropic and an isotropic
+NBRDF of the table's width, both distilled from it by :mod:`nbrdf_mitsuba.distill` (``--anisotropy
+on`` and ``off``, the same budget), the anisotropic GGX ``roughconductor`` fit (``alpha_u``,
+``alpha_v``) and the isotropic fits, all fitted on directions turned about the normal. Their
+spheres are rendered with the tangent frame turned by each of :data:`FRAME_TURNS_DEG` as well, and
+their log-space error's adaptive directions are turned by a random azimuth each (an adaptive pair
+has ``phi_h = 0``), so the metrics see the anisotropy.
 
 Metrics of each against the reference (:mod:`nbrdf_tools.metrics`; images and directions of
 :mod:`nbrdf_tools.compare_materials`: spheres under five light elevations, means over the five):
@@ -59,6 +70,17 @@ HIGHER_IS_BETTER = {"ssim"}
 METRICS_VERSION = 1
 # Stored fits made by other fitting code are redone.
 FITS_VERSION = 2
+# Anisotropic materials: the tangent frame turns of their sphere images (degrees).
+FRAME_TURNS_DEG = (0.0, 45.0, 90.0)
+# The built-in anisotropic Mitsuba BSDFs of --mitsuba (alpha_u along the tangent).
+BUILTIN = {
+    "roughconductor_aniso": {"type": "roughconductor", "distribution": "ggx", "material": "Au",
+                             "alpha_u": 0.05, "alpha_v": 0.3},
+    "principled_aniso": {"type": "principled", "base_color": {"type": "rgb", "value": [0.75, 0.4, 0.2]},
+                         "metallic": 0.7, "roughness": 0.35, "anisotropic": 0.8, "specular": 0.5},
+}
+# Analytic models of the anisotropic table (before --models' isotropic ones).
+ANISOTROPIC_MODELS = ("roughconductor_aniso",)
 
 
 def weight_count(hidden: int) -> int:
@@ -91,29 +113,53 @@ class Settings:
 class Material:
     name: str
     path: Path
-    source: str  # "rgl" or "merl"
+    source: str  # "rgl", "merl" or "mitsuba"
     group: str  # "isotropic" or "anisotropic"
+    spec: str = ""  # what the user named (--mitsuba)
+    plugin: str = ""  # the Mitsuba plugin of a --mitsuba source, when known
 
 
 # --------------------------------------------------------------------------------------------
 # The reference and the metrics
 
 
+def load_reference(material: Material):
+    """The reference BSDF: the material's file through its plugin, or the Mitsuba source."""
+    from nbrdf_tools import compare_materials as cm
+
+    if material.source != "mitsuba":
+        return cm.load_bsdf(material.path)
+    from nbrdf_mitsuba import distill
+
+    cm.set_variant()
+    try:
+        bsdf, _ = distill.load_bsdf(material.path)
+    except distill.DistillError as error:
+        raise ValueError(str(error)) from None
+    return bsdf
+
+
 class Reference:
-    """A material's reference BSDF and its sphere images."""
+    """A material's reference BSDF and its sphere images (anisotropic materials: under each
+    light and each tangent frame turn of :data:`FRAME_TURNS_DEG`)."""
 
     def __init__(self, material: Material, settings: Settings):
+        self.bsdf = load_reference(material)
+        self.anisotropic = material.group == "anisotropic"
+        self.settings = settings
+        self.images = self.render(self.bsdf)
+
+    def render(self, bsdf) -> np.ndarray:
         from nbrdf_tools import compare_materials as cm
 
-        self.bsdf = cm.load_bsdf(material.path)
-        self.images = cm.render_spheres(self.bsdf, settings.resolution)
-        self.settings = settings
+        turns = FRAME_TURNS_DEG if self.anisotropic else (0.0,)
+        return np.concatenate([cm.render_spheres(bsdf, self.settings.resolution, frame_turn_deg=t) for t in turns])
 
     def measure(self, bsdf) -> dict:
         from nbrdf_tools import compare_materials as cm
         from nbrdf_tools import metrics
 
-        images = cm.render_spheres(bsdf, self.settings.resolution)
+        images = self.render(bsdf)
         per_light = []
         for i in range(images.shape[0]):
             r = np.moveaxis(self.images[i].astype(np.float64), 0, -1)
@@ -123,7 +169,8 @@ class Reference:
                               "flip_hdr": metrics.flip_hdr(r, t), "rmse": metrics.rmse(r, t)})
         values = {k: float(np.mean([p[k] for p in per_light])) for k in per_light[0]}
         for sampling in ("adaptive", "uniform"):
-            values[f"log_error_{sampling}"] = cm.log_error(self.bsdf, bsdf, sampling, self.settings.metric_samples)
+            values[f"log_error_{sampling}"] = cm.log_error(self.bsdf, bsdf, sampling, self.settings.metric_samples,
+                                                           turned=self.anisotropic)
         return values
 
 
@@ -195,6 +242,8 @@ def fit_row(material: Material, model_name: str, data, settings: Settings, refer
 
     key = {**settings.metric_key(), "fit_samples": settings.fit_samples, "seed": settings.seed,
            "input": str(material.path), "fits": FITS_VERSION}
+    if material.group == "anisotropic":
+        key.update(turns=list(FRAME_TURNS_DEG), spec=material.spec)
     row = cache.get(material, model_name, key)
     if row is not None:
         return row
@@ -204,7 +253,8 @@ def fit_row(material: Material, model_name: str, data, settings: Settings, refer
     row = _base_row(material, "fit", model_name, model.label, key)
     row.update(stored_values=stored, memory_bytes=4 * stored, file_bytes=None, seconds=fit.seconds,
                fit=fit.to_json(), notes=model.notes,
-               rendered_by="Mitsuba plugin" if model_name in ("roughconductor", "roughplastic") else "NumpyBSDF")
+               rendered_by=("Mitsuba plugin" if model_name in ("roughconductor", "roughconductor_aniso", "roughplastic")
+                            else "NumpyBSDF"))
     row["metrics"] = reference.measure(af.mitsuba_bsdf(model_name, fit.x))
     return cache.put(material, model_name, row)
 
@@ -244,11 +294,87 @@ def reference_rows(material: Material, settings: Settings, reference, out: Path,
     return rows
 
 
+def distilled_row(material: Material, anisotropic: bool, settings: Settings, reference, out: Path,
+                  threads: int | None, cache: RowCache) -> dict:
+    """An NBRDF of the table's width distilled from the material by :mod:`nbrdf_mitsuba.distill`
+    (``--anisotropy on`` or ``off``)."""
+    from nbrdf_mitsuba import distill
+
+    from nbrdf_tools import compare_materials as cm
+
+    hidden = settings.table_hidden
+    kind = "aniso" if anisotropic else "iso"
+    name = f"nbrdf-{kind}-h{hidden}"
+    key = {**settings.training_key(), **settings.metric_key(), "hidden": hidden, "anisotropic": anisotropic,
+           "input": str(material.path), "spec": material.spec, "turns": list(FRAME_TURNS_DEG)}
+    row = cache.get(material, name, key)
+    if row is not None:
+        return row
+    network = out / "networks" / material.group / f"{material.name}.{kind}.h{hidden}.nbrdf.json"
+    network.parent.mkdir(parents=True, exist_ok=True)
+    argv = [str(material.path), "-o", str(network), "-q", "--anisotropy", "on" if anisotropic else "off",
+            "--hidden", str(hidden), "--seed", str(settings.seed)]
+    for option, value in (("--samples", settings.samples), ("--epochs", settings.epochs), ("--threads", threads)):
+        if value is not None:
+            argv += [option, str(value)]
+    start = time.perf_counter()
+    try:
+        summary = distill.distill(distill.parser().parse_args(argv))
+    except distill.DistillError as error:
+        raise RuntimeError(f"distilling {material.path}: {error}") from None
+    wall = time.perf_counter() - start
+    document = json.loads(network.read_text(encoding="utf-8"))
+    provenance = document["provenance"]
+    weights = sum(len(layer["weights"]) + len(layer["bias"]) for layer in document["layers"])
+    label = f"NBRDF {'anisotropic' if anisotropic else 'isotropic'} (distilled), {weights} weights"
+    row = _base_row(material, "nbrdf", name, label, key)
+    row.update(hidden=hidden, sampling="adaptive", anisotropic=bool(document.get("anisotropic", False)),
+               stored_values=weights, memory_bytes=4 * weights, file_bytes=network.stat().st_size,
+               seconds=provenance["seconds"], wall_seconds=wall, epochs=provenance["epochs"],
+               best_epoch=provenance["best_epoch"], samples=summary["pairs"] - summary["validation"],
+               evaluation_seconds=summary["evaluation_seconds"], network=str(network.relative_to(out)))
+    row["metrics"] = reference.measure(cm.load_bsdf(network))
+    return cache.put(material, name, row)
+
+
+def process_anisotropic(material: Material, settings: Settings, out: Path, threads: int | None,
+                        progress) -> list[dict]:
+    """The anisotropic table's rows of one material (the BSDF itself is the reference)."""
+    from nbrdf_tools import analytic_fit as af
+    from nbrdf_tools import compare_materials as cm
+
+    cache = RowCache(out)
+    reference = Reference(material, settings)
+    label = f"Mitsuba `{material.plugin or material.path.name}` (the reference)"
+    row = _base_row(material, "reference", "source", label, {})
+    row.update(stored_values=None, memory_bytes=material.path.stat().st_size if material.source == "rgl" else None,
+               file_bytes=None, seconds=None, metrics=None, bsdf=str(reference.bsdf).splitlines()[0])
+    rows = [row]
+    progress.update(1)
+    view, light = af.fit_directions(settings.fit_samples, settings.seed, turned=True)
+    data = af.FitData(view, light, cm.eval_cos(reference.bsdf, view, light))
+    for model in anisotropic_models(settings):
+        progress.set_postfix_str(f"{material.name} {model}")
+        rows.append(fit_row(material, model, data, settings, reference, cache))
+        progress.update(1)
+    for anisotropic in (True, False):
+        progress.set_postfix_str(f"{material.name} nbrdf {'anisotropic' if anisotropic else 'isotropic'}")
+        rows.append(distilled_row(material, anisotropic, settings, reference, out, threads, cache))
+        progress.update(1)
+    return rows
+
+
+def anisotropic_models(settings: Settings) -> list[str]:
+    return list(dict.fromkeys([*ANISOTROPIC_MODELS, *settings.models]))
+
+
 def process(material: Material, settings: Settings, out: Path, nbrdf: Path, threads: int | None,
             progress) -> list[dict]:
     from nbrdf_tools import analytic_fit as af
     from nbrdf_tools import compare_materials as cm
 
+    if material.group == "anisotropic":
+        return process_anisotropic(material, settings, out, threads, progress)
     cache = RowCache(out)
     reference = Reference(material, settings)
     rows = reference_rows(material, settings, reference, out, cache)
@@ -304,12 +430,16 @@ def _metric_cells(row: dict) -> list[str]:
     return [_fmt(row["metrics"][k], kind) for k, _, kind in METRIC_COLUMNS]
 
 
-def representation_table(rows: list[dict], material: str, table_hidden: int) -> list[str]:
+ANISOTROPIC_LABELS = {"log_error_adaptive": "log error (adaptive dirs, turned)"}
+
+
+def representation_table(rows: list[dict], material: str, table_hidden: int, labels: dict | None = None) -> list[str]:
     mine = [r for r in rows if r["material"] == material]
     chosen = [r for r in mine if r["kind"] == "nbrdf" and r["hidden"] == table_hidden]
     chosen += [r for r in mine if r["kind"] == "fit"] + [r for r in mine if r["kind"] == "reference"]
+    labels = labels or {}
     lines = ["| representation | stored values | memory | fit / train s | "
-             + " | ".join(label for _, label, _ in METRIC_COLUMNS) + " |",
+             + " | ".join(labels.get(k, label) for k, label, _ in METRIC_COLUMNS) + " |",
              "|---|---:|---:|---:|" + "---:|" * len(METRIC_COLUMNS)]
     for r in chosen:
         stored = f"{r['stored_values']:,}" if r.get("stored_values") else "-"
@@ -484,6 +614,62 @@ def uniform_table(rows: list[dict], materials: list[str]) -> list[str]:
     return lines
 
 
+def _better(key: str, a: float, b: float) -> bool:
+    """Whether value ``a`` of metric ``key`` is better than ``b``."""
+    return a > b if key in HIGHER_IS_BETTER else a < b
+
+
+# Fits whose model is a source plugin's own (up to its Fresnel term): their wins are expected.
+OWN_MODEL = {"roughconductor_aniso": "roughconductor"}
+
+
+def anisotropic_summary(rows: list[dict], materials: list[str], plugins: dict | None = None) -> list[str]:
+    """Per anisotropic material: the anisotropic NBRDF against the isotropic one, and every
+    metric in which a fit beats the anisotropic NBRDF (``plugins``: material -> Mitsuba plugin,
+    to say when the fit is the source's own model)."""
+    plugins = plugins or {}
+    lines = []
+    for m in materials:
+        mine = [r for r in rows if r["material"] == m]
+        nets = {r["anisotropic"]: r for r in mine if r["kind"] == "nbrdf" and "anisotropic" in r}
+        if True not in nets:
+            continue
+        a = nets[True]["metrics"]
+        parts = []
+        if False in nets:
+            i = nets[False]["metrics"]
+            la, li = a["log_error_adaptive"], i["log_error_adaptive"]
+            parts.append(f"the anisotropic NBRDF against the isotropic one: turned log error {_fmt(la)} "
+                         f"against {_fmt(li)} (x{li / max(la, 1e-300):.1f} lower), "
+                         f"HDR-FLIP {_fmt(a['flip_hdr'], 'f4')} against {_fmt(i['flip_hdr'], 'f4')}, SSIM "
+                         f"{_fmt(a['ssim'], 'f4')} against {_fmt(i['ssim'], 'f4')}")
+            worse = [label for k, label, _ in METRIC_COLUMNS if not _better(k, a[k], i[k])]
+            if worse:
+                parts.append("**the isotropic NBRDF is as good or better in " + ", ".join(worse) + "**")
+        winners = 0
+        for r in (r for r in mine if r["kind"] == "fit"):
+            won = [f"{ANISOTROPIC_LABELS.get(k, label)} ({_fmt(r['metrics'][k], kind)} against {_fmt(a[k], kind)})"
+                   for k, label, kind in METRIC_COLUMNS if _better(k, r["metrics"][k], a[k])]
+            if won:
+                winners += 1
+                if r["metrics"]["log_error_adaptive"] < 1e-4:
+                    exact = " (the source is of this model's own family, and the fit recovers it: expected)"
+                elif OWN_MODEL.get(r["method"]) == plugins.get(m):
+                    exact = (f" (expected: it is the source's own `{plugins[m]}` model, up to the Fresnel term, which "
+                             "the fit holds as a constant RGB specular_reflectance)")
+                else:
+                    exact = ""
+                parts.append(f"**{r['label']} beats the anisotropic NBRDF** in " + ", ".join(won) + exact)
+        if not winners:
+            parts.append("no fit beats the anisotropic NBRDF in any metric")
+        fits = [r for r in mine if r["kind"] == "fit"]
+        if fits:
+            best = min(fits, key=lambda r: r["metrics"]["log_error_adaptive"])
+            parts.append(f"best fit in turned log error: {best['label']} ({_fmt(best['metrics']['log_error_adaptive'])})")
+        lines.append(f"* **{m}**: " + "; ".join(parts) + ".")
+    return lines
+
+
 MARKERS = {"roughconductor": "s", "roughplastic": "D", "blinn_phong": "^", "abc": "v", "sgd": "P",
            "merl-table": "*"}
 
@@ -597,29 +783,58 @@ def write_report(report: Path, rows: list[dict], materials: list[Material], sett
     small = fits_against_small_networks(rows, iso, settings.table_hidden)
     if small:
         lines += ["Against the smaller networks of the size sweep, fits do win:", ""] + small + [""]
-    net_s = [r["seconds"] for r in rows if r["kind"] == "nbrdf" and r["hidden"] == settings.table_hidden]
-    fit_s = {r["label"]: [] for r in rows if r["kind"] == "fit"}
-    for r in rows:
+    iso_rows = [r for r in rows if r["group"] == "isotropic"]
+    net_s = [r["seconds"] for r in iso_rows if r["kind"] == "nbrdf" and r["hidden"] == settings.table_hidden]
+    fit_s = {r["label"]: [] for r in iso_rows if r["kind"] == "fit"}
+    for r in iso_rows:
         if r["kind"] == "fit":
             fit_s[r["label"]].append(r["seconds"])
     if net_s and fit_s:
         lines += [f"Time: training NBRDF-{n} took {np.mean(net_s):.0f} s on average; the fits "
                   + ", ".join(f"{k} {np.mean(v):.0f} s" for k, v in fit_s.items())
                   + " (wall times on the shared machine; the NumPy fits run on one thread, the trainer on all cores).", ""]
-    lines += ["## Size sweep: error against memory", "",
-              f"![error against memory]({report.with_suffix('.png').name})", ""] + sweep_table(rows, iso) + [""]
+    lines += ["## Size sweep: error against memory", ""]
+    lines += [f"![error against memory]({report.with_suffix('.png').name})", ""] if iso else []
+    lines += sweep_table(rows, iso) + [""]
     lines += sweep_trend(rows, iso) + [""]
     if settings.uniform_hidden:
         lines += ["## Adaptive against uniform sampling", ""] + uniform_table(rows, iso) + [""]
     lines += ["## Anisotropic materials", ""]
     if aniso:
-        lines += ["Fitted with the same isotropic models and networks (the fits cannot follow the anisotropy).", ""]
+        by_name = {m.name: m for m in materials}
+        sources = []
         for m in aniso:
-            lines += [f"### {m}", ""] + representation_table(rows, m, settings.table_hidden) + [""]
-        lines += sweep_table(rows, aniso) + [""]
+            spec = by_name[m].spec
+            what = (f"`{json.dumps(BUILTIN[spec])}`" if spec in BUILTIN else f"`{spec}`" if spec.startswith("{")
+                    else f"`{by_name[m].path}`")
+            sources.append(f"`{m}` = {what}")
+        lines += [
+            "The reference is the BSDF itself: " + "; ".join(sources) + ". (No anisotropic measurement is in the "
+            "shared data of this checkout: RGL's four are isotropic.)", "",
+            f"* **NBRDF**: `python -m nbrdf_mitsuba.distill SOURCE --hidden {settings.table_hidden} --anisotropy on` "
+            f"and `--anisotropy off` (its library call), seed {settings.seed}, "
+            + (f"{settings.samples:,} samples" if settings.samples else
+               "the distiller's default samples (800,000; 4,000,000 for the anisotropic network)")
+            + (f", at most {settings.epochs} epochs" if settings.epochs else ", the trainer's default epoch budget")
+            + ". Both have the same 6-h-h-3 shape and weight count; the anisotropic one's input carries the half "
+            "vector's azimuth `phi_h`. Seconds: the trainer's own time (Mitsuba's evaluation of the training "
+            "directions is in the JSON, `evaluation_seconds`).",
+            "* **Analytic fits**: the anisotropic GGX `roughconductor` (specular_reflectance RGB, alpha_u along the "
+            "tangent, alpha_v across it; `material none`; rendered by Mitsuba's plugin; its NumPy twin is held to "
+            "Mitsuba's by tests/test_fidelity_report.py) and the isotropic models above, fitted the same way on "
+            f"{settings.fit_samples:,} directions each turned about the normal by a random azimuth.",
+            "* **Metrics**: as above, but the spheres are rendered with every pixel's tangent frame turned by "
+            + ", ".join(f"{t:g}" for t in FRAME_TURNS_DEG)
+            + f" degrees under each of the five lights ({5 * len(FRAME_TURNS_DEG)} images, averaged), and the "
+            "adaptive directions of the log error are each turned about the normal by a random azimuth (an adaptive "
+            "pair's half vector has `phi_h = 0`, which would hide the anisotropy); the uniform directions already "
+            "cover every azimuth.", "",
+            "### Verdict", ""] + anisotropic_summary(rows, aniso, {m.name: m.plugin for m in materials}) + [""]
+        for m in aniso:
+            lines += [f"### {m}", ""] + representation_table(rows, m, settings.table_hidden, ANISOTROPIC_LABELS) + [""]
     else:
-        lines += ["No anisotropic material was given (`--anisotropic`): none is available in the shared data of "
-                  "this checkout, so this table is empty.", ""]
+        lines += ["No anisotropic material was given (`--mitsuba` or `--anisotropic`): none is available in the "
+                  "shared data of this checkout, so this table is empty.", ""]
     report.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
@@ -640,7 +855,12 @@ def parse_args(argv):
     p.add_argument("--rgl", help="comma-separated RGL .bsdf measurements (default: SHARED/data/rgl/*.bsdf when "
                                  "neither --rgl nor --merl is given)")
     p.add_argument("--merl", help="comma-separated MERL-format tables (.binary); their reference is the table")
-    p.add_argument("--anisotropic", help="comma-separated anisotropic .bsdf measurements (a table of their own)")
+    p.add_argument("--anisotropic", help="comma-separated anisotropic .bsdf measurements (the anisotropic table)")
+    p.add_argument("--mitsuba", action="append", metavar="SOURCE",
+                   help="anisotropic Mitsuba BSDFs for the anisotropic table, the BSDF itself the reference "
+                        "(repeatable): comma-separated built-in names (" + ", ".join(BUILTIN) + "), or one "
+                        "NAME=FILE (a scene .xml holding one BSDF or a mi.load_dict .json) or NAME=JSON "
+                        "(a mi.load_dict dictionary)")
     p.add_argument("--hidden", default=",".join(map(str, DEFAULT_HIDDEN)),
                    help="network widths of the size sweep, adaptive sampling (default: %(default)s)")
     p.add_argument("--uniform-hidden", default=str(PAPER_HIDDEN),
@@ -668,9 +888,55 @@ def parse_args(argv):
     return p.parse_args(argv)
 
 
+def _mitsuba_materials(values: list[str] | None, out: Path) -> list[Material]:
+    """The materials of ``--mitsuba``: built-in names (written to OUT/sources/NAME.json, the
+    distiller's input), NAME=FILE or NAME=JSON."""
+    materials = []
+    for value in values or []:
+        if "=" not in value:
+            for name in _list(value):
+                if name not in BUILTIN:
+                    raise ValueError(f"--mitsuba {name}: not a built-in BSDF ({', '.join(BUILTIN)}); "
+                                     "give NAME=FILE or NAME=JSON for others")
+                path = out / "sources" / f"{name}.json"
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(json.dumps(BUILTIN[name], indent=1) + "\n", encoding="utf-8")
+                materials.append(Material(name=name, path=path, source="mitsuba", group="anisotropic", spec=name,
+                                          plugin=BUILTIN[name]["type"]))
+            continue
+        name, _, spec = value.partition("=")
+        name, spec = name.strip(), spec.strip()
+        if not name or not name.replace("_", "").replace("-", "").isalnum():
+            raise ValueError(f"--mitsuba {value}: NAME must be letters, digits, '_' or '-'")
+        if spec.startswith("{"):
+            try:
+                parsed = json.loads(spec)
+            except json.JSONDecodeError as error:
+                raise ValueError(f"--mitsuba {name}: not a JSON dictionary: {error}") from None
+            path = out / "sources" / f"{name}.json"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(parsed, indent=1) + "\n", encoding="utf-8")
+        else:
+            path = Path(spec)
+            if not path.is_file():
+                raise MissingDataError(f"--mitsuba {name}: no such file {path}")
+            if path.suffix.lower() not in (".xml", ".json"):
+                raise ValueError(f"--mitsuba {name}: {path} is not a scene .xml or a .json dictionary")
+        plugin = ""
+        if path.suffix.lower() == ".json":
+            try:
+                plugin = str(json.loads(path.read_text(encoding="utf-8")).get("type", ""))
+            except (ValueError, AttributeError):
+                pass  # the distiller says what is wrong with it
+        materials.append(Material(name=name, path=path, source="mitsuba", group="anisotropic", spec=spec,
+                                  plugin=plugin))
+    return materials
+
+
 def _materials(args) -> list[Material]:
     rgl, merl, aniso = _list(args.rgl), _list(args.merl), _list(args.anisotropic)
-    if not rgl and not merl and not aniso:
+    mitsuba = _mitsuba_materials(args.mitsuba, args.out)
+    if not rgl and not merl and not aniso and not mitsuba:
         folder = args.shared / "data" / "rgl"
         rgl = [str(p) for p in sorted(folder.glob("*.bsdf"))]
         if not rgl:
@@ -685,6 +951,10 @@ def _materials(args) -> list[Material]:
                 raise MissingDataError(f"no such material file: {path}")
             name = path.name.removesuffix(".bsdf").removesuffix(".binary")
             materials.append(Material(name=name, path=path, source=source, group=group))
+    materials += mitsuba
+    names = [m.name for m in materials]
+    if len(set(names)) != len(names):
+        raise ValueError(f"two materials share a name: {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
     return materials
 
 
@@ -696,6 +966,7 @@ def main(argv: list[str] | None = None) -> int:
     from nbrdf_tools import analytic_fit as af
 
     try:
+        args.out.mkdir(parents=True, exist_ok=True)
         cli.check_cli(args.cli)
         materials = _materials(args)
         settings = Settings(hidden=tuple(int(h) for h in _list(args.hidden)),
@@ -715,8 +986,8 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     report = args.report or out / "fidelity.md"
     report.parent.mkdir(parents=True, exist_ok=True)
-    steps = len(materials) * (1 + len(settings.models) + len(set(settings.hidden) | {settings.table_hidden})
-                              + len(settings.uniform_hidden))
+    iso_steps = 1 + len(settings.models) + len(set(settings.hidden) | {settings.table_hidden}) + len(settings.uniform_hidden)
+    steps = sum(iso_steps if m.group == "isotropic" else 3 + len(anisotropic_models(settings)) for m in materials)
     start = time.perf_counter()
     rows: list[dict] = []
     with tqdm(total=steps, desc="fidelity_report", unit="row", disable=args.no_progress) as progress:
@@ -730,14 +1001,15 @@ def main(argv: list[str] | None = None) -> int:
     command = "python -m nbrdf_tools.fidelity_report " + shlex.join(argv)
     document = {"command": command, "settings": settings.__dict__, "machine": platform.machine(),
                 "cpus": os.cpu_count(), "seconds": elapsed,
-                "materials": [{"name": m.name, "path": str(m.path), "source": m.source, "group": m.group}
-                              for m in materials],
+                "materials": [{"name": m.name, "path": str(m.path), "source": m.source, "group": m.group,
+                               "spec": m.spec} for m in materials],
                 "rows": [{k: v for k, v in r.items() if k != "key"} for r in rows]}
     report.with_suffix(".json").write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
-    plot(report.with_suffix(".png"), [r for r in rows if r["group"] == "isotropic"],
-         [m.name for m in materials if m.group == "isotropic"])
+    isotropic = [m.name for m in materials if m.group == "isotropic"]
+    if isotropic:
+        plot(report.with_suffix(".png"), [r for r in rows if r["group"] == "isotropic"], isotropic)
     write_report(report, rows, materials, settings, command, elapsed)
-    print(f"wrote {report}, {report.with_suffix('.json')} and {report.with_suffix('.png')}")
+    print(f"wrote {report}, {report.with_suffix('.json')}" + (f" and {report.with_suffix('.png')}" if isotropic else ""))
     return 0
 
 

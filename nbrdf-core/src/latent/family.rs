@@ -210,6 +210,8 @@ pub fn encodable<'a>(
     relearn: Relearn,
     observer: &mut dyn RelearnObserver,
 ) -> Result<Cow<'a, Nbrdf>> {
+    // Before relearning, which would make an isotropic stand-in of it.
+    super::require_isotropic(net)?;
     let Some(family) = family else {
         return Ok(Cow::Borrowed(net));
     };
@@ -314,6 +316,21 @@ mod tests {
         fn relearnt(&mut self, net: &str, _: f64, report: &TrainReport) {
             self.0.push(format!("relearnt {net} {}", report.epochs_run));
         }
+    }
+
+    #[test]
+    fn anisotropic_networks_are_refused_before_any_relearning() {
+        let mut net = Nbrdf::random("brushed", 4, 1);
+        net.anisotropic = true;
+        let mut events = Events::default();
+        for family in [None, Some(Family { hidden: 4, seed: 2 })] {
+            let relearn = Relearn::Auto {
+                max_epochs: Some(1),
+            };
+            let err = encodable(family, &net, relearn, &mut events).unwrap_err();
+            assert!(err.to_string().contains("anisotropic"), "{err}");
+        }
+        assert!(events.0.is_empty(), "{:?}", events.0);
     }
 
     #[test]

@@ -10,9 +10,29 @@ pub mod predictor;
 pub mod sphere;
 
 use crate::error::{NbrdfError, Result};
+use crate::network::Nbrdf;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::path::Path;
+
+/// The latent models (autoencoders, predictors, the pretrained ones) are learnt from isotropic
+/// networks: an anisotropic network's first layer reads the half vector's azimuth, so its
+/// weights mean something else and its code (or a relearnt isotropic stand-in) would be silently
+/// wrong. Every latent operation refuses one with this error.
+pub fn require_isotropic(net: &Nbrdf) -> Result<()> {
+    anisotropy_problem(net).map_or(Ok(()), |m| Err(NbrdfError::InvalidArgument(m)))
+}
+
+/// [`require_isotropic`]'s message, when `net` is anisotropic.
+pub fn anisotropy_problem(net: &Nbrdf) -> Option<String> {
+    net.anisotropic.then(|| {
+        format!(
+            "network '{}' is anisotropic: the autoencoder and the predictors take isotropic networks \
+             only (the pretrained models are isotropic); train one with --anisotropy off",
+            net.name
+        )
+    })
+}
 
 /// Per-column mean and standard deviation (population, accumulated in f64) of equally long
 /// rows; each deviation is at least `floor`, so that standardising never divides by ~0.

@@ -332,6 +332,9 @@ pub fn interpolate(
     limits::check_range("--steps", steps, 2, 1000)?;
     limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
     let (a, b) = (Nbrdf::load(a)?, Nbrdf::load(b)?);
+    // Both checked before either is relearnt (minutes), not only when its turn comes.
+    crate::latent::require_isotropic(&a)?;
+    crate::latent::require_isotropic(&b)?;
     let (a, b) = (encoding.prepare(ae, &a)?, encoding.prepare(ae, &b)?);
     let (za, zb) = (
         ae.encode_refined(&a, refine)?,

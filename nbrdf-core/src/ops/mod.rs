@@ -85,7 +85,8 @@ fn invalid(message: String) -> NbrdfError {
     NbrdfError::InvalidArgument(message)
 }
 
-/// The `NAME.nbrdf.json` networks of a directory, sorted by name.
+/// The `NAME.nbrdf.json` networks of a directory, sorted by name: the training and test
+/// networks of the latent commands, so isotropic ([`crate::latent::require_isotropic`]).
 pub fn read_nbrdf_dir(dir: &Path) -> Result<Vec<(String, Nbrdf)>> {
     let entries = std::fs::read_dir(dir).map_err(|e| invalid(format!("{}: {e}", dir.display())))?;
     let mut out = Vec::new();
@@ -97,7 +98,11 @@ pub fn read_nbrdf_dir(dir: &Path) -> Result<Vec<(String, Nbrdf)>> {
             continue;
         };
         if let Some(name) = file.strip_suffix(".nbrdf.json") {
-            out.push((name.to_string(), Nbrdf::load(&path)?));
+            let net = Nbrdf::load(&path)?;
+            if let Some(message) = crate::latent::anisotropy_problem(&net) {
+                return Err(NbrdfError::Format { path, message });
+            }
+            out.push((name.to_string(), net));
         }
     }
     if out.is_empty() {
@@ -116,6 +121,23 @@ mod tests {
         assert_eq!(file_stem(Path::new("/x/gold-paint.binary")), "gold-paint");
         assert_eq!(file_stem(Path::new("net.nbrdf.json")), "net");
         assert_eq!(file_stem(Path::new("/")), "nbrdf");
+    }
+
+    #[test]
+    fn a_directory_with_an_anisotropic_network_is_refused_naming_it() {
+        let dir = std::env::temp_dir().join(format!("nbrdf-ops-aniso-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        Nbrdf::random("plain", 4, 1)
+            .save(dir.join("plain.nbrdf.json"))
+            .unwrap();
+        assert_eq!(read_nbrdf_dir(&dir).unwrap().len(), 1);
+        let mut brushed = Nbrdf::random("brushed", 4, 2);
+        brushed.anisotropic = true;
+        brushed.save(dir.join("brushed.nbrdf.json")).unwrap();
+        let message = read_nbrdf_dir(&dir).unwrap_err().to_string();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(message.contains("brushed.nbrdf.json"), "{message}");
+        assert!(message.contains("is anisotropic"), "{message}");
     }
 
     #[test]

@@ -257,6 +257,7 @@ impl AutoEncoder {
     }
 
     fn check(&self, net: &Nbrdf) -> Result<()> {
+        super::require_isotropic(net)?;
         if net.hidden_width() != self.nbrdf_hidden {
             return Err(NbrdfError::InvalidArgument(format!(
                 "network '{}' has hidden width {}, the autoencoder takes {}",

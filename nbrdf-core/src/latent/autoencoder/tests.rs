@@ -307,3 +307,15 @@ fn fixed_split_is_80_20_and_stable() {
     assert_eq!(s.test, expected);
     assert!(s.test.iter().all(|t| !s.train.contains(t)));
 }
+
+#[test]
+fn anisotropic_networks_are_refused_with_one_line() {
+    let (ae, _) = small_autoencoder(1, 1);
+    let mut net = Nbrdf::random("brushed", 21, 5);
+    assert!(ae.encode(&net).is_ok());
+    net.anisotropic = true;
+    let message = ae.encode(&net).unwrap_err().to_string();
+    assert!(message.contains("'brushed' is anisotropic"), "{message}");
+    assert!(!message.contains('\n'), "{message}");
+    assert!(ae.encode_refined(&net, 2).is_err());
+}
