@@ -438,8 +438,8 @@ def test_bench_rays_quick_json(tmp_path):
     parameters = sum(len(layer["weights"]) + len(layer["bias"]) for layer in layers)
     assert parameters == sum(layer["inputs"] * layer["outputs"] + layer["outputs"] for layer in layers)
     assert "second_lobe" in json.loads(network.read_text())["sampling"]  # fit-phong --lobes 2
-    names = ("nbrdf", "nbrdf-opaque", "nbrdf-cosine", "nbrdf-phong", "nbrdf-two_lobe", "merl", "roughconductor",
-             "roughplastic", "principled", "diffuse")
+    names = ("nbrdf", "nbrdf-opaque", "nbrdf-cosine", "nbrdf-phong", "nbrdf-two_lobe", "nbrdf-tabulated", "merl",
+             "roughconductor", "roughplastic", "principled", "diffuse")
     for mode_run in report["runs"]:
         bsdfs = mode_run["bsdfs"]
         assert mode_run["scene"] == "veach" and mode_run["variant"] == "llvm_ad_rgb"
@@ -450,6 +450,14 @@ def test_bench_rays_quick_json(tmp_path):
             assert ratio == pytest.approx(bsdfs[name]["mrays_per_s"] / bsdfs["roughconductor"]["mrays_per_s"])
         for name in ("nbrdf", "nbrdf-opaque", "nbrdf-two_lobe"):
             assert bsdfs[name]["memory_bytes"] == 4 * parameters and bsdfs[name]["file_bytes"] == network.stat().st_size
+        # The table built at load: 16 rows of theta x phi masses, their CDFs and the bin edges, as float32.
+        from nbrdf_mitsuba import _native
+
+        table = _native.Table(_native.Network(str(network)))
+        rows, nt, np_ = table.rows, table.theta_bins, table.phi_bins
+        want = 4 * (rows * nt * np_ + rows * (nt + 1) + rows * nt * (np_ + 1) + nt + 1)
+        assert bsdfs["nbrdf-tabulated"]["sampler_bytes"] == want
+        assert "sampler_bytes" not in bsdfs["nbrdf-phong"] and "sampler_bytes" not in bsdfs["roughconductor"]
         assert bsdfs["merl"]["memory_bytes"] == 34_992_012  # 12-byte header + 3 x 90x90x180 float64
         # diffuse: one RGB reflectance; roughconductor: alpha, eta, k.
         assert bsdfs["diffuse"]["memory_bytes"] == 12 and bsdfs["roughconductor"]["memory_bytes"] == 12

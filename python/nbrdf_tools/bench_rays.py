@@ -2,14 +2,16 @@
 the paper's speed table, with the memory each material needs.
 
 BSDFs: ``nbrdf`` (the network file's default sampling, literal and ``-opaque`` weights), ``nbrdf``
-with each sampling strategy (``nbrdf-cosine``, ``nbrdf-phong``, ``nbrdf-two_lobe``), ``merl`` (the
+with each sampling strategy (``nbrdf-cosine``, ``nbrdf-phong``, ``nbrdf-two_lobe``,
+``nbrdf-tabulated``), ``merl`` (the
 MERL-format table), ``measured`` (Mitsuba's BSDF of an RGL measurement, ``--rgl``; default the
 shared ``paper_white_rgb.bsdf``, skipped with a note when absent), Mitsuba's ``roughconductor``,
 ``roughplastic``, ``principled`` and ``diffuse``; in wavefront mode also the ``rust`` backends.
 Every one is printed and written with its Mrays/s, its ratios to ``measured`` and to
 ``roughconductor``, and ``memory_bytes``: the bytes of the material's data (a network's float32
 parameters, the MERL table and the RGL file as stored, a built-in's traversable parameters as
-float32).
+float32); where the BSDF samples with the half-vector table built at load time (``tabulated``,
+the stored default of most networks), ``sampler_bytes`` the table's float32 arrays beside it.
 
 Every BSDF under test is put on the four plates of the Veach scene (direct illumination with MIS:
 per sample one camera ray, one shadow ray and one BSDF ray), rendered once to compile the kernels,
@@ -24,8 +26,8 @@ alone, which Mitsuba calls once per direction through Python (docs/mitsuba.md, "
 
 The network is trained by ``nbrdf train`` (briefly: speed, not accuracy, is measured) unless the
 authors' Keras network of the material is in the shared data; ``nbrdf fit-phong --lobes 2``
-stores its two sampling lobes (so its default sampling is ``two_lobe``; ``nbrdf-phong`` samples
-the first of them).
+stores its two sampling lobes and the lowest-variance strategy as its default (``nbrdf``'s sampling,
+usually ``tabulated``; ``nbrdf-phong`` samples the first lobe).
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ from nbrdf_tools.scenes.veach import veach_scene_dict
 RAYS_PER_SAMPLE = 3  # camera ray, emitter (shadow) ray, BSDF ray of the MIS direct integrator
 DEFAULT_MATERIAL = "gold-metallic-paint"
 DEFAULT_RGL = "paper_white_rgb"
-NBRDF_STRATEGIES = ("cosine", "phong", "two_lobe")
+NBRDF_STRATEGIES = ("cosine", "phong", "two_lobe", "tabulated")
 # The ratios' denominators: Mitsuba's sampling of measured data, and its analytic microfacet BSDF.
 REFERENCES = ("measured", "roughconductor")
 
@@ -159,6 +161,19 @@ def memory(bsdf: dict) -> dict:
     return {"memory_bytes": 4 * count, "memory": f"{count} float32 parameters"}
 
 
+def sampler_memory(bsdf: dict) -> dict:
+    """``sampler_bytes`` of a BSDF that samples with the tabulated sampler: the float32 arrays of
+    its traced table (masses, CDFs, bin edges), built when the material loads and not stored in
+    its file; empty for every other BSDF."""
+    if bsdf["type"] not in ("nbrdf", "merl"):
+        return {}
+    table = getattr(mi.load_dict(bsdf), "_traced_table", None)
+    if table is None:
+        return {}
+    count = sum(dr.width(a) for a in (table.mass, table.marginal_cdf, table.conditional_cdf, table.edges))
+    return {"sampler_bytes": 4 * count, "sampler": f"half-vector table, {count} float32 (built at load)"}
+
+
 def add_ratios(bsdfs: dict) -> None:
     """``ratio_vs_NAME`` (Mrays/s over that of NAME) for each of :data:`REFERENCES` timed here."""
     for reference in REFERENCES:
@@ -210,11 +225,13 @@ def print_table(results: list[dict]) -> None:
     for result in results:
         bsdfs = result["bsdfs"]
         print(f"\n{result['scene']} scene, {result['variant']}, {result['mode']} mode")
-        print(f"{'BSDF':<16}{'Mrays/s':>10}{'vs measured':>13}{'vs roughconductor':>19}{'memory':>11}")
+        print(f"{'BSDF':<18}{'Mrays/s':>10}{'vs measured':>13}{'vs roughconductor':>19}{'memory':>11}"
+              f"{'+ sampler':>11}")
         for name, figures in bsdfs.items():
             ratios = [f"{figures[f'ratio_vs_{r}']:.2f}x" if f"ratio_vs_{r}" in figures else "-" for r in REFERENCES]
-            print(f"{name:<16}{figures['mrays_per_s']:>10.2f}{ratios[0]:>13}{ratios[1]:>19}"
-                  f"{human_bytes(figures['memory_bytes']):>11}")
+            sampler = human_bytes(figures["sampler_bytes"]) if "sampler_bytes" in figures else "-"
+            print(f"{name:<18}{figures['mrays_per_s']:>10.2f}{ratios[0]:>13}{ratios[1]:>19}"
+                  f"{human_bytes(figures['memory_bytes']):>11}{sampler:>11}")
 
 
 def plot(results: list[dict], path: Path) -> Path:
@@ -260,8 +277,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="comma-separated: default, wavefront (JIT variants; a scalar variant runs its one "
                              "mode, scalar)")
     parser.add_argument("--bsdfs", help="comma-separated: time only these BSDFs of the mode's list "
-                                        "(nbrdf, nbrdf-opaque, nbrdf-cosine, nbrdf-phong, nbrdf-two_lobe, merl, measured, "
-                                        "nbrdf-rust, merl-rust, diffuse, "
+                                        "(nbrdf, nbrdf-opaque, nbrdf-cosine, nbrdf-phong, nbrdf-two_lobe, nbrdf-tabulated, "
+                                        "merl, measured, nbrdf-rust, merl-rust, diffuse, "
                                         "roughconductor, roughplastic, principled; default: all)")
     parser.add_argument("--material", default=DEFAULT_MATERIAL,
                         help="MERL material of the nbrdf and merl BSDFs (default: %(default)s)")
@@ -313,6 +330,7 @@ def main(argv: list[str] | None = None) -> int:
         bsdfs = bench_mode(mode, tested, resolution, args.spp, args.repeats)
         for name, bsdf in tested.items():
             bsdfs[name].update(memory(bsdf))
+            bsdfs[name].update(sampler_memory(bsdf))
         add_ratios(bsdfs)
         results.append({"scene": "veach", "variant": args.variant, "mode": mode, "resolution": list(resolution),
                         "spp": args.spp, "material": args.material,
