@@ -367,6 +367,45 @@ def test_convergence_rgl_path_against_measured(tmp_path, shared):
     assert "two-lobe-fit / measured" in text and f"| {summary['best_nbrdf']} " in text
 
 
+def test_convergence_kitchen_quick_with_the_new_strategies(tmp_path, shared):
+    """The kitchen (two of its overrides, quick settings) honours --strategies: two-lobe-fit,
+    tabulated and the stored default are rendered beside phong-fit and compared with it at equal
+    time over seeds; measured is skipped with a note; the kitchen's checks still run."""
+    cli = _cli_or_skip()
+    help_text = subprocess.run([str(cli), "--help"], capture_output=True, text=True).stdout
+    description = json.loads((REPO / "scenes" / "kitchen_materials.json").read_text())
+    description["overrides"] = {"SteelPotBSDF": "aluminium", "SmallWorktopBSDF": "gray-plastic"}
+    materials = tmp_path / "kitchen_materials.json"
+    materials.write_text(json.dumps(description))
+    out = tmp_path / "result.json"
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "kitchen", "--quick",
+                          "--kitchen", str(shared / "scenes" / "kitchen"), "--kitchen-materials", str(materials),
+                          "--seeds", "2", "--strategies", "cosine,phong-fit,two-lobe-fit,tabulated,default,measured",
+                          "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress"],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(out.read_text())
+    rows = report["results"]
+    expected = {"cosine", "tabulated", "default"}
+    if " fit-phong " in help_text:
+        expected |= {"phong-fit", "two-lobe-fit"}
+    assert {r["strategy"] for r in rows} == expected
+    assert {r["material"] for r in rows} == {"2 overrides"} and {r["seed"] for r in rows} == {0, 1}
+    assert all(r["seconds"] > 0 and np.isfinite(r["rmse"]) and r["nonfinite"] == 0 for r in rows)
+    assert any("measured skipped" in note for note in report["notes"])
+    summary = report["equal_time"][0]
+    assert summary["statistic"] == "median over seeds" and summary["seeds"] == 2
+    assert set(summary["default_samplings"]) == {"aluminium", "gray-plastic"}
+    if " fit-phong " in help_text:
+        assert set(summary["default_samplings"].values()) <= {"cosine", "two_lobe", "tabulated"}
+        assert sum(int(part.rsplit("x", 1)[1]) for part in summary["default_sampling"].split(", ")) == 2
+        assert set(summary["vs_phong_fit"]) == expected - {"phong-fit"}
+        assert summary["vs_phong_fit"]["default"] == summary["rmse"]["default"] / summary["rmse"]["phong-fit"]
+        assert "default / phong-fit" in (tmp_path / "out" / "kitchen" / "summary.md").read_text()
+    checks = report["kitchen"]
+    assert checks["nonfinite_pixels"]["all_strategy_renders"] == 0 and checks["pixels"] == 48 * 27
+
+
 def test_equal_time_summary_is_robust_to_one_bad_seed():
     """Median over seeds: one seed with a firefly (RMSE x100) moves the pooled RMSE, not the
     median; the ratio to measured and the best strategy follow the median."""

@@ -41,11 +41,15 @@ image, and the total error of every render against the ground truth is in the
 ``*_vs_ground_truth`` fields.
 
 In the Veach scene the errors are measured on the plates only (the floor and wall are diffuse);
-in the kitchen on the whole image.
+in the kitchen on the whole image. The kitchen replaces several materials at once, and a strategy
+there samples every replaced material alike (skipped with a note when one of them lacks what it
+samples with); ``measured`` (RGL only) and ``phong-predicted`` are skipped there with a note. Its
+summary gives the stored defaults as counts over the materials (``default_sampling``, per
+material in ``default_samplings``).
 
     python -m nbrdf_tools.convergence --scene veach [--materials a,b] [--rgl x,PATH.bsdf] [--integrator bsdf|mis]
         [--strategies a,b] [--seeds N]
-    python -m nbrdf_tools.convergence --scene kitchen [--kitchen PATH]
+    python -m nbrdf_tools.convergence --scene kitchen [--kitchen PATH] [--strategies a,b] [--seeds N]
     python -m nbrdf_tools.convergence --scene veach --quick --json out/convergence.json
 
 MERL materials need nothing but the CLI (tables are synthesised from the embedded fits and the
@@ -516,6 +520,28 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
     return {"results": results, "representation": representation, "equal_time": equal_time}
 
 
+def kitchen_skip_reason(strategy: str, has_phong: bool, has_two_lobes: bool) -> str | None:
+    """Why a strategy is not rendered in the kitchen, None when it is: every replaced material
+    needs what the strategy samples with, and the kitchen's materials are MERL tables."""
+    if strategy == "measured":
+        return "Mitsuba's measured BSDF needs RGL measurements, the kitchen's materials are MERL tables"
+    if strategy == "phong-predicted":
+        return "the predicted lobe is measured in the Veach scene only"
+    if strategy == "phong-fit" and not has_phong:
+        return "not every replaced material has a fitted lobe (nbrdf fit-phong)"
+    if strategy == "two-lobe-fit" and not has_two_lobes:
+        return "not every replaced material has a two-lobe mixture (nbrdf fit-phong --lobes 2)"
+    return None
+
+
+def default_counts(defaults: dict[str, str | None]) -> str:
+    """The stored defaults of several materials as one cell, e.g. ``tabulated x9, cosine x4``."""
+    counts: dict[str, int] = {}
+    for default in defaults.values():
+        counts[default or "none"] = counts.get(default or "none", 0) + 1
+    return ", ".join(f"{d} x{n}" for d, n in sorted(counts.items(), key=lambda item: (-item[1], item[0])))
+
+
 def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: list[str]) -> dict:
     setup = KitchenSetup(args)
     module = setup.module
@@ -526,6 +552,8 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
         for note in materials[name].notes:
             notes.append(f"{name}: {note}")
     has_phong = all(m.has_phong for m in materials.values())
+    has_two_lobes = all(m.has_two_lobes for m in materials.values())
+    label = f"{len(setup.overrides['overrides'])} overrides"
     levels = spp_levels(args.max_spp)
     settings = {"spp": args.gt_spp, "resolution": list(setup.resolution), "integrator": "path",
                 "max_depth": setup.max_depth, "seed": REFERENCE_SEED, "spp_per_pass": args.spp_per_pass}
@@ -547,26 +575,34 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
     from nbrdf_tools.render import primary_hit_mask
 
     overridden = primary_hit_mask(probe, bsdf_ids=setup.overrides["overrides"].keys())
-    rep = {"scene": "kitchen", "material": "14 overrides", "kind": "merl", "model": "nbrdf",
+    rep = {"scene": "kitchen", "material": label, "kind": "merl", "model": "nbrdf",
            "network": ",".join(sorted({m.network_source for m in materials.values()})), "spp": args.gt_spp,
            "region": "image", **representation_metrics(ground_truth, nbrdf_ref)}
     rep_overridden = {**rep, "region": "replaced materials",
                       **representation_metrics(ground_truth, nbrdf_ref, overridden)}
-    strategies = {}
-    for strategy in ("uniform", "cosine", "phong-fit"):
-        if strategy == "phong-fit" and not has_phong:
+    strategies, skipped = {}, []
+    for strategy in (s for s in STRATEGIES if s in args.strategies):
+        reason = kitchen_skip_reason(strategy, has_phong, has_two_lobes)
+        if reason:
+            skipped.append(f"kitchen: {strategy} skipped: {reason}")
             continue
         strategies[strategy] = {"scene": setup.load(bsdfs(NBRDF_SAMPLING[strategy])), "reference": nbrdf_ref,
                                 "reference_name": "nbrdf"}
+    notes += skipped
+    if not strategies:
+        raise MissingDataError("kitchen: no strategy left to render; " + "; ".join(skipped))
     save_dir = out / "renders" / "kitchen"
     rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]}, args.seeds)
     for row in rows:
-        row.update(scene="kitchen", material="14 overrides", integrator="path", region="image")
+        row.update(scene="kitchen", material=label, integrator="path", region="image")
     # Fireflies traceable to our BSDFs: the NBRDF and the table, Phong-sampled alike with the same
     # random numbers at the highest spp, counted against the ground truth.
     top = levels[-1]
     seed = 424242
-    nbrdf_image, _ = timed_render(strategies["phong-fit" if has_phong else "cosine"]["scene"], top, seed=seed)
+    check_strategy = "phong-fit" if has_phong else "cosine"
+    check_scene = (strategies[check_strategy]["scene"] if check_strategy in strategies
+                   else setup.load(bsdfs(NBRDF_SAMPLING[check_strategy])))
+    nbrdf_image, _ = timed_render(check_scene, top, seed=seed)
     table_image, _ = timed_render(setup.load(gt_bsdfs), top, seed=seed)
     checks = {
         "spp": top,
@@ -586,12 +622,14 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
         write_exr(save_dir / f"{name}.exr", image)
         write_png(save_dir / f"{name}.png", image)
     summary = equal_time_summary(rows)
-    plot_material(out / "plots" / "kitchen.png", "Kitchen (path tracing), 14 overrides replaced: error on the image",
+    plot_material(out / "plots" / "kitchen.png", f"Kitchen (path tracing), {label} replaced: error on the image",
                   rows, rep["rmse"])
     log("kitchen: " + ", ".join(f"{s} {v:.4g}" for s, v in summary["rmse"].items())
         + f" RMSE at {summary['seconds']:.2f} s; NBRDF vs ground truth RMSE {rep['rmse']:.4g}")
+    defaults = {name: stored_default_sampling(m.network) for name, m in materials.items()}
     return {"results": rows, "representation": [rep, rep_overridden],
-            "equal_time": [{"scene": "kitchen", "material": "14 overrides", **summary}], "kitchen": checks}
+            "equal_time": [{"scene": "kitchen", "material": label, "default_sampling": default_counts(defaults),
+                            "default_samplings": defaults, **summary}], "kitchen": checks}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -764,8 +802,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--height", type=int, help="image height (default: 2/3 of the width, kitchen 9/16)")
     parser.add_argument("--max-spp", type=int, default=128, help="highest spp of the series 1, 2, 4, ...")
     parser.add_argument("--strategies", default=",".join(DEFAULT_STRATEGIES),
-                        help="Veach: comma-separated strategies to render, of those available per material, "
-                             f"of {', '.join(STRATEGIES)} (default: %(default)s)")
+                        help="comma-separated strategies to render, of those available per material, "
+                             f"of {', '.join(STRATEGIES)}; the kitchen skips measured and phong-predicted with a "
+                             "note (default: %(default)s)")
     parser.add_argument("--seeds", type=int, default=1,
                         help="independent renders per strategy and spp; the plots show their median and range "
                              "(default: %(default)s)")
@@ -800,6 +839,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [s for s in args.strategies if s not in STRATEGIES]
     if unknown or not args.strategies:
         parser.error(f"--strategies: unknown {', '.join(unknown) or '(none given)'}; choose from {', '.join(STRATEGIES)}")
+    if args.scene == "kitchen" and all(kitchen_skip_reason(s, True, True) for s in args.strategies):
+        parser.error(f"--strategies: the kitchen renders none of {', '.join(args.strategies)}; choose from "
+                     f"{', '.join(s for s in STRATEGIES if not kitchen_skip_reason(s, True, True))}")
     notes = []
     if args.rgl is None:
         shared_rgl = [m for m in VEACH_RGL if shared_path("data", "rgl", f"{m}.bsdf").is_file()]
@@ -864,12 +906,10 @@ def main(argv: list[str] | None = None) -> int:
         notes.append("NBRDFs imported from the authors' Keras networks (`nbrdf train` is not available)")
     if not artefacts.can_fit_phong():
         notes.append("Blinn-Phong lobes: `nbrdf fit-phong` is not available, phong-fit and two-lobe-fit skipped")
-    if not (args.ae and args.predictor):
+    if not (args.ae and args.predictor) and args.scene == "veach":
         message = "phong-predicted skipped: pass --ae AE.json --predictor P.json (nbrdf ae train, nbrdf predictor train)"
         print(f"note: {message}")
         notes.append(message)
-    elif args.scene == "kitchen":
-        notes.append("phong-predicted is measured in the Veach scene only")
 
     start = time.perf_counter()
     try:
