@@ -423,11 +423,10 @@ mod tests {
         weighted_pdf_integral(s, v, &|_| 1.0)
     }
 
-    /// `int g(l) pdf(l) dl` over light directions above the horizon, by the same midpoint rule.
-    fn weighted_pdf_integral(s: &SamplingStrategy, v: DVec3, g: &dyn Fn(DVec3) -> f64) -> f64 {
-        // Over the half vector: pdf(l) 4 (v.h) dω_h, dω_h = pi t sin(theta_h) dt dphi.
+    /// Calls `visit(l, dl)` for the light directions above the horizon of a midpoint rule over
+    /// the half vector: dl = 4 (v.h) dω_h, dω_h = pi t sin(theta_h) dt dphi.
+    fn visit_lights(v: DVec3, mut visit: impl FnMut(DVec3, f64)) {
         let (nt, np) = (1200, 720);
-        let mut total = 0.0;
         for i in 0..nt {
             let t = (i as f64 + 0.5) / nt as f64;
             let theta_h = FRAC_PI_2 * t * t;
@@ -440,38 +439,29 @@ mod tests {
                 if vh <= 0.0 || l.z <= 0.0 {
                     continue;
                 }
-                total += g(l) * s.pdf_f64(v, l) * 4.0 * vh * PI * t * sin_h / nt as f64 * TAU
-                    / np as f64;
+                visit(l, 4.0 * vh * PI * t * sin_h / nt as f64 * TAU / np as f64);
             }
         }
+    }
+
+    /// `int g(l) pdf(l) dl` over light directions above the horizon, by the same midpoint rule.
+    fn weighted_pdf_integral(s: &SamplingStrategy, v: DVec3, g: &dyn Fn(DVec3) -> f64) -> f64 {
+        let mut total = 0.0;
+        visit_lights(v, |l, dl| total += g(l) * s.pdf_f64(v, l) * dl);
         total
     }
 
     /// Relative variance `int g^2 / p / (int g)^2 - 1` of sampling `g = f l.z` for the view
-    /// `v`, by the midpoint rule of [`weighted_pdf_integral`] (independent of the table's bins).
+    /// `v`, by the midpoint rule of [`visit_lights`] (independent of the table's bins).
     fn relative_variance(s: &SamplingStrategy, v: DVec3, f: &MeanBrdf<'_>) -> f64 {
-        let (nt, np) = (1200, 720);
         let (mut integral, mut second) = (0.0, 0.0);
-        for i in 0..nt {
-            let t = (i as f64 + 0.5) / nt as f64;
-            let theta_h = FRAC_PI_2 * t * t;
-            let (sin_h, cos_h) = theta_h.sin_cos();
-            for j in 0..np {
-                let phi = (j as f64 + 0.5) / np as f64 * TAU;
-                let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
-                let vh = v.dot(h);
-                let l = 2.0 * vh * h - v;
-                if vh <= 0.0 || l.z <= 0.0 {
-                    continue;
-                }
-                let dw = 4.0 * vh * PI * t * sin_h / nt as f64 * TAU / np as f64;
-                let g = f(v, l) * l.z;
-                integral += g * dw;
-                if g > 0.0 {
-                    second += g * g / s.pdf_f64(v, l) * dw;
-                }
+        visit_lights(v, |l, dl| {
+            let g = f(v, l) * l.z;
+            integral += g * dl;
+            if g > 0.0 {
+                second += g * g / s.pdf_f64(v, l) * dl;
             }
-        }
+        });
         second / (integral * integral) - 1.0
     }
 
