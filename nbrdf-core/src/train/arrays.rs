@@ -217,7 +217,7 @@ mod tests {
         PHONG.eval(h.z)
     }
 
-    use crate::train::tests::small_config;
+    use crate::train::tests::{log_error_on_fresh_directions, small_config};
 
     struct Owned {
         view: Vec<Vec3>,
@@ -353,17 +353,7 @@ mod tests {
         assert_eq!(outcome.report.validation_samples, 400);
         // Log-space error against the closed form on fresh directions, drawn by the trainer
         // from the angles (an independent path to the same reflectance).
-        let test = dataset::draw(
-            &phong_by_angles,
-            AngularSampling::Uniform,
-            false,
-            2000,
-            99,
-            Stream::ValidationSamples,
-        )
-        .unwrap();
-        let trainer = Trainer::from_layers(&outcome.network.layers, 64, AdamConfig::default());
-        let error = trainer.validation_loss(&test.samples);
+        let error = log_error_on_fresh_directions(&phong_by_angles, &outcome.network.layers);
         assert!(error < 5e-3, "{error} {:?}", outcome.report.history);
         // A caller that passed f instead of f cos_light trains a network that is far off.
         let f_only = Owned {
@@ -383,8 +373,8 @@ mod tests {
             &mut |_| {},
         )
         .unwrap();
-        let trainer = Trainer::from_layers(&wrong.network.layers, 64, AdamConfig::default());
-        assert!(trainer.validation_loss(&test.samples) > 10.0 * error.max(1e-3));
+        let wrong_error = log_error_on_fresh_directions(&phong_by_angles, &wrong.network.layers);
+        assert!(wrong_error > 10.0 * error.max(1e-3));
     }
 
     /// Not reciprocal: brighter towards a high light than a high viewer.

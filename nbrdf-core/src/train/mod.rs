@@ -555,6 +555,21 @@ mod tests {
     }
 
     /// A quick training run (also the arrays tests', so both train alike).
+    /// Mean log-space error of a trained network against `target` on 2,000 fresh uniform
+    /// directions (the validation stream, a seed no training run here uses).
+    pub(super) fn log_error_on_fresh_directions(target: &TargetFn<'_>, layers: &[Layer; 3]) -> f64 {
+        let test = dataset::draw(
+            target,
+            AngularSampling::Uniform,
+            false,
+            2000,
+            99,
+            Stream::ValidationSamples,
+        )
+        .unwrap();
+        Trainer::from_layers(layers, 64, AdamConfig::default()).validation_loss(&test.samples)
+    }
+
     pub(super) fn small_config() -> TrainConfig {
         TrainConfig {
             samples: 4000,
@@ -622,17 +637,7 @@ mod tests {
             report.history
         );
         // Log-space error of the saved network against the target on fresh directions.
-        let test = dataset::draw(
-            &glossy,
-            AngularSampling::Uniform,
-            false,
-            2000,
-            99,
-            Stream::ValidationSamples,
-        )
-        .unwrap();
-        let trainer = Trainer::from_layers(&outcome.network.layers, 64, AdamConfig::default());
-        let error = trainer.validation_loss(&test.samples);
+        let error = log_error_on_fresh_directions(&glossy, &outcome.network.layers);
         assert!(
             error < 5e-3,
             "log-space error {error}, history {:?}",
