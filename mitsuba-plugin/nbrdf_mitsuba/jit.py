@@ -263,15 +263,21 @@ def cosine_hemisphere(u1, u2) -> mi.Vector3f:
     return _spherical(dr.safe_sqrt(1.0 - u1), dr.safe_sqrt(u1), u2)
 
 
-def blinn_phong_half_vector(exponent, u1, u2) -> mi.Vector3f:
-    """``cos theta_h = u1^(1/(n+1))``; ``1 - cos`` from expm1 keeps sharp lobes' spread."""
-    u1 = dr.clip(u1, 0.0, 1.0)
-    positive = u1 > 0
-    log_u1 = dr.log(dr.select(positive, u1, 1.0))
-    one_minus_cos = dr.select(positive, -_expm1_nonpositive(log_u1 / (exponent + 1.0)), 1.0)
+def _phong_elevation(exponent, u):
+    """``(cos theta, sin theta)`` with ``cos theta = u^(1/(n+1))``; ``1 - cos`` from expm1 keeps
+    sharp lobes' spread."""
+    u = dr.clip(u, 0.0, 1.0)
+    positive = u > 0
+    log_u = dr.log(dr.select(positive, u, 1.0))
+    one_minus_cos = dr.select(positive, -_expm1_nonpositive(log_u / (exponent + 1.0)), 1.0)
     one_minus_cos = dr.clip(one_minus_cos, 0.0, 1.0)
     cos_theta = 1.0 - one_minus_cos
-    return _spherical(cos_theta, dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta)), u2)
+    return cos_theta, dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta))
+
+
+def blinn_phong_half_vector(exponent, u1, u2) -> mi.Vector3f:
+    """``cos theta_h = u1^(1/(n+1))``, the azimuth ``2 pi u2``."""
+    return _spherical(*_phong_elevation(exponent, u1), u2)
 
 
 def _unit(v: mi.Vector3f):
@@ -377,13 +383,7 @@ def anisotropic_half_vector(exponent_u, exponent_v, u1, u2) -> mi.Vector3f:
                               dr.select(quadrant == 2, math.pi + phi0, 2.0 * math.pi - phi0)))
     sin_phi, cos_phi = dr.sincos(phi)
     exponent = exponent_u * cos_phi * cos_phi + exponent_v * sin_phi * sin_phi
-    u2 = dr.clip(u2, 0.0, 1.0)
-    positive = u2 > 0
-    log_u2 = dr.log(dr.select(positive, u2, 1.0))
-    one_minus_cos = dr.select(positive, -_expm1_nonpositive(log_u2 / (exponent + 1.0)), 1.0)
-    one_minus_cos = dr.clip(one_minus_cos, 0.0, 1.0)
-    cos_theta = 1.0 - one_minus_cos
-    sin_theta = dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta))
+    cos_theta, sin_theta = _phong_elevation(exponent, u2)
     return mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
 
 
