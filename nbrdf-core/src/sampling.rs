@@ -636,7 +636,7 @@ pub fn pdf_batch(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::network::Nbrdf;
     use crate::rng::SplitMix64;
@@ -894,6 +894,37 @@ mod tests {
         }
     }
 
+    /// Mean of `g` over `samples` draws of `strategy` at `v` (0 for invalid draws), with its
+    /// standard error.
+    pub(crate) fn sample_mean(
+        strategy: &SamplingStrategy,
+        v: DVec3,
+        g: &dyn Fn(DVec3) -> f64,
+        samples: usize,
+        seed: u64,
+    ) -> (f64, f64) {
+        let mut rng = SplitMix64::from_state(seed);
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for _ in 0..samples {
+            let s = strategy.sample(
+                v.as_vec3(),
+                [rng.next_f32(), rng.next_f32(), rng.next_f32()],
+            );
+            let x = if s.pdf > 0.0 {
+                g(s.light.as_dvec3())
+            } else {
+                0.0
+            };
+            sum += x;
+            sum2 += x * x;
+        }
+        let mean = sum / samples as f64;
+        (
+            mean,
+            ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt(),
+        )
+    }
+
     /// For each function `g` of `tests`, its mean over `samples` draws of `strategy` at `v`
     /// (seeded `seed + index`) against the quadrature of `g * pdf` over the sphere around `r`:
     /// the sampler must draw from the density that `pdf` reports.
@@ -907,23 +938,7 @@ mod tests {
     ) {
         for (t, g) in tests.iter().enumerate() {
             let exact = sphere_integral(r, 1500, 256, |l| g(l) * strategy.pdf_f64(v, l));
-            let mut rng = SplitMix64::from_state(seed + t as u64);
-            let (mut sum, mut sum2) = (0.0, 0.0);
-            for _ in 0..samples {
-                let s = strategy.sample(
-                    v.as_vec3(),
-                    [rng.next_f32(), rng.next_f32(), rng.next_f32()],
-                );
-                let x = if s.pdf > 0.0 {
-                    g(s.light.as_dvec3())
-                } else {
-                    0.0
-                };
-                sum += x;
-                sum2 += x * x;
-            }
-            let mean = sum / samples as f64;
-            let sigma = ((sum2 / samples as f64 - mean * mean) / samples as f64).sqrt();
+            let (mean, sigma) = sample_mean(strategy, v, g, samples, seed + t as u64);
             assert!(
                 (mean - exact).abs() < 5.0 * sigma + 1e-4,
                 "{strategy:?} test {t}: MC {mean} +- {sigma} vs quadrature {exact}"

@@ -392,6 +392,7 @@ mod tests {
     use super::*;
     use crate::network::Nbrdf;
     use crate::rng::SplitMix64;
+    use crate::sampling::tests::sample_mean;
     use crate::sampling::{uniform_hemisphere, SamplingStrategy};
     use std::sync::Arc;
 
@@ -536,24 +537,7 @@ mod tests {
             ];
             for (k, g) in tests.iter().enumerate() {
                 let exact = weighted_pdf_integral(&s, v, g);
-                let mut rng = SplitMix64::from_state(40 + k as u64);
-                let n = 200_000;
-                let (mut m1, mut m2) = (0.0, 0.0);
-                for _ in 0..n {
-                    let d = s.sample(
-                        v.as_vec3(),
-                        [rng.next_f32(), rng.next_f32(), rng.next_f32()],
-                    );
-                    let x = if d.pdf > 0.0 {
-                        g(d.light.as_dvec3())
-                    } else {
-                        0.0
-                    };
-                    m1 += x;
-                    m2 += x * x;
-                }
-                let mean = m1 / n as f64;
-                let sigma = ((m2 / n as f64 - mean * mean) / n as f64).sqrt();
+                let (mean, sigma) = sample_mean(&s, v, g, 200_000, 40 + k as u64);
                 assert!(
                     (mean - exact).abs() < 5.0 * sigma + 2e-3,
                     "v {v} test {k}: MC {mean} +- {sigma} vs quadrature {exact}"
