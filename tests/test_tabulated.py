@@ -78,8 +78,11 @@ def test_chi2_stiff_zoomed_and_grazing(llvm_variant, backend, theta_deg, materia
     wi = mi.Vector3f(*map(float, view))
     sample_func, pdf_func = BSDFAdapter(plugin, description(plugin, path, backend), wi=wi)
     sample_func, pdf_func = domain.adapt(sample_func, pdf_func)
+    # The zoom makes the table's bins a few cells wide, and the pdf jumps at their edges: the
+    # expected counts need 64 x 64 integration points per cell (16 x 16 misses by ~1 % at
+    # 89 degrees and rejects a correct sampler, the same in both backends).
     chi2 = ChiSquareTest(domain=domain, sample_func=sample_func, pdf_func=pdf_func, sample_dim=3,
-                         sample_count=200_000, res=41, ires=16)
+                         sample_count=200_000, res=41, ires=64)
     assert chi2.run(significance_level=0.01, test_count=12, quiet=True), (
         f"stiff/{backend} at theta_i = {theta_deg} deg: {chi2.messages}")
 
@@ -93,15 +96,14 @@ def table_oracle(table, view: np.ndarray, light: np.ndarray) -> np.ndarray:
     l = light / np.linalg.norm(light, axis=0)
     s = v + l
     h = s / np.linalg.norm(s, axis=0)
-    sin_h = np.hypot(h[0], h[1])
     v_dot_h = np.sum(v * h, axis=0)
-    theta_h = np.arctan2(sin_h, h[2])
-    t = np.sqrt(theta_h / HALF_PI)
+    t = (1.0 - np.cos(np.arctan2(np.hypot(h[0], h[1]), h[2]))) ** 0.25
+    # At the normal the view's azimuth is taken as 0 (tabulated.rs view_azimuth).
     phi = np.mod(np.arctan2(h[1], h[0]) - np.arctan2(v[1], v[0]), 2 * np.pi)
     row = np.minimum((np.arctan2(np.hypot(v[0], v[1]), v[2]) / HALF_PI * rows).astype(int), rows - 1)
     i = np.minimum((t * nt).astype(int), nt - 1)
     j = np.minimum((phi / (2 * np.pi) * np_).astype(int), np_ - 1)
-    edges = 1.0 - np.cos(HALF_PI * (np.arange(nt + 1) / nt) ** 2)
+    edges = (np.arange(nt + 1) / nt) ** 4
     solid_angle = (edges[i + 1] - edges[i]) * 2 * np.pi / np_
     tab = mass[(row * nt + i) * np_ + j] / solid_angle / (4 * v_dot_h)
     pdf = c * l[2] / np.pi + (1 - c) * tab

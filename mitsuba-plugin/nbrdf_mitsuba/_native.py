@@ -180,13 +180,15 @@ class Table:
         self.cosine_weight = float(info.cosine_weight)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(mass, marginal_cdf, conditional_cdf)`` as float32 (``nbrdf_table_arrays``)."""
-        r, t, p = self.rows, self.theta_bins, self.phi_bins
-        mass = np.empty(r * t * p, dtype=np.float32)
-        marginal = np.empty(r * (t + 1), dtype=np.float32)
-        conditional = np.empty(r * t * (p + 1), dtype=np.float32)
-        check(lib.nbrdf_table_arrays(self.ptr, _out(mass), _out(marginal), _out(conditional)))
-        return mass, marginal, conditional
+        """``(mass, alias_probability, alias)``: float32, float32 and uint32, each
+        ``rows * theta_bins * phi_bins`` (``nbrdf_table_arrays``)."""
+        n = self.rows * self.theta_bins * self.phi_bins
+        mass = np.empty(n, dtype=np.float32)
+        probability = np.empty(n, dtype=np.float32)
+        alias = np.empty(n, dtype=np.uint32)
+        check(lib.nbrdf_table_arrays(self.ptr, _out(mass), _out(probability),
+                                     ffi.from_buffer("uint32_t[]", alias, require_writable=True)))
+        return mass, probability, alias
 
 
 class _Handle:

@@ -392,50 +392,60 @@ STRATEGIES = ("uniform", "cosine", "phong", "two_lobe", "anisotropic_phong", "ta
 
 class TracedTable:
     """The tabulated half-vector sampler (``tabulated.rs``) from the library's arrays
-    (``_native.Table.arrays``): the view's elevation picks a row, a binary search in the row's
-    CDFs a bin in ``t = sqrt(theta_h / (pi/2))`` and in ``phi_h - phi_v``, the half vector uniform
-    in solid angle within the bin; mixed with cosine. The pdf is the bin's mass over its solid
-    angle through the half-vector Jacobian (``density_f64``)."""
+    (``_native.Table.arrays``): the view's elevation picks a row, the row's alias table a bin in
+    ``t = (1 - cos theta_h)^(1/4)`` and ``phi_h - phi_v``, the half vector uniform in solid angle
+    within the bin; mixed with cosine. The pdf is the bin's mass over its solid angle through the
+    half-vector Jacobian (``density_f64``)."""
 
     def __init__(self, rows: int, theta_bins: int, phi_bins: int, cosine_weight: float,
-                 mass: np.ndarray, marginal_cdf: np.ndarray, conditional_cdf: np.ndarray):
+                 mass: np.ndarray, alias_probability: np.ndarray, alias: np.ndarray):
         self.rows, self.theta_bins, self.phi_bins = int(rows), int(theta_bins), int(phi_bins)
         self.cosine_weight = float(cosine_weight)
         self.mass = mi.Float(np.asarray(mass, dtype=np.float32))
-        # 1 - cos(theta_h) at the t-bin edges, 2 sin^2(theta_h / 2) (tabulated.rs bin_one_minus_cos).
-        t = np.arange(self.theta_bins + 1, dtype=np.float64) / self.theta_bins
-        self.edges = mi.Float((2.0 * np.sin(0.25 * np.pi * t * t) ** 2).astype(np.float32))
-        self.marginal_cdf = mi.Float(np.asarray(marginal_cdf, dtype=np.float32))
-        self.conditional_cdf = mi.Float(np.asarray(conditional_cdf, dtype=np.float32))
+        self.alias_probability = mi.Float(np.asarray(alias_probability, dtype=np.float32))
+        self.alias = mi.UInt32(np.asarray(alias, dtype=np.uint32))
 
     def _row(self, v: mi.Vector3f):
         theta_v = dr.atan2(dr.sqrt(dr.fma(v.x, v.x, v.y * v.y)), v.z)
         return dr.minimum(mi.UInt32(dr.maximum(theta_v * (2.0 / math.pi) * self.rows, 0.0)), self.rows - 1)
 
-    def _search(self, cdf, base, bins: int, u):
-        """``tabulated.rs`` ``search``: the first bin ``i`` with ``cdf[i + 1] > u`` (at most
-        ``bins - 1``) and ``u`` rescaled into it."""
-        i = dr.binary_search(0, bins - 1, lambda k: dr.gather(mi.Float, cdf, base + k + 1) <= u)
-        lo = dr.gather(mi.Float, cdf, base + i)
-        hi = dr.gather(mi.Float, cdf, base + i + 1)
-        width = hi - lo
-        frac = dr.select(width > 0, dr.clip((u - lo) / dr.select(width > 0, width, 1.0), 0.0, 1.0), 0.5)
-        return i, frac
+    def _edge(self, i):
+        """``1 - cos theta_h`` at the ``t``-bin edge ``i`` (``tabulated.rs`` ``bin_one_minus_cos``)."""
+        t = mi.Float(i) * (1.0 / self.theta_bins)
+        t2 = t * t
+        return t2 * t2
+
+    @staticmethod
+    def _view_azimuth(v: mi.Vector3f):
+        """``(cos phi_v, sin phi_v)``, +x at the normal (``tabulated.rs`` ``view_azimuth``)."""
+        length = dr.sqrt(dr.fma(v.x, v.x, v.y * v.y))
+        inside = length > 0
+        inv = dr.rcp(dr.select(inside, length, 1.0))
+        return dr.select(inside, v.x * inv, 1.0), dr.select(inside, v.y * inv, 0.0)
+
+    def pick(self, row, u):
+        """``tabulated.rs`` ``pick``: the bin (within the row) of the rescaled uniform ``u``
+        through the row's alias table."""
+        n = self.theta_bins * self.phi_bins
+        scaled = u * n
+        k = dr.minimum(mi.UInt32(scaled), n - 1)
+        index = row * n + k
+        keep = scaled - mi.Float(k) < dr.gather(mi.Float, self.alias_probability, index)
+        return dr.select(keep, k, dr.gather(mi.UInt32, self.alias, index, ~keep))
 
     def sample_direction(self, v: mi.Vector3f, u0, u1, u2) -> mi.Vector3f:
-        nt, np_ = self.theta_bins, self.phi_bins
-        r = self._row(v)
-        i, ft = self._search(self.marginal_cdf, r * (nt + 1), nt, u1)
-        j, fp = self._search(self.conditional_cdf, (r * nt + i) * (np_ + 1), np_, u2)
-        o0, o1 = dr.gather(mi.Float, self.edges, i), dr.gather(mi.Float, self.edges, i + 1)
-        one_minus_cos = dr.fma(ft, o1 - o0, o0)
+        c = self.cosine_weight
+        bin_ = self.pick(self._row(v), (u0 - c) * (1.0 / (1.0 - c)))
+        i, j = bin_ // self.phi_bins, bin_ % self.phi_bins
+        o0, o1 = self._edge(i), self._edge(i + 1)
+        one_minus_cos = dr.fma(u1, o1 - o0, o0)
         cos_h = 1.0 - one_minus_cos
         sin_h = dr.safe_sqrt(one_minus_cos * (1.0 + cos_h))
-        phi = (mi.Float(j) + fp) / np_ * (2.0 * math.pi) + dr.atan2(v.y, v.x)
-        sin_p, cos_p = dr.sincos(phi)
-        h = mi.Vector3f(sin_h * cos_p, sin_h * sin_p, cos_h)
+        sin_p, cos_p = dr.sincos((mi.Float(j) + u2) * (2.0 * math.pi / self.phi_bins))
+        cx, cy = self._view_azimuth(v)
+        h = mi.Vector3f(sin_h * (cos_p * cx - sin_p * cy), sin_h * (cos_p * cy + sin_p * cx), cos_h)
         reflected = 2.0 * dr.dot(v, h) * h - v
-        return dr.select(u0 < self.cosine_weight, cosine_hemisphere(u1, u2), reflected)
+        return dr.select(u0 < c, cosine_hemisphere(u1, u2), reflected)
 
     def pdf(self, view: mi.Vector3f, light: mi.Vector3f):
         v, v_ok = _unit(view)
@@ -444,17 +454,16 @@ class TracedTable:
         s = v + l
         h = dr.normalize(s)
         v_dot_h = dr.dot(v, h)
-        sin_h = dr.sqrt(dr.fma(h.x, h.x, h.y * h.y))
         valid = (dr.squared_norm(s) > 0) & (v_dot_h > 0) & (h.z > 0)
-        t = dr.sqrt(dr.atan2(sin_h, h.z) * (2.0 / math.pi))
-        phi = dr.atan2(h.y, h.x) - dr.atan2(v.y, v.x)
-        phi = phi - 2.0 * math.pi * dr.floor(phi / (2.0 * math.pi))
+        t = dr.sqrt(dr.sqrt(dr.fma(h.x, h.x, h.y * h.y) / (1.0 + h.z)))
+        cx, cy = self._view_azimuth(v)
+        phi = dr.atan2(cx * h.y - cy * h.x, cx * h.x + cy * h.y)
+        phi = dr.select(phi < 0, phi + 2.0 * math.pi, phi)
         nt, np_ = self.theta_bins, self.phi_bins
         i = dr.minimum(mi.UInt32(t * nt), nt - 1)
-        j = dr.minimum(mi.UInt32(dr.maximum(phi / (2.0 * math.pi) * np_, 0.0)), np_ - 1)
+        j = dr.minimum(mi.UInt32(dr.maximum(phi * (np_ / (2.0 * math.pi)), 0.0)), np_ - 1)
         p = dr.gather(mi.Float, self.mass, (self._row(v) * nt + i) * np_ + j, valid)
-        solid_angle = (dr.gather(mi.Float, self.edges, i + 1) - dr.gather(mi.Float, self.edges, i)) * (
-            2.0 * math.pi / np_)
+        solid_angle = (self._edge(i + 1) - self._edge(i)) * (2.0 * math.pi / np_)
         table = p / solid_angle / (4.0 * v_dot_h)
         pdf = cosine + (1.0 - self.cosine_weight) * dr.select(valid, table, 0.0)
         return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)

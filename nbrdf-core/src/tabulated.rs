@@ -2,9 +2,13 @@
 //! half vector, tabulated from the material itself (`f_r cos` times the Jacobian), mixed with a
 //! little cosine sampling so the pdf is positive wherever `f_r cos` can be.
 //!
-//! Half-vector parametrisation: `t = sqrt(theta_h / (pi/2))` (dense near the normal, like the
-//! MERL grid and [`crate::lobe_fit`]'s quadrature, so sharp peaks get bins of their own) and
-//! `phi = phi_h - phi_v` over `[0, 2 pi)` (the material is isotropic). Bins get the mass of
+//! Half-vector parametrisation: `t = (1 - cos theta_h)^(1/4)` (dense near the normal, where it
+//! grows like `sqrt(theta_h)` as the MERL grid and [`crate::lobe_fit`]'s quadrature do, so sharp
+//! peaks get bins of their own) and `phi = phi_h - phi_v` over `[0, 2 pi)` (the material is
+//! isotropic). Both come without an arc tangent of the elevation: `1 - cos theta_h` is
+//! `(h.x^2 + h.y^2) / (1 + h.z)` (precise near the normal) and the bin edges are `(k / bins)^4`,
+//! and `phi` is one `atan2` in the view's azimuthal frame; that keeps the pdf, evaluated for
+//! every sample and every light sample under MIS, cheap (docs/results/performance.md). Bins get the mass of
 //! `f_r cos` (mean over RGB) through the half-vector Jacobian; within a bin the half vector is
 //! uniform in solid angle (no singularity at the normal). The row is chosen deterministically
 //! from the view's elevation, `floor(theta_v / (pi/2) * rows)`, and nothing is interpolated
@@ -38,14 +42,14 @@ use crate::sampling::cosine_hemisphere;
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
+use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, TAU};
 
 /// Table size and mixture weight of a [`TabulatedSampler`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TableConfig {
     /// Bands of view elevation, uniform in `theta_v` over `[0, pi/2)`.
     pub rows: usize,
-    /// Bins in `t = sqrt(theta_h / (pi/2))` and in `phi_h - phi_v` over `[0, 2 pi)` (even).
+    /// Bins in `t = (1 - cos theta_h)^(1/4)` and in `phi_h - phi_v` over `[0, 2 pi)` (even).
     /// 48 x 32: 48 `t` bins sample with 10-40 % less variance than 32 on the MERL set; 64
     /// gain nothing more (docs/results/sampling.md).
     pub theta_bins: usize,
@@ -81,10 +85,13 @@ pub struct TabulatedSampler {
     cosine_weight: f64,
     /// Probability of each bin, row-major `[row][t][phi]`, summing to 1 per row.
     mass: Vec<f64>,
-    /// Per row, the CDF over the `t` bins (`theta_bins + 1` entries, 0 to 1).
-    marginal_cdf: Vec<f64>,
-    /// Per row and `t` bin, the CDF over the `phi` bins (`phi_bins + 1` entries, 0 to 1).
-    conditional_cdf: Vec<f64>,
+    /// Per row, Walker's alias table over the row's bins (same layout as `mass`): a bin `k`
+    /// drawn uniformly is kept with probability `alias_probability[k]`, else replaced by
+    /// `alias[k]` (an index within the row), so a bin costs two lookups whatever the table's
+    /// size (binary searches in CDFs cost 11 dependent lookups at 48 x 32; the render-time
+    /// difference is in docs/results/performance.md).
+    alias_probability: Vec<f64>,
+    alias: Vec<u32>,
 }
 
 /// The exported arrays of a [`TabulatedSampler`] (float32 copies for the Dr.Jit path).
@@ -95,8 +102,8 @@ pub struct TableArrays {
     pub phi_bins: usize,
     pub cosine_weight: f64,
     pub mass: Vec<f64>,
-    pub marginal_cdf: Vec<f64>,
-    pub conditional_cdf: Vec<f64>,
+    pub alias_probability: Vec<f64>,
+    pub alias: Vec<u32>,
 }
 
 /// Mean over RGB of `f_r(view, light)`, the quantity the table follows.
@@ -108,48 +115,54 @@ fn row_of(v: DVec3, rows: usize) -> usize {
     ((theta_v / FRAC_PI_2 * rows as f64) as usize).min(rows - 1)
 }
 
-/// The index `i` of the bin of `cdf` (`bins + 1` entries) holding `u`: the first `i` with
-/// `cdf[i + 1] > u` (which skips empty bins), at most `bins - 1`; and `u` rescaled into that
-/// bin. The Dr.Jit twin does the same binary search (`jit.py` `TracedTable`).
-fn search(cdf: &[f64], u: f64) -> (usize, f64) {
-    let bins = cdf.len() - 1;
-    let i = cdf[1..].partition_point(|&c| c <= u).min(bins - 1);
-    let width = cdf[i + 1] - cdf[i];
-    let frac = if width > 0.0 {
-        ((u - cdf[i]) / width).clamp(0.0, 1.0)
-    } else {
-        0.5
-    };
-    (i, frac)
-}
-
-/// `1 - cos(theta_h)` at the edge `k` of the `t` bins (`theta_h = pi/2 (k/bins)^2`), as
-/// `2 sin^2(theta_h / 2)`, which keeps its precision for the tiny bins near the normal.
+/// `1 - cos(theta_h)` at the edge `k` of the `t` bins: `(k / bins)^4`.
 fn bin_one_minus_cos(k: usize, bins: usize) -> f64 {
     let t = k as f64 / bins as f64;
-    let s = (0.5 * FRAC_PI_2 * t * t).sin();
-    2.0 * s * s
+    (t * t) * (t * t)
 }
 
-/// Normalised CDF of non-negative weights (`len + 1` entries); uniform when they sum to 0.
-fn cdf_of(weights: &[f64]) -> Vec<f64> {
-    let total: f64 = weights.iter().sum();
-    let mut cdf = Vec::with_capacity(weights.len() + 1);
-    cdf.push(0.0);
-    let mut acc = 0.0;
-    for (k, &w) in weights.iter().enumerate() {
-        acc += if total > 0.0 {
-            w / total
-        } else {
-            1.0 / weights.len() as f64
-        };
-        cdf.push(if k + 1 == weights.len() {
-            1.0
-        } else {
-            acc.min(1.0)
-        });
+/// `(cos phi_v, sin phi_v)` of a view: the x axis of the frame in which `phi` is measured; +x
+/// at the normal, where the azimuth is undefined (the Dr.Jit twin picks the same).
+fn view_azimuth(v: DVec3) -> (f64, f64) {
+    let len = v.x.hypot(v.y);
+    if len > 0.0 {
+        (v.x / len, v.y / len)
+    } else {
+        (1.0, 0.0)
     }
-    cdf
+}
+
+/// Walker's alias table of a probability vector (Vose's construction, deterministic): per bin
+/// the probability of keeping it and the bin that replaces it otherwise. A bin of mass 0 is
+/// never kept nor anyone's alias, so it is never drawn (its pdf is 0); rounding leftovers of
+/// positive mass keep themselves.
+fn alias_table(mass: &[f64]) -> (Vec<f64>, Vec<u32>) {
+    let n = mass.len();
+    let mut scaled: Vec<f64> = mass.iter().map(|&m| m * n as f64).collect();
+    let mut probability = vec![0.0; n];
+    let mut alias: Vec<u32> = (0..n as u32).collect();
+    let (mut small, mut large): (Vec<usize>, Vec<usize>) = (0..n).partition(|&k| scaled[k] < 1.0);
+    while let (Some(&s), Some(&l)) = (small.last(), large.last()) {
+        small.pop();
+        probability[s] = scaled[s].clamp(0.0, 1.0);
+        alias[s] = l as u32;
+        scaled[l] -= 1.0 - scaled[s];
+        if scaled[l] < 1.0 {
+            large.pop();
+            small.push(l);
+        }
+    }
+    let heaviest = (0..n).fold(0, |best, k| if mass[k] > mass[best] { k } else { best });
+    for k in large.into_iter().chain(small) {
+        if mass[k] > 0.0 {
+            probability[k] = 1.0;
+            alias[k] = k as u32;
+        } else {
+            probability[k] = 0.0;
+            alias[k] = heaviest as u32;
+        }
+    }
+    (probability, alias)
 }
 
 impl TabulatedSampler {
@@ -172,7 +185,7 @@ impl TabulatedSampler {
         Self::build(&f, config)
     }
 
-    /// Tabulates `mean_f(v, l) l.z 4 (v.h) pi t sin(theta_h)` averaged over each bin, per view
+    /// Tabulates `mean_f(v, l) l.z 4 (v.h) 4 t^3` (`dω_h = 4 t^3 dt dphi`) averaged over each bin, per view
     /// normalised and averaged over the views of each row's band (module docs; views lie in
     /// the xz plane).
     pub fn build(mean_f: &MeanBrdf<'_>, config: &TableConfig) -> Result<Self> {
@@ -218,8 +231,9 @@ impl TabulatedSampler {
                 let mut sum = 0.0;
                 for a in 0..subsamples {
                     let t = (i as f64 + (a as f64 + 0.5) / subsamples as f64) * dt;
-                    let theta_h = FRAC_PI_2 * t * t;
-                    let (sin_h, cos_h) = theta_h.sin_cos();
+                    let one_minus_cos = (t * t) * (t * t);
+                    let cos_h = 1.0 - one_minus_cos;
+                    let sin_h = (one_minus_cos * (1.0 + cos_h)).sqrt();
                     for b in 0..subsamples {
                         let phi = (j as f64 + (b as f64 + 0.5) / subsamples as f64) * dphi;
                         let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
@@ -228,7 +242,7 @@ impl TabulatedSampler {
                         if v_dot_h <= 0.0 || l.z <= 0.0 {
                             continue;
                         }
-                        let g = mean_f(v, l) * l.z * 4.0 * v_dot_h * PI * t * sin_h;
+                        let g = mean_f(v, l) * l.z * 4.0 * v_dot_h * 4.0 * t * t * t;
                         if g.is_finite() && g > 0.0 {
                             sum += g;
                         }
@@ -282,30 +296,22 @@ impl TabulatedSampler {
     ) -> Self {
         let row_len = theta_bins * phi_bins;
         let mut mass = Vec::with_capacity(rows * row_len);
-        let mut marginal_cdf = Vec::with_capacity(rows * (theta_bins + 1));
-        let mut conditional_cdf = Vec::with_capacity(rows * theta_bins * (phi_bins + 1));
+        let mut alias_probability = Vec::with_capacity(rows * row_len);
+        let mut alias = Vec::with_capacity(rows * row_len);
         for row in weights.chunks_exact(row_len).take(rows) {
-            let clean: Vec<f64> = row
+            let clean = row
                 .iter()
-                .map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 })
-                .collect();
-            let total: f64 = clean.iter().sum();
-            let marginal: Vec<f64> = clean
-                .chunks_exact(phi_bins)
-                .map(|c| c.iter().sum())
-                .collect();
-            marginal_cdf.extend(cdf_of(&marginal));
-            for (i, c) in clean.chunks_exact(phi_bins).enumerate() {
-                conditional_cdf.extend(cdf_of(c));
-                // What the two CDFs sample: P(t bin) P(phi bin | t bin).
-                let m = &marginal_cdf[marginal_cdf.len() - theta_bins - 1..];
-                let p_t = m[i + 1] - m[i];
-                let cc = &conditional_cdf[conditional_cdf.len() - phi_bins - 1..];
-                for j in 0..phi_bins {
-                    mass.push(p_t * (cc[j + 1] - cc[j]));
-                }
-            }
-            debug_assert!(total >= 0.0);
+                .map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 });
+            let total: f64 = clean.clone().sum();
+            let row_mass: Vec<f64> = if total > 0.0 {
+                clean.map(|w| w / total).collect()
+            } else {
+                vec![1.0 / row_len as f64; row_len]
+            };
+            let (p, a) = alias_table(&row_mass);
+            mass.extend(row_mass);
+            alias_probability.extend(p);
+            alias.extend(a);
         }
         TabulatedSampler {
             rows,
@@ -313,8 +319,8 @@ impl TabulatedSampler {
             phi_bins,
             cosine_weight,
             mass,
-            marginal_cdf,
-            conditional_cdf,
+            alias_probability,
+            alias,
         }
     }
 
@@ -326,8 +332,8 @@ impl TabulatedSampler {
             phi_bins: self.phi_bins,
             cosine_weight: self.cosine_weight,
             mass: self.mass.clone(),
-            marginal_cdf: self.marginal_cdf.clone(),
-            conditional_cdf: self.conditional_cdf.clone(),
+            alias_probability: self.alias_probability.clone(),
+            alias: self.alias.clone(),
         }
     }
 
@@ -336,23 +342,44 @@ impl TabulatedSampler {
         self.cosine_weight
     }
 
-    /// The direction before rounding to float32 (`v` unit, above the horizon; `u` in [0, 1]).
+    /// The bin (index within row `r`) of the rescaled uniform `u`, through the row's alias table.
+    /// The Dr.Jit twin (`jit.py` `TracedTable.pick`) does the same in float32.
+    fn pick(&self, r: usize, u: f64) -> usize {
+        let n = self.theta_bins * self.phi_bins;
+        let scaled = u * n as f64;
+        let k = (scaled as usize).min(n - 1);
+        let keep = scaled - (k as f64) < self.alias_probability[r * n + k];
+        if keep {
+            k
+        } else {
+            self.alias[r * n + k] as usize
+        }
+    }
+
+    /// The direction before rounding to float32 (`v` unit, above the horizon; `u` in [0, 1]):
+    /// `u0` picks the component and, rescaled, the table's bin; `u1` and `u2` place the half
+    /// vector within the bin.
     pub(crate) fn sample_direction(&self, v: DVec3, [u0, u1, u2]: [f64; 3]) -> DVec3 {
-        if u0 < self.cosine_weight {
+        let c = self.cosine_weight;
+        if u0 < c {
             return cosine_hemisphere(u1, u2);
         }
         let r = row_of(v, self.rows);
         let (nt, np) = (self.theta_bins, self.phi_bins);
-        let (i, ft) = search(&self.marginal_cdf[r * (nt + 1)..(r + 1) * (nt + 1)], u1);
-        let c0 = (r * nt + i) * (np + 1);
-        let (j, fp) = search(&self.conditional_cdf[c0..c0 + np + 1], u2);
+        let bin = self.pick(r, (u0 - c) / (1.0 - c));
+        let (i, j, ft, fp) = (bin / np, bin % np, u1, u2);
         // Uniform in solid angle within the bin: 1 - cos(theta_h) uniform between its edges.
         let (o0, o1) = (bin_one_minus_cos(i, nt), bin_one_minus_cos(i + 1, nt));
         let one_minus_cos = o0 + ft * (o1 - o0);
         let cos_h = 1.0 - one_minus_cos;
         let sin_h = (one_minus_cos * (1.0 + cos_h)).max(0.0).sqrt();
-        let phi = (j as f64 + fp) / np as f64 * TAU + v.y.atan2(v.x);
-        let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+        let (sin_p, cos_p) = ((j as f64 + fp) / np as f64 * TAU).sin_cos();
+        let (cx, cy) = view_azimuth(v);
+        let h = DVec3::new(
+            sin_h * (cos_p * cx - sin_p * cy),
+            sin_h * (cos_p * cy + sin_p * cx),
+            cos_h,
+        );
         2.0 * v.dot(h) * h - v
     }
 
@@ -366,14 +393,15 @@ impl TabulatedSampler {
         }
         let h = sum / len;
         let v_dot_h = v.dot(h);
-        let sin_h = h.x.hypot(h.y);
         if v_dot_h <= 0.0 || h.z <= 0.0 {
             return cosine;
         }
-        let theta_h = sin_h.atan2(h.z);
-        let t = (theta_h / FRAC_PI_2).sqrt();
+        let t = ((h.x * h.x + h.y * h.y) / (1.0 + h.z)).sqrt().sqrt();
         let (nt, np) = (self.theta_bins, self.phi_bins);
-        let mut phi = (h.y.atan2(h.x) - v.y.atan2(v.x)).rem_euclid(TAU);
+        let (cx, cy) = view_azimuth(v);
+        let mut phi = (cx * h.y - cy * h.x)
+            .atan2(cx * h.x + cy * h.y)
+            .rem_euclid(TAU);
         if phi >= TAU {
             phi = 0.0;
         }
@@ -394,6 +422,7 @@ mod tests {
     use crate::rng::SplitMix64;
     use crate::sampling::tests::sample_mean;
     use crate::sampling::{uniform_hemisphere, SamplingStrategy};
+    use std::f64::consts::PI;
     use std::sync::Arc;
 
     fn dir(theta_deg: f64, phi: f64) -> DVec3 {
@@ -555,11 +584,8 @@ mod tests {
         for row in a.mass.chunks_exact(48 * 32) {
             assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         }
-        assert_eq!(a.marginal_cdf.len(), 16 * 49);
-        for row in a.marginal_cdf.chunks_exact(49) {
-            assert!(row[0] == 0.0 && row[48] == 1.0);
-            assert!(row.windows(2).all(|w| w[0] <= w[1]));
-        }
+        assert_eq!(a.alias_probability.len(), 16 * 48 * 32);
+        assert_eq!(a.alias.len(), 16 * 48 * 32);
         let s = SamplingStrategy::Tabulated(Arc::new(t));
         let mut rng = SplitMix64::from_state(8);
         let v = dir(50.0, 0.3).as_vec3();
@@ -571,6 +597,48 @@ mod tests {
             })
             .count();
         assert!(valid > 800, "{valid}");
+    }
+
+    /// The probability of each bin under an alias table, summed the other way round (kept plus
+    /// aliased-to), against the mass it was built from; zero-mass bins are never drawn.
+    #[test]
+    fn alias_tables_draw_each_bin_with_its_mass() {
+        let mut rng = SplitMix64::from_state(11);
+        let spiky: Vec<f64> = (0..1536)
+            .map(|k| match k % 7 {
+                0 => 0.0,
+                1 => 1e3 * rng.next_f64(),
+                _ => 1e-9 * rng.next_f64(),
+            })
+            .collect();
+        let cases = [
+            vec![1.0; 5],
+            vec![0.0, 0.0, 3.0, 0.0],
+            vec![1e-300, 1.0, 0.0, 1e-17, 2.0],
+            spiky,
+        ];
+        for weights in cases {
+            let total: f64 = weights.iter().sum();
+            let mass: Vec<f64> = weights.iter().map(|w| w / total).collect();
+            let (probability, alias) = alias_table(&mass);
+            let n = mass.len() as f64;
+            let mut drawn: Vec<f64> = probability.iter().map(|p| p / n).collect();
+            for (k, (&p, &a)) in probability.iter().zip(&alias).enumerate() {
+                assert!((0.0..=1.0).contains(&p));
+                if a as usize != k {
+                    drawn[a as usize] += (1.0 - p) / n;
+                }
+            }
+            for (k, (&d, &m)) in drawn.iter().zip(&mass).enumerate() {
+                assert!(
+                    (d - m).abs() <= 1e-12 * m.max(1.0 / n),
+                    "bin {k}: {d} vs {m}"
+                );
+                if m == 0.0 {
+                    assert_eq!(d, 0.0, "bin {k} of mass 0 is drawn");
+                }
+            }
+        }
     }
 
     #[test]

@@ -108,9 +108,11 @@ typedef struct NbrdfMixtureSampler {
   float specular_weight2;
 } NbrdfMixtureSampler;
 
-// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability) has
-// `rows * theta_bins * phi_bins` values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
-// `rows * theta_bins * (phi_bins + 1)` (`nbrdf_table_arrays`).
+// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability, row-major
+// `[row][theta bin][phi bin]`), `alias_probability` and `alias` (per row, Walker's alias table
+// over the row's bins: a bin `k` drawn uniformly is kept with probability
+// `alias_probability[k]`, else replaced by the bin `alias[k]`, an index within the row) each
+// have `rows * theta_bins * phi_bins` values (`nbrdf_table_arrays`).
 typedef struct NbrdfTableInfo {
   uint32_t rows;
   uint32_t theta_bins;
@@ -349,15 +351,16 @@ void nbrdf_table_free(struct NbrdfTable *table);
 int32_t nbrdf_table_info(const struct NbrdfTable *table,
                          struct NbrdfTableInfo *out);
 
-// Copies the table's arrays (as float32) into caller buffers of the sizes `NbrdfTableInfo`
-// gives, for a second implementation of the sampler (the plugin's Dr.Jit path).
+// Copies the table's arrays (probabilities as float32) into caller buffers of the sizes
+// `NbrdfTableInfo` gives, for a second implementation of the sampler (the plugin's Dr.Jit
+// path).
 //
 // # Safety
 // `table` is a live handle; the outputs point to writable buffers of the documented sizes.
 int32_t nbrdf_table_arrays(const struct NbrdfTable *table,
                            float *out_mass,
-                           float *out_marginal_cdf,
-                           float *out_conditional_cdf);
+                           float *out_alias_probability,
+                           uint32_t *out_alias);
 
 // `nbrdf_network_sample` with the tabulated sampler `table`.
 //

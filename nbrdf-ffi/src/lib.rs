@@ -134,9 +134,11 @@ pub struct NbrdfTable {
     sampler: Arc<TabulatedSampler>,
 }
 
-/// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability) has
-/// `rows * theta_bins * phi_bins` values, `marginal_cdf` `rows * (theta_bins + 1)`, `conditional_cdf`
-/// `rows * theta_bins * (phi_bins + 1)` (`nbrdf_table_arrays`).
+/// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability, row-major
+/// `[row][theta bin][phi bin]`), `alias_probability` and `alias` (per row, Walker's alias table
+/// over the row's bins: a bin `k` drawn uniformly is kept with probability
+/// `alias_probability[k]`, else replaced by the bin `alias[k]`, an index within the row) each
+/// have `rows * theta_bins * phi_bins` values (`nbrdf_table_arrays`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NbrdfTableInfo {
@@ -1027,8 +1029,9 @@ pub unsafe extern "C" fn nbrdf_table_info(
     })
 }
 
-/// Copies the table's arrays (as float32) into caller buffers of the sizes `NbrdfTableInfo`
-/// gives, for a second implementation of the sampler (the plugin's Dr.Jit path).
+/// Copies the table's arrays (probabilities as float32) into caller buffers of the sizes
+/// `NbrdfTableInfo` gives, for a second implementation of the sampler (the plugin's Dr.Jit
+/// path).
 ///
 /// # Safety
 /// `table` is a live handle; the outputs point to writable buffers of the documented sizes.
@@ -1036,20 +1039,19 @@ pub unsafe extern "C" fn nbrdf_table_info(
 pub unsafe extern "C" fn nbrdf_table_arrays(
     table: *const NbrdfTable,
     out_mass: *mut f32,
-    out_marginal_cdf: *mut f32,
-    out_conditional_cdf: *mut f32,
+    out_alias_probability: *mut f32,
+    out_alias: *mut u32,
 ) -> i32 {
     guard("nbrdf_table_arrays", || {
         // SAFETY: forwarded contract.
         let table = unsafe { reference(table, "table")? };
         check_pointer(out_mass, "out_mass")?;
-        check_pointer(out_marginal_cdf, "out_marginal_cdf")?;
-        check_pointer(out_conditional_cdf, "out_conditional_cdf")?;
+        check_pointer(out_alias_probability, "out_alias_probability")?;
+        check_pointer(out_alias, "out_alias")?;
         let arrays = table.sampler.tables();
         for (src, dst) in [
             (&arrays.mass, out_mass),
-            (&arrays.marginal_cdf, out_marginal_cdf),
-            (&arrays.conditional_cdf, out_conditional_cdf),
+            (&arrays.alias_probability, out_alias_probability),
         ] {
             // SAFETY: checked above; the size is the caller's contract.
             let dst = unsafe { output(dst, src.len()) };
@@ -1057,6 +1059,9 @@ pub unsafe extern "C" fn nbrdf_table_arrays(
                 *d = v as f32;
             }
         }
+        // SAFETY: checked above; the size is the caller's contract and no other slice aliases it.
+        let dst = unsafe { std::slice::from_raw_parts_mut(out_alias, arrays.alias.len()) };
+        dst.copy_from_slice(&arrays.alias);
         Ok(())
     })
 }

@@ -220,61 +220,61 @@ fn check_against_core<H>(brdf: &dyn Brdf, table: &Table, sampler: &Sampler<'_, H
     }
 }
 
-/// `nbrdf_table_arrays` writes exactly the documented sizes, the core's values as float32, and
-/// per row a probability distribution and its CDFs.
+/// `nbrdf_table_arrays` writes exactly the documented sizes, the core's values (probabilities
+/// as float32), and per row a probability distribution whose alias table draws each bin with
+/// its mass (counted the other way round: kept plus aliased to).
 fn check_arrays(table: &Table, info: &NbrdfTableInfo, core: &nbrdf_core::tabulated::TableArrays) {
     let (rows, nt, np) = (
         info.rows as usize,
         info.theta_bins as usize,
         info.phi_bins as usize,
     );
-    let sizes = [rows * nt * np, rows * (nt + 1), rows * nt * (np + 1)];
+    let len = rows * nt * np;
     // One sentinel past each documented size: the call must not write there.
-    let mut buffers: Vec<Vec<f32>> = sizes.iter().map(|&len| vec![-7.0; len + 1]).collect();
-    let [mass, marginal, conditional] = &mut buffers[..] else {
-        unreachable!()
-    };
+    let mut mass = vec![-7.0f32; len + 1];
+    let mut probability = vec![-7.0f32; len + 1];
+    let mut alias = vec![u32::MAX; len + 1];
     // SAFETY: a live handle and buffers of the documented sizes.
     let status = unsafe {
         nbrdf_table_arrays(
             table.0,
             mass.as_mut_ptr(),
-            marginal.as_mut_ptr(),
-            conditional.as_mut_ptr(),
+            probability.as_mut_ptr(),
+            alias.as_mut_ptr(),
         )
     };
     assert_eq!(status, OK, "{}", last_error());
-    for (buffer, expected) in
-        buffers
-            .iter()
-            .zip([&core.mass, &core.marginal_cdf, &core.conditional_cdf])
-    {
-        let (values, sentinel) = buffer.split_at(buffer.len() - 1);
+    for (buffer, expected) in [(&mass, &core.mass), (&probability, &core.alias_probability)] {
+        let (values, sentinel) = buffer.split_at(len);
         assert_eq!(sentinel, [-7.0], "written past the documented size");
         let expected: Vec<f32> = expected.iter().map(|&v| v as f32).collect();
         assert_eq!(values, &expected[..]);
     }
-    let is_cdf = |cdf: &[f32]| {
-        cdf[0] == 0.0 && cdf[cdf.len() - 1] == 1.0 && cdf.windows(2).all(|w| w[0] <= w[1])
-    };
+    assert_eq!(alias[len], u32::MAX, "written past the documented size");
+    assert_eq!(&alias[..len], &core.alias[..]);
+    let row_len = nt * np;
     for r in 0..rows {
-        let row_mass = &buffers[0][r * nt * np..(r + 1) * nt * np];
+        let row = r * row_len..(r + 1) * row_len;
+        let row_mass = &mass[row.clone()];
         let total: f64 = row_mass.iter().map(|&m| f64::from(m)).sum();
         assert!((total - 1.0).abs() < 1e-5, "row {r}: mass {total}");
         assert!(row_mass.iter().all(|&m| m >= 0.0));
-        let marginal = &buffers[1][r * (nt + 1)..(r + 1) * (nt + 1)];
-        assert!(is_cdf(marginal), "row {r}: marginal {marginal:?}");
-        for i in 0..nt {
-            let start = (r * nt + i) * (np + 1);
-            let conditional = &buffers[2][start..start + np + 1];
-            assert!(is_cdf(conditional), "row {r} bin {i}: {conditional:?}");
-            // What the two CDFs sample is the bin's mass.
-            let p_t = marginal[i + 1] - marginal[i];
-            for j in 0..np {
-                let p = p_t * (conditional[j + 1] - conditional[j]);
-                let m = row_mass[i * np + j];
-                assert!((p - m).abs() <= 1e-6, "row {r} bin ({i}, {j}): {p} vs {m}");
+        let mut drawn: Vec<f64> = probability[row.clone()]
+            .iter()
+            .map(|&p| f64::from(p) / row_len as f64)
+            .collect();
+        for (k, (&p, &a)) in probability[row.clone()].iter().zip(&alias[row]).enumerate() {
+            assert!((0.0..=1.0).contains(&p), "row {r} bin {k}: {p}");
+            assert!((a as usize) < row_len, "row {r} bin {k}: alias {a}");
+            if a as usize != k {
+                drawn[a as usize] += (1.0 - f64::from(p)) / row_len as f64;
             }
+        }
+        for (k, (&d, &m)) in drawn.iter().zip(row_mass).enumerate() {
+            assert!(
+                (d - f64::from(m)).abs() <= 1e-6,
+                "row {r} bin {k}: drawn {d} vs mass {m}"
+            );
         }
     }
 }
@@ -475,6 +475,8 @@ fn null_pointers_name_the_argument() {
     let mut info = NbrdfTableInfo::default();
     let mut buf = [0.0_f32; 1];
     let bp = buf.as_mut_ptr();
+    let mut alias_buffer = [0_u32; 1];
+    let ap = alias_buffer.as_mut_ptr();
     // SAFETY: every pointer is null or valid; the calls fail before touching the arrays' sizes.
     unsafe {
         // A failed build leaves NULL in `*out`, never a stale pointer.
@@ -489,16 +491,13 @@ fn null_pointers_name_the_argument() {
 
         check(nbrdf_table_info(null(), &mut info), "table");
         check(nbrdf_table_info(tab, null_mut()), "out");
-        check(nbrdf_table_arrays(null(), bp, bp, bp), "table");
-        check(nbrdf_table_arrays(tab, null_mut(), bp, bp), "out_mass");
+        check(nbrdf_table_arrays(null(), bp, bp, ap), "table");
+        check(nbrdf_table_arrays(tab, null_mut(), bp, ap), "out_mass");
         check(
-            nbrdf_table_arrays(tab, bp, null_mut(), bp),
-            "out_marginal_cdf",
+            nbrdf_table_arrays(tab, bp, null_mut(), ap),
+            "out_alias_probability",
         );
-        check(
-            nbrdf_table_arrays(tab, bp, bp, null_mut()),
-            "out_conditional_cdf",
-        );
+        check(nbrdf_table_arrays(tab, bp, bp, null_mut()), "out_alias");
 
         let sample = |net, t, view, u, light, weight, pdf| {
             nbrdf_network_sample_table(net, t, view, u, 1, light, weight, pdf)

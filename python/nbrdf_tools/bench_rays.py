@@ -163,15 +163,15 @@ def memory(bsdf: dict) -> dict:
 
 def sampler_memory(bsdf: dict) -> dict:
     """``sampler_bytes`` of a BSDF that samples with the tabulated sampler: the float32 arrays of
-    its traced table (masses, CDFs, bin edges), built when the material loads and not stored in
+    its traced table (masses and alias tables), built when the material loads and not stored in
     its file; empty for every other BSDF."""
     if bsdf["type"] not in ("nbrdf", "merl"):
         return {}
     table = getattr(mi.load_dict(bsdf), "_traced_table", None)
     if table is None:
         return {}
-    count = sum(dr.width(a) for a in (table.mass, table.marginal_cdf, table.conditional_cdf, table.edges))
-    return {"sampler_bytes": 4 * count, "sampler": f"half-vector table, {count} float32 (built at load)"}
+    count = sum(dr.width(a) for a in (table.mass, table.alias_probability, table.alias))
+    return {"sampler_bytes": 4 * count, "sampler": f"half-vector table, {count} 32-bit values (built at load)"}
 
 
 def add_ratios(bsdfs: dict) -> None:
