@@ -193,3 +193,12 @@ def test_fit_phong_stores_the_lowest_variance_strategy(llvm_variant, tmp_path, n
     stored = json.loads(out.read_text())["sampling"]
     assert stored["default"] == best and stored["relative_variance"]["tabulated"] == variance["tabulated"]
     assert f"sampling = {best}" in str(mi.load_dict({"type": "nbrdf", "filename": str(out)}))
+    # The table's defensive cosine weight: the candidate of lowest variance, stored, and what
+    # the library's table (and so both backends) mixes when the file is loaded.
+    from nbrdf_mitsuba import _native
+
+    weight = report["table_cosine_weight"]
+    assert weight in (0.1, 0.05, 0.02) and stored["table_cosine_weight"] == pytest.approx(weight)
+    assert _native.Table(_native.Network(out)).cosine_weight == pytest.approx(weight)
+    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(out), "backend": "jit", "sampling": "tabulated"})
+    assert bsdf._traced_table.cosine_weight == pytest.approx(weight)

@@ -650,13 +650,18 @@ pub fn choose_lobe(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::coords::from_rusinkiewicz;
     use crate::coords::RusinkiewiczAngles;
     use glam::Vec3;
 
-    fn blinn_phong(kd: f64, ks: f64, n: f64) -> impl Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> {
+    /// `kd / pi` plus a normalised Blinn-Phong lobe, in Rusinkiewicz angles.
+    pub(crate) fn blinn_phong(
+        kd: f64,
+        ks: f64,
+        n: f64,
+    ) -> impl Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> {
         move |a: &RusinkiewiczAngles| {
             let cos_h = a.theta_h.cos().max(0.0);
             let f = kd / PI + ks * (n + 2.0) / (2.0 * PI) * cos_h.powf(n);

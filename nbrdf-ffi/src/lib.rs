@@ -323,12 +323,20 @@ trait BrdfHandle: Sized {
     /// The name of the handle argument in error messages.
     const ARGUMENT: &'static str;
     fn brdf(&self) -> &dyn Brdf;
+    /// How to tabulate it for `sampling` = `tabulated`.
+    fn table_config(&self) -> TableConfig {
+        TableConfig::default()
+    }
 }
 
 impl BrdfHandle for NbrdfNetwork {
     const ARGUMENT: &'static str = "network";
     fn brdf(&self) -> &dyn Brdf {
         &self.network
+    }
+    /// With the cosine weight `nbrdf fit-phong` stored, if any.
+    fn table_config(&self) -> TableConfig {
+        TableConfig::for_network(&self.network)
     }
 }
 
@@ -956,7 +964,7 @@ unsafe fn build_table_impl<H: BrdfHandle>(
         unsafe { out.write(std::ptr::null_mut()) };
         // SAFETY: forwarded contract.
         let handle = unsafe { reference(handle, H::ARGUMENT)? };
-        let sampler = TabulatedSampler::from_brdf(handle.brdf(), &TableConfig::default())?;
+        let sampler = TabulatedSampler::from_brdf(handle.brdf(), &handle.table_config())?;
         let table = NbrdfTable {
             sampler: Arc::new(sampler),
         };
@@ -966,8 +974,9 @@ unsafe fn build_table_impl<H: BrdfHandle>(
     })
 }
 
-/// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds);
-/// free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
+/// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds),
+/// with the defensive cosine weight of its file (`sampling.table_cosine_weight`, chosen by
+/// `nbrdf fit-phong`; 0.1 without); free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
 ///
 /// # Safety
 /// `network` is a live handle; `out` points to a writable pointer.

@@ -49,8 +49,9 @@ VEACH_MERL = (
 VEACH_RGL = ("cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb")
 #: Revision of nbrdf-core's tabulated sampler: `nbrdf fit-phong` scores it to choose the file's
 #: `sampling.default`, so cached fits are redone when it changes (2: 48 theta bins, views
-#: normalised per band from its lower edge).
-TABULATED_SAMPLER_REVISION = 2
+#: normalised per band from its lower edge; 3: `t = (1 - cos theta_h)^(1/4)` bins and the
+#: stored `sampling.table_cosine_weight`).
+TABULATED_SAMPLER_REVISION = 3
 
 
 def test_split(names: list[str]) -> list[str]:

@@ -86,6 +86,11 @@ pub struct SamplingParams {
     /// scene gives no `sampling`. Optional: files without it sample as before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub default: Option<String>,
+    /// Weight of the defensive cosine component of the tabulated sampler
+    /// ([`crate::tabulated::TableConfig::for_network`]), in `(0, 1)`: the lowest-variance
+    /// candidate of `nbrdf fit-phong`. Optional: files without it mix 0.1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table_cosine_weight: Option<f32>,
 }
 
 /// The values [`SamplingParams::default`] may take.
@@ -147,6 +152,13 @@ impl SamplingParams {
                     "sampling: exponent_v (an anisotropic lobe) and second_lobe do not combine"
                         .into(),
                 );
+            }
+        }
+        if let Some(c) = self.table_cosine_weight {
+            if !(c > 0.0 && c < 1.0) {
+                return Some(format!(
+                    "sampling table_cosine_weight {c} must be in (0, 1)"
+                ));
             }
         }
         if let Some(name) = &self.default {

@@ -471,6 +471,7 @@ fn json_round_trip_is_exact() {
         exponent_v: None,
         relative_variance: None,
         default: None,
+        table_cosine_weight: None,
     });
     net.provenance = serde_json::json!({"epochs": 12, "loss": 0.0123, "table": "gold.binary"});
     let path = temp_path("roundtrip");
@@ -579,6 +580,7 @@ fn malformed_files_are_rejected_with_the_file_name() {
             exponent_v: None,
             relative_variance: None,
             default: None,
+            table_cosine_weight: None,
         });
         n.to_json_string()
     })
@@ -717,6 +719,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
         exponent_v: None,
         relative_variance: None,
         default: None,
+        table_cosine_weight: None,
     };
     net.sampling = Some(one.clone());
     // A one-lobe file writes no new fields and samples with the one-lobe mixture.
@@ -757,6 +760,42 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
 }
 
 #[test]
+fn table_cosine_weight_round_trips_and_is_checked_on_load() {
+    let mut net = test_net(4, 3);
+    let lobe = SamplingParams {
+        model: "blinn-phong".into(),
+        exponent: 40.0,
+        specular_weight: 0.5,
+        source: "fit".into(),
+        second_lobe: None,
+        exponent_v: None,
+        relative_variance: None,
+        default: Some("tabulated".into()),
+        table_cosine_weight: Some(0.02),
+    };
+    net.sampling = Some(lobe.clone());
+    let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();
+    assert_eq!(back, net);
+    let config = crate::tabulated::TableConfig::for_network(&back);
+    assert_eq!(config.cosine_weight, f64::from(0.02f32));
+    for bad in [0.0, -0.1, 1.0, 3.0] {
+        net.sampling = Some(SamplingParams {
+            table_cosine_weight: Some(bad),
+            ..lobe.clone()
+        });
+        let err = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap_err();
+        assert!(err.to_string().contains("table_cosine_weight"), "{err}");
+    }
+    // Without it (older files) the table mixes the default 0.1.
+    net.sampling = Some(SamplingParams {
+        table_cosine_weight: None,
+        ..lobe
+    });
+    let config = crate::tabulated::TableConfig::for_network(&net);
+    assert_eq!(config.cosine_weight, 0.1);
+}
+
+#[test]
 fn anisotropic_sampling_lobe_round_trips_and_is_checked_on_load() {
     let mut net = test_net(4, 3);
     net.anisotropic = true;
@@ -769,6 +808,7 @@ fn anisotropic_sampling_lobe_round_trips_and_is_checked_on_load() {
         exponent_v: Some(25.0),
         relative_variance: None,
         default: None,
+        table_cosine_weight: None,
     };
     net.sampling = Some(lobe.clone());
     let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();

@@ -11,7 +11,7 @@ use crate::metrics::Material;
 use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
 use crate::phong_fit::FitConfig;
 use crate::sampling::SamplingStrategy;
-use crate::tabulated::{TableConfig, TabulatedSampler};
+use crate::tabulated::{TableConfig, TabulatedSampler, COSINE_WEIGHT_CANDIDATES};
 use crate::target::material_target;
 use serde::Serialize;
 use std::fmt;
@@ -71,8 +71,41 @@ pub struct RelativeVariances {
     /// azimuths.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub anisotropic: Option<f64>,
-    /// The tabulated sampler's (built from the material as the plugin builds it at load time).
+    /// The tabulated sampler's (built from the material as the plugin builds it at load time),
+    /// with the lowest-variance cosine weight of [`COSINE_WEIGHT_CANDIDATES`].
     pub tabulated: f64,
+}
+
+/// The tabulated sampler's variance with the cosine weight that gives the lowest.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TableChoice {
+    cosine_weight: f64,
+    relative_variance: f64,
+}
+
+/// Scores `table` mixed with each of [`COSINE_WEIGHT_CANDIDATES`] on the lobe search's
+/// quadrature; the first of equal variances wins.
+fn lowest_variance_cosine_weight(
+    quadrature: &LobeQuadrature,
+    table: &TabulatedSampler,
+) -> Result<TableChoice> {
+    let mut scored = Vec::with_capacity(COSINE_WEIGHT_CANDIDATES.len());
+    for cosine_weight in COSINE_WEIGHT_CANDIDATES {
+        let strategy =
+            SamplingStrategy::Tabulated(Arc::new(table.with_cosine_weight(cosine_weight)?));
+        scored.push(TableChoice {
+            cosine_weight,
+            relative_variance: quadrature.strategy_relative_variance(&strategy),
+        });
+    }
+    let best = scored
+        .into_iter()
+        .filter(|c| c.relative_variance.is_finite())
+        .min_by(|a, b| a.relative_variance.total_cmp(&b.relative_variance));
+    Ok(best.unwrap_or(TableChoice {
+        cosine_weight: COSINE_WEIGHT_CANDIDATES[0],
+        relative_variance: f64::INFINITY,
+    }))
 }
 
 /// What `fit-phong` found (and wrote).
@@ -103,6 +136,9 @@ pub struct FitPhongReport {
     /// The strategy with the lowest relative variance (the plugin's `sampling` name), stored
     /// as the file's `sampling.default`.
     pub default_sampling: &'static str,
+    /// The tabulated sampler's cosine weight of lowest variance, stored as the file's
+    /// `sampling.table_cosine_weight` (isotropic networks).
+    pub table_cosine_weight: f64,
     #[serde(skip)]
     pub choice: LobeChoice,
 }
@@ -145,8 +181,8 @@ impl fmt::Display for FitPhongReport {
         }
         writeln!(
             f,
-            "tabulated sampler: relative variance {:.4e}\ndefault sampling (lowest variance): {}",
-            v.tabulated, self.default_sampling
+            "tabulated sampler: relative variance {:.4e} (cosine weight {})\ndefault sampling (lowest variance): {}",
+            v.tabulated, self.table_cosine_weight, self.default_sampling
         )?;
         if let Some(out) = &self.written {
             writeln!(f, "updated the sampling of {out}")?;
@@ -191,8 +227,10 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 None
             };
             let table = TabulatedSampler::from_target(&*target, &TableConfig::default())?;
-            let tabulated = LobeQuadrature::new(&*target, &lobe_config)?
-                .strategy_relative_variance(&SamplingStrategy::Tabulated(Arc::new(table)));
+            let tabulated = lowest_variance_cosine_weight(
+                &LobeQuadrature::new(&*target, &lobe_config)?,
+                &table,
+            )?;
             if search_two {
                 let (analysis, two) =
                     LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
@@ -244,7 +282,7 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         [
             ("cosine", cosine_variance),
             stored_lobes_variance,
-            ("tabulated", tabulated),
+            ("tabulated", tabulated.relative_variance),
         ]
         .into_iter()
         .filter(|(_, v)| v.is_finite())
@@ -268,6 +306,7 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 tabulated: None,
             }),
             default: stored_default,
+            table_cosine_weight: None,
         },
         None => SamplingParams {
             model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
@@ -281,9 +320,10 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 two_lobe: two_lobes.map(|two| two.relative_variance),
                 anisotropic: None,
                 cosine: cosine_variance,
-                tabulated: Some(tabulated),
+                tabulated: Some(tabulated.relative_variance),
             }),
             default: stored_default,
+            table_cosine_weight: Some(tabulated.cosine_weight as f32),
         },
     };
     let mut written = None;
@@ -322,10 +362,44 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
             }),
             two_lobe: two_lobes.map(|two| two.relative_variance),
             anisotropic: anisotropic.map(|a| a.relative_variance),
-            tabulated,
+            tabulated: tabulated.relative_variance,
         },
+        table_cosine_weight: tabulated.cosine_weight,
         written,
         default_sampling,
         choice: request.lobe,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lobe_fit::tests::blinn_phong;
+    use crate::train::dataset::TargetFn;
+
+    /// A sharp lobe wastes the cosine share (the smallest weight wins); for a Lambertian
+    /// material cosine sampling is exact, so the largest weight wins; the choice's variance is
+    /// its candidate's.
+    #[test]
+    fn the_table_keeps_the_cosine_weight_of_lowest_variance() {
+        let config = LobeFitConfig::default();
+        let glossy = blinn_phong(0.05, 0.9, 400.0);
+        let lambertian = blinn_phong(0.8, 0.0, 1.0);
+        let cases: [(&TargetFn<'_>, f64); 2] = [
+            (&glossy, COSINE_WEIGHT_CANDIDATES[2]),
+            (&lambertian, COSINE_WEIGHT_CANDIDATES[0]),
+        ];
+        for (target, want) in cases {
+            let quadrature = LobeQuadrature::new(target, &config).unwrap();
+            let table = TabulatedSampler::from_target(target, &TableConfig::default()).unwrap();
+            let choice = lowest_variance_cosine_weight(&quadrature, &table).unwrap();
+            assert_eq!(choice.cosine_weight, want, "{choice:?}");
+            let strategy =
+                SamplingStrategy::Tabulated(Arc::new(table.with_cosine_weight(want).unwrap()));
+            assert_eq!(
+                choice.relative_variance,
+                quadrature.strategy_relative_variance(&strategy)
+            );
+        }
+    }
 }

@@ -505,6 +505,7 @@ pub fn predict_phong(
         exponent_v: None,
         relative_variance: None,
         default: None,
+        table_cosine_weight: None,
     });
     net.validate()?;
     let out = output.unwrap_or(input);
