@@ -11,7 +11,7 @@
 //! quadrature.
 
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{visit_half_vectors, LobeFitConfig};
+use crate::lobe_fit::{relative_second_moment, visit_half_vectors, LobeFitConfig};
 use crate::pattern_search::{PatternSearch, SearchPoint};
 use crate::sampling::{SamplingStrategy, MAX_EXPONENT};
 use crate::train::dataset::TargetFn;
@@ -127,21 +127,12 @@ fn view_quadrature(
 /// `R` of the lobe for a view; the density is that of
 /// [`crate::sampling::anisotropic_lobe_density`] on the quadrature's half vectors.
 fn second_moment(q: &ViewQuadrature, nu: f64, nv: f64, w: f64) -> f64 {
-    if q.integral_sq <= 0.0 {
-        return 1.0;
-    }
     let norm = ((nu + 1.0) * (nv + 1.0)).sqrt() * 0.5 * FRAC_1_PI;
-    let mut sum = 0.0;
-    for i in 0..q.g2_dw.len() {
+    relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
         let exponent = nu * q.cos2_phi_h[i] + nv * (1.0 - q.cos2_phi_h[i]);
         let specular = norm * (exponent * q.ln_cos_h[i]).exp() * q.inv_jacobian[i];
-        let pdf = w * specular + (1.0 - w) * q.cosine_pdf[i];
-        if pdf <= 0.0 {
-            return f64::INFINITY;
-        }
-        sum += q.g2_dw[i] / pdf;
-    }
-    sum / q.integral_sq
+        w * specular + (1.0 - w) * q.cosine_pdf[i]
+    })
 }
 
 /// A candidate: `(R - 1, n_u, n_v, w)`.

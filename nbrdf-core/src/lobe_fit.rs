@@ -97,22 +97,35 @@ struct ViewQuadrature {
     lights: Vec<DVec3>,
 }
 
-/// Relative second moment `R` of the lobe `(n, w)` for a view.
-fn second_moment(q: &ViewQuadrature, exponent: f64, weight: f64) -> f64 {
-    if q.integral_sq <= 0.0 {
+/// Relative second moment `R = sum(g^2 dω / pdf) / (int g)^2` over a view's quadrature points
+/// of the density `pdf(i)` at point `i`; 1 where `g` vanishes, infinite where the density misses
+/// a point. The lobe searches (one lobe, several, anisotropic) differ only in `pdf`.
+pub(crate) fn relative_second_moment(
+    g2_dw: &[f64],
+    integral_sq: f64,
+    pdf: impl Fn(usize) -> f64,
+) -> f64 {
+    if integral_sq <= 0.0 {
         return 1.0;
     }
-    let norm = (exponent + 1.0) * 0.5 * FRAC_1_PI;
     let mut sum = 0.0;
-    for i in 0..q.g2_dw.len() {
-        let specular = norm * (exponent * q.ln_cos_h[i]).exp() * q.inv_jacobian[i];
-        let pdf = weight * specular + (1.0 - weight) * q.cosine_pdf[i];
-        if pdf <= 0.0 {
+    for (i, &g2) in g2_dw.iter().enumerate() {
+        let p = pdf(i);
+        if p <= 0.0 {
             return f64::INFINITY;
         }
-        sum += q.g2_dw[i] / pdf;
+        sum += g2 / p;
     }
-    sum / q.integral_sq
+    sum / integral_sq
+}
+
+/// Relative second moment `R` of the lobe `(n, w)` for a view.
+fn second_moment(q: &ViewQuadrature, exponent: f64, weight: f64) -> f64 {
+    let norm = (exponent + 1.0) * 0.5 * FRAC_1_PI;
+    relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
+        let specular = norm * (exponent * q.ln_cos_h[i]).exp() * q.inv_jacobian[i];
+        weight * specular + (1.0 - weight) * q.cosine_pdf[i]
+    })
 }
 
 /// A point of the half-vector quadrature of one view where `g = f_r cos(theta_l)` (mean over
@@ -240,18 +253,9 @@ impl LobeQuadrature {
     /// against the lobes on the same quadrature.
     pub fn strategy_relative_variance(&self, strategy: &SamplingStrategy) -> f64 {
         let moments = self.views.par_iter().map(|q| {
-            if q.integral_sq <= 0.0 {
-                return 1.0;
-            }
-            let mut sum = 0.0;
-            for (g2_dw, &l) in q.g2_dw.iter().zip(&q.lights) {
-                let pdf = strategy.pdf_f64(q.view, l);
-                if pdf <= 0.0 {
-                    return f64::INFINITY;
-                }
-                sum += g2_dw / pdf;
-            }
-            sum / q.integral_sq
+            relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
+                strategy.pdf_f64(q.view, q.lights[i])
+            })
         });
         moments.sum::<f64>() / self.views.len() as f64 - 1.0
     }
@@ -352,26 +356,17 @@ const TWO_LOBE_REFINE_LEVELS: usize = 7;
 /// `1 - sum w`, at least 0) for a view: [`second_moment`] with more lobes. Lobes of weight 0
 /// are skipped, so a second lobe of weight 0 scores exactly as the one-lobe mixture.
 fn mixture_second_moment(q: &ViewQuadrature, lobes: &[(f64, f64)]) -> f64 {
-    if q.integral_sq <= 0.0 {
-        return 1.0;
-    }
     let cosine_weight = (1.0 - lobes.iter().map(|l| l.1).sum::<f64>()).max(0.0);
-    let mut sum = 0.0;
-    for i in 0..q.g2_dw.len() {
-        let mut pdf = 0.0;
+    relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
+        let mut pdf = cosine_weight * q.cosine_pdf[i];
         for &(n, w) in lobes {
             if w > 0.0 {
                 let norm = (n + 1.0) * 0.5 * FRAC_1_PI;
                 pdf += w * (norm * (n * q.ln_cos_h[i]).exp() * q.inv_jacobian[i]);
             }
         }
-        pdf += cosine_weight * q.cosine_pdf[i];
-        if pdf <= 0.0 {
-            return f64::INFINITY;
-        }
-        sum += q.g2_dw[i] / pdf;
-    }
-    sum / q.integral_sq
+        pdf
+    })
 }
 
 /// The light densities of one Blinn-Phong lobe at every quadrature point of a view.
