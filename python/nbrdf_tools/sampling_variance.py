@@ -29,7 +29,8 @@ def _variances(cli: Path, material_file: Path, *extra) -> dict:
     report = json.loads(nbrdf(cli, "fit-phong", material_file, "--lobes", "2", "--json", *extra))
     variance, two = report["relative_variance"], report["two_lobe"]
     return {"cosine": variance["cosine"], "one_lobe": variance["variance_lobe"], "two_lobe": variance["two_lobe"],
-            "tabulated": variance["tabulated"], "default": report["default_sampling"],
+            "tabulated": variance["tabulated"], "table_cosine_weight": report["table_cosine_weight"],
+            "default": report["default_sampling"],
             "two_lobe_n": two["exponents"], "two_lobe_w": two["weights"]}
 
 
@@ -47,13 +48,13 @@ def measure(cli: Path, material: str, work: Path, train_args: list[str] | None) 
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| material | of | cosine | one lobe | two lobes | tabulated | two/one | tabulated/one | default "
-             "| two lobes (n1, w1; n2, w2) |",
+    lines = ["| material | of | cosine | one lobe | two lobes | tabulated (cosine weight) | two/one | tabulated/one "
+             "| default | two lobes (n1, w1; n2, w2) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         n, w = r["two_lobe_n"], r["two_lobe_w"]
         lines.append(f"| {r['material']} | {r['of']} | {r['cosine']:.3g} | {r['one_lobe']:.3g} | {r['two_lobe']:.3g} | "
-                     f"{r['tabulated']:.3g} | {r['two_lobe'] / r['one_lobe']:.2f} | "
+                     f"{r['tabulated']:.3g} ({r['table_cosine_weight']:.2g}) | {r['two_lobe'] / r['one_lobe']:.2f} | "
                      f"{r['tabulated'] / r['one_lobe']:.2f} | {r['default']} | "
                      f"{n[0]:.3g}, {w[0]:.2f}; {n[1]:.3g}, {w[1]:.2f} |")
     return "\n".join(lines)
