@@ -323,8 +323,9 @@ int32_t nbrdf_network_stored_sampler(const struct NbrdfNetwork *network,
 int32_t nbrdf_network_default_sampling(const struct NbrdfNetwork *network,
                                        int32_t *out);
 
-// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds);
-// free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
+// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds),
+// with the defensive cosine weight of its file (`sampling.table_cosine_weight`, chosen by
+// `nbrdf fit-phong`; 0.1 without); free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
 //
 // # Safety
 // `network` is a live handle; `out` points to a writable pointer.
