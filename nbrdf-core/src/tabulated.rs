@@ -29,8 +29,13 @@
 //! rest) from leaving the others to the cosine component. Without both, the grazing band of
 //! gray-plastic sampled with a relative variance of 14 (one lobe: 1.7); docs/results/sampling.md.
 //!
+//! A bin is drawn through its row's alias table (Walker's method, Vose's construction): `u0`
+//! picks cosine (below `c`) or the table and, rescaled, the bin; `u1` and `u2` place the half
+//! vector within it.
+//!
 //! The table is built when a material is loaded (a few milliseconds for a network), so the file
-//! format carries no table; `nbrdf fit-phong` stores only which strategy samples best.
+//! format carries no table; `nbrdf fit-phong` stores only which strategy samples best and the
+//! cosine weight `c` of lowest variance ([`COSINE_WEIGHT_CANDIDATES`]).
 //!
 //! Twin: `mitsuba-plugin/nbrdf_mitsuba/jit.py` `TracedTable` (sampling and pdf from the exported
 //! [`TabulatedSampler::tables`]); held together by `tests/test_tabulated.py`.
