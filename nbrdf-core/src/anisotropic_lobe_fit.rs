@@ -11,7 +11,7 @@
 //! quadrature.
 
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{relative_second_moment, visit_half_vectors, LobeFitConfig};
+use crate::lobe_fit::{LobeFitConfig, LobeTerms};
 use crate::pattern_search::{PatternSearch, SearchPoint};
 use crate::sampling::{SamplingStrategy, MAX_EXPONENT};
 use crate::train::dataset::TargetFn;
@@ -74,15 +74,9 @@ impl AnisotropicLobeFit {
 
 /// Quadrature points of one view.
 struct ViewQuadrature {
-    /// `g^2 dω_l`.
-    g2_dw: Vec<f64>,
-    ln_cos_h: Vec<f64>,
+    terms: LobeTerms,
     /// `cos^2 phi_h`: the share of `n_u` in the exponent at the point.
     cos2_phi_h: Vec<f64>,
-    /// `1 / (4 v.h)`.
-    inv_jacobian: Vec<f64>,
-    cosine_pdf: Vec<f64>,
-    integral_sq: f64,
 }
 
 /// The quadrature of a material over all views (evaluated once, then scored per lobe).
@@ -101,37 +95,23 @@ fn view_quadrature(
         theta_v.sin() * phi_v.sin(),
         theta_v.cos(),
     );
-    let mut q = ViewQuadrature {
-        g2_dw: Vec::new(),
-        ln_cos_h: Vec::new(),
-        cos2_phi_h: Vec::new(),
-        inv_jacobian: Vec::new(),
-        cosine_pdf: Vec::new(),
-        integral_sq: 0.0,
-    };
-    let mut integral = 0.0;
+    let mut cos2_phi_h = Vec::new();
     // That of crate::lobe_fit, without the isotropic fold of phi_h.
     let bins = (config.s_bins, config.phi_bins);
-    visit_half_vectors(target, view, bins, TAU, 1.0, |p| {
-        integral += p.g * p.dw_l;
-        q.g2_dw.push(p.g * p.g * p.dw_l);
-        q.ln_cos_h.push(p.cos_h.max(1e-300).ln());
-        q.cos2_phi_h.push(p.cos_phi_h * p.cos_phi_h);
-        q.inv_jacobian.push(0.25 / p.v_dot_h);
-        q.cosine_pdf.push(p.light.z * FRAC_1_PI);
+    let terms = LobeTerms::collect(target, view, bins, TAU, 1.0, |p| {
+        cos2_phi_h.push(p.cos_phi_h * p.cos_phi_h);
     });
-    q.integral_sq = integral * integral;
-    q
+    ViewQuadrature { terms, cos2_phi_h }
 }
 
 /// `R` of the lobe for a view; the density is that of
 /// [`crate::sampling::anisotropic_lobe_density`] on the quadrature's half vectors.
 fn second_moment(q: &ViewQuadrature, nu: f64, nv: f64, w: f64) -> f64 {
     let norm = ((nu + 1.0) * (nv + 1.0)).sqrt() * 0.5 * FRAC_1_PI;
-    relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
+    let t = &q.terms;
+    t.relative_second_moment(|i| {
         let exponent = nu * q.cos2_phi_h[i] + nv * (1.0 - q.cos2_phi_h[i]);
-        let specular = norm * (exponent * q.ln_cos_h[i]).exp() * q.inv_jacobian[i];
-        w * specular + (1.0 - w) * q.cosine_pdf[i]
+        w * t.lobe_density(i, exponent, norm) + (1.0 - w) * t.cosine_pdf[i]
     })
 }
 

@@ -81,50 +81,84 @@ pub struct LobeFit {
     pub cosine_relative_variance: f64,
 }
 
+/// What a lobe mixture's second moment needs at each quadrature point of one view where
+/// `g = f_r cos` is positive; the isotropic and the anisotropic lobe searches share it.
+#[derive(Default)]
+pub(crate) struct LobeTerms {
+    /// `g^2 dω_l` of each point.
+    pub g2_dw: Vec<f64>,
+    pub ln_cos_h: Vec<f64>,
+    /// `1 / (4 v.h)`: the Jacobian from half-vector to light density.
+    pub inv_jacobian: Vec<f64>,
+    /// Cosine density `l.z / pi`.
+    pub cosine_pdf: Vec<f64>,
+    /// `(int g)^2`.
+    pub integral_sq: f64,
+}
+
+impl LobeTerms {
+    /// The terms of the half-vector quadrature of `view` (`visit_half_vectors`'s `phi_range`
+    /// and `weight`); `extra` sees each point too, for what only one search keeps.
+    pub(crate) fn collect(
+        target: &TargetFn<'_>,
+        view: DVec3,
+        bins: (usize, usize),
+        phi_range: f64,
+        weight: f64,
+        mut extra: impl FnMut(&HalfVectorPoint),
+    ) -> Self {
+        let mut terms = LobeTerms::default();
+        let mut integral = 0.0;
+        visit_half_vectors(target, view, bins, phi_range, weight, |p| {
+            integral += p.g * p.dw_l;
+            terms.g2_dw.push(p.g * p.g * p.dw_l);
+            terms.ln_cos_h.push(p.cos_h.max(1e-300).ln());
+            terms.inv_jacobian.push(0.25 / p.v_dot_h);
+            terms.cosine_pdf.push(p.light.z * FRAC_1_PI);
+            extra(p);
+        });
+        terms.integral_sq = integral * integral;
+        terms
+    }
+
+    /// Relative second moment `R = sum(g^2 dω / pdf) / (int g)^2` of the density `pdf(i)` at
+    /// point `i`; 1 where `g` vanishes, infinite where the density misses a point. The lobe
+    /// searches (one lobe, several, anisotropic, any strategy) differ only in `pdf`.
+    pub(crate) fn relative_second_moment(&self, pdf: impl Fn(usize) -> f64) -> f64 {
+        if self.integral_sq <= 0.0 {
+            return 1.0;
+        }
+        let mut sum = 0.0;
+        for (i, &g2) in self.g2_dw.iter().enumerate() {
+            let p = pdf(i);
+            if p <= 0.0 {
+                return f64::INFINITY;
+            }
+            sum += g2 / p;
+        }
+        sum / self.integral_sq
+    }
+
+    /// The Blinn-Phong lobe of exponent `n` (normalised `norm`) at point `i`, as a light density.
+    pub(crate) fn lobe_density(&self, i: usize, n: f64, norm: f64) -> f64 {
+        norm * (n * self.ln_cos_h[i]).exp() * self.inv_jacobian[i]
+    }
+}
+
 /// Quadrature points of one view with what the candidate densities need.
 struct ViewQuadrature {
-    /// `g^2 dω_l` of each point where `g > 0`.
-    g2_dw: Vec<f64>,
-    ln_cos_h: Vec<f64>,
-    /// `1 / (4 v.h)`: the Jacobian from half-vector to light density.
-    inv_jacobian: Vec<f64>,
-    /// Cosine density `l.z / pi`.
-    cosine_pdf: Vec<f64>,
-    /// `(int g)^2`.
-    integral_sq: f64,
+    terms: LobeTerms,
     /// The view and the light direction of each point, for densities other than lobes.
     view: DVec3,
     lights: Vec<DVec3>,
 }
 
-/// Relative second moment `R = sum(g^2 dω / pdf) / (int g)^2` over a view's quadrature points
-/// of the density `pdf(i)` at point `i`; 1 where `g` vanishes, infinite where the density misses
-/// a point. The lobe searches (one lobe, several, anisotropic) differ only in `pdf`.
-pub(crate) fn relative_second_moment(
-    g2_dw: &[f64],
-    integral_sq: f64,
-    pdf: impl Fn(usize) -> f64,
-) -> f64 {
-    if integral_sq <= 0.0 {
-        return 1.0;
-    }
-    let mut sum = 0.0;
-    for (i, &g2) in g2_dw.iter().enumerate() {
-        let p = pdf(i);
-        if p <= 0.0 {
-            return f64::INFINITY;
-        }
-        sum += g2 / p;
-    }
-    sum / integral_sq
-}
-
 /// Relative second moment `R` of the lobe `(n, w)` for a view.
 fn second_moment(q: &ViewQuadrature, exponent: f64, weight: f64) -> f64 {
     let norm = (exponent + 1.0) * 0.5 * FRAC_1_PI;
-    relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
-        let specular = norm * (exponent * q.ln_cos_h[i]).exp() * q.inv_jacobian[i];
-        weight * specular + (1.0 - weight) * q.cosine_pdf[i]
+    let t = &q.terms;
+    t.relative_second_moment(|i| {
+        weight * t.lobe_density(i, exponent, norm) + (1.0 - weight) * t.cosine_pdf[i]
     })
 }
 
@@ -195,29 +229,16 @@ pub(crate) fn visit_half_vectors(
 
 fn quadrature(target: &TargetFn<'_>, view_theta: f64, config: &LobeFitConfig) -> ViewQuadrature {
     let view = DVec3::new(view_theta.sin(), 0.0, view_theta.cos());
-    let mut q = ViewQuadrature {
-        g2_dw: Vec::new(),
-        ln_cos_h: Vec::new(),
-        inv_jacobian: Vec::new(),
-        cosine_pdf: Vec::new(),
-        integral_sq: 0.0,
-        view,
-        lights: Vec::new(),
-    };
-    let mut integral = 0.0;
+    let mut lights = Vec::new();
     // phi_h over [0, pi] counts twice: the view lies in the xz plane and the material is
     // isotropic.
     let bins = (config.s_bins, config.phi_bins);
-    visit_half_vectors(target, view, bins, PI, 2.0, |p| {
-        integral += p.g * p.dw_l;
-        q.g2_dw.push(p.g * p.g * p.dw_l);
-        q.ln_cos_h.push(p.cos_h.max(1e-300).ln());
-        q.inv_jacobian.push(0.25 / p.v_dot_h);
-        q.cosine_pdf.push(p.light.z * FRAC_1_PI);
-        q.lights.push(p.light);
-    });
-    q.integral_sq = integral * integral;
-    q
+    let terms = LobeTerms::collect(target, view, bins, PI, 2.0, |p| lights.push(p.light));
+    ViewQuadrature {
+        terms,
+        view,
+        lights,
+    }
 }
 
 /// The quadrature of a material over all views, built once (it evaluates the material) and
@@ -253,9 +274,8 @@ impl LobeQuadrature {
     /// against the lobes on the same quadrature.
     pub fn strategy_relative_variance(&self, strategy: &SamplingStrategy) -> f64 {
         let moments = self.views.par_iter().map(|q| {
-            relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
-                strategy.pdf_f64(q.view, q.lights[i])
-            })
+            q.terms
+                .relative_second_moment(|i| strategy.pdf_f64(q.view, q.lights[i]))
         });
         moments.sum::<f64>() / self.views.len() as f64 - 1.0
     }
@@ -357,12 +377,12 @@ const TWO_LOBE_REFINE_LEVELS: usize = 7;
 /// are skipped, so a second lobe of weight 0 scores exactly as the one-lobe mixture.
 fn mixture_second_moment(q: &ViewQuadrature, lobes: &[(f64, f64)]) -> f64 {
     let cosine_weight = (1.0 - lobes.iter().map(|l| l.1).sum::<f64>()).max(0.0);
-    relative_second_moment(&q.g2_dw, q.integral_sq, |i| {
-        let mut pdf = cosine_weight * q.cosine_pdf[i];
+    let t = &q.terms;
+    t.relative_second_moment(|i| {
+        let mut pdf = cosine_weight * t.cosine_pdf[i];
         for &(n, w) in lobes {
             if w > 0.0 {
-                let norm = (n + 1.0) * 0.5 * FRAC_1_PI;
-                pdf += w * (norm * (n * q.ln_cos_h[i]).exp() * q.inv_jacobian[i]);
+                pdf += w * t.lobe_density(i, n, (n + 1.0) * 0.5 * FRAC_1_PI);
             }
         }
         pdf
@@ -372,10 +392,8 @@ fn mixture_second_moment(q: &ViewQuadrature, lobes: &[(f64, f64)]) -> f64 {
 /// The light densities of one Blinn-Phong lobe at every quadrature point of a view.
 fn lobe_densities(q: &ViewQuadrature, n: f64) -> Vec<f64> {
     let norm = (n + 1.0) * 0.5 * FRAC_1_PI;
-    q.ln_cos_h
-        .iter()
-        .zip(&q.inv_jacobian)
-        .map(|(&ln_cos, &inv_j)| norm * (n * ln_cos).exp() * inv_j)
+    (0..q.terms.g2_dw.len())
+        .map(|i| q.terms.lobe_density(i, n, norm))
         .collect()
 }
 
@@ -421,23 +439,18 @@ impl LobeQuadrature {
             .map(|&pair| {
                 let mut sums = vec![0.0; weight_pairs.len()];
                 for q in &self.views {
-                    if q.integral_sq <= 0.0 {
+                    let t = &q.terms;
+                    if t.integral_sq <= 0.0 {
+                        // R = 1 whatever the weights: skip the densities.
                         sums.iter_mut().for_each(|s| *s += 1.0);
                         continue;
                     }
                     let (d1, d2) = (lobe_densities(q, pair[0]), lobe_densities(q, pair[1]));
                     for (sum, w) in sums.iter_mut().zip(&weight_pairs) {
                         let cosine_weight = (1.0 - w[0] - w[1]).max(0.0);
-                        let mut total = 0.0;
-                        for i in 0..q.g2_dw.len() {
-                            let pdf = w[0] * d1[i] + w[1] * d2[i] + cosine_weight * q.cosine_pdf[i];
-                            total += if pdf > 0.0 {
-                                q.g2_dw[i] / pdf
-                            } else {
-                                f64::INFINITY
-                            };
-                        }
-                        *sum += total / q.integral_sq;
+                        *sum += t.relative_second_moment(|i| {
+                            w[0] * d1[i] + w[1] * d2[i] + cosine_weight * t.cosine_pdf[i]
+                        });
                     }
                 }
                 let views = self.views.len() as f64;
@@ -758,7 +771,7 @@ pub(crate) mod tests {
             "quadrature {quad} vs Monte Carlo {mc}"
         );
         // And the integral itself: the mean of g/p is int g.
-        assert!((m1 - q.integral_sq.sqrt()).abs() < 0.01 * m1);
+        assert!((m1 - q.terms.integral_sq.sqrt()).abs() < 0.01 * m1);
     }
 
     #[test]
