@@ -6,15 +6,19 @@
 //! * this file: the [`Nbrdf`] type, its [`Layer`]s (the one dense-layer definition of the crate,
 //!   [`Layer::affine_into`]), [`paper_init`], flat parameter vectors and single evaluation;
 //! * `format.rs`: the versioned `*.nbrdf.json` file format, reading, writing and validation;
-//! * `kernel.rs`: the batched, vectorised and threaded evaluation, the renderer's hot loop.
+//! * `kernel.rs`: the batched, vectorised and threaded evaluation, the renderer's hot loop;
+//! * `pruning.rs`: the hidden units no pair of directions above the horizon can activate, and
+//!   the narrower network without them that renderers evaluate.
 
 mod format;
 mod kernel;
+mod pruning;
 #[cfg(test)]
 mod tests;
 
 pub use format::{FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_ISOTROPIC};
 pub use kernel::LANES;
+pub use pruning::{active_units, ActiveUnits};
 
 use crate::brdf::{Brdf, Directions, RgbMut};
 use crate::coords::network_input_for;

@@ -850,3 +850,165 @@ fn anisotropic_sampling_lobe_round_trips_and_is_checked_on_load() {
     net.anisotropic = false;
     refused(&net, "needs an anisotropic network");
 }
+
+/// `test_net` with planted units in the first hidden layer: 0 never fires (bias -10), 1 fires
+/// only within 0.1 degree of `theta_d = 0` (a sliver random directions almost never reach),
+/// 2 fires only where `sin theta_h + sin theta_d cos phi_d > 1.7`, which needs a direction
+/// below the horizon (the largest value above it is sqrt 2); unit 0 of the second hidden layer
+/// never fires (bias -100, far below any sum of its inputs).
+fn planted_net(seed: u64) -> Nbrdf {
+    let mut net = test_net(DEFAULT_HIDDEN, seed);
+    let outputs = net.layers[0].outputs;
+    let mut plant = |unit: usize, weights: [f32; INPUTS], bias: f32| {
+        for (i, w) in weights.into_iter().enumerate() {
+            net.layers[0].weights[i * outputs + unit] = w;
+        }
+        net.layers[0].bias[unit] = bias;
+    };
+    plant(0, [0.1; INPUTS], -10.0);
+    plant(1, [0.0, 0.0, 0.0, 0.0, 0.0, 1.0], -0.999_998_5);
+    plant(2, [1.0, 0.0, 0.0, 1.0, 0.0, 0.0], -1.7);
+    net.layers[1].bias[0] = -100.0;
+    net
+}
+
+/// Float64 pre-activations of both hidden layers for a direction pair, independent of the
+/// pruning module's own (from the network input of `coords`).
+fn hidden_pre_activations(net: &Nbrdf, v: Vec3, l: Vec3) -> [Vec<f64>; 2] {
+    let x = network_input_for(net.anisotropic, v, l);
+    let affine = |layer: &Layer, x: &[f64]| -> Vec<f64> {
+        (0..layer.outputs)
+            .map(|o| {
+                (0..layer.inputs).fold(f64::from(layer.bias[o]), |s, i| {
+                    s + f64::from(layer.weights[i * layer.outputs + o]) * x[i]
+                })
+            })
+            .collect()
+    };
+    let x: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
+    let first = affine(&net.layers[0], &x);
+    let relu: Vec<f64> = first.iter().map(|&z| z.max(0.0)).collect();
+    let second = affine(&net.layers[1], &relu);
+    [first, second]
+}
+
+/// Direction pairs for the pruning tests: `direction_pairs`, the sliver (view = light, so
+/// `theta_d = 0`, at every elevation) and pairs on the edge of the horizon.
+fn pruning_pairs(seed: u64) -> Vec<(Vec3, Vec3)> {
+    let mut pairs = direction_pairs(4000, seed);
+    let mut rng = SplitMix64::from_state(seed ^ 0x5eed);
+    for k in 0..400 {
+        let theta = 0.5 * PI * f64::from(k) / 400.0;
+        let v = hemisphere(theta, 2.0 * PI * rng.next_f64());
+        pairs.push((v, v));
+        let grazing = 0.5 * PI - 1e-5 * rng.next_f64();
+        let l = hemisphere(grazing, 2.0 * PI * rng.next_f64());
+        pairs.push((l, hemisphere(grazing, 2.0 * PI * rng.next_f64())));
+    }
+    pairs
+}
+
+#[test]
+fn pruning_keeps_slivers_and_drops_units_dead_above_the_horizon() {
+    for seed in [3, 17] {
+        let net = planted_net(seed);
+        let active = net.active_units();
+        assert!(
+            !active.hidden1[0],
+            "seed {seed}: a unit with bias -10 never fires"
+        );
+        assert!(
+            active.hidden1[1],
+            "seed {seed}: the sliver at theta_d = 0 fires"
+        );
+        assert!(
+            !active.hidden1[2],
+            "seed {seed}: fires only below the horizon"
+        );
+        assert!(
+            !active.hidden2[0],
+            "seed {seed}: a unit with bias -100 never fires"
+        );
+        // The sliver is real: pairs with view = light switch it on.
+        let v = hemisphere(0.3, 1.0);
+        assert!(hidden_pre_activations(&net, v, v)[0][1] > 0.0);
+        // Every unit called inactive is at or below 0 on every pair above the horizon.
+        for (l, v) in pruning_pairs(seed) {
+            let (vn, ln) = (v.normalize_or_zero(), l.normalize_or_zero());
+            if !(vn.z > 0.0 && ln.z > 0.0 && v.is_finite() && l.is_finite()) {
+                continue;
+            }
+            let z = hidden_pre_activations(&net, v, l);
+            for (layer, flags) in [&active.hidden1, &active.hidden2].into_iter().enumerate() {
+                for (unit, &flag) in flags.iter().enumerate() {
+                    assert!(
+                        flag || z[layer][unit] <= 0.0,
+                        "seed {seed}: layer {} unit {unit} called inactive is {} at {v} {l}",
+                        layer + 1,
+                        z[layer][unit]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn pruned_networks_evaluate_exactly_like_the_full_ones() {
+    let anisotropic = |seed| {
+        let mut net = planted_net(seed);
+        net.anisotropic = true;
+        net
+    };
+    let mut all_dead = test_net(DEFAULT_HIDDEN, 5);
+    all_dead.layers[0].bias = vec![-50.0; DEFAULT_HIDDEN];
+    let trained = ["roughconductor-on", "roughconductor-off"].map(|name| {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../docs/results/anisotropic/work")
+            .join(format!("{name}.nbrdf.json"));
+        Nbrdf::load(&path).expect("the anisotropic report's networks are in the repository")
+    });
+    let nets = [planted_net(3), planted_net(17), anisotropic(23), all_dead]
+        .into_iter()
+        .chain(trained);
+    let mut dropped = 0;
+    for (k, net) in nets.enumerate() {
+        let pruned = net.without_inactive_units();
+        assert!(pruned.validate().is_ok());
+        let widths = [pruned.layers[0].outputs, pruned.layers[1].outputs];
+        assert_eq!(
+            widths,
+            net.active_units()
+                .hidden1
+                .iter()
+                .zip(&net.active_units().hidden2)
+                .fold([0, 0], |[a, b], (&x, &y)| [
+                    a + usize::from(x),
+                    b + usize::from(y)
+                ]),
+            "network {k}"
+        );
+        assert!(
+            widths[0] >= 1 && widths[1] >= 1,
+            "network {k}: a layer keeps a width"
+        );
+        dropped += 2 * DEFAULT_HIDDEN - widths[0] - widths[1];
+        let pairs = pruning_pairs(100 + k as u64);
+        let (full, fewer) = (eval_batch(&net, &pairs), eval_batch(&pruned, &pairs));
+        for ((got, want), (l, v)) in fewer.iter().zip(&full).zip(&pairs) {
+            assert_eq!(
+                got, want,
+                "network {k}: pruned {got:?}, full {want:?} at {v} {l}"
+            );
+            assert_eq!(
+                pruned.eval(*v, *l),
+                net.eval(*v, *l),
+                "network {k} at {v} {l}"
+            );
+        }
+    }
+    assert!(
+        dropped >= 4 * 4,
+        "the planted units and the trained networks' dead ones: {dropped}"
+    );
+}

@@ -1,0 +1,378 @@
+//! Hidden units that no pair of directions above the horizon can switch on, proved by interval
+//! arithmetic, and the narrower network without them.
+//!
+//! Trained NBRDFs carry dead ReLUs: on the paper's 21-wide networks 0-8 units of the first hidden
+//! layer and 0-14 of the second never fire anywhere on the hemisphere (docs/design.md, section
+//! 4). A dead unit's output is exactly 0, so its row and column only add `0 * w` to sums:
+//! dropping them changes no value the renderer uses and saves up to two thirds of the
+//! multiply-adds of every evaluation.
+//!
+//! Why a proof and not sampling: a unit that fires only in a small corner (grazing light, a thin
+//! band of `phi_d`) would be missed by any finite set of samples, and dropping it would change
+//! the BRDF there. The proof covers the network's whole input domain: `theta_h` and `theta_d` in
+//! `[0, pi/2]`, `phi_d` (and for anisotropic networks `phi_h`) over the full circle, keeping only
+//! configurations whose two directions are both above the horizon
+//! (`cos theta_h cos theta_d >= sin theta_h sin theta_d |cos phi_d|`, from the light's and the
+//! view's elevations). Boxes of that domain are bounded layer by layer; a box on which some
+//! candidate unit may still be positive is split, up to a depth and a box budget, and a unit
+//! positive at a box centre is active outright. A unit counts as inactive only when every box
+//! of a cover bounds it at or below `-margin`; the margins (on the inputs and relative to each
+//! sum's magnitude) are far above float32's rounding, so the float32 evaluation of a dropped unit
+//! would also have been exactly 0. Whatever cannot be proved within the budget stays.
+//!
+//! Twin: none (the plugin asks the library through `nbrdf_network_active_units`). Tests:
+//! `network::tests` (dropped units change no value on dense and grazing directions, a unit
+//! alive only in a sliver is kept, a unit alive only where a direction is below the horizon is
+//! dropped).
+
+use super::{Layer, Nbrdf, INPUTS};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+/// Which hidden units can fire: `hidden1[k]` for unit `k` of the first hidden layer,
+/// `hidden2[k]` of the second. `true` also for units that could not be proved dead.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ActiveUnits {
+    pub hidden1: Vec<bool>,
+    pub hidden2: Vec<bool>,
+}
+
+impl ActiveUnits {
+    /// Number of units proved inactive, per hidden layer.
+    pub fn inactive_counts(&self) -> [usize; 2] {
+        let dead = |units: &[bool]| units.iter().filter(|&&active| !active).count();
+        [dead(&self.hidden1), dead(&self.hidden2)]
+    }
+}
+
+/// Absolute widening of every input interval (float32 inputs are within ~1e-6 of the exact ones).
+const INPUT_MARGIN: f64 = 1e-5;
+/// Widening of each pre-activation bound, relative to `|b| + sum |w| max|x|` (float32 sums of 21
+/// products round within ~1e-6 of that).
+const RELATIVE_MARGIN: f64 = 1e-5;
+/// Splits along every axis of a box before a still-open box is given up on.
+const MAX_DEPTH: u32 = 10;
+/// Boxes bounded at most; beyond it the remaining candidates stay active.
+const BOX_BUDGET: usize = 200_000;
+
+/// A box of the input domain: `theta_h, phi_h, theta_d, phi_d` (`phi_h` fixed at 0 for
+/// isotropic networks).
+#[derive(Clone, Copy, Debug)]
+struct Domain {
+    lo: [f64; 4],
+    hi: [f64; 4],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Interval {
+    lo: f64,
+    hi: f64,
+}
+
+impl Interval {
+    fn new(lo: f64, hi: f64) -> Self {
+        Interval { lo, hi }
+    }
+
+    fn mul(self, other: Interval) -> Interval {
+        let products = [
+            self.lo * other.lo,
+            self.lo * other.hi,
+            self.hi * other.lo,
+            self.hi * other.hi,
+        ];
+        Interval::new(
+            products.iter().copied().fold(f64::INFINITY, f64::min),
+            products.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        )
+    }
+
+    fn abs(self) -> Interval {
+        if self.lo >= 0.0 {
+            self
+        } else if self.hi <= 0.0 {
+            Interval::new(-self.hi, -self.lo)
+        } else {
+            Interval::new(0.0, self.hi.max(-self.lo))
+        }
+    }
+
+    fn magnitude(self) -> f64 {
+        self.lo.abs().max(self.hi.abs())
+    }
+}
+
+/// The exact range of `sin` on `[a, b]` for `0 <= a <= b <= 2 pi + pi/2`.
+fn sin_range(a: f64, b: f64) -> Interval {
+    let (sa, sb) = (a.sin(), b.sin());
+    let mut range = Interval::new(sa.min(sb), sa.max(sb));
+    let contains = |x: f64| a <= x && x <= b;
+    if contains(FRAC_PI_2) || contains(FRAC_PI_2 + TAU) {
+        range.hi = 1.0;
+    }
+    if contains(1.5 * PI) {
+        range.lo = -1.0;
+    }
+    range
+}
+
+fn cos_range(a: f64, b: f64) -> Interval {
+    sin_range(a + FRAC_PI_2, b + FRAC_PI_2)
+}
+
+impl Domain {
+    fn whole(anisotropic: bool) -> Self {
+        let phi_h = if anisotropic { TAU } else { 0.0 };
+        Domain {
+            lo: [0.0; 4],
+            hi: [FRAC_PI_2, phi_h, FRAC_PI_2, TAU],
+        }
+    }
+
+    /// The network input at a point: `[sin th cos ph, sin th sin ph, cos th, d]`, as
+    /// `coords::network_input_components_for` computes it from directions.
+    fn input_at(angles: [f64; 4]) -> [f64; INPUTS] {
+        let [theta_h, phi_h, theta_d, phi_d] = angles;
+        let (sin_h, cos_h) = theta_h.sin_cos();
+        let (sin_d, cos_d) = theta_d.sin_cos();
+        [
+            sin_h * phi_h.cos(),
+            sin_h * phi_h.sin(),
+            cos_h,
+            sin_d * phi_d.cos(),
+            sin_d * phi_d.sin(),
+            cos_d,
+        ]
+    }
+
+    fn centre(&self) -> [f64; 4] {
+        std::array::from_fn(|k| 0.5 * (self.lo[k] + self.hi[k]))
+    }
+
+    /// Whether both directions are above the horizon at a point (the light's elevation is
+    /// `cos th cos td - sin th sin td cos pd`, the view's the same with `+`).
+    fn above_horizon(angles: [f64; 4]) -> bool {
+        let [theta_h, _, theta_d, phi_d] = angles;
+        theta_h.cos() * theta_d.cos() >= theta_h.sin() * theta_d.sin() * phi_d.cos().abs()
+    }
+
+    /// Whether some point of the box may have both directions above the horizon.
+    fn may_be_above_horizon(&self) -> bool {
+        let cos_h = cos_range(self.lo[0], self.hi[0]);
+        let sin_h = sin_range(self.lo[0], self.hi[0]);
+        let cos_d = cos_range(self.lo[2], self.hi[2]);
+        let sin_d = sin_range(self.lo[2], self.hi[2]);
+        let cos_p = cos_range(self.lo[3], self.hi[3]).abs();
+        let slack = cos_h.mul(cos_d).hi - sin_h.mul(sin_d).mul(cos_p).lo;
+        slack >= -INPUT_MARGIN
+    }
+
+    /// Bounds of each network input over the box, widened by [`INPUT_MARGIN`].
+    fn input_bounds(&self) -> [Interval; INPUTS] {
+        let sin_h = sin_range(self.lo[0], self.hi[0]);
+        let cos_h = cos_range(self.lo[0], self.hi[0]);
+        let sin_d = sin_range(self.lo[2], self.hi[2]);
+        let exact = [
+            sin_h.mul(cos_range(self.lo[1], self.hi[1])),
+            sin_h.mul(sin_range(self.lo[1], self.hi[1])),
+            cos_h,
+            sin_d.mul(cos_range(self.lo[3], self.hi[3])),
+            sin_d.mul(sin_range(self.lo[3], self.hi[3])),
+            cos_range(self.lo[2], self.hi[2]),
+        ];
+        exact.map(|x| Interval::new(x.lo - INPUT_MARGIN, x.hi + INPUT_MARGIN))
+    }
+
+    /// The halves along every axis of positive width (8 children, 16 for anisotropic networks).
+    fn children(&self) -> Vec<Domain> {
+        let axes: Vec<usize> = (0..4).filter(|&k| self.hi[k] > self.lo[k]).collect();
+        let mut children = Vec::with_capacity(1 << axes.len());
+        for mask in 0..(1usize << axes.len()) {
+            let mut child = *self;
+            for (bit, &axis) in axes.iter().enumerate() {
+                let middle = 0.5 * (self.lo[axis] + self.hi[axis]);
+                if mask >> bit & 1 == 0 {
+                    child.hi[axis] = middle;
+                } else {
+                    child.lo[axis] = middle;
+                }
+            }
+            children.push(child);
+        }
+        children
+    }
+}
+
+/// Bounds of `x W + b` over input bounds, widened by [`RELATIVE_MARGIN`].
+fn affine_bounds(layer: &Layer, x: &[Interval], out: &mut Vec<Interval>) {
+    out.clear();
+    for o in 0..layer.outputs {
+        let bias = f64::from(layer.bias[o]);
+        let (mut lo, mut hi, mut scale) = (bias, bias, bias.abs());
+        for (i, xi) in x.iter().enumerate() {
+            let w = f64::from(layer.weights[i * layer.outputs + o]);
+            lo += (w * xi.lo).min(w * xi.hi);
+            hi += (w * xi.lo).max(w * xi.hi);
+            scale += w.abs() * xi.magnitude();
+        }
+        let margin = RELATIVE_MARGIN * scale;
+        out.push(Interval::new(lo - margin, hi + margin));
+    }
+}
+
+/// Exact (float64) pre-activations of both hidden layers at one input.
+fn pre_activations(layers: &[Layer; 3], x: &[f64; INPUTS]) -> [Vec<f64>; 2] {
+    let affine = |layer: &Layer, x: &[f64]| -> Vec<f64> {
+        (0..layer.outputs)
+            .map(|o| {
+                x.iter()
+                    .enumerate()
+                    .fold(f64::from(layer.bias[o]), |acc, (i, &xi)| {
+                        acc + f64::from(layer.weights[i * layer.outputs + o]) * xi
+                    })
+            })
+            .collect()
+    };
+    let first = affine(&layers[0], x);
+    let relu: Vec<f64> = first.iter().map(|&z| z.max(0.0)).collect();
+    let second = affine(&layers[1], &relu);
+    [first, second]
+}
+
+/// The hidden units of a `6 -> h1 -> h2 -> 3` network that some pair of directions above the
+/// horizon may activate (see the module documentation). Layers whose shapes do not chain give
+/// every unit active.
+pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
+    let widths = [layers[0].outputs, layers[1].outputs];
+    let all_active = ActiveUnits {
+        hidden1: vec![true; widths[0]],
+        hidden2: vec![true; widths[1]],
+    };
+    if super::format::shape_problem(layers).is_some() {
+        return all_active;
+    }
+    // candidate[l][k]: unit k of hidden layer l not yet seen positive nor given up on.
+    let mut candidate = [vec![true; widths[0]], vec![true; widths[1]]];
+    let mut stack = vec![(Domain::whole(anisotropic), 0u32)];
+    let mut bounded = 0usize;
+    let (mut first, mut second) = (Vec::new(), Vec::new());
+    while let Some((domain, depth)) = stack.pop() {
+        if !candidate.iter().flatten().any(|&c| c) {
+            break;
+        }
+        if !domain.may_be_above_horizon() {
+            continue;
+        }
+        let centre = domain.centre();
+        if Domain::above_horizon(centre) {
+            let z = pre_activations(layers, &Domain::input_at(centre));
+            for (flags, values) in candidate.iter_mut().zip(&z) {
+                for (flag, &value) in flags.iter_mut().zip(values) {
+                    *flag &= value <= 0.0;
+                }
+            }
+        }
+        bounded += 1;
+        affine_bounds(&layers[0], &domain.input_bounds(), &mut first);
+        let relu: Vec<Interval> = first
+            .iter()
+            .map(|z| Interval::new(z.lo.max(0.0), z.hi.max(0.0)))
+            .collect();
+        affine_bounds(&layers[1], &relu, &mut second);
+        let open: Vec<(usize, usize)> = [&first, &second]
+            .iter()
+            .enumerate()
+            .flat_map(|(l, bounds)| {
+                let candidate = &candidate[l];
+                bounds
+                    .iter()
+                    .enumerate()
+                    .filter(move |&(k, z)| candidate[k] && z.hi > 0.0)
+                    .map(move |(k, _)| (l, k))
+            })
+            .collect();
+        if open.is_empty() {
+            continue;
+        }
+        if depth >= MAX_DEPTH || bounded + stack.len() >= BOX_BUDGET {
+            for (l, k) in open {
+                candidate[l][k] = false;
+            }
+            continue;
+        }
+        stack.extend(
+            domain
+                .children()
+                .into_iter()
+                .map(|child| (child, depth + 1)),
+        );
+    }
+    let mut active = all_active;
+    for (flags, candidate) in [&mut active.hidden1, &mut active.hidden2]
+        .into_iter()
+        .zip(&candidate)
+    {
+        for (flag, &dead) in flags.iter_mut().zip(candidate) {
+            *flag = !dead;
+        }
+        // A layer needs a width: keep its first unit when all of them are dead.
+        if flags.iter().all(|&a| !a) {
+            flags[0] = true;
+        }
+    }
+    active
+}
+
+impl Nbrdf {
+    /// The hidden units some pair of directions above the horizon may activate
+    /// ([`active_units`]).
+    pub fn active_units(&self) -> ActiveUnits {
+        active_units(&self.layers, self.anisotropic)
+    }
+
+    /// The same BRDF on every pair of directions above the horizon, without the hidden units
+    /// that can never fire there: the network to evaluate for rendering. Not for raw inputs
+    /// off the hemisphere ([`Nbrdf::eval_input`] of arbitrary vectors, tabulation at angles
+    /// with a direction below the horizon), where a dropped unit may fire.
+    pub fn without_inactive_units(&self) -> Nbrdf {
+        let active = self.active_units();
+        let mut pruned = self.clone();
+        pruned.layers = keep_units(&self.layers, &active);
+        pruned
+    }
+}
+
+/// The layers restricted to the active units: columns of layer 1 and rows of layer 2 for the
+/// first hidden layer, columns of layer 2 and rows of layer 3 for the second.
+fn keep_units(layers: &[Layer; 3], active: &ActiveUnits) -> [Layer; 3] {
+    let kept = |flags: &[bool]| -> Vec<usize> {
+        flags
+            .iter()
+            .enumerate()
+            .filter_map(|(k, &a)| a.then_some(k))
+            .collect()
+    };
+    let (rows1, rows2) = (kept(&active.hidden1), kept(&active.hidden2));
+    let all_inputs: Vec<usize> = (0..layers[0].inputs).collect();
+    let all_outputs: Vec<usize> = (0..layers[2].outputs).collect();
+    [
+        select(&layers[0], &all_inputs, &rows1),
+        select(&layers[1], &rows1, &rows2),
+        select(&layers[2], &rows2, &all_outputs),
+    ]
+}
+
+fn select(layer: &Layer, inputs: &[usize], outputs: &[usize]) -> Layer {
+    Layer {
+        inputs: inputs.len(),
+        outputs: outputs.len(),
+        weights: inputs
+            .iter()
+            .flat_map(|&i| {
+                outputs
+                    .iter()
+                    .map(move |&o| layer.weights[i * layer.outputs + o])
+            })
+            .collect(),
+        bias: outputs.iter().map(|&o| layer.bias[o]).collect(),
+    }
+}
