@@ -171,6 +171,25 @@ int32_t nbrdf_network_is_anisotropic(const struct NbrdfNetwork *network,
 int32_t nbrdf_network_name(const struct NbrdfNetwork *network,
                            const char **out_name);
 
+// Which hidden units of a `6 -> hidden -> hidden -> 3` network, given as its flat parameters
+// `W1, b1, W2, b2, W3, b3` (`count` floats, `hidden * hidden + 11 * hidden + 3` of them, all
+// finite), some pair of directions above the horizon may activate. Writes `2 hidden` bytes to
+// `out_active` (`out_len` must be that): the first hidden layer's units, then the second's, 1
+// for a unit that may fire, 0 for one proved never to. A 0 unit outputs exactly 0 on every
+// direction pair the BRDF is evaluated at, so an evaluator that leaves it out computes the same
+// values with fewer multiply-adds (the network handles do so; the Mitsuba plugin's traced
+// kernels ask here). `anisotropic` is 1 for a network that sees the half vector's azimuth.
+// Takes milliseconds (a bounded interval-arithmetic proof over the hemisphere).
+//
+// # Safety
+// `params` points to `count` readable floats; `out_active` to `out_len` writable bytes.
+int32_t nbrdf_network_active_units(const float *params,
+                                   size_t count,
+                                   size_t hidden,
+                                   uint32_t anisotropic,
+                                   uint8_t *out_active,
+                                   size_t out_len);
+
 // Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
 // direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 // `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon.

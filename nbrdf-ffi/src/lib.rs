@@ -117,6 +117,9 @@ pub struct NbrdfNetworkInfo {
 /// threads at once.
 pub struct NbrdfNetwork {
     network: Nbrdf,
+    /// What eval, sample and tables evaluate: the same BRDF without the hidden units that no
+    /// pair of directions above the horizon activates (`Nbrdf::without_inactive_units`).
+    renderer: Nbrdf,
     name: CString,
 }
 
@@ -332,7 +335,7 @@ trait BrdfHandle: Sized {
 impl BrdfHandle for NbrdfNetwork {
     const ARGUMENT: &'static str = "network";
     fn brdf(&self) -> &dyn Brdf {
-        &self.network
+        &self.renderer
     }
     /// With the cosine weight `nbrdf fit-phong` stored, if any.
     fn table_config(&self) -> TableConfig {
@@ -496,7 +499,12 @@ pub unsafe extern "C" fn nbrdf_network_load(
         load_impl("nbrdf_network_load", path, out, |path| {
             let network = Nbrdf::load(&path)?;
             let name = CString::new(network.name.replace('\0', "")).unwrap_or_default();
-            Ok(NbrdfNetwork { network, name })
+            let renderer = network.without_inactive_units();
+            Ok(NbrdfNetwork {
+                network,
+                renderer,
+                name,
+            })
         })
     }
 }
@@ -576,6 +584,66 @@ pub unsafe extern "C" fn nbrdf_network_name(
         check_pointer(out_name, "out_name")?;
         // SAFETY: non-null, aligned, writable by contract.
         unsafe { out_name.write(network.name.as_ptr()) };
+        Ok(())
+    })
+}
+
+/// Which hidden units of a `6 -> hidden -> hidden -> 3` network, given as its flat parameters
+/// `W1, b1, W2, b2, W3, b3` (`count` floats, `hidden * hidden + 11 * hidden + 3` of them, all
+/// finite), some pair of directions above the horizon may activate. Writes `2 hidden` bytes to
+/// `out_active` (`out_len` must be that): the first hidden layer's units, then the second's, 1
+/// for a unit that may fire, 0 for one proved never to. A 0 unit outputs exactly 0 on every
+/// direction pair the BRDF is evaluated at, so an evaluator that leaves it out computes the same
+/// values with fewer multiply-adds (the network handles do so; the Mitsuba plugin's traced
+/// kernels ask here). `anisotropic` is 1 for a network that sees the half vector's azimuth.
+/// Takes milliseconds (a bounded interval-arithmetic proof over the hemisphere).
+///
+/// # Safety
+/// `params` points to `count` readable floats; `out_active` to `out_len` writable bytes.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_network_active_units(
+    params: *const f32,
+    count: usize,
+    hidden: usize,
+    anisotropic: u32,
+    out_active: *mut u8,
+    out_len: usize,
+) -> i32 {
+    guard("nbrdf_network_active_units", || {
+        check_pointer(params, "params")?;
+        check_pointer(out_active, "out_active")?;
+        let expected = hidden
+            .checked_mul(2)
+            .filter(|&len| len == out_len)
+            .ok_or_else(|| {
+                Failure::invalid(format!(
+                    "out_len is {out_len}, expected 2 hidden = 2 x {hidden}"
+                ))
+            })?;
+        let parameters = hidden
+            .checked_mul(hidden)
+            .zip(hidden.checked_mul(11))
+            .and_then(|(square, linear)| square.checked_add(linear)?.checked_add(3));
+        if parameters != Some(count) {
+            return Err(Failure::invalid(format!(
+                "count is {count}, but a network of hidden width {hidden} has \
+                 hidden * hidden + 11 * hidden + 3 parameters"
+            )));
+        }
+        let count = array_len(count, 1)?;
+        // SAFETY: non-null, `count` readable floats by contract.
+        let params = unsafe { input(params, count) };
+        let mut network = Nbrdf::from_flat("parameters", hidden, params)?;
+        network.anisotropic = anisotropic != 0;
+        let active = network.active_units();
+        // SAFETY: non-null, `out_len` writable bytes by contract.
+        let out = unsafe { std::slice::from_raw_parts_mut(out_active, expected) };
+        for (byte, &flag) in out
+            .iter_mut()
+            .zip(active.hidden1.iter().chain(&active.hidden2))
+        {
+            *byte = u8::from(flag);
+        }
         Ok(())
     })
 }

@@ -693,3 +693,83 @@ fn anisotropic_samplers_go_through_the_mixture_functions() {
         (40.0, 0.25, 7.5)
     );
 }
+
+#[test]
+fn active_units_are_the_library_proof_and_handles_evaluate_without_the_others() {
+    let mut net = Nbrdf::random("units", 6, 11);
+    for layer in net.layers.iter_mut() {
+        for (k, w) in layer.weights.iter_mut().enumerate() {
+            *w = 1.5 * ((k as f32 * 0.37).sin());
+        }
+    }
+    net.layers[0].bias[2] = -100.0; // never fires
+    net.layers[1].bias[4] = -1e4; // never fires
+    let flat = net.to_flat();
+    let mut out = vec![7u8; 12];
+    // SAFETY: valid pointers of the documented sizes.
+    let status = unsafe {
+        nbrdf_network_active_units(flat.as_ptr(), flat.len(), 6, 0, out.as_mut_ptr(), out.len())
+    };
+    assert_eq!(status, OK, "{}", last_error());
+    let active = net.active_units();
+    let expected: Vec<u8> = active
+        .hidden1
+        .iter()
+        .chain(&active.hidden2)
+        .map(|&a| u8::from(a))
+        .collect();
+    assert_eq!(out, expected);
+    assert_eq!((out[2], out[6 + 4]), (0, 0));
+
+    // A handle of that network evaluates what the full network does.
+    let (handle, path) = load_network_text(&net.to_json_string(), "active-units");
+    let core = Nbrdf::load(&path).unwrap();
+    let pairs = direction_pairs();
+    let n = pairs.len();
+    let view = planar(pairs.iter().map(|p| p.0));
+    let light = planar(pairs.iter().map(|p| p.1));
+    let mut rgb = vec![0.0f32; 3 * n];
+    // SAFETY: slices of the documented sizes.
+    let status =
+        unsafe { nbrdf_network_eval(handle.0, view.as_ptr(), light.as_ptr(), n, rgb.as_mut_ptr()) };
+    assert_eq!(status, OK, "{}", last_error());
+    for (i, (v, l)) in pairs.iter().enumerate() {
+        let want = core.eval(*v, *l);
+        let cos = (l.z / l.length()).max(0.0);
+        for c in 0..3 {
+            assert_close(
+                rgb[c * n + i],
+                want[c] * cos,
+                "pruned handle vs full network",
+            );
+        }
+    }
+
+    // Wrong sizes, non-finite parameters and null pointers are refused with a message.
+    let call = |params: &[f32], count: usize, hidden: usize, out: &mut [u8], len: usize| {
+        // SAFETY: the slices are at least as long as the sizes passed where the call is valid.
+        unsafe {
+            nbrdf_network_active_units(params.as_ptr(), count, hidden, 0, out.as_mut_ptr(), len)
+        }
+    };
+    assert_eq!(call(&flat, flat.len() - 1, 6, &mut out, 12), INVALID);
+    assert!(last_error().contains("count is"), "{}", last_error());
+    assert_eq!(call(&flat, flat.len(), 6, &mut out, 11), INVALID);
+    assert!(last_error().contains("out_len is 11"), "{}", last_error());
+    assert_eq!(call(&flat, flat.len(), usize::MAX, &mut out, 12), INVALID);
+    let mut bad = flat.clone();
+    bad[3] = f32::NAN;
+    assert_eq!(call(&bad, bad.len(), 6, &mut out, 12), INVALID);
+    // SAFETY: null pointers are what is tested.
+    unsafe {
+        assert_eq!(
+            nbrdf_network_active_units(null(), flat.len(), 6, 0, out.as_mut_ptr(), 12),
+            NULL
+        );
+        assert!(last_error().contains("params"), "{}", last_error());
+        assert_eq!(
+            nbrdf_network_active_units(flat.as_ptr(), flat.len(), 6, 0, null_mut(), 12),
+            NULL
+        );
+    }
+}
