@@ -50,6 +50,41 @@ def test_traced_network_matches_numpy_reference(llvm_variant, network_file):
     assert np.all(np.abs(got - ref) <= 1e-5 * (1 + ref) + 1e-5 * ref), np.max(np.abs(got - ref) / (1 + ref))
 
 
+def test_traced_kernels_leave_out_units_that_never_fire(llvm_variant, network_file, tmp_path):
+    """A literal kernel drops the hidden units the library proves inactive above the horizon
+    (network/pruning.rs), here two planted ones besides any the network has, and evaluates
+    exactly what a kernel of every unit (opaque weights) does, on random, grazing and
+    retro-reflection pairs; the values also match the float64 NumPy reference."""
+    from nbrdf_testing import write_network
+
+    layers = read_network_layers(network_file)
+    layers[0][1][0] = -10.0 - np.abs(layers[0][0][:, 0]).sum()  # first hidden layer: never fires
+    layers[1][1][1] = -10.0 - np.abs(layers[1][0][:, 1]).sum() * 1e3  # second: never fires
+    path = write_network(tmp_path / "dead-units.nbrdf.json", layers)
+    literal = mi.load_dict({"type": "nbrdf", "filename": str(path), "backend": "jit"})
+    opaque = mi.load_dict({"type": "nbrdf", "filename": str(path), "backend": "jit", "jit_weights": "opaque"})
+    first, second = literal._traced.active
+    assert not first[0] and not second[1]
+    assert opaque._traced.active is None
+    view, light = directions()
+    retro, _ = random_pairs(500, 23)
+    view, light = np.concatenate([view, f32(retro)], axis=1), np.concatenate([light, f32(retro)], axis=1)
+    got, full = bsdf_eval(literal, view, light), bsdf_eval(opaque, view, light)
+    np.testing.assert_array_equal(got, full)
+    ref = nbrdf_reference(read_network_layers(path), light, view)
+    assert np.all(np.abs(got - ref) <= 1e-5 * (1 + ref) + 1e-5 * ref), np.max(np.abs(got - ref) / (1 + ref))
+    # An update that revives the dead unit is proved again: the unit is back in the kernel.
+    for bsdf in (literal, opaque):
+        params = mi.traverse(bsdf)
+        values = np.array(params["weights"].numpy())
+        values[layers[0][0].size] = 0.5  # layer 1, bias of unit 0
+        params["weights"] = mi.Float(values)
+        params.update()
+    assert literal._traced.active[0][0]
+    np.testing.assert_array_equal(bsdf_eval(literal, view, light), bsdf_eval(opaque, view, light))
+    assert not np.array_equal(bsdf_eval(literal, view, light), got)
+
+
 def test_traced_expm1_is_relatively_exact(llvm_variant):
     """The traced network's output function (twin of fastmath.rs expm1_with) against float64
     over the clamped argument range, tiny arguments (small reflectances) included: relative

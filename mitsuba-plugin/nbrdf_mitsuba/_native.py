@@ -166,6 +166,19 @@ def pdf(sampler_, view, light) -> np.ndarray:
     return out
 
 
+def active_units(flat, hidden: int, anisotropic: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Which hidden units of the network with flat parameters ``flat`` (W1 b1 W2 b2 W3 b3) some
+    pair of directions above the horizon may activate: two boolean arrays of ``hidden``, for
+    the first and the second hidden layer (``nbrdf_network_active_units``)."""
+    flat = np.ascontiguousarray(np.asarray(flat, dtype=np.float32).reshape(-1))
+    out = np.empty(2 * hidden, dtype=np.uint8)
+    check(lib.nbrdf_network_active_units(_in(flat), flat.size, hidden, int(bool(anisotropic)),
+                                         ffi.from_buffer("uint8_t[]", out, require_writable=True),
+                                         out.size))
+    active = out.astype(bool)
+    return active[:hidden], active[hidden:]
+
+
 class Table:
     """The tabulated sampler of a loaded network or MERL table (``sampling`` = ``tabulated``),
     built by the library from the material; pass it where a sampler goes."""

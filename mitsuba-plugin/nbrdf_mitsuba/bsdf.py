@@ -638,7 +638,7 @@ class NbrdfMixin(_NativeBSDFMixin):
         return jit.TracedNetwork([
             (np.asarray(layer["weights"], dtype=np.float32).reshape(layer["inputs"], layer["outputs"]),
              np.asarray(layer["bias"], dtype=np.float32)) for layer in layers
-        ], weights=mode, anisotropic=self._native.anisotropic)
+        ], weights=mode, anisotropic=self._native.anisotropic, active_units=_native.active_units)
 
     def _traverse_traced(self, put):
         # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3, updatable through

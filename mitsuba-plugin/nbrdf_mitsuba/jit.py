@@ -155,10 +155,18 @@ class TracedNetwork:
 
     ``flat`` (W1, b1, W2, b2, W3, b3 as one ``mi.Float``) is what ``traverse`` exposes; after an
     update call ``refresh()`` so the traced kernels see the new values.
+
+    ``active_units(flat, hidden, anisotropic)`` (the library's ``_native.active_units``), when
+    given, names in ``literal`` mode the hidden units some pair of directions above the horizon
+    can activate; the kernel leaves the others out. They output exactly 0 wherever the BSDF is
+    evaluated, so the values do not change and a trained network loses up to two thirds of its
+    multiply-adds (``network/pruning.rs``; tests/test_backends.py holds the pruned
+    kernel to the full one). ``opaque`` kernels keep every unit: their weights change without a
+    new kernel.
     """
 
     def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "literal",
-                 anisotropic: bool = False):
+                 anisotropic: bool = False, active_units=None):
         if weights not in ("opaque", "literal"):
             raise ValueError(f"weights must be 'opaque' or 'literal', got '{weights}'")
         self.mode = weights
@@ -166,6 +174,7 @@ class TracedNetwork:
         self.anisotropic = bool(anisotropic)
         self.shapes = [(int(W.shape[0]), int(W.shape[1])) for W, _ in layers]
         self.parameter_count = sum(i * o + o for i, o in self.shapes)
+        self._active_units = active_units
         flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
         self.flat = mi.Float(flat.astype(np.float32))
         self.refresh()
@@ -187,6 +196,11 @@ class TracedNetwork:
         a copy as ``good``, the state a rejected update returns to."""
         values = np.array(dr.detach(self.flat).numpy(), dtype=np.float32).reshape(-1)
         self.good = values
+        #: Per hidden layer, which units the kernel computes (None: all of them).
+        self.active = None
+        hidden = self.shapes[0][1]
+        if self.mode == "literal" and self._active_units is not None and self.shapes[1] == (hidden, hidden):
+            self.active = self._active_units(values, hidden, self.anisotropic)
         if self.mode == "literal":
             scalars = [mi.Float(float(v)) for v in values]
         else:
@@ -206,15 +220,19 @@ class TracedNetwork:
     def eval_input(self, x: list) -> mi.Color3f:
         """The network on an input list (``None`` entries are zeros): ``f_r``, clamped at 0."""
         h = x
+        last = len(self._layers) - 1
         for k, (W, b) in enumerate(self._layers):
             out = []
             for o in range(len(b)):
+                if k < last and self.active is not None and not self.active[k][o]:
+                    out.append(None)  # never fires above the horizon: exactly 0
+                    continue
                 acc = b[o]
                 for i, h_i in enumerate(h):
                     if h_i is not None:
                         acc = dr.fma(h_i, W[i][o], acc)
                 out.append(acc)
-            h = [relu(v) for v in out] if k < len(self._layers) - 1 else out
+            h = [None if v is None else relu(v) for v in out] if k < last else out
         rgb = [relu(expm1(clamp_exp_argument(v))) for v in h]
         return mi.Color3f(rgb[0], rgb[1], rgb[2])
 
