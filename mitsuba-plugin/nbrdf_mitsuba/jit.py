@@ -249,13 +249,6 @@ def _both_valid_above(view, light):
     return v_ok & l_ok & (vz > 0) & (lz > 0)
 
 
-def _expm1_nonpositive(x):
-    """exp(x) - 1 for x <= 0 without the cancellation of exp near 0."""
-    small = dr.abs(x) < 1e-3
-    series = x * dr.fma(x, dr.fma(x, 1.0 / 6.0, 0.5), 1.0)
-    return dr.select(small, series, dr.exp(x) - 1.0)
-
-
 def _log1m(x):
     """ln(1 - x) for x in [0, 1) with full relative accuracy for small x (Kahan's trick: the
     rounding of 1 - x is divided back out)."""
@@ -302,7 +295,8 @@ def _phong_elevation(exponent, u):
     u = dr.clip(u, 0.0, 1.0)
     positive = u > 0
     log_u = dr.log(dr.select(positive, u, 1.0))
-    one_minus_cos = dr.select(positive, -_expm1_nonpositive(log_u / (exponent + 1.0)), 1.0)
+    # The network's expm1 (exact near 0); below EXP_ARGUMENT_MIN, 1 - cos rounds to 1 anyway.
+    one_minus_cos = dr.select(positive, -expm1(clamp_exp_argument(log_u / (exponent + 1.0))), 1.0)
     one_minus_cos = dr.clip(one_minus_cos, 0.0, 1.0)
     cos_theta = 1.0 - one_minus_cos
     return cos_theta, dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta))
