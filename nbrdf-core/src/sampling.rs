@@ -260,27 +260,69 @@ impl SamplingStrategy {
         if v.z <= 0.0 || l.z <= 0.0 {
             return 0.0;
         }
+        self.unit_density(v, l)
+    }
+
+    /// The density for unit `v`, `l` with valid parameters. For the lobe mixtures it holds over
+    /// the whole sphere of `l`: the Blinn-Phong lobes also below the horizon (where the sampler
+    /// rejects them, so that a mixture integrates to 1 for every view), the cosine part on the
+    /// upper hemisphere.
+    fn unit_density(&self, v: DVec3, l: DVec3) -> f64 {
+        let phong = |n: f64, w: f64| weighted(w, || specular_density(v, l, n));
         match *self {
             SamplingStrategy::Uniform => 0.5 * FRAC_1_PI,
-            SamplingStrategy::Cosine => l.z * FRAC_1_PI,
+            SamplingStrategy::Cosine => l.z.max(0.0) * FRAC_1_PI,
             SamplingStrategy::Tabulated(ref table) => table.density_f64(v, l),
             SamplingStrategy::BlinnPhong {
                 exponent,
                 specular_weight,
-            } => mixture_density(v, l, exponent, specular_weight),
+            } => with_cosine(l, 1.0 - specular_weight, phong(exponent, specular_weight)),
             SamplingStrategy::TwoLobe {
                 exponent1,
                 weight1,
                 exponent2,
                 weight2,
-            } => two_lobe_mixture_density(v, l, [exponent1, exponent2], [weight1, weight2]),
+            } => with_cosine(
+                l,
+                (1.0 - weight1 - weight2).max(0.0), // float32 weights may sum to 1 + ulp
+                phong(exponent1, weight1) + phong(exponent2, weight2),
+            ),
             SamplingStrategy::AnisotropicBlinnPhong {
                 exponent_u,
                 exponent_v,
                 specular_weight,
-            } => anisotropic_mixture_density(v, l, [exponent_u, exponent_v], specular_weight),
+            } => {
+                let lobe = weighted(specular_weight, || {
+                    anisotropic_specular_density(v, l, [exponent_u, exponent_v])
+                });
+                with_cosine(l, 1.0 - specular_weight, lobe)
+            }
         }
     }
+
+    /// [`SamplingStrategy::unit_density`] for any inputs: 0 for invalid parameters or
+    /// directions.
+    fn sphere_density(&self, view: DVec3, light: DVec3) -> f64 {
+        match (self.params_ok(), normalized(view), normalized(light)) {
+            (true, Some(v), Some(l)) => self.unit_density(v, l),
+            _ => 0.0,
+        }
+    }
+}
+
+/// `w density()`, with `density` left unevaluated for `w = 0` (a lobe of weight 0 may carry any
+/// exponent).
+fn weighted(w: f64, density: impl FnOnce() -> f64) -> f64 {
+    if w > 0.0 {
+        w * density()
+    } else {
+        0.0
+    }
+}
+
+/// A lobe mixture's density: its lobes' part plus `cosine_weight cos(theta_l) / pi`.
+fn with_cosine(l: DVec3, cosine_weight: f64, lobes: f64) -> f64 {
+    lobes + cosine_weight * l.z.max(0.0) * FRAC_1_PI
 }
 
 /// Which component of a two-lobe mixture the uniform `u0` picks: `Some(1)`, `Some(2)` for the
@@ -298,34 +340,17 @@ fn two_lobe_component(u0: f64, weight1: f64, weight2: f64) -> Option<u8> {
     }
 }
 
-/// Two Blinn-Phong lobes plus cosine over the whole sphere of `l` (`v`, `l` unit), as
-/// [`mixture_density`] for one lobe; the cosine weight `1 - w1 - w2` is clamped at 0 (float32
-/// weights may sum to 1 + ulp).
-fn two_lobe_mixture_density(v: DVec3, l: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
-    let mut density = 0.0;
-    for (n, w) in exponents.into_iter().zip(weights) {
-        if w > 0.0 {
-            density += w * specular_density(v, l, n);
-        }
-    }
-    let cosine = (1.0 - weights[0] - weights[1]).max(0.0);
-    density + cosine * l.z.max(0.0) * FRAC_1_PI
-}
-
 /// The two-lobe mixture's density over the whole sphere of light directions (the two-lobe
 /// counterpart of [`blinn_phong_lobe_density`]): integrates to 1 for every view when the
 /// weights sum to at most 1; 0 for invalid parameters or directions.
 pub fn two_lobe_density(view: DVec3, light: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
-    let strategy = SamplingStrategy::TwoLobe {
+    SamplingStrategy::TwoLobe {
         exponent1: exponents[0],
         weight1: weights[0],
         exponent2: exponents[1],
         weight2: weights[1],
-    };
-    match (strategy.params_ok(), normalized(view), normalized(light)) {
-        (true, Some(v), Some(l)) => two_lobe_mixture_density(v, l, exponents, weights),
-        _ => 0.0,
     }
+    .sphere_density(view, light)
 }
 
 /// Clamps a uniform into `[0, 1]`; NaN becomes 0.
@@ -456,15 +481,6 @@ fn anisotropic_specular_density(v: DVec3, l: DVec3, [nu, nv]: [f64; 2]) -> f64 {
         / (4.0 * v_dot_h)
 }
 
-fn anisotropic_mixture_density(v: DVec3, l: DVec3, exponents: [f64; 2], w: f64) -> f64 {
-    let specular = if w > 0.0 {
-        w * anisotropic_specular_density(v, l, exponents)
-    } else {
-        0.0
-    };
-    specular + (1.0 - w) * l.z.max(0.0) * FRAC_1_PI
-}
-
 /// The anisotropic mixture's density over the whole sphere of light directions (the anisotropic
 /// counterpart of [`blinn_phong_lobe_density`]): integrates to 1 for every view; 0 for invalid
 /// parameters or directions.
@@ -474,20 +490,8 @@ pub fn anisotropic_lobe_density(
     exponents: [f64; 2],
     specular_weight: f64,
 ) -> f64 {
-    let strategy = SamplingStrategy::anisotropic(exponents[0], exponents[1], specular_weight);
-    match (strategy.params_ok(), normalized(view), normalized(light)) {
-        (true, Some(v), Some(l)) => anisotropic_mixture_density(v, l, exponents, specular_weight),
-        _ => 0.0,
-    }
-}
-
-fn mixture_density(v: DVec3, l: DVec3, n: f64, w: f64) -> f64 {
-    let specular = if w > 0.0 {
-        w * specular_density(v, l, n)
-    } else {
-        0.0
-    };
-    specular + (1.0 - w) * l.z.max(0.0) * FRAC_1_PI
+    SamplingStrategy::anisotropic(exponents[0], exponents[1], specular_weight)
+        .sphere_density(view, light)
 }
 
 /// The Blinn-Phong mixture's density over the whole sphere of light directions: the specular
@@ -501,14 +505,11 @@ pub fn blinn_phong_lobe_density(
     exponent: f64,
     specular_weight: f64,
 ) -> f64 {
-    let strategy = SamplingStrategy::BlinnPhong {
+    SamplingStrategy::BlinnPhong {
         exponent,
         specular_weight,
-    };
-    match (strategy.params_ok(), normalized(view), normalized(light)) {
-        (true, Some(v), Some(l)) => mixture_density(v, l, exponent, specular_weight),
-        _ => 0.0,
     }
+    .sphere_density(view, light)
 }
 
 /// Splits equally long slices into aligned chunks of `chunk` lanes, for parallel iteration over
