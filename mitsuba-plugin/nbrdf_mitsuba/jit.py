@@ -420,9 +420,10 @@ STRATEGIES = ("uniform", "cosine", "phong", "two_lobe", "anisotropic_phong", "ta
 class TracedTable:
     """The tabulated half-vector sampler (``tabulated.rs``) from the library's arrays
     (``_native.Table.arrays``): the view's elevation picks a row, the row's alias table a bin in
-    ``t = (1 - cos theta_h)^(1/4)`` and ``phi_h - phi_v``, the half vector uniform in solid angle
-    within the bin; mixed with cosine. The pdf is the bin's mass over its solid angle through the
-    half-vector Jacobian (``density_f64``)."""
+    ``t = (1 - cos theta_h)^(1/4)`` and ``|phi_h - phi_v|`` over ``[0, pi]``, ``u2`` the side of
+    the plane of incidence, the half vector uniform in solid angle within the bin or its mirror
+    image; mixed with cosine. The pdf is the bin's mass over the solid angle of the bin and its
+    mirror image through the half-vector Jacobian (``density_f64``)."""
 
     def __init__(self, rows: int, theta_bins: int, phi_bins: int, cosine_weight: float,
                  mass: np.ndarray, alias_probability: np.ndarray, alias: np.ndarray):
@@ -468,7 +469,10 @@ class TracedTable:
         one_minus_cos = dr.fma(u1, o1 - o0, o0)
         cos_h = 1.0 - one_minus_cos
         sin_h = dr.safe_sqrt(one_minus_cos * (1.0 + cos_h))
-        sin_p, cos_p = dr.sincos((mi.Float(j) + u2) * (2.0 * math.pi / self.phi_bins))
+        mirrored = u2 >= 0.5
+        fp = dr.select(mirrored, 2.0 * u2 - 1.0, 2.0 * u2)
+        sin_p, cos_p = dr.sincos((mi.Float(j) + fp) * (math.pi / self.phi_bins))
+        sin_p = dr.select(mirrored, -sin_p, sin_p)
         cx, cy = self._view_azimuth(v)
         h = mi.Vector3f(sin_h * (cos_p * cx - sin_p * cy), sin_h * (cos_p * cy + sin_p * cx), cos_h)
         reflected = 2.0 * dr.dot(v, h) * h - v
@@ -484,13 +488,12 @@ class TracedTable:
         valid = (dr.squared_norm(s) > 0) & (v_dot_h > 0) & (h.z > 0)
         t = dr.sqrt(dr.sqrt(dr.fma(h.x, h.x, h.y * h.y) / (1.0 + h.z)))
         cx, cy = self._view_azimuth(v)
-        phi = dr.atan2(cx * h.y - cy * h.x, cx * h.x + cy * h.y)
-        phi = dr.select(phi < 0, phi + 2.0 * math.pi, phi)
+        phi = dr.abs(dr.atan2(cx * h.y - cy * h.x, cx * h.x + cy * h.y))
         nt, np_ = self.theta_bins, self.phi_bins
         i = dr.minimum(mi.UInt32(t * nt), nt - 1)
-        j = dr.minimum(mi.UInt32(dr.maximum(phi * (np_ / (2.0 * math.pi)), 0.0)), np_ - 1)
+        j = dr.minimum(mi.UInt32(phi * (np_ / math.pi)), np_ - 1)
         p = dr.gather(mi.Float, self.mass, (self._row(v) * nt + i) * np_ + j, valid)
-        solid_angle = (self._edge(i + 1) - self._edge(i)) * (2.0 * math.pi / np_)
+        solid_angle = (self._edge(i + 1) - self._edge(i)) * (2.0 * math.pi / np_)  # with the mirror
         table = p / solid_angle / (4.0 * v_dot_h)
         pdf = cosine + (1.0 - self.cosine_weight) * dr.select(valid, table, 0.0)
         return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)

@@ -4,8 +4,10 @@
 //!
 //! Half-vector parametrisation: `t = (1 - cos theta_h)^(1/4)` (dense near the normal, where it
 //! grows like `sqrt(theta_h)` as the MERL grid and [`crate::lobe_fit`]'s quadrature do, so sharp
-//! peaks get bins of their own) and `phi = phi_h - phi_v` over `[0, 2 pi)` (the material is
-//! isotropic). Both come without an arc tangent of the elevation: `1 - cos theta_h` is
+//! peaks get bins of their own) and `|phi|`, `phi = phi_h - phi_v`, over `[0, pi]`: the material
+//! is isotropic, so its `f_r cos` is the same at `phi` and `-phi` (mirrored across the plane of
+//! incidence) and one bin stands for both, which halves the table; the sampler picks the side
+//! with one bit of `u2`. Both come without an arc tangent of the elevation: `1 - cos theta_h` is
 //! `(h.x^2 + h.y^2) / (1 + h.z)` (precise near the normal) and the bin edges are `(k / bins)^4`,
 //! and `phi` is one `atan2` in the view's azimuthal frame; that keeps the pdf, evaluated for
 //! every sample and every light sample under MIS, cheap (docs/results/performance.md). Bins get the mass of
@@ -16,7 +18,8 @@
 //!
 //! `pdf(l) = c l.z / pi + (1 - c) P_row(bin) / Ω(bin) / (4 v.h)`
 //!
-//! with `Ω(bin) = (phi_1 - phi_0) (cos theta_0 - cos theta_1)` the bin's solid angle and
+//! with `Ω(bin) = 2 (phi_1 - phi_0) (cos theta_0 - cos theta_1)` the solid angle of the bin and
+//! its mirror image and
 //! `dω_l = 4 v.h dω_h`. Half vectors whose reflection falls below the horizon are rejected
 //! (pdf 0), like the Blinn-Phong lobes.
 //!
@@ -30,8 +33,9 @@
 //! gray-plastic sampled with a relative variance of 14 (one lobe: 1.7); docs/results/sampling.md.
 //!
 //! A bin is drawn through its row's alias table (Walker's method, Vose's construction): `u0`
-//! picks cosine (below `c`) or the table and, rescaled, the bin; `u1` and `u2` place the half
-//! vector within it.
+//! picks cosine (below `c`) or the table and, rescaled, the bin; `u1` places the half vector
+//! within the bin in elevation, `u2` picks the side (below or above 1/2) and, rescaled, the
+//! azimuth.
 //!
 //! The table is built when a material is loaded (a few milliseconds for a network), so the file
 //! format carries no table; `nbrdf fit-phong` stores only which strategy samples best and the
@@ -47,16 +51,16 @@ use crate::sampling::cosine_hemisphere;
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, TAU};
+use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
 
 /// Table size and mixture weight of a [`TabulatedSampler`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TableConfig {
     /// Bands of view elevation, uniform in `theta_v` over `[0, pi/2)`.
     pub rows: usize,
-    /// Bins in `t = (1 - cos theta_h)^(1/4)` and in `phi_h - phi_v` over `[0, 2 pi)` (even).
-    /// 48 x 32: 48 `t` bins sample with 10-40 % less variance than 32 on the MERL set; 64
-    /// gain nothing more (docs/results/sampling.md).
+    /// Bins in `t = (1 - cos theta_h)^(1/4)` and in `|phi_h - phi_v|` over `[0, pi]` (each
+    /// standing for itself and its mirror image). 48 x 16: 48 `t` bins sample with 10-40 % less
+    /// variance than 32 on the MERL set; 64 gain nothing more (docs/results/sampling.md).
     pub theta_bins: usize,
     pub phi_bins: usize,
     /// Points per bin side when averaging the material over a bin.
@@ -91,7 +95,7 @@ impl Default for TableConfig {
         TableConfig {
             rows: 16,
             theta_bins: 48,
-            phi_bins: 32,
+            phi_bins: 16,
             subsamples: 3,
             views_per_row: 3,
             cosine_weight: 0.1,
@@ -106,7 +110,8 @@ pub struct TabulatedSampler {
     theta_bins: usize,
     phi_bins: usize,
     cosine_weight: f64,
-    /// Probability of each bin, row-major `[row][t][phi]`, summing to 1 per row.
+    /// Probability of each bin (with its mirror image), row-major `[row][t][phi]`, summing to 1
+    /// per row.
     mass: Vec<f64>,
     /// Per row, Walker's alias table over the row's bins (same layout as `mass`): a bin `k`
     /// drawn uniformly is kept with probability `alias_probability[k]`, else replaced by
@@ -220,16 +225,10 @@ impl TabulatedSampler {
             views_per_row: views,
             cosine_weight,
         } = *config;
-        if rows == 0
-            || theta_bins == 0
-            || phi_bins < 2
-            || phi_bins % 2 != 0
-            || subsamples == 0
-            || views == 0
-        {
+        if rows == 0 || theta_bins == 0 || phi_bins == 0 || subsamples == 0 || views == 0 {
             return Err(NbrdfError::InvalidArgument(format!(
-                "tabulated sampler: needs rows, theta bins, an even number of phi bins, \
-                 subsamples and views per row (got {config:?})"
+                "tabulated sampler: needs rows, theta bins, phi bins, subsamples and views per \
+                 row (got {config:?})"
             )));
         }
         if !(0.0..1.0).contains(&cosine_weight) {
@@ -237,18 +236,17 @@ impl TabulatedSampler {
                 "tabulated sampler: cosine weight {cosine_weight} must be in [0, 1)"
             )));
         }
-        let half = phi_bins / 2;
-        let (dt, dphi) = (1.0 / theta_bins as f64, TAU / phi_bins as f64);
+        let (dt, dphi) = (1.0 / theta_bins as f64, PI / phi_bins as f64);
         // `f_r cos` over each bin for each of the `views` view elevations of each row, row-major
         // `[row][view][t][phi]`.
-        let per_view: Vec<f64> = (0..rows * views * theta_bins * half)
+        let per_view: Vec<f64> = (0..rows * views * theta_bins * phi_bins)
             .into_par_iter()
             .map(|k| {
                 let (r, c) = (
-                    k / (views * theta_bins * half),
-                    (k / (theta_bins * half)) % views,
+                    k / (views * theta_bins * phi_bins),
+                    (k / (theta_bins * phi_bins)) % views,
                 );
-                let (i, j) = ((k / half) % theta_bins, k % half);
+                let (i, j) = ((k / phi_bins) % theta_bins, k % phi_bins);
                 let theta_v = (r as f64 + c as f64 / views as f64) / rows as f64 * FRAC_PI_2;
                 let v = DVec3::new(theta_v.sin(), 0.0, theta_v.cos());
                 let mut sum = 0.0;
@@ -275,7 +273,7 @@ impl TabulatedSampler {
             })
             .collect();
         // Each view's density normalised, then averaged over the band (module docs).
-        let block = theta_bins * half;
+        let block = theta_bins * phi_bins;
         let mut cells = vec![0.0; rows * block];
         for (r, row_cells) in cells.chunks_exact_mut(block).enumerate() {
             for view in per_view[r * views * block..(r + 1) * views * block].chunks_exact(block) {
@@ -287,24 +285,12 @@ impl TabulatedSampler {
                 }
             }
         }
-        // Isotropy: bin j over [0, pi) and bin phi_bins - 1 - j over [pi, 2 pi) are mirror images.
-        let mut weights = vec![0.0; rows * theta_bins * phi_bins];
-        for r in 0..rows {
-            for i in 0..theta_bins {
-                for j in 0..half {
-                    let c = cells[(r * theta_bins + i) * half + j];
-                    let base = (r * theta_bins + i) * phi_bins;
-                    weights[base + j] = c;
-                    weights[base + phi_bins - 1 - j] = c;
-                }
-            }
-        }
         Ok(Self::from_weights(
             rows,
             theta_bins,
             phi_bins,
             cosine_weight,
-            &weights,
+            &cells,
         ))
     }
 
@@ -394,7 +380,7 @@ impl TabulatedSampler {
 
     /// The direction before rounding to float32 (`v` unit, above the horizon; `u` in [0, 1]):
     /// `u0` picks the component and, rescaled, the table's bin; `u1` and `u2` place the half
-    /// vector within the bin.
+    /// vector within the bin or its mirror image (module docs).
     pub(crate) fn sample_direction(&self, v: DVec3, [u0, u1, u2]: [f64; 3]) -> DVec3 {
         let c = self.cosine_weight;
         if u0 < c {
@@ -403,13 +389,19 @@ impl TabulatedSampler {
         let r = row_of(v, self.rows);
         let (nt, np) = (self.theta_bins, self.phi_bins);
         let bin = self.pick(r, (u0 - c) / (1.0 - c));
-        let (i, j, ft, fp) = (bin / np, bin % np, u1, u2);
+        let (mirrored, fp) = if u2 < 0.5 {
+            (false, 2.0 * u2)
+        } else {
+            (true, 2.0 * u2 - 1.0)
+        };
+        let (i, j, ft) = (bin / np, bin % np, u1);
         // Uniform in solid angle within the bin: 1 - cos(theta_h) uniform between its edges.
         let (o0, o1) = (bin_one_minus_cos(i, nt), bin_one_minus_cos(i + 1, nt));
         let one_minus_cos = o0 + ft * (o1 - o0);
         let cos_h = 1.0 - one_minus_cos;
         let sin_h = (one_minus_cos * (1.0 + cos_h)).max(0.0).sqrt();
-        let (sin_p, cos_p) = ((j as f64 + fp) / np as f64 * TAU).sin_cos();
+        let (sin_p, cos_p) = ((j as f64 + fp) / np as f64 * PI).sin_cos();
+        let sin_p = if mirrored { -sin_p } else { sin_p };
         let (cx, cy) = view_azimuth(v);
         let h = DVec3::new(
             sin_h * (cos_p * cx - sin_p * cy),
@@ -435,16 +427,12 @@ impl TabulatedSampler {
         let t = ((h.x * h.x + h.y * h.y) / (1.0 + h.z)).sqrt().sqrt();
         let (nt, np) = (self.theta_bins, self.phi_bins);
         let (cx, cy) = view_azimuth(v);
-        let mut phi = (cx * h.y - cy * h.x)
-            .atan2(cx * h.x + cy * h.y)
-            .rem_euclid(TAU);
-        if phi >= TAU {
-            phi = 0.0;
-        }
+        let phi = (cx * h.y - cy * h.x).atan2(cx * h.x + cy * h.y).abs();
         let i = ((t * nt as f64) as usize).min(nt - 1);
-        let j = ((phi / TAU * np as f64) as usize).min(np - 1);
+        let j = ((phi / PI * np as f64) as usize).min(np - 1);
         let r = row_of(v, self.rows);
         let p = self.mass[(r * nt + i) * np + j];
+        // The bin and its mirror image.
         let solid_angle =
             (bin_one_minus_cos(i + 1, nt) - bin_one_minus_cos(i, nt)) * TAU / np as f64;
         cosine + (1.0 - self.cosine_weight) * p / solid_angle / (4.0 * v_dot_h)
@@ -611,17 +599,50 @@ mod tests {
         }
     }
 
+    /// One bin stands for `phi` and `-phi`: the density is the same at a light direction and at
+    /// its mirror image across the plane of incidence, and the sampler puts half of its table
+    /// samples on each side.
+    #[test]
+    fn both_sides_of_the_plane_of_incidence_are_drawn_alike() {
+        let table = TabulatedSampler::build(&phong(0.1, 1.0, 50.0), &TableConfig::default());
+        let table = Arc::new(table.unwrap());
+        let c = table.cosine_weight();
+        let s = SamplingStrategy::Tabulated(table);
+        let mut rng = SplitMix64::from_state(21);
+        for _ in 0..200 {
+            let v = uniform_hemisphere(rng.next_f64(), rng.next_f64());
+            let l = uniform_hemisphere(rng.next_f64(), rng.next_f64());
+            let normal_to_plane = DVec3::new(-v.y, v.x, 0.0).normalize_or_zero();
+            let mirrored = l - 2.0 * l.dot(normal_to_plane) * normal_to_plane;
+            let (a, b) = (s.pdf_f64(v, l), s.pdf_f64(v, mirrored));
+            assert!((a - b).abs() <= 1e-9 * a.max(b), "{a} vs {b}");
+        }
+        let v = dir(40.0, 1.0);
+        let side = DVec3::new(-v.y, v.x, 0.0);
+        let (mut left, mut drawn) = (0u32, 0u32);
+        for _ in 0..40_000 {
+            let u = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+            let d = s.sample(v.as_vec3(), u);
+            if d.pdf > 0.0 && f64::from(u[0]) >= c {
+                drawn += 1;
+                left += u32::from(d.light.as_dvec3().dot(side) > 0.0);
+            }
+        }
+        let share = f64::from(left) / f64::from(drawn);
+        assert!((share - 0.5).abs() < 0.015, "{share} of {drawn}");
+    }
+
     #[test]
     fn a_network_table_builds_and_samples() {
         let net = Nbrdf::random("n", 21, 7);
         let t = TabulatedSampler::from_brdf(&net, &TableConfig::default()).unwrap();
         let a = t.tables();
-        assert_eq!(a.mass.len(), 16 * 48 * 32);
-        for row in a.mass.chunks_exact(48 * 32) {
+        assert_eq!(a.mass.len(), 16 * 48 * 16);
+        for row in a.mass.chunks_exact(48 * 16) {
             assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         }
-        assert_eq!(a.alias_probability.len(), 16 * 48 * 32);
-        assert_eq!(a.alias.len(), 16 * 48 * 32);
+        assert_eq!(a.alias_probability.len(), 16 * 48 * 16);
+        assert_eq!(a.alias.len(), 16 * 48 * 16);
         let s = SamplingStrategy::Tabulated(Arc::new(t));
         let mut rng = SplitMix64::from_state(8);
         let v = dir(50.0, 0.3).as_vec3();
@@ -686,7 +707,7 @@ mod tests {
                 ..TableConfig::default()
             },
             TableConfig {
-                phi_bins: 7,
+                phi_bins: 0,
                 ..TableConfig::default()
             },
             TableConfig {

@@ -109,7 +109,9 @@ typedef struct NbrdfMixtureSampler {
 } NbrdfMixtureSampler;
 
 // Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability, row-major
-// `[row][theta bin][phi bin]`), `alias_probability` and `alias` (per row, Walker's alias table
+// `[row][theta bin][phi bin]`; the `phi_bins` span `|phi_h - phi_v|` over `[0, pi]`, each bin
+// standing for itself and its mirror image across the plane of incidence, so a bin's mass is
+// spread over both), `alias_probability` and `alias` (per row, Walker's alias table
 // over the row's bins: a bin `k` drawn uniformly is kept with probability
 // `alias_probability[k]`, else replaced by the bin `alias[k]`, an index within the row) each
 // have `rows * theta_bins * phi_bins` values (`nbrdf_table_arrays`).
