@@ -239,15 +239,23 @@ fn pre_activations(layers: &[Layer; 3], x: &[f64; INPUTS]) -> [Vec<f64>; 2] {
 }
 
 /// The hidden units of a `6 -> h1 -> h2 -> 3` network that some pair of directions above the
-/// horizon may activate (see the module documentation). Layers whose shapes do not chain give
-/// every unit active.
+/// horizon may activate (see the module documentation). Layers whose shapes do not chain, or
+/// with a parameter that is not finite (whose interval bounds would prove nothing), give every
+/// unit active.
 pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
     let widths = [layers[0].outputs, layers[1].outputs];
     let all_active = ActiveUnits {
         hidden1: vec![true; widths[0]],
         hidden2: vec![true; widths[1]],
     };
-    if super::format::shape_problem(layers).is_some() {
+    let all_finite = layers.iter().all(|layer| {
+        layer
+            .weights
+            .iter()
+            .chain(&layer.bias)
+            .all(|p| p.is_finite())
+    });
+    if super::format::shape_problem(layers).is_some() || !all_finite {
         return all_active;
     }
     // candidate[l][k]: unit k of hidden layer l not yet seen positive nor given up on.

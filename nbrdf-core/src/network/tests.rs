@@ -953,6 +953,23 @@ fn pruning_keeps_slivers_and_drops_units_dead_above_the_horizon() {
     }
 }
 
+/// Interval bounds prove nothing with a parameter that is not finite (the loaders refuse such
+/// networks; `active_units` takes any layers): every unit stays.
+#[test]
+fn pruning_keeps_every_unit_of_layers_with_non_finite_parameters() {
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        for (layer, index) in [(0, 5), (1, 0), (2, 1)] {
+            let mut net = planted_net(3);
+            net.layers[layer].weights[index] = bad;
+            let active = crate::network::active_units(&net.layers, false);
+            assert!(
+                active.hidden1.iter().chain(&active.hidden2).all(|&a| a),
+                "{bad} in layer {layer}"
+            );
+        }
+    }
+}
+
 #[test]
 fn pruned_networks_evaluate_exactly_like_the_full_ones() {
     let anisotropic = |seed| {
