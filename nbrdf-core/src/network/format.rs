@@ -149,7 +149,7 @@ pub(super) fn shape_problem(layers: &[Layer]) -> Option<String> {
 }
 
 /// The first non-finite parameter, if any.
-fn value_problem(layers: &[Layer]) -> Option<String> {
+pub(super) fn value_problem(layers: &[Layer]) -> Option<String> {
     for (k, layer) in layers.iter().enumerate() {
         if let Some(i) = layer.weights.iter().position(|w| !w.is_finite()) {
             return Some(format!(

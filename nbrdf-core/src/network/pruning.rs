@@ -26,6 +26,8 @@
 //! dropped).
 
 use super::{Layer, Nbrdf, INPUTS};
+use crate::coords::{network_input_from_angles_for, RusinkiewiczAngles};
+use crate::fastmath::Unfused;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 /// Which hidden units can fire: `hidden1[k]` for unit `k` of the first hidden layer,
@@ -128,22 +130,6 @@ impl Domain {
         }
     }
 
-    /// The network input at a point: `[sin th cos ph, sin th sin ph, cos th, d]`, as
-    /// `coords::network_input_components_for` computes it from directions.
-    fn input_at(angles: [f64; 4]) -> [f64; INPUTS] {
-        let [theta_h, phi_h, theta_d, phi_d] = angles;
-        let (sin_h, cos_h) = theta_h.sin_cos();
-        let (sin_d, cos_d) = theta_d.sin_cos();
-        [
-            sin_h * phi_h.cos(),
-            sin_h * phi_h.sin(),
-            cos_h,
-            sin_d * phi_d.cos(),
-            sin_d * phi_d.sin(),
-            cos_d,
-        ]
-    }
-
     fn centre(&self) -> [f64; 4] {
         std::array::from_fn(|k| 0.5 * (self.lo[k] + self.hi[k]))
     }
@@ -219,23 +205,23 @@ fn affine_bounds(layer: &Layer, x: &[Interval], out: &mut Vec<Interval>) {
     }
 }
 
-/// Exact (float64) pre-activations of both hidden layers at one input.
-fn pre_activations(layers: &[Layer; 3], x: &[f64; INPUTS]) -> [Vec<f64>; 2] {
-    let affine = |layer: &Layer, x: &[f64]| -> Vec<f64> {
-        (0..layer.outputs)
-            .map(|o| {
-                x.iter()
-                    .enumerate()
-                    .fold(f64::from(layer.bias[o]), |acc, (i, &xi)| {
-                        acc + f64::from(layer.weights[i * layer.outputs + o]) * xi
-                    })
-            })
-            .collect()
+/// Evaluates the network at a point of the domain as a renderer does, leaving both hidden
+/// layers' outputs in `hidden` (positive exactly for the units that fire there). `phi_h` is 0
+/// throughout an isotropic network's domain, so the anisotropic input serves both.
+fn fire_at(
+    layers: &[Layer; 3],
+    [theta_h, phi_h, theta_d, phi_d]: [f64; 4],
+    hidden: &mut [Vec<f32>; 2],
+) {
+    let angles = RusinkiewiczAngles {
+        theta_h,
+        phi_h,
+        theta_d,
+        phi_d,
     };
-    let first = affine(&layers[0], x);
-    let relu: Vec<f64> = first.iter().map(|&z| z.max(0.0)).collect();
-    let second = affine(&layers[1], &relu);
-    [first, second]
+    let x = network_input_from_angles_for(true, &angles);
+    let [h1, h2] = hidden;
+    super::kernel::eval_input_generic::<Unfused>(layers, &x, h1, h2);
 }
 
 /// The hidden units of a `6 -> h1 -> h2 -> 3` network that some pair of directions above the
@@ -248,14 +234,9 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
         hidden1: vec![true; widths[0]],
         hidden2: vec![true; widths[1]],
     };
-    let all_finite = layers.iter().all(|layer| {
-        layer
-            .weights
-            .iter()
-            .chain(&layer.bias)
-            .all(|p| p.is_finite())
-    });
-    if super::format::shape_problem(layers).is_some() || !all_finite {
+    if super::format::shape_problem(layers).is_some()
+        || super::format::value_problem(layers).is_some()
+    {
         return all_active;
     }
     // candidate[l][k]: unit k of hidden layer l not yet seen positive nor given up on.
@@ -263,6 +244,7 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
     let mut stack = vec![(Domain::whole(anisotropic), 0u32)];
     let mut bounded = 0usize;
     let (mut first, mut second) = (Vec::new(), Vec::new());
+    let mut hidden = [vec![0.0; widths[0]], vec![0.0; widths[1]]];
     while let Some((domain, depth)) = stack.pop() {
         if !candidate.iter().flatten().any(|&c| c) {
             break;
@@ -272,8 +254,8 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
         }
         let centre = domain.centre();
         if Domain::above_horizon(centre) {
-            let z = pre_activations(layers, &Domain::input_at(centre));
-            for (flags, values) in candidate.iter_mut().zip(&z) {
+            fire_at(layers, centre, &mut hidden);
+            for (flags, values) in candidate.iter_mut().zip(&hidden) {
                 for (flag, &value) in flags.iter_mut().zip(values) {
                     *flag &= value <= 0.0;
                 }
