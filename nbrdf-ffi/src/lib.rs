@@ -14,6 +14,7 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 
 use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
+use nbrdf_core::network::parameter_count_for;
 use nbrdf_core::sampling::{self, SamplingStrategy};
 use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
@@ -622,11 +623,7 @@ pub unsafe extern "C" fn nbrdf_network_active_units(
                     "out_len is {out_len}, expected 2 hidden = 2 x {hidden}"
                 ))
             })?;
-        let parameters = hidden
-            .checked_mul(hidden)
-            .zip(hidden.checked_mul(11))
-            .and_then(|(square, linear)| square.checked_add(linear)?.checked_add(3));
-        if parameters != Some(count) {
+        if parameter_count_for(hidden) != count {
             return Err(Failure::invalid(format!(
                 "count is {count}, but a network of hidden width {hidden} has \
                  hidden * hidden + 11 * hidden + 3 parameters"

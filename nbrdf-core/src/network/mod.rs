@@ -263,9 +263,14 @@ pub fn paper_init(hidden: usize, seed: u64) -> [Layer; 3] {
     })
 }
 
-/// Number of parameters of a `6 -> hidden -> hidden -> 3` network.
+/// Number of parameters of a `6 -> hidden -> hidden -> 3` network, `hidden^2 + 11 hidden + 3`.
+/// Saturates at `usize::MAX` for widths whose count overflows (no slice is that long, so a
+/// length compared with it never matches).
 pub fn parameter_count_for(hidden: usize) -> usize {
-    hidden * hidden + 11 * hidden + 3
+    hidden
+        .saturating_mul(hidden)
+        .saturating_add(hidden.saturating_mul(11))
+        .saturating_add(3)
 }
 
 impl Nbrdf {

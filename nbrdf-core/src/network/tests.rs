@@ -420,6 +420,9 @@ fn flat_round_trip_and_parameter_count() {
     let net = Nbrdf::random("r", DEFAULT_HIDDEN, 42);
     assert_eq!(net.parameter_count(), 675);
     assert_eq!(parameter_count_for(21), 675);
+    // Widths whose count overflows saturate, so a user-given width is an error, not an overflow.
+    assert_eq!(parameter_count_for(1 << 40), usize::MAX);
+    assert!(Nbrdf::from_flat("huge", 1 << 40, &[0.0; 675]).is_err());
     let flat = net.to_flat();
     assert_eq!(flat.len(), 675);
     assert!(flat.iter().all(|w| (-0.05..0.05).contains(w)));
