@@ -3,7 +3,7 @@
 //! values that overflow float32, NaN), sampling parameters and nested provenance. Most inputs
 //! are well-formed JSON, so the fuzzer spends its time in validation and evaluation rather than
 //! in the JSON syntax. Tame networks are also checked for agreement between the single and the
-//! batched evaluation.
+//! batched evaluation, and every accepted one for agreement with its pruned network.
 
 #![no_main]
 
@@ -11,7 +11,8 @@ use arbitrary::Arbitrary;
 use libfuzzer_sys::fuzz_target;
 use nbrdf_core::network::Nbrdf;
 use nbrdf_core_fuzz::{
-    check_error_names_origin, check_evaluations, fixed_pairs, pairs_from_components,
+    check_error_names_origin, check_evaluations, check_pruning, fixed_pairs,
+    pairs_from_components,
 };
 use std::fmt::Write;
 use std::path::Path;
@@ -242,6 +243,7 @@ fuzz_target!(|input: Input| {
         &input.directions[..input.directions.len().min(16)],
     ));
     let (single, batch) = check_evaluations(&net, &pairs, None);
+    check_pruning(&net, &pairs);
     if !tame {
         return;
     }

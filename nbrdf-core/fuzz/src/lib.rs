@@ -87,6 +87,23 @@ pub fn check_evaluations(
     (single, batch)
 }
 
+/// Leaving out the hidden units that never fire changes no value: the pruned network of an
+/// accepted one evaluates to the same numbers at every pair (`network/pruning.rs` proves units
+/// dead for directions above the horizon; its float32 guards are what this checks).
+pub fn check_pruning(net: &nbrdf_core::network::Nbrdf, pairs: &[(Vec3, Vec3)]) {
+    let pruned = net.without_inactive_units();
+    for &(light, view) in pairs {
+        if !(light.is_finite() && view.is_finite() && light.z > 0.0 && view.z > 0.0) {
+            continue;
+        }
+        let (full, fewer) = (net.eval(view, light), pruned.eval(view, light));
+        assert!(
+            full.iter().zip(&fewer).all(|(a, b)| a == b),
+            "pruned {fewer:?}, full {full:?} at light {light}, view {view}"
+        );
+    }
+}
+
 /// Directions from fuzzer-chosen components, so that odd values (NaN, subnormal, huge, signed
 /// zeros) reach the evaluators beside [`fixed_pairs`].
 pub fn pairs_from_components(components: &[[f32; 6]]) -> Vec<(Vec3, Vec3)> {

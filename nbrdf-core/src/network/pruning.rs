@@ -14,7 +14,8 @@
 //! configurations whose two directions are both above the horizon
 //! (`cos theta_h cos theta_d >= sin theta_h sin theta_d |cos phi_d|`, from the light's and the
 //! view's elevations). Boxes of that domain are bounded layer by layer; a box on which some
-//! candidate unit may still be positive is split, up to a depth and a box budget, and a unit
+//! candidate unit may still be positive is split, up to a depth and a budget of boxes and of
+//! work (so a very wide network proves less rather than stalling its load), and a unit
 //! positive at a box centre is active outright. A unit counts as inactive only when every box
 //! of a cover bounds it at or below `-margin`; the margins (on the inputs and relative to each
 //! sum's magnitude) are far above float32's rounding, so the float32 evaluation of a dropped unit
@@ -55,6 +56,21 @@ const RELATIVE_MARGIN: f64 = 1e-5;
 const MAX_DEPTH: u32 = 10;
 /// Boxes bounded at most; beyond it the remaining candidates stay active.
 const BOX_BUDGET: usize = 200_000;
+/// Interval multiply-adds spent at most, so that loading a very wide network (a box costs
+/// `6 h1 + h1 h2 + 3 h2` of them) proves less instead of taking minutes; the paper's 21-wide
+/// networks stay within [`BOX_BUDGET`].
+const WORK_BUDGET: usize = 200_000_000;
+
+/// Boxes bounded at most for hidden widths `h1, h2`: [`BOX_BUDGET`], fewer where the boxes'
+/// work would exceed [`WORK_BUDGET`], and at least one (the whole domain).
+pub(crate) fn box_budget(widths: [usize; 2]) -> usize {
+    let [h1, h2] = widths;
+    let work_per_box = (super::INPUTS * h1)
+        .saturating_add(h1.saturating_mul(h2))
+        .saturating_add(3 * h2)
+        .max(1);
+    (WORK_BUDGET / work_per_box).clamp(1, BOX_BUDGET)
+}
 
 /// A box of the input domain: `theta_h, phi_h, theta_d, phi_d` (`phi_h` fixed at 0 for
 /// isotropic networks).
@@ -188,9 +204,11 @@ impl Domain {
     }
 }
 
-/// Bounds of `x W + b` over input bounds, widened by [`RELATIVE_MARGIN`].
-fn affine_bounds(layer: &Layer, x: &[Interval], out: &mut Vec<Interval>) {
+/// Bounds of `x W + b` over input bounds, widened by [`RELATIVE_MARGIN`]. Returns the largest
+/// `|b| + sum |w| max|x|` of the outputs, which bounds every partial sum of their evaluation.
+fn affine_bounds(layer: &Layer, x: &[Interval], out: &mut Vec<Interval>) -> f64 {
     out.clear();
+    let mut largest = 0.0f64;
     for o in 0..layer.outputs {
         let bias = f64::from(layer.bias[o]);
         let (mut lo, mut hi, mut scale) = (bias, bias, bias.abs());
@@ -202,7 +220,31 @@ fn affine_bounds(layer: &Layer, x: &[Interval], out: &mut Vec<Interval>) {
         }
         let margin = RELATIVE_MARGIN * scale;
         out.push(Interval::new(lo - margin, hi + margin));
+        largest = largest.max(scale);
     }
+    largest
+}
+
+fn relu_bounds(z: &[Interval]) -> Vec<Interval> {
+    z.iter()
+        .map(|z| Interval::new(z.lo.max(0.0), z.hi.max(0.0)))
+        .collect()
+}
+
+/// Whether some partial sum of a hidden layer may leave float32's range somewhere in the domain
+/// (bounded over the whole of it). The proof is about exact sums: a float32 sum whose positive
+/// terms overflow to `+inf` before its negative ones are added fires although its exact value
+/// is negative, so there the float32 evaluation is not what was proved.
+fn float32_may_overflow(layers: &[Layer; 3], anisotropic: bool) -> bool {
+    let (mut first, mut second) = (Vec::new(), Vec::new());
+    let scale1 = affine_bounds(
+        &layers[0],
+        &Domain::whole(anisotropic).input_bounds(),
+        &mut first,
+    );
+    let scale2 = affine_bounds(&layers[1], &relu_bounds(&first), &mut second);
+    // A quarter of float32's largest value leaves room for the rounding of 100s of terms.
+    scale1.max(scale2) >= f64::from(f32::MAX) / 4.0
 }
 
 /// Evaluates the network at a point of the domain as a renderer does, leaving both hidden
@@ -227,7 +269,7 @@ fn fire_at(
 /// The hidden units of a `6 -> h1 -> h2 -> 3` network that some pair of directions above the
 /// horizon may activate (see the module documentation). Layers whose shapes do not chain, or
 /// with a parameter that is not finite (whose interval bounds would prove nothing), give every
-/// unit active.
+/// unit active, and so do layers whose float32 sums may overflow ([`float32_may_overflow`]).
 pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
     let widths = [layers[0].outputs, layers[1].outputs];
     let all_active = ActiveUnits {
@@ -236,6 +278,7 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
     };
     if super::format::shape_problem(layers).is_some()
         || super::format::value_problem(layers).is_some()
+        || float32_may_overflow(layers, anisotropic)
     {
         return all_active;
     }
@@ -243,6 +286,7 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
     let mut candidate = [vec![true; widths[0]], vec![true; widths[1]]];
     let mut stack = vec![(Domain::whole(anisotropic), 0u32)];
     let mut bounded = 0usize;
+    let budget = box_budget(widths);
     let (mut first, mut second) = (Vec::new(), Vec::new());
     let mut hidden = [vec![0.0; widths[0]], vec![0.0; widths[1]]];
     while let Some((domain, depth)) = stack.pop() {
@@ -263,11 +307,7 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
         }
         bounded += 1;
         affine_bounds(&layers[0], &domain.input_bounds(), &mut first);
-        let relu: Vec<Interval> = first
-            .iter()
-            .map(|z| Interval::new(z.lo.max(0.0), z.hi.max(0.0)))
-            .collect();
-        affine_bounds(&layers[1], &relu, &mut second);
+        affine_bounds(&layers[1], &relu_bounds(&first), &mut second);
         let open: Vec<(usize, usize)> = [&first, &second]
             .iter()
             .enumerate()
@@ -283,7 +323,7 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
         if open.is_empty() {
             continue;
         }
-        if depth >= MAX_DEPTH || bounded + stack.len() >= BOX_BUDGET {
+        if depth >= MAX_DEPTH || bounded + stack.len() >= budget {
             for (l, k) in open {
                 candidate[l][k] = false;
             }

@@ -973,6 +973,66 @@ fn pruning_keeps_every_unit_of_layers_with_non_finite_parameters() {
     }
 }
 
+/// A second-layer unit whose exact sum is negative everywhere but whose float32 sum overflows:
+/// its first term, 3.45e5 times a first-layer unit `1e38 (cos theta_d - 0.99999)`, passes
+/// float32's largest value within 0.03 degrees of `theta_d = 0` (closer than any centre of the
+/// proof's boxes) before six constant units of 3e38 subtract 1.8e39, so the renderer's sum is
+/// `+inf` there. The interval proof alone drops it (its bound is below 0 from the first box
+/// on); the overflow guard keeps every unit, so pruned and full networks still agree.
+#[test]
+fn pruning_keeps_every_unit_where_float32_sums_may_overflow() {
+    let mut net = planted_net(3);
+    let h1 = net.layers[0].outputs;
+    let mut plant = |unit: usize, x5: f32, bias: f32| {
+        for i in 0..INPUTS {
+            net.layers[0].weights[i * h1 + unit] = if i == 5 { x5 } else { 0.0 };
+        }
+        net.layers[0].bias[unit] = bias;
+    };
+    plant(1, 1e38, -0.999_99e38);
+    let constants = 3..=8;
+    for unit in constants.clone() {
+        plant(unit, 0.0, 3e38);
+    }
+    let h2 = net.layers[1].outputs;
+    let overflowing = 1;
+    for i in 0..h1 {
+        for o in 0..h2 {
+            let w = &mut net.layers[1].weights[i * h2 + o];
+            let large = i == 1 || constants.contains(&i);
+            *w = match (i, o == overflowing) {
+                (1, true) => 3.45e5,
+                (_, true) if large => -1.0,
+                // The large units feed nothing else (those sums would overflow too).
+                (_, false) if large => 0.0,
+                (_, true) => 0.0,
+                _ => *w,
+            };
+        }
+    }
+    net.layers[1].bias[overflowing] = 0.0;
+    let v = hemisphere(0.4, 0.7);
+    assert!(
+        hidden_pre_activations(&net, v, v)[1][overflowing] < -1e39,
+        "exactly, the unit is far below 0"
+    );
+    let pruned = net.without_inactive_units();
+    for (l, v) in pruning_pairs(7) {
+        let (full, fewer) = (net.eval(v, l), pruned.eval(v, l));
+        assert!(
+            full.iter()
+                .zip(&fewer)
+                .all(|(a, b)| a == b || (a.is_nan() && b.is_nan())),
+            "pruned {fewer:?}, full {full:?} at {v} {l}"
+        );
+    }
+    let active = net.active_units();
+    assert!(
+        active.hidden1.iter().chain(&active.hidden2).all(|&a| a),
+        "nothing is proved where float32 sums may overflow: {active:?}"
+    );
+}
+
 #[test]
 fn pruned_networks_evaluate_exactly_like_the_full_ones() {
     let anisotropic = |seed| {
@@ -1031,4 +1091,34 @@ fn pruned_networks_evaluate_exactly_like_the_full_ones() {
         dropped >= 4 * 4,
         "the planted units and the trained networks' dead ones: {dropped}"
     );
+}
+
+#[test]
+fn wide_networks_prove_within_a_work_budget() {
+    use super::pruning::box_budget;
+    // The paper's width keeps the full box budget; with it alone a random 96-wide network took
+    // 4.4 s to prove and a 512-wide one 124 s (release build).
+    assert_eq!(box_budget([21, 21]), 200_000);
+    let cost = |h: usize| 6 * h + h * h + 3 * h;
+    for h in [96, 512, 4096] {
+        let boxes = box_budget([h, h]);
+        assert!(
+            boxes < 200_000 && boxes * cost(h) <= 200_000_000,
+            "{h}: {boxes}"
+        );
+    }
+    assert_eq!(box_budget([usize::MAX, usize::MAX]), 1);
+    // A wide network's proof still only drops units that change no value.
+    let net = test_net(160, 3);
+    let pruned = net.without_inactive_units();
+    let [d1, _] = net.active_units().inactive_counts();
+    assert!(
+        d1 > 0,
+        "a random 160-wide network has dead first-layer units"
+    );
+    let pairs = pruning_pairs(5);
+    let (full, fewer) = (eval_batch(&net, &pairs), eval_batch(&pruned, &pairs));
+    for ((got, want), (l, v)) in fewer.iter().zip(&full).zip(&pairs) {
+        assert_eq!(got, want, "pruned {got:?}, full {want:?} at {v} {l}");
+    }
 }
