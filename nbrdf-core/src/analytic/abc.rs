@@ -8,11 +8,15 @@ use super::{finite_non_negative, geometry, Geometry};
 use glam::DVec3;
 use std::f64::consts::PI;
 
-#[derive(Clone, Debug, PartialEq)]
+/// The parameters of one fit; field names as in the embedded `data/merl_fits.json`.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
 pub struct AbcParams {
     pub kd: [f64; 3],
+    #[serde(rename = "A")]
     pub a: [f64; 3],
+    #[serde(rename = "B")]
     pub b: f64,
+    #[serde(rename = "C")]
     pub c: f64,
     pub ior: f64,
 }

@@ -38,17 +38,8 @@ pub struct SgdFit {
     pub name: String,
     #[serde(default)]
     pub alias: Option<String>,
-    pub rho_d: [f64; 3],
-    pub rho_s: [f64; 3],
-    pub alpha: [f64; 3],
-    pub p: [f64; 3],
-    pub f0: [f64; 3],
-    pub f1: [f64; 3],
-    pub kap: [f64; 3],
-    pub lambda: [f64; 3],
-    pub c: [f64; 3],
-    pub k: [f64; 3],
-    pub theta0: [f64; 3],
+    #[serde(flatten)]
+    pub params: SgdParams,
     /// The fitting residual published with the fit.
     pub fit_error: [f64; 3],
 }
@@ -57,44 +48,8 @@ pub struct SgdFit {
 #[derive(Clone, Debug, Deserialize)]
 pub struct AbcFit {
     pub name: String,
-    pub kd: [f64; 3],
-    #[serde(rename = "A")]
-    pub a: [f64; 3],
-    #[serde(rename = "B")]
-    pub b: f64,
-    #[serde(rename = "C")]
-    pub c: f64,
-    pub ior: f64,
-}
-
-impl SgdFit {
-    pub fn params(&self) -> SgdParams {
-        SgdParams {
-            rho_d: self.rho_d,
-            rho_s: self.rho_s,
-            alpha: self.alpha,
-            p: self.p,
-            f0: self.f0,
-            f1: self.f1,
-            kap: self.kap,
-            lambda: self.lambda,
-            c: self.c,
-            k: self.k,
-            theta0: self.theta0,
-        }
-    }
-}
-
-impl AbcFit {
-    pub fn params(&self) -> AbcParams {
-        AbcParams {
-            kd: self.kd,
-            a: self.a,
-            b: self.b,
-            c: self.c,
-            ior: self.ior,
-        }
-    }
+    #[serde(flatten)]
+    pub params: AbcParams,
 }
 
 /// The parsed catalogue.
@@ -198,15 +153,15 @@ mod tests {
     fn figures_are_parsed_into_the_right_fields() {
         // Literal figures from the file (first and last material of each model).
         let s = sgd_fit("alum-bronze").unwrap();
-        assert_eq!(s.rho_d, [0.0478786, 0.0313514, 0.0200638]);
-        assert_eq!(s.theta0, [0.205635, 0.066289, -0.0661091]);
+        assert_eq!(s.params.rho_d, [0.0478786, 0.0313514, 0.0200638]);
+        assert_eq!(s.params.theta0, [0.205635, 0.066289, -0.0661091]);
         assert_eq!(s.fit_error, [0.100735, 0.0878706, 0.0861907]);
-        let a = abc_fit("alum-bronze").unwrap().params();
+        let a = &abc_fit("alum-bronze").unwrap().params;
         assert_eq!(a.kd, [0.024514, 0.022346, 0.01622]);
         assert_eq!(a.a, [51.714554, 37.932693, 27.373095]);
         assert_eq!((a.b, a.c, a.ior), (10482.133789, 0.816737, 2.236525));
         for m in &catalogue().sgd.materials {
-            let p = m.params();
+            let p = &m.params;
             let all = [
                 p.rho_d, p.rho_s, p.alpha, p.p, p.f0, p.f1, p.kap, p.lambda, p.c, p.k, p.theta0,
             ];
@@ -214,7 +169,7 @@ mod tests {
             assert!(p.alpha.iter().all(|&x| x > 0.0), "{}", m.name);
         }
         for m in &catalogue().abc.materials {
-            assert!(m.ior >= 1.0 && m.b >= 0.0, "{}", m.name);
+            assert!(m.params.ior >= 1.0 && m.params.b >= 0.0, "{}", m.name);
         }
     }
 }

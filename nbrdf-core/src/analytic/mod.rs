@@ -80,12 +80,18 @@ impl AnalyticBrdf {
             name: material.to_string(),
         };
         Ok(match model {
-            ModelKind::Sgd => {
-                AnalyticBrdf::Sgd(catalogue::sgd_fit(material).ok_or_else(unknown)?.params())
-            }
-            ModelKind::Abc => {
-                AnalyticBrdf::Abc(catalogue::abc_fit(material).ok_or_else(unknown)?.params())
-            }
+            ModelKind::Sgd => AnalyticBrdf::Sgd(
+                catalogue::sgd_fit(material)
+                    .ok_or_else(unknown)?
+                    .params
+                    .clone(),
+            ),
+            ModelKind::Abc => AnalyticBrdf::Abc(
+                catalogue::abc_fit(material)
+                    .ok_or_else(unknown)?
+                    .params
+                    .clone(),
+            ),
         })
     }
 

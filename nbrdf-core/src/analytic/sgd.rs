@@ -10,7 +10,8 @@ use super::{finite_non_negative, geometry, Geometry};
 use glam::DVec3;
 use std::f64::consts::PI;
 
-#[derive(Clone, Debug, PartialEq)]
+/// The parameters of one fit; field names as in the embedded `data/merl_fits.json`.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
 pub struct SgdParams {
     pub rho_d: [f64; 3],
     pub rho_s: [f64; 3],
