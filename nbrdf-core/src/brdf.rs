@@ -33,6 +33,11 @@ impl<'a> Directions<'a> {
         self.x.is_empty()
     }
 
+    /// The length of the shortest component: the lanes a batch call processes.
+    pub fn min_len(&self) -> usize {
+        self.x.len().min(self.y.len()).min(self.z.len())
+    }
+
     pub fn get(&self, i: usize) -> Vec3 {
         Vec3::new(self.x[i], self.y[i], self.z[i])
     }
@@ -74,6 +79,11 @@ impl<'a> DirectionsMut<'a> {
         self.x.is_empty()
     }
 
+    /// The length of the shortest component: the lanes a batch call processes.
+    pub fn min_len(&self) -> usize {
+        self.x.len().min(self.y.len()).min(self.z.len())
+    }
+
     pub fn set(&mut self, i: usize, v: Vec3) {
         self.x[i] = v.x;
         self.y[i] = v.y;
@@ -108,11 +118,22 @@ impl<'a> RgbMut<'a> {
         self.r.is_empty()
     }
 
+    /// The length of the shortest component: the lanes a batch call processes.
+    pub fn min_len(&self) -> usize {
+        self.r.len().min(self.g.len()).min(self.b.len())
+    }
+
     pub fn set(&mut self, i: usize, rgb: [f32; 3]) {
         self.r[i] = rgb[0];
         self.g[i] = rgb[1];
         self.b[i] = rgb[2];
     }
+}
+
+/// The lanes every slice of a batch call has: batch functions process this common prefix
+/// when their slices differ in length.
+pub fn common_len(lengths: &[usize]) -> usize {
+    lengths.iter().copied().min().unwrap_or(0)
 }
 
 /// An isotropic reflectance function `f_r(view, light)` in linear RGB.
@@ -122,11 +143,12 @@ pub trait Brdf: Send + Sync {
     fn eval(&self, view: Vec3, light: Vec3) -> [f32; 3];
 
     /// `f_r(view, light) * cos(theta_light)` for a batch (what Mitsuba's `BSDF.eval` returns).
-    /// `view`, `light` and `out` have the same length (the caller checks). Implementations
-    /// override this with a vectorised, multi-threaded version.
+    /// If the slices (components included) differ in length, only their common prefix is
+    /// evaluated and the rest of `out` is left as it is. Implementations override this with a
+    /// vectorised, multi-threaded version.
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
         let mut out = out;
-        for i in 0..view.len() {
+        for i in 0..common_len(&[view.min_len(), light.min_len(), out.min_len()]) {
             let l = light.get(i);
             let cos = cos_theta_light(l);
             let f = self.eval(view.get(i), l);
@@ -142,5 +164,41 @@ pub fn cos_theta_light(light: Vec3) -> f32 {
         (light.z / len).max(0.0)
     } else {
         0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The trait's own batch loop, on a reflectance that is 1 everywhere.
+    struct One;
+
+    impl Brdf for One {
+        fn eval(&self, _: Vec3, _: Vec3) -> [f32; 3] {
+            [1.0; 3]
+        }
+    }
+
+    #[test]
+    fn the_default_batch_evaluates_the_common_prefix_of_uneven_components() {
+        let up = [0.0, 0.0, 1.0, 1.0, 1.0];
+        let zeros = [0.0; 5];
+        let view = Directions {
+            x: &zeros,
+            y: &zeros[..3],
+            z: &up,
+        };
+        let light = Directions {
+            x: &zeros,
+            y: &zeros,
+            z: &up[..4],
+        };
+        let mut out = [[-1.0f32; 5], [-1.0; 5], [-1.0; 5]];
+        let [r, g, b] = &mut out;
+        One.eval_cos_batch(view, light, RgbMut { r, g, b });
+        // Lanes 0-1 have the light at z = 0 (cos 0), lane 2 at z = 1; 3-4 are past the prefix.
+        assert_eq!(out[0], [0.0, 0.0, 1.0, -1.0, -1.0]);
+        assert_eq!(out[2], out[0]);
     }
 }

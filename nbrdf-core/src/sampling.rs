@@ -10,7 +10,7 @@
 //! The pdf a sample reports is computed from the float32 direction it returns, by the same
 //! function as [`SamplingStrategy::pdf`], so the two agree exactly (what MIS needs).
 
-use crate::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
+use crate::brdf::{common_len, Brdf, Directions, DirectionsMut, RgbMut};
 use crate::error::{NbrdfError, Result};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -539,19 +539,13 @@ pub fn sample_batch(
     weight: RgbMut<'_>,
     pdf: &mut [f32],
 ) {
-    let n = [
-        view.len(),
-        view.y.len(),
-        view.z.len(),
-        u.len(),
-        u.y.len(),
-        u.z.len(),
-    ]
-    .into_iter()
-    .chain([light.x.len(), light.y.len(), light.z.len()])
-    .chain([weight.r.len(), weight.g.len(), weight.b.len(), pdf.len()])
-    .min()
-    .unwrap_or(0);
+    let n = common_len(&[
+        view.min_len(),
+        u.min_len(),
+        light.min_len(),
+        weight.min_len(),
+        pdf.len(),
+    ]);
     let outputs = [
         &mut light.x[..n],
         &mut light.y[..n],
@@ -613,18 +607,7 @@ pub fn pdf_batch(
     light: Directions<'_>,
     pdf: &mut [f32],
 ) {
-    let n = [
-        view.len(),
-        view.y.len(),
-        view.z.len(),
-        light.len(),
-        light.y.len(),
-        light.z.len(),
-        pdf.len(),
-    ]
-    .into_iter()
-    .min()
-    .unwrap_or(0);
+    let n = common_len(&[view.min_len(), light.min_len(), pdf.len()]);
     pdf[..n]
         .par_chunks_mut(TASK_LANES)
         .enumerate()

@@ -412,6 +412,39 @@ fn batches_match_single_evaluations() {
     }
 }
 
+#[test]
+fn batches_with_uneven_components_evaluate_their_common_prefix() {
+    use nbrdf_core::brdf::{Directions, RgbMut};
+    let m = parse(Fields::valid(true).bytes()).unwrap();
+    let (v, l) = directions()[0];
+    let repeat = |x: f32| vec![x; 6];
+    let (vx, vy, vz) = (repeat(v.x), repeat(v.y), repeat(v.z));
+    let (lx, ly, lz) = (repeat(l.x), repeat(l.y), repeat(l.z));
+    let view = Directions {
+        x: &vx,
+        y: &vy[..4],
+        z: &vz,
+    };
+    let light = Directions {
+        x: &lx,
+        y: &ly,
+        z: &lz[..5],
+    };
+    let single = m.eval_cos_f32(v, l);
+    let mut planar = vec![-1.0f32; 18];
+    m.eval_cos_batch_f32(view, light, RgbMut::from_planar(&mut planar).unwrap());
+    let mut clamped = vec![-1.0f32; 18];
+    Brdf::eval_cos_batch(&m, view, light, RgbMut::from_planar(&mut clamped).unwrap());
+    // The raw values keep the measurement's out-of-gamut negatives; the trait clamps them.
+    for (out, expect) in [(&planar, single), (&clamped, single.map(|x| x.max(0.0)))] {
+        for c in 0..3 {
+            let channel = &out[6 * c..6 * (c + 1)];
+            assert!(channel[..4].iter().all(|&x| x == expect[c]), "{out:?}");
+            assert_eq!(&channel[4..], &[-1.0, -1.0], "past the prefix: {out:?}");
+        }
+    }
+}
+
 /// Training straight from a measurement file (`nbrdf train X.bsdf`): the source is recognised by
 /// content and the network learns the closed form of the constant synthetic measurement.
 #[cfg(feature = "train")]

@@ -20,7 +20,7 @@ mod tests;
 pub use grid::*;
 pub use io::FILE_SIZE;
 
-use crate::brdf::{Brdf, Directions, RgbMut};
+use crate::brdf::{common_len, Brdf, Directions, RgbMut};
 use crate::coords::RusinkiewiczAngles;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -121,12 +121,7 @@ pub(crate) fn parallel_eval_cos<F>(
 ) where
     F: Fn(DVec3, DVec3) -> [f64; 3] + Sync,
 {
-    let n = [view.x, view.y, view.z, light.x, light.y, light.z]
-        .iter()
-        .map(|s| s.len())
-        .chain([out.r.len(), out.g.len(), out.b.len()])
-        .min()
-        .unwrap_or(0);
+    let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
     let RgbMut { r, g, b } = out;
     r[..n]
         .par_chunks_mut(BATCH_CHUNK)

@@ -7,7 +7,7 @@
 
 use super::format::shape_problem;
 use super::{Layer, Nbrdf};
-use crate::brdf::{Directions, RgbMut};
+use crate::brdf::{common_len, Directions, RgbMut};
 use crate::coords::network_input_components_for;
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
 use crate::fastmath::Fused;
@@ -65,20 +65,7 @@ impl Nbrdf {
         light: Directions<'_>,
         out: RgbMut<'_>,
     ) {
-        let n = [
-            view.x.len(),
-            view.y.len(),
-            view.z.len(),
-            light.x.len(),
-            light.y.len(),
-            light.z.len(),
-            out.r.len(),
-            out.g.len(),
-            out.b.len(),
-        ]
-        .into_iter()
-        .min()
-        .unwrap_or(0);
+        let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
         let (r, g, b) = (&mut out.r[..n], &mut out.g[..n], &mut out.b[..n]);
         let Some(packed) = Packed::new(self) else {
             for c in [r, g, b] {

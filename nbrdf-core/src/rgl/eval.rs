@@ -10,7 +10,7 @@
 
 use super::warp::SliceWeights;
 use super::RglMeasurement;
-use crate::brdf::{Brdf, Directions, RgbMut};
+use crate::brdf::{common_len, Brdf, Directions, RgbMut};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
@@ -206,8 +206,8 @@ impl RglMeasurement {
         }
     }
 
-    /// [`RglMeasurement::eval_cos_f32`] for a batch, in parallel (`view`, `light` and `out` of
-    /// the same length; extra outputs are left untouched).
+    /// [`RglMeasurement::eval_cos_f32`] for a batch, in parallel: the common prefix of the
+    /// slices (components included); outputs past it are left untouched.
     pub fn eval_cos_batch_f32(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
         for_each_pair(view, light, out, |v, l| self.eval_cos_f32(v, l));
     }
@@ -220,7 +220,7 @@ fn for_each_pair(
     out: RgbMut<'_>,
     eval: impl Fn(Vec3, Vec3) -> [f32; 3] + Sync,
 ) {
-    let n = view.len().min(light.len());
+    let n = common_len(&[view.min_len(), light.min_len()]);
     out.r
         .par_chunks_mut(BATCH_CHUNK)
         .zip(out.g.par_chunks_mut(BATCH_CHUNK))
