@@ -3,6 +3,45 @@
 
 use glam::Vec3;
 
+/// `len`, `is_empty` and `min_len` of a planar batch type with components `$a, $b, $c`.
+macro_rules! planar_lanes {
+    ($ty:ident, $a:ident, $b:ident, $c:ident) => {
+        impl $ty<'_> {
+            /// The length of the first component.
+            pub fn len(&self) -> usize {
+                self.$a.len()
+            }
+
+            pub fn is_empty(&self) -> bool {
+                self.$a.is_empty()
+            }
+
+            /// The length of the shortest component: the lanes a batch call processes.
+            pub fn min_len(&self) -> usize {
+                self.$a.len().min(self.$b.len()).min(self.$c.len())
+            }
+        }
+    };
+}
+
+/// `from_planar` of a mutable planar batch type with components `$a, $b, $c`.
+macro_rules! planar_from_mut_buffer {
+    ($ty:ident, $a:ident, $b:ident, $c:ident) => {
+        impl<'a> $ty<'a> {
+            /// Splits a planar buffer `[a0..an, b0..bn, c0..cn]` of length `3 n`.
+            pub fn from_planar(buffer: &'a mut [f32]) -> Option<Self> {
+                if buffer.len() % 3 != 0 {
+                    return None;
+                }
+                let n = buffer.len() / 3;
+                let ($a, rest) = buffer.split_at_mut(n);
+                let ($b, $c) = rest.split_at_mut(n);
+                Some($ty { $a, $b, $c })
+            }
+        }
+    };
+}
+
 /// A batch of directions in the local shading frame, one slice per component.
 #[derive(Clone, Copy, Debug)]
 pub struct Directions<'a> {
@@ -23,19 +62,6 @@ impl<'a> Directions<'a> {
             y: &buffer[n..2 * n],
             z: &buffer[2 * n..],
         })
-    }
-
-    pub fn len(&self) -> usize {
-        self.x.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.x.is_empty()
-    }
-
-    /// The length of the shortest component: the lanes a batch call processes.
-    pub fn min_len(&self) -> usize {
-        self.x.len().min(self.y.len()).min(self.z.len())
     }
 
     pub fn get(&self, i: usize) -> Vec3 {
@@ -61,29 +87,6 @@ pub struct DirectionsMut<'a> {
 }
 
 impl<'a> DirectionsMut<'a> {
-    pub fn from_planar(buffer: &'a mut [f32]) -> Option<Self> {
-        if buffer.len() % 3 != 0 {
-            return None;
-        }
-        let n = buffer.len() / 3;
-        let (x, rest) = buffer.split_at_mut(n);
-        let (y, z) = rest.split_at_mut(n);
-        Some(DirectionsMut { x, y, z })
-    }
-
-    pub fn len(&self) -> usize {
-        self.x.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.x.is_empty()
-    }
-
-    /// The length of the shortest component: the lanes a batch call processes.
-    pub fn min_len(&self) -> usize {
-        self.x.len().min(self.y.len()).min(self.z.len())
-    }
-
     pub fn set(&mut self, i: usize, v: Vec3) {
         self.x[i] = v.x;
         self.y[i] = v.y;
@@ -100,35 +103,18 @@ pub struct RgbMut<'a> {
 }
 
 impl<'a> RgbMut<'a> {
-    pub fn from_planar(buffer: &'a mut [f32]) -> Option<Self> {
-        if buffer.len() % 3 != 0 {
-            return None;
-        }
-        let n = buffer.len() / 3;
-        let (r, rest) = buffer.split_at_mut(n);
-        let (g, b) = rest.split_at_mut(n);
-        Some(RgbMut { r, g, b })
-    }
-
-    pub fn len(&self) -> usize {
-        self.r.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.r.is_empty()
-    }
-
-    /// The length of the shortest component: the lanes a batch call processes.
-    pub fn min_len(&self) -> usize {
-        self.r.len().min(self.g.len()).min(self.b.len())
-    }
-
     pub fn set(&mut self, i: usize, rgb: [f32; 3]) {
         self.r[i] = rgb[0];
         self.g[i] = rgb[1];
         self.b[i] = rgb[2];
     }
 }
+
+planar_lanes!(Directions, x, y, z);
+planar_lanes!(DirectionsMut, x, y, z);
+planar_lanes!(RgbMut, r, g, b);
+planar_from_mut_buffer!(DirectionsMut, x, y, z);
+planar_from_mut_buffer!(RgbMut, r, g, b);
 
 /// The lanes every slice of a batch call has: batch functions process this common prefix
 /// when their slices differ in length.
