@@ -354,3 +354,75 @@ proptest! {
         }
     }
 }
+
+/// The six direction components of `pairs` (views' x, y, z, then lights'), component `k` cut to
+/// its first `lengths[k]` lanes.
+fn uneven_columns(pairs: &[(Vec3, Vec3)], lengths: [usize; 6]) -> [Vec<f32>; 6] {
+    let component = |k: usize| -> Vec<f32> {
+        pairs
+            .iter()
+            .take(lengths[k])
+            .map(|(v, l)| if k < 3 { v[k] } else { l[k - 3] })
+            .collect()
+    };
+    [0, 1, 2, 3, 4, 5].map(component)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Every batched entry point (`eval_cos_batch` of tables and networks, `pdf_batch`,
+    /// `sample_batch`) processes the common prefix of slices of different lengths, components
+    /// included, equal to the single calls there, and leaves the rest alone: no panic.
+    #[test]
+    fn uneven_batches_process_their_common_prefix(
+        pairs in prop::collection::vec((unit_direction(), unit_direction()), 12),
+        lengths in [0usize..=12, 0usize..=12, 0usize..=12, 0usize..=12, 0usize..=12, 0usize..=12],
+        out_lengths in [0usize..=12, 0usize..=12, 0usize..=12],
+    ) {
+        let cols = uneven_columns(&pairs, lengths);
+        let view = Directions { x: &cols[0], y: &cols[1], z: &cols[2] };
+        let light = Directions { x: &cols[3], y: &cols[4], z: &cols[5] };
+        let n = lengths.iter().chain(&out_lengths).copied().min().unwrap_or(0);
+        let untouched = |c: &[f32]| c[n.min(c.len())..].iter().all(|&x| x == -1.0);
+        for brdf in [test_network() as &dyn Brdf, test_table() as &dyn Brdf] {
+            let [mut r, mut g, mut b] = out_lengths.map(|len| vec![-1.0f32; len]);
+            brdf.eval_cos_batch(view, light, RgbMut { r: &mut r, g: &mut g, b: &mut b });
+            for (i, &(v, l)) in pairs.iter().take(n).enumerate() {
+                let want = eval_cos(brdf, v, l);
+                prop_assert!(close(want, [r[i], g[i], b[i]]), "lane {i}: {want:?}");
+            }
+            prop_assert!(untouched(&r) && untouched(&g) && untouched(&b));
+        }
+        let strategy = SamplingStrategy::BlinnPhong { exponent: 40.0, specular_weight: 0.5 };
+        let mut pdf = vec![-1.0f32; out_lengths[0]];
+        sampling::pdf_batch(&strategy, view, light, &mut pdf);
+        let n_pdf = lengths.iter().copied().chain([out_lengths[0]]).min().unwrap_or(0);
+        for (i, &(v, l)) in pairs.iter().take(n_pdf).enumerate() {
+            prop_assert_eq!(pdf[i], strategy.pdf(v, l));
+        }
+        prop_assert!(pdf[n_pdf..].iter().all(|&x| x == -1.0));
+        // The lights' columns serve as the random numbers (folded into [0, 1)).
+        let u: Vec<Vec<f32>> = cols[3..].iter().map(|c| c.iter().map(|x| x.abs() * 0.99).collect()).collect();
+        let [mut ox, mut oy, mut oz] = out_lengths.map(|len| vec![0.0f32; len]);
+        let [mut r, mut g, mut b] = out_lengths.map(|len| vec![-1.0f32; len]);
+        let mut spdf = vec![-1.0f32; out_lengths[1]];
+        sampling::sample_batch(
+            &strategy,
+            test_network(),
+            view,
+            Directions { x: &u[0], y: &u[1], z: &u[2] },
+            DirectionsMut { x: &mut ox, y: &mut oy, z: &mut oz },
+            RgbMut { r: &mut r, g: &mut g, b: &mut b },
+            &mut spdf,
+        );
+        let n_sample = n.min(out_lengths[1]);
+        for i in 0..n_sample {
+            let s = strategy.sample(pairs[i].0, [u[0][i], u[1][i], u[2][i]]);
+            prop_assert_eq!(spdf[i], s.pdf);
+            prop_assert_eq!([ox[i], oy[i], oz[i]], s.light.to_array());
+        }
+        prop_assert!(spdf[n_sample..].iter().all(|&x| x == -1.0));
+        prop_assert!(untouched(&r) && untouched(&g) && untouched(&b));
+    }
+}
