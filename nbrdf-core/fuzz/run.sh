@@ -14,7 +14,7 @@ seconds=${1:-300}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(merl_reader merl_structured network_json network_structured rgl_reader rgl_structured)
+    targets=(merl_reader merl_structured network_json network_structured network_pruning rgl_reader rgl_structured)
 fi
 nice_cmd=(nice -n "${NICE:-10}")
 

@@ -104,6 +104,33 @@ pub fn check_pruning(net: &nbrdf_core::network::Nbrdf, pairs: &[(Vec3, Vec3)]) {
     }
 }
 
+/// A deterministic value in `(-1, 1)` for parameter `k` of a network drawn from `seed`
+/// (splitmix64-like hash), so that a few input bytes describe hundreds of weights.
+pub fn unit_value(seed: u64, k: u64) -> f32 {
+    let mut z = seed.wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    ((z >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+}
+
+/// `(light, view)` pairs near the horizon and near the normal at several azimuths: where a unit
+/// alive only in a sliver of the domain would fire.
+pub fn grazing_pairs() -> Vec<(Vec3, Vec3)> {
+    let elevations = [1e-6f32, 1e-3, 0.05, 0.6, 1.5, std::f32::consts::FRAC_PI_2];
+    let azimuths = [0.0f32, 1.0, std::f32::consts::PI, 4.0];
+    let direction = |e: f32, a: f32| Vec3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin());
+    let mut pairs = Vec::new();
+    for &el in &elevations {
+        for &ev in &elevations {
+            for &a in &azimuths {
+                pairs.push((direction(el, a), direction(ev, 0.0)));
+            }
+        }
+    }
+    pairs
+}
+
 /// Directions from fuzzer-chosen components, so that odd values (NaN, subnormal, huge, signed
 /// zeros) reach the evaluators beside [`fixed_pairs`].
 pub fn pairs_from_components(components: &[[f32; 6]]) -> Vec<(Vec3, Vec3)> {
@@ -171,7 +198,10 @@ pub fn assert_acceptable_merl(bytes: &[u8]) -> f64 {
 /// through the `Brdf` trait to finite non-negative values, single and batched alike (the trainer
 /// and the plugins read it there), and, for unit directions, give Mitsuba's raw (possibly
 /// slightly negative) `eval` finite values too.
-pub fn check_rgl_measurement(measurement: &nbrdf_core::rgl::RglMeasurement, pairs: &[(Vec3, Vec3)]) {
+pub fn check_rgl_measurement(
+    measurement: &nbrdf_core::rgl::RglMeasurement,
+    pairs: &[(Vec3, Vec3)],
+) {
     let (single, batch) = check_evaluations(measurement, pairs, None);
     for (i, ((s, b), (light, view))) in single.iter().zip(&batch).zip(pairs).enumerate() {
         // The batch is cosine weighted; both clamp the same raw value, so zero must agree.

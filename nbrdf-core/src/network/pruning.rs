@@ -24,7 +24,8 @@
 //! Twin: none (the plugin asks the library through `nbrdf_network_active_units`). Tests:
 //! `network::tests` (dropped units change no value on dense and grazing directions, a unit
 //! alive only in a sliver is kept, a unit alive only where a direction is below the horizon is
-//! dropped).
+//! dropped, float32 overflow keeps every unit, the work budget) and the fuzz target
+//! `network_pruning`.
 
 use super::{Layer, Nbrdf, INPUTS};
 use crate::coords::{network_input_from_angles_for, RusinkiewiczAngles};
