@@ -443,6 +443,21 @@ fn batches_with_uneven_components_evaluate_their_common_prefix() {
             assert_eq!(&channel[4..], &[-1.0, -1.0], "past the prefix: {out:?}");
         }
     }
+    // Output channels of different lengths: the prefix shrinks to the shortest one.
+    let (mut r, mut g, mut b) = (vec![-1.0f32; 6], vec![-1.0f32; 3], vec![-1.0f32; 6]);
+    m.eval_cos_batch_f32(
+        view,
+        light,
+        RgbMut {
+            r: &mut r,
+            g: &mut g,
+            b: &mut b,
+        },
+    );
+    for (c, channel) in [&r, &g, &b].into_iter().enumerate() {
+        assert!(channel[..3].iter().all(|&x| x == single[c]), "{channel:?}");
+        assert!(channel[3..].iter().all(|&x| x == -1.0), "{channel:?}");
+    }
 }
 
 /// Training straight from a measurement file (`nbrdf train X.bsdf`): the source is recognised by

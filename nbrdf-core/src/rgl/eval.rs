@@ -220,15 +220,16 @@ fn for_each_pair(
     out: RgbMut<'_>,
     eval: impl Fn(Vec3, Vec3) -> [f32; 3] + Sync,
 ) {
-    let n = common_len(&[view.min_len(), light.min_len()]);
-    out.r
+    let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
+    let RgbMut { r, g, b } = out;
+    r[..n]
         .par_chunks_mut(BATCH_CHUNK)
-        .zip(out.g.par_chunks_mut(BATCH_CHUNK))
-        .zip(out.b.par_chunks_mut(BATCH_CHUNK))
+        .zip(g[..n].par_chunks_mut(BATCH_CHUNK))
+        .zip(b[..n].par_chunks_mut(BATCH_CHUNK))
         .enumerate()
         .for_each(|(chunk, ((r, g), b))| {
             let start = chunk * BATCH_CHUNK;
-            for i in 0..r.len().min(n.saturating_sub(start)) {
+            for i in 0..r.len() {
                 let value = eval(view.get(start + i), light.get(start + i));
                 (r[i], g[i], b[i]) = (value[0], value[1], value[2]);
             }
