@@ -55,29 +55,18 @@ struct Input {
     weight_seed: u64,
     /// Weights uniform in `(-2^s, 2^s)`, `s` in [-8, 31].
     weight_scale: u8,
-    /// Added to every bias of the two hidden layers, in units of the weight scale / 8.
+    /// Added to every bias of the two hidden layers (after the replacements), in units of the
+    /// weight scale / 8.
     bias_shift: [i8; 2],
     /// Values replaced in the flat parameter list `W1 b1 W2 b2 W3 b3` (index modulo its length).
     replacements: Vec<(u16, Value)>,
     directions: Vec<[f32; 6]>,
 }
 
-fn parameters(input: &Input, hidden: usize) -> Vec<f32> {
-    let scale = 2f32.powi(i32::from(input.weight_scale % 40) - 8);
+fn parameters(input: &Input, hidden: usize, scale: f32) -> Vec<f32> {
     let mut params: Vec<f32> = (0..parameter_count_for(hidden) as u64)
         .map(|k| unit_value(input.weight_seed, k) * scale)
         .collect();
-    // Bias ranges within the flat list: b1 after W1, b2 after W2.
-    let b1 = 6 * hidden..7 * hidden;
-    let b2_start = 7 * hidden + hidden * hidden;
-    for (range, shift) in [
-        (b1, input.bias_shift[0]),
-        (b2_start..b2_start + hidden, input.bias_shift[1]),
-    ] {
-        for b in &mut params[range] {
-            *b += f32::from(shift) * scale / 8.0;
-        }
-    }
     for &(position, value) in input.replacements.iter().take(16) {
         let i = usize::from(position) % params.len();
         params[i] = value.get();
@@ -87,10 +76,16 @@ fn parameters(input: &Input, hidden: usize) -> Vec<f32> {
 
 fuzz_target!(|input: Input| {
     let hidden = 1 + usize::from(input.hidden) % 24;
-    let Ok(mut net) = Nbrdf::from_flat("fuzz", hidden, &parameters(&input, hidden)) else {
+    let scale = 2f32.powi(i32::from(input.weight_scale % 40) - 8);
+    let Ok(mut net) = Nbrdf::from_flat("fuzz", hidden, &parameters(&input, hidden, scale)) else {
         return; // non-finite replacements: refused, which the other targets check
     };
     net.anisotropic = input.anisotropic;
+    for (layer, shift) in net.layers.iter_mut().zip(input.bias_shift) {
+        for b in &mut layer.bias {
+            *b += f32::from(shift) * scale / 8.0;
+        }
+    }
     let mut pairs = fixed_pairs();
     pairs.extend(grazing_pairs());
     pairs.extend(pairs_from_components(
