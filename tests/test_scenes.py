@@ -5,6 +5,7 @@ convergence and rays/sec scripts. Tiny images throughout (64x43 Veach, 48x27 kit
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -365,6 +366,14 @@ def test_convergence_rgl_path_against_measured(tmp_path, shared):
     assert summary["vs_measured"][summary["best_nbrdf"]] == summary["best_vs_measured"]
     text = (tmp_path / "out" / "veach" / "summary.md").read_text()
     assert "two-lobe-fit / measured" in text and f"| {summary['best_nbrdf']} " in text
+    # The plates were also timed in diffuse, in the same interleaved runs (3 seeds per level).
+    floor = summary["cost_floor"]
+    top = max(r["spp"] for r in report["results"])
+    assert floor["spp"] == top and set(floor["per_sample"]) == set(summary["vs_measured"])
+    assert sorted((t["spp"], t["seed"]) for t in report["timings"]) == sorted(
+        (r["spp"], r["seed"]) for r in report["results"] if r["strategy"] == "measured")
+    assert 0 < floor["floor_time"] < 5 and all(b > 0 for b in floor["bound"].values())
+    assert "`diffuse` time" in text
 
 
 def test_convergence_kitchen_quick_with_the_new_strategies(tmp_path, shared):
@@ -424,6 +433,33 @@ def test_equal_time_summary_is_robust_to_one_bad_seed():
     assert summary["rmse_pooled"]["phong-fit"] == pytest.approx(pooled)
     assert summary["vs_measured"]["phong-fit"] == pytest.approx(0.5 / 0.6)
     assert summary["best_nbrdf"] == "phong-fit" and "measured" not in summary["vs_measured"]
+
+
+def test_cost_floor_bounds_the_equal_time_ratio_by_the_scene_s_share_of_the_time():
+    """The cost floor from rows built on closed forms: at the highest common spp, per-sample
+    ratio = RMSE / measured's RMSE, time ratio = seconds / measured's, bound = per-sample ratio x
+    sqrt(floor seconds / measured's); medians over seeds; strategies that are not NBRDF sampling
+    (measured) have no entry; spp beyond what every strategy reached is ignored."""
+    from nbrdf_tools.convergence import cost_floor
+
+    rows, timings = [], []
+    base = {"cosine": (2.0, 0.7), "tabulated": (0.45, 0.75), "measured": (0.5, 1.0)}
+    for spp in (1, 2, 4):
+        for seed in range(3):
+            jitter = 1.0 + 0.1 * (seed - 1)  # median at seed 1
+            for strategy, (rmse, seconds) in base.items():
+                rows.append({"strategy": strategy, "spp": spp, "seed": seed,
+                             "rmse": rmse / math.sqrt(spp) * jitter, "seconds": seconds * spp * jitter})
+            timings.append({"strategy": "diffuse", "spp": spp, "seed": seed, "seconds": 0.64 * spp * jitter})
+    rows.append({"strategy": "cosine", "spp": 8, "seed": 0, "rmse": 0.1, "seconds": 5.0})
+    floor = cost_floor(rows, timings)
+    assert floor["spp"] == 4 and floor["bsdf"] == "diffuse"
+    assert floor["floor_time"] == pytest.approx(0.64)
+    assert floor["per_sample"] == pytest.approx({"cosine": 4.0, "tabulated": 0.9})
+    assert floor["time"] == pytest.approx({"cosine": 0.7, "tabulated": 0.75})
+    assert floor["bound"] == pytest.approx({"cosine": 4.0 * 0.8, "tabulated": 0.9 * 0.8})
+    assert cost_floor(rows, []) is None
+    assert cost_floor([r for r in rows if r["strategy"] != "measured"], timings) is None
 
 
 def test_convergence_reports_missing_inputs_before_any_work(tmp_path):

@@ -24,6 +24,12 @@ figures (``equal_time`` in the JSON, the summary's tables) are the median over s
 materials also each strategy's RMSE over ``measured``'s at the same time (``vs_measured``) and
 the best NBRDF strategy (``best_nbrdf``, ``best_vs_measured``).
 
+Beside ``measured``, the Veach scene is also rendered, timed only, with ``diffuse`` plates (a
+BSDF that costs next to nothing; ``timings`` in the JSON): its render time is the scene's share
+of every render, so it bounds what any BSDF can gain on ``measured`` at equal time. The summary
+(``cost_floor``) gives, at the highest common spp, each strategy's RMSE and time over
+measured's and that bound (per-sample ratio x sqrt(floor time / measured's time)).
+
 References and ground truths (cached under ``OUT/references`` with JSON sidecars, re-rendered when
 any input changes; see ground_truth.py), all with multiple importance sampling (emitter + BSDF
 samples: the same integral, much less noise) at ``--gt-spp``:
@@ -87,6 +93,9 @@ NBRDF_SAMPLING = {"uniform": "uniform", "cosine": "cosine", "phong-fit": "phong"
 #: What ``--strategies`` renders unless told: ``default`` is one of the others under another
 #: name (the one the file names), so it is rendered only on request.
 DEFAULT_STRATEGIES = tuple(s for s in STRATEGIES if s != "default")
+#: The plates' BSDF of the cost floor (timed beside ``measured``): one that costs next to nothing,
+#: so its render time is the scene's share of every render.
+COST_FLOOR_BSDF = "diffuse"
 REFERENCE_SEED = 1_000_000  # references use seeds from here on; test renders stay far below
 QUICK_TRAIN_ARGS = ["--samples", "40000", "--epochs", "3", "--min-epochs", "1"]
 
@@ -187,14 +196,20 @@ def rmse_at_time(points: list[tuple[float, float]], seconds: float) -> float:
 
 
 def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str, save_dir: Path | None,
-            save_spp: set[int], seeds: int = 1) -> list[dict]:
+            save_spp: set[int], seeds: int = 1, timing_only: dict | None = None,
+            timings: list[dict] | None = None) -> list[dict]:
     """Renders every strategy at every spp level, ``seeds`` times with independent random numbers
     (interleaved, so that machine load hits them alike), and measures each against its reference
-    and against the ground truth. Rows carry the seed's index (``seed``)."""
+    and against the ground truth. Rows carry the seed's index (``seed``). The scenes of
+    ``timing_only`` (name: scene) are rendered in the same interleaved order and only timed, into
+    ``timings`` (rows of strategy, spp, seed and seconds)."""
     rows = []
+    timing_only = timing_only or {}
     for entry in strategies.values():
         entry["warm_up_seconds"] = warm_up(entry["scene"])
-    total = len(levels) * len(strategies) * seeds
+    for scene in timing_only.values():
+        warm_up(scene)
+    total = len(levels) * (len(strategies) + len(timing_only)) * seeds
     with bar(total=total, desc=f"{label}: renders", unit="render", leave=False) as renders:
         for level_index, spp in enumerate(levels):
             for seed_index, (strategy_index, (name, entry)) in itertools.product(range(seeds),
@@ -215,6 +230,11 @@ def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str,
                 rows.append(row)
                 if save_dir is not None and spp in save_spp and seed_index == 0:
                     write_exr(save_dir / f"{name}-{spp:04d}spp.exr", image)
+                renders.update()
+            for seed_index, (name, scene) in itertools.product(range(seeds), timing_only.items()):
+                seed = 1000 * (level_index + 1) + 100_000 * seed_index
+                seconds = min(timed_render(scene, spp, seed=seed)[1] for _ in range(timing_repeats(spp)))
+                timings.append({"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds})
                 renders.update()
     return rows
 
@@ -276,6 +296,33 @@ def equal_time_summary(rows: list[dict]) -> dict:
         lobe = summary["rmse"]["phong-fit"]
         summary["vs_phong_fit"] = {s: r / lobe for s, r in summary["rmse"].items() if s != "phong-fit"}
     return summary
+
+
+def cost_floor(rows: list[dict], timings: list[dict], floor: str = COST_FLOOR_BSDF) -> dict | None:
+    """What the render time costs each NBRDF strategy against ``measured``, and the least any
+    BSDF could cost: at the highest spp that all reached (median over seeds), each strategy's RMSE
+    over measured's (``per_sample``: same samples, so the sampler's quality alone), its render
+    time over measured's (``time``), and the plates rendered with ``floor`` (a BSDF that costs next
+    to nothing, timed in the same runs; ``floor_time``). ``bound``: the equal-time ratio that each
+    strategy's per-sample error would reach at the floor's time, i.e. if the BSDF's evaluation and
+    sampling cost nothing (equal time: the RMSE ratio is the per-sample ratio times the square root
+    of the time ratio). None without measured or the floor's timings."""
+    floor_rows = [t for t in timings if t["strategy"] == floor]
+    if not floor_rows or not any(r["strategy"] == "measured" for r in rows):
+        return None
+    strategies = list(dict.fromkeys(r["strategy"] for r in rows))
+    spp = min(max(r["spp"] for r in rows + floor_rows if r["strategy"] == s) for s in strategies + [floor])
+
+    def median(strategy: str, key: str, source: list[dict]) -> float:
+        return float(np.median([r[key] for r in source if r["strategy"] == strategy and r["spp"] == spp]))
+
+    measured_time, measured_rmse = median("measured", "seconds", rows), median("measured", "rmse", rows)
+    floor_time = median(floor, "seconds", floor_rows) / measured_time
+    nbrdf = [s for s in strategies if s in NBRDF_SAMPLING]
+    per_sample = {s: median(s, "rmse", rows) / measured_rmse for s in nbrdf}
+    return {"bsdf": floor, "spp": spp, "statistic": "median over seeds", "floor_time": floor_time,
+            "per_sample": per_sample, "time": {s: median(s, "seconds", rows) / measured_time for s in nbrdf},
+            "bound": {s: r * math.sqrt(floor_time) for s, r in per_sample.items()}}
 
 
 def stored_default_sampling(network: Path) -> str | None:
@@ -436,6 +483,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
     levels = spp_levels(args.max_spp)
     specs = material_specs(args)
     results, representation, equal_time, per_material, predicted_lobes = [], [], [], {}, {}
+    timings = []
     tag = "" if setup.integrator == "bsdf" else f"-{setup.integrator}"  # keeps the two runs apart
     settings = {"spp": args.gt_spp, "resolution": list(setup.resolution), "integrator": "mis",
                 "seed": REFERENCE_SEED, "spp_per_pass": args.spp_per_pass}
@@ -489,7 +537,15 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
                                         "reference_name": "measured"}
         save_dir = out / f"renders{tag}" / label
         save_spp = {levels[0], levels[len(levels) // 2], levels[-1]}
-        rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp, args.seeds)
+        # Beside measured, the plates in a BSDF that costs next to nothing: the scene's share of a
+        # render, which bounds what any BSDF can gain on measured at equal time (cost_floor).
+        floor = {COST_FLOOR_BSDF: mask_scene} if "measured" in strategies else {}
+        material_timings = []
+        rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp, args.seeds,
+                       timing_only=floor, timings=material_timings)
+        for row in material_timings:
+            row.update(scene="veach", material=label, integrator=setup.integrator)
+        timings += material_timings
         write_exr(save_dir / "ground-truth.exr", ground_truth)
         write_exr(save_dir / "nbrdf-converged.exr", nbrdf_ref)
         write_png(save_dir / "ground-truth.png", ground_truth)
@@ -499,6 +555,9 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
         results += rows
         per_material[label] = rows
         summary = equal_time_summary(rows)
+        floor_summary = cost_floor(rows, material_timings)
+        if floor_summary is not None:
+            summary["cost_floor"] = floor_summary
         equal_time.append({"scene": "veach", "material": label, "kind": material.kind,
                            "exponent": material.exponent, "specular_weight": material.specular_weight,
                            "two_lobe_exponents": material.two_lobe_exponents,
@@ -517,7 +576,7 @@ def run_veach(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes: 
     plot_overview(out / "plots" / f"veach{tag}-overview.png",
                   f"Veach scene, {'pure BSDF sampling' if setup.integrator == 'bsdf' else 'MIS'}: RMSE on the plates "
                   "against render time", per_material)
-    return {"results": results, "representation": representation, "equal_time": equal_time}
+    return {"results": results, "representation": representation, "equal_time": equal_time, "timings": timings}
 
 
 def kitchen_skip_reason(strategy: str, has_phong: bool, has_two_lobes: bool) -> str | None:
@@ -667,6 +726,34 @@ def vs_measured_table(equal_time: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def cost_floor_table(equal_time: list[dict]) -> list[str]:
+    """Markdown lines: per material with a cost floor (``cost_floor``), each NBRDF strategy's RMSE
+    and render time over measured's at the same spp, the floor BSDF's time, and the lowest
+    equal-time ratio that any strategy's per-sample error allows at the floor's time; none
+    without such materials."""
+    rows = [e for e in equal_time if "cost_floor" in e]
+    if not rows:
+        return []
+    floors = [e["cost_floor"] for e in rows]
+    strategies = [s for s in STRATEGIES if any(s in f["per_sample"] for f in floors)]
+    bsdf = floors[0]["bsdf"]
+    lines = [f"Per sample and per render against `measured` at the same spp (median over seeds): RMSE / "
+             f"render time, each over measured's; `{bsdf}`: the render time with `{bsdf}` plates, a BSDF that "
+             "costs next to nothing (the scene's share of every render); bound: the lowest equal-time ratio "
+             "to measured that a strategy's per-sample error allows if its BSDF cost nothing "
+             f"(per-sample ratio x sqrt(`{bsdf}` time)), beside the best strategy's measured ratio:", "",
+             "| material | spp | " + " | ".join(strategies) + f" | `{bsdf}` time | bound | best at equal time |",
+             "|" + "---|" * (len(strategies) + 5)]
+    for e, f in zip(rows, floors):
+        cells = [f"{f['per_sample'][s]:.2f} / {f['time'][s]:.2f}" if s in f["per_sample"] else "-"
+                 for s in strategies]
+        lowest = min(f["bound"], key=f["bound"].get)
+        best = f"{e['best_nbrdf']} {e['best_vs_measured']:.2f}" if "best_nbrdf" in e else "-"
+        lines.append(f"| {e['material']} | {f['spp']} | " + " | ".join(cells)
+                     + f" | {f['floor_time']:.2f} | {f['bound'][lowest]:.2f} ({lowest}) | {best} |")
+    return lines + [""]
+
+
 def vs_phong_fit_table(equal_time: list[dict]) -> list[str]:
     """Markdown lines: per material, each strategy's RMSE over the single lobe's (``phong-fit``)
     at equal time (median over seeds) and the file's stored default; none without phong-fit."""
@@ -723,6 +810,7 @@ def markdown(report: dict) -> str:
         lines.append("")
         lines += vs_phong_fit_table(report["equal_time"])
         lines += vs_measured_table(report["equal_time"])
+        lines += cost_floor_table(report["equal_time"])
     if report["representation"]:
         lines += [f"Representation error against the ground truth ({report['settings']['gt_spp']} spp, MIS/path, "
                   "same random numbers):", "",
