@@ -2,6 +2,7 @@
 //! the structure-of-arrays batch types the hot loops and the C ABI use.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// `len`, `is_empty` and `min_len` of a planar batch type with components `$a, $b, $c`.
 macro_rules! planar_lanes {
@@ -120,6 +121,36 @@ planar_from_mut_buffer!(RgbMut, r, g, b);
 /// when their slices differ in length.
 pub fn common_len(lengths: &[usize]) -> usize {
     lengths.iter().copied().min().unwrap_or(0)
+}
+
+/// Lanes per rayon task of [`par_eval_pairs`]: large enough to amortise scheduling, small
+/// enough to balance a few thousand directions over all cores.
+const PAIR_CHUNK: usize = 1024;
+
+/// `out[i] = eval(view[i], light[i])` on all cores, one pair at a time: the loop behind the batch
+/// evaluations of the tables and analytic models (the network has its own, wider kernel). Only
+/// the common prefix of the slices (components included) is written, so mismatched lengths are
+/// not a reason to panic in a renderer callback.
+pub(crate) fn par_eval_pairs(
+    view: Directions<'_>,
+    light: Directions<'_>,
+    out: RgbMut<'_>,
+    eval: impl Fn(Vec3, Vec3) -> [f32; 3] + Sync,
+) {
+    let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
+    let RgbMut { r, g, b } = out;
+    r[..n]
+        .par_chunks_mut(PAIR_CHUNK)
+        .zip(g[..n].par_chunks_mut(PAIR_CHUNK))
+        .zip(b[..n].par_chunks_mut(PAIR_CHUNK))
+        .enumerate()
+        .for_each(|(chunk, ((r, g), b))| {
+            let start = chunk * PAIR_CHUNK;
+            for i in 0..r.len() {
+                let value = eval(view.get(start + i), light.get(start + i));
+                (r[i], g[i], b[i]) = (value[0], value[1], value[2]);
+            }
+        });
 }
 
 /// An isotropic reflectance function `f_r(view, light)` in linear RGB.

@@ -20,16 +20,12 @@ mod tests;
 pub use grid::*;
 pub use io::FILE_SIZE;
 
-use crate::brdf::{common_len, Brdf, Directions, RgbMut};
+use crate::brdf::{par_eval_pairs, Brdf, Directions, RgbMut};
 use crate::coords::RusinkiewiczAngles;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::fmt;
 use std::sync::OnceLock;
-
-/// Work items per rayon task in batched evaluation: large enough to amortise scheduling, small
-/// enough to balance a few thousand directions over all cores.
-const BATCH_CHUNK: usize = 1024;
 
 /// How a table is read between cell centres.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -121,26 +117,11 @@ pub(crate) fn parallel_eval_cos<F>(
 ) where
     F: Fn(DVec3, DVec3) -> [f64; 3] + Sync,
 {
-    let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
-    let RgbMut { r, g, b } = out;
-    r[..n]
-        .par_chunks_mut(BATCH_CHUNK)
-        .zip(g[..n].par_chunks_mut(BATCH_CHUNK))
-        .zip(b[..n].par_chunks_mut(BATCH_CHUNK))
-        .enumerate()
-        .for_each(|(chunk, ((r, g), b))| {
-            let start = chunk * BATCH_CHUNK;
-            for j in 0..r.len() {
-                let i = start + j;
-                let l = DVec3::new(light.x[i] as f64, light.y[i] as f64, light.z[i] as f64);
-                let v = DVec3::new(view.x[i] as f64, view.y[i] as f64, view.z[i] as f64);
-                let cos = unit(l).map_or(0.0, |l| l.z.max(0.0));
-                let rgb = to_f32_rgb(f(v, l).map(|x| x * cos));
-                r[j] = rgb[0];
-                g[j] = rgb[1];
-                b[j] = rgb[2];
-            }
-        });
+    par_eval_pairs(view, light, out, |v, l| {
+        let (v, l) = (v.as_dvec3(), l.as_dvec3());
+        let cos = unit(l).map_or(0.0, |l| l.z.max(0.0));
+        to_f32_rgb(f(v, l).map(|x| x * cos))
+    });
 }
 
 impl MerlTable {

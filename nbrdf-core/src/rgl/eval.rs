@@ -10,13 +10,9 @@
 
 use super::warp::SliceWeights;
 use super::RglMeasurement;
-use crate::brdf::{common_len, Brdf, Directions, RgbMut};
+use crate::brdf::{par_eval_pairs, Brdf, Directions, RgbMut};
 use glam::Vec3;
-use rayon::prelude::*;
 use std::f32::consts::PI;
-
-/// Work items per rayon task in batched evaluation.
-const BATCH_CHUNK: usize = 1024;
 
 /// `measured.cpp`'s `theta2u`: the square-root warp of the elevation.
 #[inline(always)]
@@ -209,31 +205,8 @@ impl RglMeasurement {
     /// [`RglMeasurement::eval_cos_f32`] for a batch, in parallel: the common prefix of the
     /// slices (components included); outputs past it are left untouched.
     pub fn eval_cos_batch_f32(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        for_each_pair(view, light, out, |v, l| self.eval_cos_f32(v, l));
+        par_eval_pairs(view, light, out, |v, l| self.eval_cos_f32(v, l));
     }
-}
-
-/// Fills `out[i]` with `eval(view[i], light[i])` on all cores.
-fn for_each_pair(
-    view: Directions<'_>,
-    light: Directions<'_>,
-    out: RgbMut<'_>,
-    eval: impl Fn(Vec3, Vec3) -> [f32; 3] + Sync,
-) {
-    let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
-    let RgbMut { r, g, b } = out;
-    r[..n]
-        .par_chunks_mut(BATCH_CHUNK)
-        .zip(g[..n].par_chunks_mut(BATCH_CHUNK))
-        .zip(b[..n].par_chunks_mut(BATCH_CHUNK))
-        .enumerate()
-        .for_each(|(chunk, ((r, g), b))| {
-            let start = chunk * BATCH_CHUNK;
-            for i in 0..r.len() {
-                let value = eval(view.get(start + i), light.get(start + i));
-                (r[i], g[i], b[i]) = (value[0], value[1], value[2]);
-            }
-        });
 }
 
 /// The measurement as a reflectance function: directions are normalised first and negative
@@ -248,7 +221,7 @@ impl Brdf for RglMeasurement {
     }
 
     fn eval_cos_batch(&self, view: Directions<'_>, light: Directions<'_>, out: RgbMut<'_>) {
-        for_each_pair(view, light, out, |v, l| {
+        par_eval_pairs(view, light, out, |v, l| {
             self.eval_cos_f32(v.normalize_or_zero(), l.normalize_or_zero())
                 .map(|x| x.max(0.0))
         });
