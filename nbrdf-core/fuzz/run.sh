@@ -39,8 +39,9 @@ max_len() {
 
 run_one() {
     local target=$1
-    mkdir -p "work/$target" "artifacts/$target"
-    # New inputs go to work/TARGET (git-ignored); corpus/TARGET holds the committed seeds.
+    # New inputs go to work/TARGET (git-ignored); corpus/TARGET holds the committed seeds, and
+    # a target without any (rgl_structured) has no such folder in a fresh clone.
+    mkdir -p "work/$target" "artifacts/$target" "corpus/$target"
     "${nice_cmd[@]}" cargo +nightly fuzz run -O "$target" "work/$target" "corpus/$target" -- \
         -max_total_time="$seconds" -rss_limit_mb=2048 -max_len="$(max_len "$target")" \
         -timeout=60 -print_final_stats=1 >"work/$target.log" 2>&1
