@@ -460,6 +460,8 @@ def test_cost_floor_bounds_the_equal_time_ratio_by_the_scene_s_share_of_the_time
     assert floor["bound"] == pytest.approx({"cosine": 4.0 * 0.8, "tabulated": 0.9 * 0.8})
     assert cost_floor(rows, []) is None
     assert cost_floor([r for r in rows if r["strategy"] != "measured"], timings) is None
+    noiseless = [{**r, "rmse": 0.0} if r["strategy"] == "measured" else r for r in rows]
+    assert cost_floor(noiseless, timings) is None
 
 
 def test_convergence_reports_missing_inputs_before_any_work(tmp_path):

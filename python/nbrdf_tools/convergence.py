@@ -317,6 +317,8 @@ def cost_floor(rows: list[dict], timings: list[dict], floor: str = COST_FLOOR_BS
         return float(np.median([r[key] for r in source if r["strategy"] == strategy and r["spp"] == spp]))
 
     measured_time, measured_rmse = median("measured", "seconds", rows), median("measured", "rmse", rows)
+    if not (measured_time > 0 and measured_rmse > 0):
+        return None  # nothing to compare with (a noiseless or untimed measured render)
     floor_time = median(floor, "seconds", floor_rows) / measured_time
     nbrdf = [s for s in strategies if s in NBRDF_SAMPLING]
     per_sample = {s: median(s, "rmse", rows) / measured_rmse for s in nbrdf}
