@@ -1,6 +1,8 @@
 """Fixtures of the end-to-end tests of the Mitsuba plugin (pytest).
 
 * ``variant`` - parametrised over scalar_rgb and llvm_ad_rgb; sets the Mitsuba variant.
+* ``jit_variant`` - llvm_ad_rgb and cuda_ad_rgb (the latter skipped, with the reason, without a
+  CUDA device); the backend parity tests run in both.
 * ``shared`` - the read-only data directory ``../shared`` next to the repository (or
   $NBRDF_SHARED); tests that need it are skipped, with the reason, when it is absent.
 * ``merl_table`` - a MERL-format table synthesised once per session with
@@ -79,6 +81,34 @@ def llvm_variant():
     mi.set_variant("llvm_ad_rgb")
     _set_symbolic(True)
     yield "llvm_ad_rgb"
+    _set_symbolic(True)  # a rust-backed BSDF switches wavefront mode on
+
+
+def _cuda_problem() -> str | None:
+    import drjit as dr
+
+    if "cuda_ad_rgb" not in mi.variants():
+        return "this Mitsuba build has no cuda_ad_rgb variant"
+    if not dr.has_backend(dr.JitBackend.CUDA):
+        return "Dr.Jit found no CUDA device and driver on this machine"
+    return None
+
+
+#: The JIT variants the backend parity tests run in: the CUDA one wherever a GPU is present
+#: (skipped, with the reason, where there is none).
+JIT_VARIANTS = ["llvm_ad_rgb", "cuda_ad_rgb"]
+
+
+@pytest.fixture(params=JIT_VARIANTS)
+def jit_variant(request):
+    """Each JIT variant in turn (symbolic mode), for the parity of the traced and Rust backends."""
+    name = request.param
+    problem = _llvm_problem() if name.startswith("llvm") else _cuda_problem()
+    if problem:
+        pytest.skip(f"{name} unavailable: {problem}")
+    mi.set_variant(name)
+    _set_symbolic(True)
+    yield name
     _set_symbolic(True)  # a rust-backed BSDF switches wavefront mode on
 
 

@@ -28,7 +28,7 @@ def directions(n=3000):
 
 
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
-def test_eval_and_pdf_agree(llvm_variant, plugin, network_file, merl_table):
+def test_eval_and_pdf_agree(jit_variant, plugin, network_file, merl_table):
     path = network_file if plugin == "nbrdf" else merl_table
     rust, jit = pair(plugin, path, **PHONG)
     view, light = directions()
@@ -42,7 +42,7 @@ def test_eval_and_pdf_agree(llvm_variant, plugin, network_file, merl_table):
     np.testing.assert_allclose(bsdf_pdf(jit, view, light), bsdf_pdf(rust, view, light), rtol=1e-4, atol=1e-7)
 
 
-def test_traced_network_matches_numpy_reference(llvm_variant, network_file):
+def test_traced_network_matches_numpy_reference(jit_variant, network_file):
     _, jit = pair("nbrdf", network_file)
     view, light = directions()
     ref = nbrdf_reference(read_network_layers(network_file), light, view)  # f_r cos
@@ -50,7 +50,7 @@ def test_traced_network_matches_numpy_reference(llvm_variant, network_file):
     assert np.all(np.abs(got - ref) <= 1e-5 * (1 + ref) + 1e-5 * ref), np.max(np.abs(got - ref) / (1 + ref))
 
 
-def test_traced_kernels_leave_out_units_that_never_fire(llvm_variant, network_file, tmp_path):
+def test_traced_kernels_leave_out_units_that_never_fire(jit_variant, network_file, tmp_path):
     """A literal kernel drops the hidden units the library proves inactive above the horizon
     (network/pruning.rs), here two planted ones besides any the network has, and evaluates
     exactly what a kernel of every unit (opaque weights) does, on random, grazing and
@@ -85,7 +85,7 @@ def test_traced_kernels_leave_out_units_that_never_fire(llvm_variant, network_fi
     assert not np.array_equal(bsdf_eval(literal, view, light), got)
 
 
-def test_traced_expm1_is_relatively_exact(llvm_variant):
+def test_traced_expm1_is_relatively_exact(jit_variant):
     """The traced network's output function (twin of fastmath.rs expm1_with) against float64
     over the clamped argument range, tiny arguments (small reflectances) included: relative
     error within a few float32 roundings, and it is 0 at 0."""
@@ -101,7 +101,7 @@ def test_traced_expm1_is_relatively_exact(llvm_variant):
 
 
 @pytest.mark.parametrize("sampling", ["phong", "cosine", "uniform"])
-def test_same_uniforms_give_the_same_samples(llvm_variant, sampling, network_file):
+def test_same_uniforms_give_the_same_samples(jit_variant, sampling, network_file):
     extra = PHONG if sampling == "phong" else {"sampling": sampling}
     rust, jit = pair("nbrdf", network_file, **extra)
     view, _ = directions(2000)
@@ -132,7 +132,7 @@ def veach_like(bsdf: dict, spp: int = 8) -> dict:
 
 
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
-def test_renders_match(llvm_variant, plugin, network_file, merl_table):
+def test_renders_match(jit_variant, plugin, network_file, merl_table):
     path = network_file if plugin == "nbrdf" else merl_table
     images = {}
     for backend in ("rust", "jit"):
@@ -148,7 +148,7 @@ def test_renders_match(llvm_variant, plugin, network_file, merl_table):
 
 
 @pytest.mark.parametrize("jit_weights", ["literal", "opaque"])
-def test_weights_are_scene_parameters(llvm_variant, network_file, jit_weights):
+def test_weights_are_scene_parameters(jit_variant, network_file, jit_weights):
     scene = mi.load_dict(veach_like({"type": "nbrdf", "filename": str(network_file), "jit_weights": jit_weights}, spp=2))
     params = mi.traverse(scene)
     key = next(k for k in params.keys() if k.endswith("weights"))
@@ -163,7 +163,7 @@ def test_weights_are_scene_parameters(llvm_variant, network_file, jit_weights):
     assert before.max() > 0 and after.max() == 0
 
 
-def test_opaque_weights_carry_gradients(llvm_variant, network_file):
+def test_opaque_weights_carry_gradients(jit_variant, network_file):
     scene = mi.load_dict(veach_like({"type": "nbrdf", "filename": str(network_file), "jit_weights": "opaque"}, spp=2))
     params = mi.traverse(scene)
     key = next(k for k in params.keys() if k.endswith("weights"))
