@@ -72,18 +72,6 @@ def variant(request):
         _set_symbolic(True)
 
 
-@pytest.fixture
-def llvm_variant():
-    """Only the llvm_ad_rgb variant (for tests that need vectorised Mitsuba machinery)."""
-    problem = _llvm_problem()
-    if problem:
-        pytest.skip(f"llvm variant unavailable: {problem}")
-    mi.set_variant("llvm_ad_rgb")
-    _set_symbolic(True)
-    yield "llvm_ad_rgb"
-    _set_symbolic(True)  # a rust-backed BSDF switches wavefront mode on
-
-
 def _cuda_problem() -> str | None:
     import drjit as dr
 
@@ -99,10 +87,9 @@ def _cuda_problem() -> str | None:
 JIT_VARIANTS = ["llvm_ad_rgb", "cuda_ad_rgb"]
 
 
-@pytest.fixture(params=JIT_VARIANTS)
-def jit_variant(request):
-    """Each JIT variant in turn (symbolic mode), for the parity of the traced and Rust backends."""
-    name = request.param
+def _use_jit_variant(name: str):
+    """Sets a JIT variant in symbolic mode for one test (skipped, naming the reason, where the
+    variant cannot run) and puts symbolic mode back after it."""
     problem = _llvm_problem() if name.startswith("llvm") else _cuda_problem()
     if problem:
         pytest.skip(f"{name} unavailable: {problem}")
@@ -110,6 +97,18 @@ def jit_variant(request):
     _set_symbolic(True)
     yield name
     _set_symbolic(True)  # a rust-backed BSDF switches wavefront mode on
+
+
+@pytest.fixture
+def llvm_variant():
+    """Only the llvm_ad_rgb variant (for tests that need vectorised Mitsuba machinery)."""
+    yield from _use_jit_variant("llvm_ad_rgb")
+
+
+@pytest.fixture(params=JIT_VARIANTS)
+def jit_variant(request):
+    """Each JIT variant in turn (symbolic mode), for the parity of the traced and Rust backends."""
+    yield from _use_jit_variant(request.param)
 
 
 @pytest.fixture(scope="session")

@@ -195,6 +195,21 @@ def rmse_at_time(points: list[tuple[float, float]], seconds: float) -> float:
     return float(math.exp(np.interp(t, ts, es)))
 
 
+def render_seed(level_index: int, scene_index: int, seed_index: int) -> int:
+    """The seed of one render of a series: distinct per spp level, scene and repetition (seed
+    index 0 keeps the random numbers of single-seed runs)."""
+    return 1000 * (level_index + 1) + scene_index + 100_000 * seed_index
+
+
+def fastest_render(scene, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    """(image, seconds): short renders are timed again (same seed, same image) and the fastest
+    run kept, since other processes on the machine disturb short timings the most."""
+    image, seconds = timed_render(scene, spp, seed=seed)
+    for _ in range(timing_repeats(spp) - 1):
+        seconds = min(seconds, timed_render(scene, spp, seed=seed)[1])
+    return image, seconds
+
+
 def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str, save_dir: Path | None,
             save_spp: set[int], seeds: int = 1, timing_only: dict | None = None,
             timings: list[dict] | None = None) -> list[dict]:
@@ -214,13 +229,8 @@ def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str,
         for level_index, spp in enumerate(levels):
             for seed_index, (strategy_index, (name, entry)) in itertools.product(range(seeds),
                                                                                  enumerate(strategies.items())):
-                # Seed index 0 keeps the random numbers of single-seed runs.
-                seed = 1000 * (level_index + 1) + strategy_index + 100_000 * seed_index
-                image, seconds = timed_render(entry["scene"], spp, seed=seed)
-                # Short renders are timed again (same seed, same image) and the fastest run kept:
-                # other processes on the machine disturb short timings the most.
-                for _ in range(timing_repeats(spp) - 1):
-                    seconds = min(seconds, timed_render(entry["scene"], spp, seed=seed)[1])
+                image, seconds = fastest_render(entry["scene"], spp,
+                                                render_seed(level_index, strategy_index, seed_index))
                 row = {"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds,
                        **metrics.render_metrics(entry["reference"], image, mask),
                        "nonfinite": metrics.nonfinite_count(image)}
@@ -231,9 +241,10 @@ def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str,
                 if save_dir is not None and spp in save_spp and seed_index == 0:
                     write_exr(save_dir / f"{name}-{spp:04d}spp.exr", image)
                 renders.update()
-            for seed_index, (name, scene) in itertools.product(range(seeds), timing_only.items()):
-                seed = 1000 * (level_index + 1) + 100_000 * seed_index
-                seconds = min(timed_render(scene, spp, seed=seed)[1] for _ in range(timing_repeats(spp)))
+            for seed_index, (scene_index, (name, scene)) in itertools.product(range(seeds),
+                                                                             enumerate(timing_only.items())):
+                seed = render_seed(level_index, len(strategies) + scene_index, seed_index)
+                _, seconds = fastest_render(scene, spp, seed)
                 timings.append({"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds})
                 renders.update()
     return rows
