@@ -2,17 +2,13 @@
 
 Everything here is written from docs/design.md (sections 2-4 and 6) in float64 NumPy, without
 calling the Rust code, so that the tests compare two implementations. These are the deliberate
-second copies of the Rust formulas; their twins in ``nbrdf-core``:
+second copies of the Rust formulas; docs/design.md's twin table ("Twins") names each one's Rust
+twin and the test that holds the two together. The network's input and forward pass are not
+repeated here: they are ``nbrdf_tools.network``'s (the one NumPy copy, shared with the tools).
 
-* ``to_angles`` / ``from_angles``: ``coords::to_rusinkiewicz`` / ``coords::from_rusinkiewicz``
-  (held together by ``test_merl_bsdf.py``). Unlike the Rust API,
-  which takes and returns ``(view, light)``, these keep their historical ``(light, view)`` order;
-  the Mitsuba wrappers below (``bsdf_eval`` and friends) take ``(view, light)``.
-* ``SCALE``, ``CELLS``, ``continuous_index``, ``merl_trilinear``: ``merl::grid`` and
-  ``merl/lookup.rs`` (``test_merl_bsdf.py``).
-* ``network_input`` / ``nbrdf_reference``: ``coords::network_input`` and the network's
-  ``Layer::affine_into`` forward pass and batched kernel (``test_nbrdf_eval.py``).
-* ``phong_pdf``: ``sampling::SamplingStrategy::pdf`` (``test_sampling.py``).
+``to_angles`` / ``from_angles``, ``merl_trilinear`` and ``nbrdf_reference`` take planar (3, n)
+batches in their historical ``(light, view)`` order (the Rust API, ``nbrdf_tools.network`` and
+the Mitsuba wrappers below (``bsdf_eval`` and friends) take ``(view, light)``).
 """
 
 from __future__ import annotations
@@ -20,6 +16,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from nbrdf_tools import network
+from nbrdf_tools.network import apply, rot_y, rot_z
 
 N_TH, N_TD, N_PD = 90, 90, 180
 CELLS = N_TH * N_TD * N_PD
@@ -82,32 +81,10 @@ def f32(a: np.ndarray) -> np.ndarray:
 # Rusinkiewicz coordinates (docs/design.md section 2), with trigonometry and rotation matrices
 
 
-def rot_z(angle):
-    c, s = np.cos(angle), np.sin(angle)
-    o, i = np.zeros_like(angle), np.ones_like(angle)
-    return np.array([[c, -s, o], [s, c, o], [o, o, i]])  # (3, 3, n)
-
-
-def rot_y(angle):
-    c, s = np.cos(angle), np.sin(angle)
-    o, i = np.zeros_like(angle), np.ones_like(angle)
-    return np.array([[c, o, s], [o, i, o], [-s, o, c]])
-
-
-def apply(m, v):
-    return np.einsum("ijn,jn->in", m, v)
-
-
 def to_angles(light: np.ndarray, view: np.ndarray):
-    """(theta_h, phi_h, theta_d, phi_d, d) of planar light/view directions."""
-    l, v = normalize(light), normalize(view)
-    h = normalize(l + v)
-    theta_h = np.arccos(np.clip(h[2], -1, 1))
-    phi_h = np.arctan2(h[1], h[0])
-    d = apply(rot_y(-theta_h), apply(rot_z(-phi_h), l))
-    theta_d = np.arccos(np.clip(d[2], -1, 1))
-    phi_d = np.arctan2(d[1], d[0])
-    return theta_h, phi_h, theta_d, phi_d, d
+    """(theta_h, phi_h, theta_d, phi_d, d) of planar light/view directions (``d`` planar too)."""
+    theta_h, phi_h, theta_d, phi_d, d = network.rusinkiewicz(np.asarray(view).T, np.asarray(light).T)
+    return theta_h, phi_h, theta_d, phi_d, d.T
 
 
 def from_angles(theta_h, phi_h, theta_d, phi_d):
@@ -241,11 +218,7 @@ def write_network(path: Path, layers=None, sampling: dict | None = None, name: s
 
 def read_network_layers(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     """(W, b) pairs of an ``*.nbrdf.json`` file, float64."""
-    import json
-
-    layers = json.loads(Path(path).read_text())["layers"]
-    return [(np.asarray(l["weights"], np.float64).reshape(l["inputs"], l["outputs"]),
-             np.asarray(l["bias"], np.float64)) for l in layers]
+    return network.read_layers(path)
 
 
 def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -257,22 +230,13 @@ def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def network_input(light: np.ndarray, view: np.ndarray, anisotropic: bool = False) -> np.ndarray:
-    """(n, 6) isotropic input ``[sin th, 0, cos th, d.x, d.y, d.z]``, or the anisotropic one
-    ``[sin th cos ph, sin th sin ph, cos th, d]`` (the half vector, then the difference vector)."""
-    theta_h, phi_h, _, _, d = to_angles(light, view)
-    if not anisotropic:
-        phi_h = np.zeros_like(theta_h)
-    s = np.sin(theta_h)
-    return np.stack([s * np.cos(phi_h), s * np.sin(phi_h), np.cos(theta_h), d[0], d[1], d[2]], axis=1)
+    """(n, 6) network input of planar directions (``nbrdf_tools.network.network_input``)."""
+    return network.network_input(np.asarray(view).T, np.asarray(light).T, anisotropic)
 
 
 def nbrdf_reference(layers, light: np.ndarray, view: np.ndarray, anisotropic: bool = False) -> np.ndarray:
     """f_r cos(theta_l), (3, n), float64; zero when either direction is below the horizon."""
-    (w1, b1), (w2, b2), (w3, b3) = layers
-    x = network_input(light, view, anisotropic)
-    y = np.maximum(x @ w1 + b1, 0)
-    y = np.maximum(y @ w2 + b2, 0)
-    f = np.maximum(np.exp(y @ w3 + b3) - 1, 0).T
+    f = network.evaluate(layers, np.asarray(view).T, np.asarray(light).T, anisotropic).T
     cos_l = normalize(light)[2]
     above = (normalize(light)[2] > 0) & (normalize(view)[2] > 0)
     return np.where(above, f * cos_l, 0.0)

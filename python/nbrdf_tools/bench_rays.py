@@ -44,6 +44,7 @@ import drjit as dr
 import mitsuba as mi
 
 from nbrdf_tools import cli, progress
+from nbrdf_tools import network as nbrdf_network
 from nbrdf_tools.paths import MissingDataError, default_cli, default_out, shared_path
 from nbrdf_tools.progress import bar
 from nbrdf_tools.render import sync
@@ -83,7 +84,7 @@ def ensure_inputs(material: str, out: Path, nbrdf: Path) -> tuple[Path, Path]:
             import_keras.convert(keras, network)
         else:
             cli.run([nbrdf, "train", table, "-o", network, "--epochs", "5", "--samples", "200000", "--quiet"])
-    if "second_lobe" not in (json.loads(network.read_text()).get("sampling") or {}):
+    if "second_lobe" not in nbrdf_network.sampling_of(network):
         cli.run([nbrdf, "fit-phong", network, "--lobes", "2"])
     return network, table
 
@@ -131,7 +132,7 @@ def candidates(network: Path, table: Path, mode: str, measured: Path | None = No
 
 
 def network_parameter_count(network: Path) -> int:
-    return sum(len(layer["weights"]) + len(layer["bias"]) for layer in json.loads(network.read_text())["layers"])
+    return nbrdf_network.parameter_count(network)
 
 
 def traversed_float_count(bsdf: dict) -> int:

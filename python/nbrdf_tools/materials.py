@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from nbrdf_tools import cli
+from nbrdf_tools import network as nbrdf_network
 from nbrdf_tools.ground_truth import file_hash
 from nbrdf_tools.paths import MissingDataError, shared_dir
 
@@ -239,7 +240,7 @@ class Artefacts:
         network, source = self._network(name, measured or table, keras, record)
         self._phong(name, network, record)
         self._save_record(name, record)
-        sampling = json.loads(network.read_text()).get("sampling") or {}
+        sampling = nbrdf_network.sampling_of(network)
         material = Material(name=name, kind=kind, table=table, network=network, network_source=source,
                             measured=measured)
         if sampling.get("model") == "blinn-phong":
