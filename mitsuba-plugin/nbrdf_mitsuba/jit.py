@@ -1,39 +1,11 @@
-"""The NBRDF evaluation, the MERL lookup and the Blinn-Phong mixture written as Dr.Jit arithmetic.
+"""The rendering formulas of the Rust library written as Dr.Jit arithmetic: the network input and
+forward pass, the MERL lookup, the hemisphere warps, the Phong, two-lobe and anisotropic lobes
+and the tabulated sampler.
 
-Traced into Mitsuba's own kernels, so a scene with NBRDFs keeps Dr.Jit's symbolic (megakernel)
-mode and runs on CUDA as well as LLVM.
-
-This module is a deliberate second copy of the Rust library's math (the Rust code stays the
-reference). Its twins, and the tests that hold the two together:
-
-* :func:`network_input` - ``nbrdf-core/src/coords.rs`` ``network_input_components_for`` (the
-  Rusinkiewicz input encoding, isotropic with ``phi_h = 0`` or anisotropic with the full half
-  vector);
-* :class:`TracedNetwork` - ``nbrdf-core/src/network.rs`` ``eval_input`` / ``eval_chunks``: the
-  same fused multiply-adds, ReLU as a compare-select (NaN -> 0, ``relu``) and the exp argument
-  clamped to ``[EXP_ARGUMENT_MIN, EXP_ARGUMENT_MAX]`` with NaN going to the lower end
-  (``clamp_exp_arg``), so that no finite weights give NaN or infinity; directions normalised
-  like ``rescale_out_of_range`` (zero and non-finite vectors give 0);
-* :func:`mixture_pdf`, :func:`sample`, :func:`blinn_phong_half_vector` -
-  ``nbrdf-core/src/sampling.rs`` (``SamplingStrategy::sample``/``pdf``, ``cos_power_from_one_minus``,
-  ``blinn_phong_half_vector``; uniforms clamped like ``unit_interval``);
-* :func:`two_lobe_pdf` and the ``two_lobe`` branch of :func:`sample` - ``sampling.rs``
-  ``SamplingStrategy::TwoLobe`` (``two_lobe_mixture_density``, ``two_lobe_component``);
-* :func:`anisotropic_pdf`, :func:`anisotropic_half_vector` and the ``anisotropic_phong`` branch of
-  :func:`sample` - ``sampling.rs`` ``SamplingStrategy::AnisotropicBlinnPhong``
-  (``anisotropic_mixture_density``, ``anisotropic_half_vector``); ``exponent2`` is ``n_v`` (the
-  plugin parameter ``exponent_v``).
-  Held to the library by ``tests/test_anisotropic.py`` (``test_anisotropic_lobe_backends_agree``)
-  and Mitsuba's chi^2 test there;
-* :class:`TracedMerl` - ``nbrdf-core/src/merl.rs`` ``MerlTable::trilinear``;
-* :class:`TracedTable` (``sampling`` = ``tabulated``) - ``nbrdf-core/src/tabulated.rs``
-  ``TabulatedSampler::sample_direction`` / ``density_f64`` (held together by
-  ``tests/test_tabulated.py``).
-
-Tests: ``tests/test_backends.py`` (eval, pdf, samples and renders of both backends, and a
-float64 NumPy oracle), ``tests/test_sampling.py`` (chi^2, quadrature, the design formula) and
-``tests/test_hardening_plugin.py`` (NaN-safety, degenerate directions, sharp lobes at
-``n = 1e4, 1e6`` in a zoomed chi^2 domain).
+Why a second copy: traced into Mitsuba's own kernels, a scene with NBRDFs keeps Dr.Jit's symbolic
+(megakernel) mode and runs on CUDA as well as LLVM. The Rust code stays the reference; each
+function here is a deliberate twin of one there. Which twin, and the test holding the two
+together: docs/design.md, "Twins" (the twin table, checked by tests/test_twin_map.py).
 
 Sharp lobes: ``1 - cos(theta_h)`` is computed from ``|h_xy|^2`` (never as ``1 - h.z``, which
 cancels in float32), so the pdf keeps its accuracy up to :data:`MAX_EXPONENT`.
