@@ -10,8 +10,8 @@ directions, giving ``f_r(view, light) cos(theta_light)`` (3, n), Mitsuba's ``eva
 adaptive: uniform in theta_h, theta_d, phi_d; half uniform over the hemisphere) with
 ``scipy.optimize.least_squares`` (trust-region reflective, bounds), from several starts.
 
-The NumPy forms are deliberate second copies; each names its twin and the test holding them
-together (tests/test_fidelity_report.py):
+The NumPy forms are deliberate second copies (docs/design.md's twin table lists those of Rust
+forms); each names its twin and the test holding them together (tests/test_fidelity_report.py):
 
 * :func:`ggx_conductor_eval_cos`: Mitsuba's ``roughconductor`` (``distribution ggx``,
   ``material none``: Fresnel 1), ``test_numpy_ggx_matches_mitsuba_roughconductor``;

@@ -7,7 +7,7 @@ alone, docs/design.md section 7) scored by sampling variance and (optionally) in
 
 Inputs: NAME.nbrdf.json networks of the 100 MERL materials in OUT/nbrdfs (OUT = out/latent/SOURCE),
 all trained by ``nbrdf train`` from the common initialisation (seed 0), which is what aligns their
-hidden units (``--train-missing`` trains those not there yet, ~100 x 15 s on 2 cores):
+hidden units (``--train-missing`` trains those not there yet; docs/results/latent.md gives the time):
 
 * ``--source sgd`` (default, runs on a fresh machine): on tables synthesised from the SGD fits;
 * ``--source authors``: on the tabulations of the authors' networks of the real MERL
@@ -32,7 +32,7 @@ from typing import NamedTuple
 import numpy as np
 
 from nbrdf_tools import cli, metrics, progress
-from nbrdf_tools.network import Layers, forward, lerp, network_input, read_layers
+from nbrdf_tools.network import Layers, forward, lerp, network_input, read_document, read_layers
 from nbrdf_tools.paths import MissingDataError, default_cli, default_out, require_shared, shared_path
 
 
@@ -222,14 +222,14 @@ def missing_inputs(args, ae: Path) -> list[str]:
             problems.append(str(error))
     has_networks = args.nbrdfs.is_dir() and any(args.nbrdfs.glob("*.nbrdf.json"))
     if not args.train_missing and not has_networks and not (ae.exists() and (args.veach_only or args.interpolation_only)):
-        problems.append(f"no networks in {args.nbrdfs}: pass --train-missing to train them (~100 x 15 s on 2 cores), "
+        problems.append(f"no networks in {args.nbrdfs}: pass --train-missing to train them (100 networks), "
                         "or --nbrdfs FOLDER")
     if (args.veach_only or args.interpolation_only) and not ae.exists():
         problems.append(f"{ae} is missing: --veach-only and --interpolation-only need an earlier full run")
     return problems
 
 
-def report(argv: list[str] | None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
     p.add_argument("--source", choices=["sgd", "authors"], default="sgd",
@@ -273,7 +273,117 @@ def report(argv: list[str] | None) -> int:
     p.add_argument("--veach-gt-spp", type=int, default=512, help="spp of the converged MIS render")
     p.add_argument("--veach-seeds", type=int, default=8, help="renders (seeds) averaged per strategy")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
-    args = p.parse_args(argv)
+    return p
+
+
+def ae_vs_pca(args, ae: Path) -> None:
+    """The autoencoder against PCA-32 on the test split: ae_vs_pca_TABLES.json and .md."""
+    ev = json.loads(run([args.cli, "ae", "eval", "--ae", ae, "--nbrdfs", args.nbrdfs,
+                         "--pca-tables", args.pca_tables, "--refine", args.refine]))
+    (args.out / f"ae_vs_pca_{args.pca_tables}.json").write_text(json.dumps(ev, indent=1))
+    table = markdown_table(ev)
+    keys = [k for k in ("ae", "ae_refined", "pca") if k in ev["materials"][0]]
+    rows = ["| material | " + " | ".join(f"{k} {m}" for m in ("MAE", "RMSE", "SSIM") for k in keys) + " |",
+            "|---|" + "---|" * (3 * len(keys))]
+    rows += [f"| {r['name']} | " + " | ".join(f"{r[k][m]:.5f}" for m in ("mae", "rmse", "ssim") for k in keys) + " |"
+             for r in ev["materials"]]
+    m = ev["materials"]
+    if "ae_refined" in m[0]:
+        wins = [sum(better(r["ae_refined"][q], r["pca"][q]) for r in m)
+                for q, better in (("mae", float.__lt__), ("rmse", float.__lt__), ("ssim", float.__gt__))]
+        table += (f"\n\nRefined autoencoder better than PCA-32 per material: MAE {wins[0]}, RMSE {wins[1]}, "
+                  f"SSIM {wins[2]} of {len(m)}.")
+    selection = json.loads(ae.read_text()).get("provenance", {}).get("selection")
+    if selection:
+        table += "\n\nAutoencoder chosen among seeds by " + selection["criterion"] + ": " + ", ".join(
+            f"seed {c['seed']} {c['refined_validation_loss']:.3e}" for c in selection["candidates"]) + "."
+    (args.out / f"ae_vs_pca_{args.pca_tables}.md").write_text(table + "\n\n" + "\n".join(rows) + "\n")
+    print(table)
+
+
+def tsne_figure(args, ae: Path, split: dict, plt) -> None:
+    """latent_tsne.png: the t-SNE of every material's code, the test split marked."""
+    names = sorted(f.name[: -len(".nbrdf.json")] for f in args.nbrdfs.glob("*.nbrdf.json"))
+    codes = np.array([json.loads(run([args.cli, "ae", "encode", "--ae", ae, args.nbrdfs / f"{n}.nbrdf.json"]))
+                      for n in names])
+    from sklearn.manifold import TSNE
+
+    xy = TSNE(n_components=2, perplexity=15, random_state=args.seed, init="pca").fit_transform(codes)
+    test = np.array([n in split["test"] for n in names])
+    fig, ax = plt.subplots(figsize=(10, 8))
+    ax.scatter(xy[~test, 0], xy[~test, 1], c="tab:blue", s=18, label="train")
+    ax.scatter(xy[test, 0], xy[test, 1], c="tab:red", marker="*", s=80, label="test")
+    for (x, y), n in zip(xy, names):
+        ax.annotate(n, (x, y), fontsize=5, alpha=0.7)
+    ax.legend()
+    ax.set_title("t-SNE of the 32-value autoencoder codes")
+    fig.savefig(args.out / "latent_tsne.png", dpi=150, bbox_inches="tight")
+    plt.close(fig)
+
+
+def train_predictors(args, ae: Path) -> None:
+    """The predictors of :data:`PREDICTORS` not yet in the output folder."""
+    for variant in PREDICTORS:
+        pred = args.out / variant.file
+        if not pred.exists():
+            options = list(variant.options)
+            # The code-only comparison keeps its own settings (the CLI refuses a repeated option).
+            if variant is PREDICTORS[0] and args.predictor_hidden is not None:
+                options += ["--hidden", args.predictor_hidden]
+            if variant is PREDICTORS[0] and args.predictor_weight_decay is not None:
+                options += ["--weight-decay", args.predictor_weight_decay]
+            print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred, *options]))
+        (args.out / variant.folder).mkdir(exist_ok=True)
+
+
+def predicted_vs_fitted(args, ae: Path, split: dict) -> None:
+    """predicted_vs_fitted.md: each test material's fitted lobe beside each predictor's."""
+    lines = ["| material | fitted n | fitted w | " + " | ".join(f"{v.label} n | {v.label} w" for v in PREDICTORS) + " |",
+             "|---|---|---|" + "---|---|" * len(PREDICTORS)]
+    for n in split["test"]:
+        src = args.nbrdfs / f"{n}.nbrdf.json"
+        fitted = read_document(src).get("sampling")
+        if fitted is None or fitted.get("source") != "fit":
+            fitted_dir = args.out / "fitted"
+            fitted_dir.mkdir(exist_ok=True)
+            run([args.cli, "fit-phong", src, "--lobes", "1", "-o", fitted_dir / f"{n}.nbrdf.json"])
+            fitted = read_document(fitted_dir / f"{n}.nbrdf.json")["sampling"]
+        row = f"| {n} | {fitted['exponent']:.1f} | {fitted['specular_weight']:.3f} |"
+        for variant in PREDICTORS:
+            dst = args.out / variant.folder / f"{n}.nbrdf.json"
+            run([args.cli, "predict-phong", "--ae", ae, "--predictor", args.out / variant.file, src, "-o", dst])
+            s = read_document(dst)["sampling"]
+            row += f" {s['exponent']:.1f} | {s['specular_weight']:.3f} |"
+        lines.append(row)
+    (args.out / "predicted_vs_fitted.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def predictor_variance(args, ae: Path) -> None:
+    """predictor_eval.md: the lobes scored by the relative variance of BSDF sampling (noise-free,
+    all views)."""
+    lines = []
+    for variant in PREDICTORS:
+        pe = json.loads(run([args.cli, "predictor", "eval", "--ae", ae, "--predictor", args.out / variant.file,
+                             "--nbrdfs", args.nbrdfs]))
+        (args.out / f"predictor_eval{variant.suffix}.json").write_text(json.dumps(pe, indent=1))
+        lines += [f"Predictor: {variant.label}.", "",
+                  "| material | fitted n, w | predicted n, w | R-1 fitted | R-1 predicted | R-1 cosine | RMSE ratio |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in pe["test"]:
+            f, q = r["fitted"], r["predicted"]
+            lines.append(f"| {r['name']} | {f['exponent']:.3g}, {f['specular_weight']:.2f} | "
+                         f"{q['exponent']:.3g}, {q['specular_weight']:.2f} | {f['relative_variance']:.3g} | "
+                         f"{q['relative_variance']:.3g} | {r['cosine_relative_variance']:.3g} | {r['rmse_ratio']:.2f} |")
+        q = pe["rmse_ratio"]
+        lines += ["", f"RMSE ratio sqrt((R-1) predicted / (R-1) fitted): median {q['median']:.2f}, "
+                  f"max {q['max']:.2f}, within 1.25x for {q['within_1_25']} of {q['materials']}.", ""]
+    (args.out / "predictor_eval.md").write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+def report(argv: list[str] | None) -> int:
+    args = parser().parse_args(argv)
     progress.set_enabled(not args.no_progress)
     args.out = args.out or default_out("latent", args.source)
     args.nbrdfs = args.nbrdfs or args.out / "nbrdfs"
@@ -303,101 +413,18 @@ def report(argv: list[str] | None) -> int:
         return 0
 
     # 1. AE vs PCA on the test split.
-    ev = json.loads(run([args.cli, "ae", "eval", "--ae", ae, "--nbrdfs", args.nbrdfs,
-                         "--pca-tables", args.pca_tables, "--refine", args.refine]))
-    (args.out / f"ae_vs_pca_{args.pca_tables}.json").write_text(json.dumps(ev, indent=1))
-    table = markdown_table(ev)
-    keys = [k for k in ("ae", "ae_refined", "pca") if k in ev["materials"][0]]
-    rows = ["| material | " + " | ".join(f"{k} {m}" for m in ("MAE", "RMSE", "SSIM") for k in keys) + " |",
-            "|---|" + "---|" * (3 * len(keys))]
-    rows += [f"| {r['name']} | " + " | ".join(f"{r[k][m]:.5f}" for m in ("mae", "rmse", "ssim") for k in keys) + " |"
-             for r in ev["materials"]]
-    m = ev["materials"]
-    if "ae_refined" in m[0]:
-        wins = [sum(better(r["ae_refined"][q], r["pca"][q]) for r in m)
-                for q, better in (("mae", float.__lt__), ("rmse", float.__lt__), ("ssim", float.__gt__))]
-        table += (f"\n\nRefined autoencoder better than PCA-32 per material: MAE {wins[0]}, RMSE {wins[1]}, "
-                  f"SSIM {wins[2]} of {len(m)}.")
-    selection = json.loads(ae.read_text()).get("provenance", {}).get("selection")
-    if selection:
-        table += "\n\nAutoencoder chosen among seeds by " + selection["criterion"] + ": " + ", ".join(
-            f"seed {c['seed']} {c['refined_validation_loss']:.3e}" for c in selection["candidates"]) + "."
-    (args.out / f"ae_vs_pca_{args.pca_tables}.md").write_text(table + "\n\n" + "\n".join(rows) + "\n")
-    print(table)
-
+    ae_vs_pca(args, ae)
     # 2. t-SNE of the codes.
-    names = sorted(f.name[: -len(".nbrdf.json")] for f in args.nbrdfs.glob("*.nbrdf.json"))
-    codes = np.array([json.loads(run([args.cli, "ae", "encode", "--ae", ae, args.nbrdfs / f"{n}.nbrdf.json"]))
-                      for n in names])
-    from sklearn.manifold import TSNE
-
-    xy = TSNE(n_components=2, perplexity=15, random_state=args.seed, init="pca").fit_transform(codes)
-    test = np.array([n in split["test"] for n in names])
-    fig, ax = plt.subplots(figsize=(10, 8))
-    ax.scatter(xy[~test, 0], xy[~test, 1], c="tab:blue", s=18, label="train")
-    ax.scatter(xy[test, 0], xy[test, 1], c="tab:red", marker="*", s=80, label="test")
-    for (x, y), n in zip(xy, names):
-        ax.annotate(n, (x, y), fontsize=5, alpha=0.7)
-    ax.legend()
-    ax.set_title("t-SNE of the 32-value autoencoder codes")
-    fig.savefig(args.out / "latent_tsne.png", dpi=150, bbox_inches="tight")
-    plt.close(fig)
-
+    tsne_figure(args, ae, split, plt)
     # 3. Interpolation strips: latent, weights of the aligned networks, weights of the authors'
     # independently trained networks of the same materials (the paper's comparison).
     interpolation(args, ae, a, b, plt, split)
 
     # 4. Predictors: fitted vs predicted on the test split. The default reads the code and the
     # network's highlight profile; the code-only one is docs/design.md section 7 to the letter.
-    for variant in PREDICTORS:
-        pred = args.out / variant.file
-        if not pred.exists():
-            options = list(variant.options)
-            # The code-only comparison keeps its own settings (the CLI refuses a repeated option).
-            if variant is PREDICTORS[0] and args.predictor_hidden is not None:
-                options += ["--hidden", args.predictor_hidden]
-            if variant is PREDICTORS[0] and args.predictor_weight_decay is not None:
-                options += ["--weight-decay", args.predictor_weight_decay]
-            print(run([args.cli, "predictor", "train", "--ae", ae, "--nbrdfs", args.nbrdfs, "-o", pred, *options]))
-        (args.out / variant.folder).mkdir(exist_ok=True)
-    lines = ["| material | fitted n | fitted w | " + " | ".join(f"{v.label} n | {v.label} w" for v in PREDICTORS) + " |",
-             "|---|---|---|" + "---|---|" * len(PREDICTORS)]
-    for n in split["test"]:
-        src = args.nbrdfs / f"{n}.nbrdf.json"
-        fitted = json.loads(src.read_text()).get("sampling")
-        if fitted is None or fitted.get("source") != "fit":
-            fitted_dir = args.out / "fitted"
-            fitted_dir.mkdir(exist_ok=True)
-            run([args.cli, "fit-phong", src, "--lobes", "1", "-o", fitted_dir / f"{n}.nbrdf.json"])
-            fitted = json.loads((fitted_dir / f"{n}.nbrdf.json").read_text())["sampling"]
-        row = f"| {n} | {fitted['exponent']:.1f} | {fitted['specular_weight']:.3f} |"
-        for variant in PREDICTORS:
-            dst = args.out / variant.folder / f"{n}.nbrdf.json"
-            run([args.cli, "predict-phong", "--ae", ae, "--predictor", args.out / variant.file, src, "-o", dst])
-            s = json.loads(dst.read_text())["sampling"]
-            row += f" {s['exponent']:.1f} | {s['specular_weight']:.3f} |"
-        lines.append(row)
-    (args.out / "predicted_vs_fitted.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    # The same lobes scored by the relative variance of BSDF sampling (noise-free, all views).
-    lines = []
-    for variant in PREDICTORS:
-        pe = json.loads(run([args.cli, "predictor", "eval", "--ae", ae, "--predictor", args.out / variant.file,
-                             "--nbrdfs", args.nbrdfs]))
-        (args.out / f"predictor_eval{variant.suffix}.json").write_text(json.dumps(pe, indent=1))
-        lines += [f"Predictor: {variant.label}.", "",
-                  "| material | fitted n, w | predicted n, w | R-1 fitted | R-1 predicted | R-1 cosine | RMSE ratio |",
-                  "|---|---|---|---|---|---|---|"]
-        for r in pe["test"]:
-            f, q = r["fitted"], r["predicted"]
-            lines.append(f"| {r['name']} | {f['exponent']:.3g}, {f['specular_weight']:.2f} | "
-                         f"{q['exponent']:.3g}, {q['specular_weight']:.2f} | {f['relative_variance']:.3g} | "
-                         f"{q['relative_variance']:.3g} | {r['cosine_relative_variance']:.3g} | {r['rmse_ratio']:.2f} |")
-        q = pe["rmse_ratio"]
-        lines += ["", f"RMSE ratio sqrt((R-1) predicted / (R-1) fitted): median {q['median']:.2f}, "
-                  f"max {q['max']:.2f}, within 1.25x for {q['within_1_25']} of {q['materials']}.", ""]
-    (args.out / "predictor_eval.md").write_text("\n".join(lines))
-    print("\n".join(lines))
+    train_predictors(args, ae)
+    predicted_vs_fitted(args, ae, split)
+    predictor_variance(args, ae)
     if args.veach:
         veach(args, split)
     return 0
@@ -539,7 +566,7 @@ def veach(args, split) -> None:
         r_pred = [rmse(p) for p in predicted]
         for v, r in zip(PREDICTORS, r_pred):
             ratios[v.label].append(r / r_fit)
-        lobe = [json.loads(Path(p).read_text())["sampling"] for p in (fitted, *predicted)]
+        lobe = [read_document(p)["sampling"] for p in (fitted, *predicted)]
         lines.append(f"| {n} | " + " | ".join(f"{x['exponent']:.3g}, {x['specular_weight']:.2f}" for x in lobe)
                      + f" | {r_fit:.4g} | " + " | ".join(f"{r:.4g}" for r in r_pred) + f" | {r_cos:.4g} | "
                      + " | ".join(f"{r / r_fit:.2f}" for r in r_pred) + " |")

@@ -7,7 +7,7 @@ Steps (each skipped when its output is already in OUT, so an interrupted run goe
 
 1. the authors' 100 Keras networks (../shared/data/reference-nbrdf/merl/) imported, tabulated
    (``nbrdf tabulate``) and re-learnt by ``nbrdf train`` from the common initialisation (seed 0)
-   into OUT/nbrdfs/ (``latent_report.train_missing``, ~100 x 15 s on 2 free cores);
+   into OUT/nbrdfs/ (``latent_report.train_missing``; docs/results/latent.md gives the time);
 2. ``nbrdf ae train --seeds K`` on them (the fixed 80/20 split) -> OUT/ae.json;
 3. ``nbrdf predictor train`` with its defaults (code + highlight profile) -> OUT/predictor.json;
 4. their scores on the test split: ``nbrdf ae eval --refine 30`` -> OUT/ae_eval.json and
