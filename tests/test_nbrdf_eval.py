@@ -20,11 +20,15 @@ ULPS = 4
 def f32_conditioning(layers, light, view) -> np.ndarray:
     """How far the float64 reference moves when its six inputs carry ULPS float32 rounding errors
     (linearised): the float32 floor of any implementation fed with float32 directions. The
-    input components are computed from unit vectors, so their errors are absolute, ~2^-23."""
+    input components are computed from unit vectors, so their errors are absolute, ~2^-23, but
+    the half vector is formed as ``l + v``: where the two nearly cancel (grazing, opposite
+    azimuths) the unit vectors' own rounding is amplified by ``1 / |l + v|`` (up to ~10 near the
+    horizon), and how far depends on the CPU's float32 normalisation (rsqrt)."""
     ref = nbrdf_reference(layers, light, view)
     x = network_input(light, view)
     (w1, b1), (w2, b2), (w3, b3) = layers
     cos_l = normalize(light)[2]
+    cancellation = 1.0 / np.maximum(np.linalg.norm(normalize(light) + normalize(view), axis=0), 1e-3)
     bound = np.zeros_like(ref)
     for i in range(6):
         xp = x.copy()
@@ -32,7 +36,7 @@ def f32_conditioning(layers, light, view) -> np.ndarray:
         y = np.maximum(np.maximum(xp @ w1 + b1, 0) @ w2 + b2, 0)
         moved = np.maximum(np.exp(y @ w3 + b3) - 1, 0).T * np.where(cos_l > 0, cos_l, 0)
         bound += np.abs(moved - ref) / 1e-6 * 2.0**-23
-    return ULPS * bound
+    return ULPS * bound * np.maximum(cancellation, 1.0)
 
 
 def test_matches_keras_reference(variant, keras_networks):
