@@ -533,7 +533,7 @@ mod tests {
         let f =
             |v: DVec3, l: DVec3| sgd.eval_f64(v, l).iter().map(|c| c.max(0.0)).sum::<f64>() / 3.0;
         let table = strategy(&f);
-        let lobe = SamplingStrategy::BlinnPhong {
+        let lobe = SamplingStrategy::Phong {
             exponent: 562.0,
             specular_weight: 0.35,
         };

@@ -10,7 +10,7 @@ use crate::merl::PhiFold;
 use crate::metrics::Material;
 use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
 use crate::phong_fit::FitConfig;
-use crate::sampling::SamplingStrategy;
+use crate::sampling::{SamplingKind, SamplingStrategy};
 use crate::tabulated::{TableConfig, TabulatedSampler, COSINE_WEIGHT_CANDIDATES};
 use crate::target::material_target;
 use serde::Serialize;
@@ -135,7 +135,7 @@ pub struct FitPhongReport {
     pub written: Option<String>,
     /// The strategy with the lowest relative variance (the plugin's `sampling` name), stored
     /// as the file's `sampling.default`.
-    pub default_sampling: &'static str,
+    pub default_sampling: SamplingKind,
     /// The tabulated sampler's cosine weight of lowest variance, stored as the file's
     /// `sampling.table_cosine_weight` (isotropic networks).
     pub table_cosine_weight: f64,
@@ -270,26 +270,26 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
     };
     let cosine_variance = analysis.lowest_variance.cosine_relative_variance;
     let stored_lobes_variance = match stored_two {
-        Some(two) => ("two_lobe", two.relative_variance),
-        None => ("phong", one_lobe_variance),
+        Some(two) => (SamplingKind::TwoLobe, two.relative_variance),
+        None => (SamplingKind::Phong, one_lobe_variance),
     };
     // The table is built over the half vector's azimuth relative to the view's (an isotropic
     // material's); an anisotropic network samples with its anisotropic lobe, the stored lobe
     // the plugin picks when the file names no default.
     let default_sampling = if anisotropic.is_some() {
-        "anisotropic_phong"
+        SamplingKind::AnisotropicPhong
     } else {
         [
-            ("cosine", cosine_variance),
+            (SamplingKind::Cosine, cosine_variance),
             stored_lobes_variance,
-            ("tabulated", tabulated.relative_variance),
+            (SamplingKind::Tabulated, tabulated.relative_variance),
         ]
         .into_iter()
         .filter(|(_, v)| v.is_finite())
         .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or("cosine", |(name, _)| name)
+        .map_or(SamplingKind::Cosine, |(kind, _)| kind)
     };
-    let stored_default = (anisotropic.is_none()).then(|| default_sampling.to_string());
+    let stored_default = (anisotropic.is_none()).then_some(default_sampling);
     let sampling = match anisotropic {
         Some(a) => SamplingParams {
             model: SAMPLING_MODEL_BLINN_PHONG.to_string(),

@@ -17,7 +17,10 @@ use rayon::prelude::*;
 use std::f64::consts::{FRAC_1_PI, TAU};
 use std::sync::Arc;
 
+mod kind;
+
 pub use crate::tabulated::TabulatedSampler;
+pub use kind::{ParsedKind, SamplingKind, UnknownSamplingCode, UnknownSamplingKind};
 
 /// Lanes per rayon task in the batched functions.
 const TASK_LANES: usize = 4096;
@@ -37,7 +40,7 @@ pub enum SamplingStrategy {
     Uniform,
     Cosine,
     /// Mixture of a Blinn-Phong lobe (exponent `n >= 0`) with weight `w` in `[0, 1]` and a cosine lobe.
-    BlinnPhong {
+    Phong {
         exponent: f64,
         specular_weight: f64,
     },
@@ -55,8 +58,8 @@ pub enum SamplingStrategy {
     /// Mixture of an anisotropic Blinn-Phong lobe (Ashikhmin and Shirley's half-vector
     /// distribution, exponent `exponent_u` along the tangent x and `exponent_v` along y) with
     /// weight `w` and a cosine lobe ([`anisotropic_lobe_density`]), for anisotropic networks.
-    /// With equal exponents it is [`SamplingStrategy::BlinnPhong`].
-    AnisotropicBlinnPhong {
+    /// With equal exponents it is [`SamplingStrategy::Phong`].
+    AnisotropicPhong {
         exponent_u: f64,
         exponent_v: f64,
         specular_weight: f64,
@@ -67,9 +70,21 @@ pub enum SamplingStrategy {
 }
 
 impl SamplingStrategy {
-    /// An anisotropic Blinn-Phong mixture ([`SamplingStrategy::AnisotropicBlinnPhong`]).
+    /// The strategy's family, without its parameters.
+    pub fn kind(&self) -> SamplingKind {
+        match self {
+            SamplingStrategy::Uniform => SamplingKind::Uniform,
+            SamplingStrategy::Cosine => SamplingKind::Cosine,
+            SamplingStrategy::Phong { .. } => SamplingKind::Phong,
+            SamplingStrategy::TwoLobe { .. } => SamplingKind::TwoLobe,
+            SamplingStrategy::AnisotropicPhong { .. } => SamplingKind::AnisotropicPhong,
+            SamplingStrategy::Tabulated(_) => SamplingKind::Tabulated,
+        }
+    }
+
+    /// An anisotropic Blinn-Phong mixture ([`SamplingStrategy::AnisotropicPhong`]).
     pub fn anisotropic(exponent_u: f64, exponent_v: f64, specular_weight: f64) -> Self {
-        SamplingStrategy::AnisotropicBlinnPhong {
+        SamplingStrategy::AnisotropicPhong {
             exponent_u,
             exponent_v,
             specular_weight,
@@ -90,7 +105,7 @@ pub struct DirectionSample {
 impl SamplingStrategy {
     /// Checks the parameters (exponent in [0, [`MAX_EXPONENT`]], weight in [0, 1]).
     pub fn validated(self) -> Result<Self> {
-        if let SamplingStrategy::BlinnPhong {
+        if let SamplingStrategy::Phong {
             exponent,
             specular_weight,
         } = self
@@ -109,7 +124,7 @@ impl SamplingStrategy {
         if let Some(problem) = self.two_lobe_problem() {
             return Err(NbrdfError::InvalidArgument(problem));
         }
-        if let SamplingStrategy::AnisotropicBlinnPhong {
+        if let SamplingStrategy::AnisotropicPhong {
             exponent_u,
             exponent_v,
             specular_weight,
@@ -164,12 +179,12 @@ impl SamplingStrategy {
     /// Whether the parameters are usable; unusable ones give pdf 0 everywhere instead of NaN.
     fn params_ok(&self) -> bool {
         match *self {
-            SamplingStrategy::BlinnPhong {
+            SamplingStrategy::Phong {
                 exponent,
                 specular_weight,
             } => exponent_in_range(exponent) && (0.0..=1.0).contains(&specular_weight),
             SamplingStrategy::TwoLobe { .. } => self.two_lobe_problem().is_none(),
-            SamplingStrategy::AnisotropicBlinnPhong {
+            SamplingStrategy::AnisotropicPhong {
                 exponent_u,
                 exponent_v,
                 specular_weight,
@@ -205,7 +220,7 @@ impl SamplingStrategy {
             SamplingStrategy::Uniform => uniform_hemisphere(u1, u2),
             SamplingStrategy::Cosine => cosine_hemisphere(u1, u2),
             SamplingStrategy::Tabulated(ref table) => table.sample_direction(v, [u0, u1, u2]),
-            SamplingStrategy::BlinnPhong {
+            SamplingStrategy::Phong {
                 exponent,
                 specular_weight,
             } => {
@@ -229,7 +244,7 @@ impl SamplingStrategy {
                 }
                 None => cosine_hemisphere(u1, u2),
             },
-            SamplingStrategy::AnisotropicBlinnPhong {
+            SamplingStrategy::AnisotropicPhong {
                 exponent_u,
                 exponent_v,
                 specular_weight,
@@ -273,7 +288,7 @@ impl SamplingStrategy {
             SamplingStrategy::Uniform => 0.5 * FRAC_1_PI,
             SamplingStrategy::Cosine => l.z.max(0.0) * FRAC_1_PI,
             SamplingStrategy::Tabulated(ref table) => table.density_f64(v, l),
-            SamplingStrategy::BlinnPhong {
+            SamplingStrategy::Phong {
                 exponent,
                 specular_weight,
             } => with_cosine(l, 1.0 - specular_weight, phong(exponent, specular_weight)),
@@ -287,7 +302,7 @@ impl SamplingStrategy {
                 (1.0 - weight1 - weight2).max(0.0), // float32 weights may sum to 1 + ulp
                 phong(exponent1, weight1) + phong(exponent2, weight2),
             ),
-            SamplingStrategy::AnisotropicBlinnPhong {
+            SamplingStrategy::AnisotropicPhong {
                 exponent_u,
                 exponent_v,
                 specular_weight,
@@ -505,7 +520,7 @@ pub fn blinn_phong_lobe_density(
     exponent: f64,
     specular_weight: f64,
 ) -> f64 {
-    SamplingStrategy::BlinnPhong {
+    SamplingStrategy::Phong {
         exponent,
         specular_weight,
     }
@@ -703,7 +718,7 @@ pub(crate) mod tests {
 
     #[test]
     fn validated_rejects_bad_parameters() {
-        let bp = |exponent, specular_weight| SamplingStrategy::BlinnPhong {
+        let bp = |exponent, specular_weight| SamplingStrategy::Phong {
             exponent,
             specular_weight,
         };
@@ -825,7 +840,7 @@ pub(crate) mod tests {
     #[test]
     fn pdf_is_the_lobe_density_above_the_horizon_and_zero_below() {
         let mut rng = SplitMix64::from_state(5);
-        let strategy = SamplingStrategy::BlinnPhong {
+        let strategy = SamplingStrategy::Phong {
             exponent: 30.0,
             specular_weight: 0.6,
         };
@@ -853,11 +868,11 @@ pub(crate) mod tests {
         let strategies = [
             SamplingStrategy::Uniform,
             SamplingStrategy::Cosine,
-            SamplingStrategy::BlinnPhong {
+            SamplingStrategy::Phong {
                 exponent: 20.0,
                 specular_weight: 0.5,
             },
-            SamplingStrategy::BlinnPhong {
+            SamplingStrategy::Phong {
                 exponent: 1e6,
                 specular_weight: 0.9,
             },
@@ -938,14 +953,14 @@ pub(crate) mod tests {
             (SamplingStrategy::Uniform, dir(30.0, 0.0)),
             (SamplingStrategy::Cosine, dir(30.0, 0.0)),
             (
-                SamplingStrategy::BlinnPhong {
+                SamplingStrategy::Phong {
                     exponent: 10.0,
                     specular_weight: 0.5,
                 },
                 dir(45.0, 1.0),
             ),
             (
-                SamplingStrategy::BlinnPhong {
+                SamplingStrategy::Phong {
                     exponent: 1000.0,
                     specular_weight: 0.8,
                 },
@@ -1012,7 +1027,7 @@ pub(crate) mod tests {
         let mut strategies = vec![SamplingStrategy::Uniform, SamplingStrategy::Cosine];
         for exponent in [0.0, 1e-3, 1.0, 1e6] {
             for specular_weight in [0.0, 0.5, 1.0] {
-                strategies.push(SamplingStrategy::BlinnPhong {
+                strategies.push(SamplingStrategy::Phong {
                     exponent,
                     specular_weight,
                 });
@@ -1042,7 +1057,7 @@ pub(crate) mod tests {
             }
         }
         // The sharpest lobe with the extreme uniforms lands on the mirror direction.
-        let bp = SamplingStrategy::BlinnPhong {
+        let bp = SamplingStrategy::Phong {
             exponent: 1e6,
             specular_weight: 1.0,
         };
@@ -1058,7 +1073,7 @@ pub(crate) mod tests {
     #[test]
     fn batches_match_single_lanes() {
         let net = Nbrdf::random("n", 21, 3);
-        let strategy = SamplingStrategy::BlinnPhong {
+        let strategy = SamplingStrategy::Phong {
             exponent: 40.0,
             specular_weight: 0.7,
         };
@@ -1175,7 +1190,7 @@ pub(crate) mod tests {
             assert!(s.light.is_finite());
         }
         // A second lobe of weight 0 is the one-lobe mixture, sample for sample.
-        let one = SamplingStrategy::BlinnPhong {
+        let one = SamplingStrategy::Phong {
             exponent: 300.0,
             specular_weight: 0.6,
         };
