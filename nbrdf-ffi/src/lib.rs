@@ -15,8 +15,8 @@
 
 use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 use nbrdf_core::network::parameter_count_for;
+use nbrdf_core::sampling::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::sampling::{self, SamplingStrategy};
-use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
 use nbrdf_ffi_common::{
     array_len, check_pointer, input, output, reference, Failure, FailureKind, FfiResult, Status,
@@ -342,7 +342,7 @@ impl BrdfHandle for NbrdfNetwork {
     }
     /// With the cosine weight `nbrdf fit-phong` stored, if any.
     fn table_config(&self) -> TableConfig {
-        TableConfig::for_network(&self.network)
+        self.network.table_config()
     }
 }
 
