@@ -105,7 +105,7 @@ fn network_eval(c: &mut Criterion) {
 
 fn blinn_phong_sampling(c: &mut Criterion) {
     let net = bench_network();
-    let strategy = SamplingStrategy::BlinnPhong {
+    let strategy = SamplingStrategy::Phong {
         exponent: 210.0,
         specular_weight: 0.31,
     };

@@ -1,5 +1,5 @@
 //! Choosing the anisotropic Blinn-Phong sampling lobe `(n_u, n_v, w)` of an anisotropic
-//! material ([`SamplingStrategy::AnisotropicBlinnPhong`]) for the lowest variance of BSDF
+//! material ([`SamplingStrategy::AnisotropicPhong`]) for the lowest variance of BSDF
 //! sampling: the objective of [`crate::lobe_fit`] (mean relative second moment `R` of `g / p`,
 //! `g = f_r cos(theta_l)`), on a quadrature that no longer assumes isotropy: views at several
 //! azimuths as well as elevations, half vectors over the whole circle of `phi_h`.

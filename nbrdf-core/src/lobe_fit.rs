@@ -752,7 +752,7 @@ pub(crate) mod tests {
         let q = quadrature(&target, theta_v, &config);
         let (n, w) = (40.0, 0.6);
         let quad = second_moment(&q, n, w);
-        let strategy = SamplingStrategy::BlinnPhong {
+        let strategy = SamplingStrategy::Phong {
             exponent: n,
             specular_weight: w,
         };

@@ -27,7 +27,7 @@ fn message<T: std::fmt::Debug>(result: nbrdf_core::Result<T>) -> String {
 
 #[test]
 fn exponents_above_the_cap_are_refused_by_every_path() {
-    let bp = |exponent| SamplingStrategy::BlinnPhong {
+    let bp = |exponent| SamplingStrategy::Phong {
         exponent,
         specular_weight: 0.5,
     };
@@ -315,7 +315,7 @@ proptest! {
         for strategy in [
             SamplingStrategy::Uniform,
             SamplingStrategy::Cosine,
-            SamplingStrategy::BlinnPhong { exponent, specular_weight: weight },
+            SamplingStrategy::Phong { exponent, specular_weight: weight },
         ] {
             let pdf = strategy.pdf(view, light);
             prop_assert!(pdf.is_finite() && pdf >= 0.0, "{strategy:?} pdf({view}, {light}) = {pdf}");
@@ -394,7 +394,7 @@ proptest! {
             }
             prop_assert!(untouched(&r) && untouched(&g) && untouched(&b));
         }
-        let strategy = SamplingStrategy::BlinnPhong { exponent: 40.0, specular_weight: 0.5 };
+        let strategy = SamplingStrategy::Phong { exponent: 40.0, specular_weight: 0.5 };
         let mut pdf = vec![-1.0f32; out_lengths[0]];
         sampling::pdf_batch(&strategy, view, light, &mut pdf);
         let n_pdf = lengths.iter().copied().chain([out_lengths[0]]).min().unwrap_or(0);

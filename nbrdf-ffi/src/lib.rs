@@ -15,8 +15,8 @@
 
 use nbrdf_core::brdf::{Brdf, Directions, DirectionsMut, RgbMut};
 use nbrdf_core::network::parameter_count_for;
+use nbrdf_core::sampling::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::sampling::{self, SamplingStrategy};
-use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
 use nbrdf_ffi_common::{
     array_len, check_pointer, input, output, reference, Failure, FailureKind, FfiResult, Status,
@@ -200,7 +200,7 @@ impl SamplerFields {
         let strategy = match (self.kind, self.second) {
             (0, _) => SamplingStrategy::Uniform,
             (1, _) => SamplingStrategy::Cosine,
-            (2, _) => SamplingStrategy::BlinnPhong {
+            (2, _) => SamplingStrategy::Phong {
                 exponent,
                 specular_weight,
             },
@@ -342,7 +342,7 @@ impl BrdfHandle for NbrdfNetwork {
     }
     /// With the cosine weight `nbrdf fit-phong` stored, if any.
     fn table_config(&self) -> TableConfig {
-        TableConfig::for_network(&self.network)
+        self.network.table_config()
     }
 }
 
@@ -1002,12 +1002,9 @@ pub unsafe extern "C" fn nbrdf_network_default_sampling(
         // SAFETY: forwarded contract.
         let network = &unsafe { reference(network, "network")? }.network;
         check_pointer(out, "out")?;
-        let kind = match network.sampling.as_ref().and_then(|s| s.default.as_deref()) {
-            Some("cosine") => NbrdfSamplingKind::NBRDF_SAMPLING_COSINE as i32,
-            Some("phong") => NbrdfSamplingKind::NBRDF_SAMPLING_PHONG as i32,
-            Some("two_lobe") => NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE as i32,
-            Some("tabulated") => NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED as i32,
-            _ => NO_DEFAULT_SAMPLING,
+        let kind = match network.sampling.as_ref().and_then(|s| s.default) {
+            Some(kind) => kind.code() as i32,
+            None => NO_DEFAULT_SAMPLING,
         };
         // SAFETY: non-null, aligned, writable by contract.
         unsafe { out.write(kind) };

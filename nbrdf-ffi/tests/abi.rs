@@ -372,7 +372,7 @@ fn check_layouts(brdf: &dyn Brdf, eval: EvalFn<'_>, sample: SampleFn<'_>) {
         ),
         (
             NbrdfSamplingKind::NBRDF_SAMPLING_PHONG,
-            SamplingStrategy::BlinnPhong {
+            SamplingStrategy::Phong {
                 exponent: 40.0,
                 specular_weight: 0.3,
             },

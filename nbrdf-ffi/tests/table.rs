@@ -11,7 +11,7 @@ mod support;
 use glam::Vec3;
 use nbrdf_core::brdf::Brdf;
 use nbrdf_core::rng::SplitMix64;
-use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
+use nbrdf_core::sampling::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{Nbrdf, SamplingStrategy};
 use nbrdf_ffi::*;
 use std::f64::consts::TAU;
@@ -223,7 +223,11 @@ fn check_against_core<H>(brdf: &dyn Brdf, table: &Table, sampler: &Sampler<'_, H
 /// `nbrdf_table_arrays` writes exactly the documented sizes, the core's values (probabilities
 /// as float32), and per row a probability distribution whose alias table draws each bin with
 /// its mass (counted the other way round: kept plus aliased to).
-fn check_arrays(table: &Table, info: &NbrdfTableInfo, core: &nbrdf_core::tabulated::TableArrays) {
+fn check_arrays(
+    table: &Table,
+    info: &NbrdfTableInfo,
+    core: &nbrdf_core::sampling::tabulated::TableArrays,
+) {
     let (rows, nt, np) = (
         info.rows as usize,
         info.theta_bins as usize,

@@ -42,7 +42,7 @@ fn core_accepts(s: &NbrdfSampler) -> bool {
     let strategy = match s.kind {
         NbrdfSamplingKind::NBRDF_SAMPLING_UNIFORM => SamplingStrategy::Uniform,
         NbrdfSamplingKind::NBRDF_SAMPLING_COSINE => SamplingStrategy::Cosine,
-        NbrdfSamplingKind::NBRDF_SAMPLING_PHONG => SamplingStrategy::BlinnPhong {
+        NbrdfSamplingKind::NBRDF_SAMPLING_PHONG => SamplingStrategy::Phong {
             exponent: f64::from(s.exponent),
             specular_weight: f64::from(s.specular_weight),
         },

@@ -25,9 +25,10 @@ use crate::coords::network_input_for;
 use crate::error::{NbrdfError, Result};
 use crate::fastmath::MulAdd;
 use crate::rng::{SplitMix64, Stream};
-use crate::sampling::SamplingStrategy;
+use crate::sampling::tabulated::TableConfig;
+use crate::sampling::{SamplingKind, SamplingStrategy};
 use glam::{DVec3, Vec3};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 
 pub const INPUTS: usize = 6;
 pub const OUTPUTS: usize = 3;
@@ -77,7 +78,7 @@ pub struct SamplingParams {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub second_lobe: Option<SecondLobe>,
     /// The exponent across the tangent of an anisotropic lobe: `exponent` becomes `n_u`
-    /// (along the tangent x) and this `n_v` ([`SamplingStrategy::AnisotropicBlinnPhong`]).
+    /// (along the tangent x) and this `n_v` ([`SamplingStrategy::AnisotropicPhong`]).
     /// Optional and only for anisotropic networks (`nbrdf fit-phong` stores it); readers that
     /// predate it sample the isotropic lobe of exponent `n_u`, a valid (if weaker) density.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -85,20 +86,38 @@ pub struct SamplingParams {
     /// What the lobe search measured when it chose these parameters (informational).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_variance: Option<SamplingVariances>,
-    /// The strategy that sampled this material with the lowest measured variance, by the
-    /// plugin's `sampling` name (one of [`DEFAULT_SAMPLING_NAMES`]); the plugin uses it when a
-    /// scene gives no `sampling`. Optional: files without it sample as before.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub default: Option<String>,
+    /// The strategy that sampled this material with the lowest measured variance; the plugin
+    /// uses it when a scene gives no `sampling`. Optional: files without it sample as before.
+    /// Old spellings (`two-lobe`, `blinn_phong`, ...) load as their canonical kind.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "deserialize_default_kind"
+    )]
+    pub default: Option<SamplingKind>,
     /// Weight of the defensive cosine component of the tabulated sampler
-    /// ([`crate::tabulated::TableConfig::for_network`]), in `(0, 1)`: the lowest-variance
+    /// ([`Nbrdf::table_config`]), in `(0, 1)`: the lowest-variance
     /// candidate of `nbrdf fit-phong`. Optional: files without it mix 0.1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub table_cosine_weight: Option<f32>,
 }
 
-/// The values [`SamplingParams::default`] may take.
-pub const DEFAULT_SAMPLING_NAMES: [&str; 4] = ["cosine", "phong", "two_lobe", "tabulated"];
+/// [`SamplingParams::default`] from its name, canonical or deprecated.
+fn deserialize_default_kind<'de, D: Deserializer<'de>>(
+    deserializer: D,
+) -> std::result::Result<Option<SamplingKind>, D::Error> {
+    let Some(name) = Option::<String>::deserialize(deserializer)? else {
+        return Ok(None);
+    };
+    SamplingKind::parse_lenient(&name)
+        .map(|parsed| Some(parsed.kind))
+        .map_err(|_| {
+            serde::de::Error::custom(format!(
+                "unknown sampling default '{name}' (one of {})",
+                SamplingKind::canonical_names()
+            ))
+        })
+}
 
 /// The second lobe of a two-lobe sampling mixture.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -119,7 +138,7 @@ pub struct SamplingVariances {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub anisotropic: Option<f64>,
     pub cosine: f64,
-    /// The tabulated sampler's ([`crate::tabulated`]), when it was measured.
+    /// The tabulated sampler's ([`crate::sampling::tabulated`]), when it was measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tabulated: Option<f64>,
 }
@@ -165,16 +184,16 @@ impl SamplingParams {
                 ));
             }
         }
-        if let Some(name) = &self.default {
-            if !DEFAULT_SAMPLING_NAMES.contains(&name.as_str()) {
-                return Some(format!(
-                    "unknown sampling default '{name}' (one of {})",
-                    DEFAULT_SAMPLING_NAMES.join(", ")
-                ));
-            }
-            if name == "two_lobe" && self.second_lobe.is_none() {
+        match self.default {
+            Some(SamplingKind::TwoLobe) if self.second_lobe.is_none() => {
                 return Some("sampling default 'two_lobe' needs a second_lobe".to_string());
             }
+            Some(SamplingKind::AnisotropicPhong) if self.exponent_v.is_none() => {
+                return Some(
+                    "sampling default 'anisotropic_phong' needs an exponent_v".to_string(),
+                );
+            }
+            _ => {}
         }
         if self.second_lobe.is_some() {
             if let Err(NbrdfError::InvalidArgument(message)) = self.two_lobe_strategy().validated()
@@ -215,7 +234,7 @@ impl SamplingParams {
         if self.second_lobe.is_some() {
             return self.two_lobe_strategy().validated();
         }
-        SamplingStrategy::BlinnPhong {
+        SamplingStrategy::Phong {
             exponent: f64::from(self.exponent),
             specular_weight: f64::from(self.specular_weight),
         }
@@ -367,6 +386,13 @@ impl Nbrdf {
             light.as_vec3(),
         ))
         .map(f64::from)
+    }
+
+    /// The tabulated sampler's settings, with the cosine weight the file stores, if any.
+    pub fn table_config(&self) -> TableConfig {
+        TableConfig::with_stored_cosine_weight(
+            self.sampling.as_ref().and_then(|s| s.table_cosine_weight),
+        )
     }
 
     /// The stored sampling strategy, if the file has one and it is valid.

@@ -494,7 +494,7 @@ fn json_round_trip_is_exact() {
     assert_eq!(back.layers, net.layers);
     assert_eq!(
         net.sampling_strategy(),
-        Some(SamplingStrategy::BlinnPhong {
+        Some(SamplingStrategy::Phong {
             exponent: 210.0,
             specular_weight: f64::from(0.31f32)
         })
@@ -730,7 +730,7 @@ fn two_lobe_sampling_round_trips_and_one_lobe_files_are_unchanged() {
     assert!(!text.contains("second_lobe") && !text.contains("relative_variance"));
     assert_eq!(
         net.sampling_strategy(),
-        Some(SamplingStrategy::BlinnPhong {
+        Some(SamplingStrategy::Phong {
             exponent: 900.0,
             specular_weight: 0.5
         })
@@ -773,13 +773,13 @@ fn table_cosine_weight_round_trips_and_is_checked_on_load() {
         second_lobe: None,
         exponent_v: None,
         relative_variance: None,
-        default: Some("tabulated".into()),
+        default: Some(SamplingKind::Tabulated),
         table_cosine_weight: Some(0.02),
     };
     net.sampling = Some(lobe.clone());
     let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();
     assert_eq!(back, net);
-    let config = crate::tabulated::TableConfig::for_network(&back);
+    let config = back.table_config();
     assert_eq!(config.cosine_weight, f64::from(0.02f32));
     for bad in [0.0, -0.1, 1.0, 3.0] {
         net.sampling = Some(SamplingParams {
@@ -794,7 +794,7 @@ fn table_cosine_weight_round_trips_and_is_checked_on_load() {
         table_cosine_weight: None,
         ..lobe
     });
-    let config = crate::tabulated::TableConfig::for_network(&net);
+    let config = net.table_config();
     assert_eq!(config.cosine_weight, 0.1);
 }
 
@@ -1121,4 +1121,48 @@ fn wide_networks_prove_within_a_work_budget() {
     for ((got, want), (l, v)) in fewer.iter().zip(&full).zip(&pairs) {
         assert_eq!(got, want, "pruned {got:?}, full {want:?} at {v} {l}");
     }
+}
+
+/// `sampling.default` as a file spells it: canonical names and the old spellings load as the
+/// canonical kind and are written back canonical; an unknown name and a default without the
+/// parameters it samples with are refused.
+#[test]
+fn sampling_default_loads_old_spellings_as_the_canonical_kind() {
+    let mut net = test_net(4, 3);
+    net.sampling = Some(SamplingParams {
+        model: "blinn-phong".into(),
+        exponent: 40.0,
+        specular_weight: 0.5,
+        source: "fit".into(),
+        second_lobe: Some(SecondLobe {
+            exponent: 4.0,
+            specular_weight: 0.2,
+        }),
+        exponent_v: None,
+        relative_variance: None,
+        default: None,
+        table_cosine_weight: None,
+    });
+    let with_default = |name: &str| {
+        let mut doc: serde_json::Value = serde_json::from_str(&net.to_json_string()).unwrap();
+        doc["sampling"]["default"] = serde_json::Value::String(name.into());
+        Nbrdf::from_json_str(&doc.to_string(), Path::new("t"))
+    };
+    let cases = [
+        ("tabulated", "tabulated"),
+        ("two_lobe", "two_lobe"),
+        ("two-lobe", "two_lobe"),
+        ("blinn_phong", "phong"),
+        ("phong-fit", "phong"),
+        ("Cosine", "cosine"),
+    ];
+    for (spelling, canonical) in cases {
+        let loaded = with_default(spelling).unwrap();
+        let written: serde_json::Value = serde_json::from_str(&loaded.to_json_string()).unwrap();
+        assert_eq!(written["sampling"]["default"], canonical, "{spelling}");
+    }
+    let err = with_default("ggx").unwrap_err().to_string();
+    assert!(err.contains("unknown sampling default 'ggx'"), "{err}");
+    let err = with_default("anisotropic-phong").unwrap_err().to_string();
+    assert!(err.contains("needs an exponent_v"), "{err}");
 }
