@@ -33,7 +33,9 @@ EXECUTORS = ("local", "dask")
 POLL_SECONDS = 0.2
 
 
-def _lost(source, settings, key, error) -> dict:
+def lost_row(job, error) -> dict:
+    """The row of a conversion whose worker died (its job: source, settings, key)."""
+    source, _, key = job
     return {"name": source.name, "kind": source.kind, "source": source.path, "key": key, "status": "failed",
             "error": f"worker: {type(error).__name__}: {error}", "wall_seconds": None}
 
@@ -42,14 +44,16 @@ class _Executor:
     def __init__(self):
         self.events: queue_module.Queue = queue_module.Queue()
 
-    def _submit(self, source, settings, key):
+    def _submit(self, function, args):
         raise NotImplementedError
 
-    def run(self, jobs, on_event):
-        """Runs ``convert(source, settings, key)`` for each ``(source, settings, key)`` of
-        ``jobs``; yields the rows as they finish and calls ``on_event(event)`` with each
-        progress event in between (in this thread)."""
-        pending = {self._submit(*job): job for job in jobs}
+    def run(self, jobs, on_event=None, function=task.convert, on_lost=lost_row):
+        """Runs ``function(*job)`` for each tuple of ``jobs`` (by default the conversion of a
+        ``(source, settings, key)``); yields the results as they finish, ``on_lost(job, error)``
+        for a job whose worker died, and calls ``on_event(event)`` with each progress event in
+        between (in this thread)."""
+        on_event = on_event or (lambda event: None)
+        pending = {self._submit(function, job): job for job in jobs}
         try:
             while pending:
                 finished = [f for f in pending if f.done()]
@@ -62,7 +66,7 @@ class _Executor:
                     try:
                         row = future.result()
                     except Exception as error:  # noqa: BLE001 - the worker died, not the task
-                        row = _lost(*job, error)
+                        row = on_lost(job, error)
                     yield row
             self._drain(on_event)
         finally:
@@ -80,12 +84,12 @@ class _Executor:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, kind, *_):
+        self.close(abort=kind is not None and issubclass(kind, KeyboardInterrupt))
         return False
 
-    def close(self):
-        pass
+    def close(self, abort: bool = False):
+        """Stops the workers; ``abort`` (Ctrl-C) ends the running tasks instead of waiting."""
 
 
 class LocalExecutor(_Executor):
@@ -96,11 +100,16 @@ class LocalExecutor(_Executor):
         self.pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=task.init_local_worker,
                                         initargs=(self.events,))
 
-    def _submit(self, source, settings, key):
-        return self.pool.submit(task.convert, source, settings, key)
+    def _submit(self, function, args):
+        return self.pool.submit(function, *args)
 
-    def close(self):
-        self.pool.shutdown(wait=True, cancel_futures=True)
+    def close(self, abort: bool = False):
+        if abort:
+            # concurrent.futures has no way to end running tasks before Python 3.14
+            # (terminate_workers); their commands die with them (task._die_with_parent).
+            for process in list((getattr(self.pool, "_processes", None) or {}).values()):
+                process.terminate()
+        self.pool.shutdown(wait=not abort, cancel_futures=True)
         self.events.close()
 
 
@@ -135,11 +144,11 @@ class DaskExecutor(_Executor):
     def workers(self) -> int:
         return len(self.client.scheduler_info()["workers"])
 
-    def _submit(self, source, settings, key):
-        # pure=False: a task is its side effects' run, never shared with another submission.
-        return self.client.submit(task.convert, source, settings, key, pure=False, key=f"convert-{source.name}-{key[:12]}")
+    def _submit(self, function, args):
+        # pure=False: every submission runs (no result shared between equal-looking calls).
+        return self.client.submit(function, *args, pure=False)
 
-    def close(self):
+    def close(self, abort: bool = False):
         try:
             self.client.unsubscribe_topic(task.PROGRESS_TOPIC)
         finally:

@@ -18,6 +18,8 @@ import json
 import os
 import pty
 import re
+import resource
+import signal
 import struct
 import subprocess
 import sys
@@ -99,6 +101,27 @@ def _reporter():
 # Commands
 
 
+def _parent_death_signal():
+    """Linux's prctl, looked up here: the child between fork and exec only calls it (no loading,
+    no locks, which other threads of a Dask worker might hold)."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _parent_death_signal()
+
+
+def _die_with_parent() -> None:
+    """In a command's process before it starts: end it when the worker that started it ends,
+    so that an aborted run leaves no trainer running on."""
+    if _PRCTL is not None:
+        _PRCTL(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+
+
 _EPOCH = re.compile(rb"(\d+)/(\d+) \[")
 _ANSI = re.compile(rb"\x1b\[[0-9;?]*[A-Za-z]")
 
@@ -116,14 +139,14 @@ def run_tracked(argv: list, on_epoch=None) -> None:
     they change. Raises cli.CommandError on failure."""
     argv = [str(a) for a in argv]
     if on_epoch is None:
-        cli.run(argv, stdin=subprocess.DEVNULL)
+        cli.run(argv, stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent)
         return
     master, slave = pty.openpty()
     # A sane width: a 0-column terminal truncates the bars.
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 160, 0, 0))
     try:
         proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=slave,
-                                env={**os.environ, "TERM": "xterm"})
+                                env={**os.environ, "TERM": "xterm"}, preexec_fn=_die_with_parent)
     finally:
         os.close(slave)
     chunks, last = [], None
@@ -255,7 +278,7 @@ def convert(source: Source, settings: Settings, key: str) -> dict:
             fit = [settings.cli, "fit-phong", network_path, *settings.fit_args]
             if settings.threads is not None and "--threads" not in settings.fit_args:
                 fit += ["--threads", settings.threads]
-            cli.run(fit, stdin=subprocess.DEVNULL)
+            cli.run(fit, stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent)
             step = "measure"
             network_bytes = network_path.read_bytes()
             network = json.loads(network_bytes)
@@ -274,4 +297,8 @@ def convert(source: Source, settings: Settings, key: str) -> dict:
         detail = "".join(traceback.format_exception_only(type(error), error)).strip()
         row.update(status="failed", error=f"{step}: {detail}")
     row["wall_seconds"] = time.perf_counter() - start
+    # Peaks so far in this worker process and in the largest command it ran (the trainer): the
+    # memory a worker needs (docs/scale.md).
+    row["worker_peak_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    row["commands_peak_mib"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     return row
