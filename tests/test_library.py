@@ -130,6 +130,7 @@ def test_threads_do_not_enter_the_key():
 
 def test_atomic_write_leaves_the_old_file_or_the_new(tmp_path, monkeypatch):
     path = store.write_atomic(tmp_path / "f.json", "old")
+    assert path.stat().st_mode & 0o777 == 0o666 & ~_umask()  # not mkstemp's private 0600
 
     def cut(*_):
         raise OSError("disk gone")
@@ -142,6 +143,12 @@ def test_atomic_write_leaves_the_old_file_or_the_new(tmp_path, monkeypatch):
     (tmp_path / "m").mkdir()
     (tmp_path / "m" / (store.TEMP_PREFIX + "abc")).write_text("half")
     assert store.remove_temporaries(tmp_path) == 1 and temporaries(tmp_path) == []
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def test_error_message_keeps_the_error_lines():

@@ -21,6 +21,9 @@ from pathlib import Path
 
 TEMP_PREFIX = ".nbrdf-tmp-"
 ROW = "row.json"
+# mkstemp makes its files private (0600); the outputs get what a plain open() would give them.
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
 
 
 def sha256(data: bytes) -> str:
@@ -47,6 +50,7 @@ def write_atomic(path: Path, data: bytes | str) -> Path:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(temp, 0o666 & ~_UMASK)
         os.replace(temp, path)
     except BaseException:
         Path(temp).unlink(missing_ok=True)
