@@ -136,7 +136,7 @@ class DaskExecutor(_Executor):
         else:
             # One thread per worker: each task runs its own multi-threaded trainer.
             self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                                        dashboard_address=None)
+                                        dashboard_address=":0")
             self.client = Client(self.cluster)
         self.client.register_plugin(ImportPlugin(), name=ImportPlugin.name)
         self.client.subscribe_topic(task.PROGRESS_TOPIC, lambda event: self.events.put(event[1]))
