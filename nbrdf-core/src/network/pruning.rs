@@ -21,7 +21,8 @@
 //! sum's magnitude) are far above float32's rounding, so the float32 evaluation of a dropped unit
 //! would also have been exactly 0. Whatever cannot be proved within the budget stays.
 //!
-//! Twin: none (the plugin asks the library through `nbrdf_network_active_units`). Tests:
+//! Twin: none (the plugin takes the proof from the C library: `nbrdf_material_network`, and
+//! `nbrdf_material_active_units` for new weights). Tests:
 //! `network::tests` (dropped units change no value on dense and grazing directions, a unit
 //! alive only in a sliver is kept, a unit alive only where a direction is below the horizon is
 //! dropped, float32 overflow keeps every unit, the work budget) and the fuzz target
@@ -365,9 +366,16 @@ impl Nbrdf {
     /// off the hemisphere ([`Nbrdf::eval_input`] of arbitrary vectors, tabulation at angles
     /// with a direction below the horizon), where a dropped unit may fire.
     pub fn without_inactive_units(&self) -> Nbrdf {
-        let active = self.active_units();
+        self.with_units(&self.active_units())
+    }
+
+    /// The network restricted to the units `active` keeps: [`Nbrdf::without_inactive_units`]
+    /// when `active` is [`Nbrdf::active_units`], for callers that also hand the proof on (the C
+    /// library gives it to the plugin's kernels) and so run it once. `active` has this network's
+    /// hidden widths.
+    pub fn with_units(&self, active: &ActiveUnits) -> Nbrdf {
         let mut pruned = self.clone();
-        pruned.layers = keep_units(&self.layers, &active);
+        pruned.layers = keep_units(&self.layers, active);
         pruned
     }
 }
