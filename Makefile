@@ -56,7 +56,8 @@ llvm: $(VENV)/.plugin-installed
 PREFIX ?= /usr/local
 LIBDIR ?= $(PREFIX)/lib
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n 1)
-SOVERSION := $(firstword $(subst ., ,$(VERSION)))
+# The ABI's major version, set in nbrdf-ffi/build.rs (which gives the library its SONAME).
+SOVERSION := $(shell sed -n 's/^const SOVERSION: &str = "\(.*\)";/\1/p' nbrdf-ffi/build.rs)
 install: build
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/include
 	install -m 755 $(CLI) $(DESTDIR)$(PREFIX)/bin/nbrdf

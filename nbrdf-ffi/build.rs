@@ -1,6 +1,12 @@
-//! Gives the C library an ELF SONAME (`libnbrdf_ffi.so.<major>`), so that programs linked with
-//! `-lnbrdf_ffi` record the versioned name and `make install` can ship the usual
-//! `libnbrdf_ffi.so.<major> -> libnbrdf_ffi.so` pair. Other platforms keep the linker's default.
+//! Gives the C library an ELF SONAME (`libnbrdf_ffi.so.<SOVERSION>`), so that programs linked
+//! with `-lnbrdf_ffi` record the versioned name and `make install` can ship the usual
+//! `libnbrdf_ffi.so.<SOVERSION> -> libnbrdf_ffi.so` pair. Other platforms keep the linker's
+//! default.
+
+/// The ABI's major version: raised whenever a program built against the previous header could
+/// no longer run (functions removed or changed), independently of the crate version. The
+/// Makefile reads it from here. 1: one material and one sampler handle (issue 30).
+const SOVERSION: &str = "1";
 
 fn main() {
     let os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
@@ -8,8 +14,7 @@ fn main() {
         os.as_str(),
         "linux" | "android" | "freebsd" | "netbsd" | "openbsd" | "dragonfly"
     ) {
-        let major = std::env::var("CARGO_PKG_VERSION_MAJOR").unwrap_or_else(|_| "0".into());
-        println!("cargo:rustc-cdylib-link-arg=-Wl,-soname,libnbrdf_ffi.so.{major}");
+        println!("cargo:rustc-cdylib-link-arg=-Wl,-soname,libnbrdf_ffi.so.{SOVERSION}");
     }
     println!("cargo:rerun-if-changed=build.rs");
 }

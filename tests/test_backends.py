@@ -85,6 +85,23 @@ def test_traced_kernels_leave_out_units_that_never_fire(jit_variant, network_fil
     assert not np.array_equal(bsdf_eval(literal, view, light), got)
 
 
+def test_the_traced_network_is_the_one_the_library_loaded(jit_variant, network_file):
+    """One load: the plugin's kernels take the parameters and the active-unit proof from the
+    library's handle (nbrdf_material_network), not from a second read of the file; they are the
+    file's weights, read here independently, and what the library proves for those weights
+    through its other entry point (nbrdf_material_active_units)."""
+    from nbrdf_mitsuba import _native
+
+    literal = mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": "jit"})
+    layers = read_network_layers(network_file)
+    want = np.concatenate([np.concatenate([W.ravel(), b]) for W, b in layers]).astype(np.float32)
+    np.testing.assert_array_equal(literal._traced.good, want)
+    assert literal._traced.shapes == [W.shape for W, _ in layers]
+    proved = _native.Material(network_file).active_units(want)
+    for got, expected in zip(literal._traced.active, proved, strict=True):
+        np.testing.assert_array_equal(got, expected)
+
+
 def test_traced_expm1_is_relatively_exact(jit_variant):
     """The traced network's output function (twin of fastmath.rs expm1_with) against float64
     over the clamped argument range, tiny arguments (small reflectances) included: relative

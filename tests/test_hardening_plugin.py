@@ -504,7 +504,7 @@ def test_library_caps_the_exponent():
     from nbrdf_mitsuba import _native
 
     with pytest.raises(_native.NbrdfError, match="1e6|1000000"):
-        _native.sampler("phong", 2e6, 0.5)
+        _native.Sampler("phong", 2e6, 0.5)
 
 
 def test_library_refuses_tables_beyond_float32(tmp_path):
@@ -513,14 +513,14 @@ def test_library_refuses_tables_beyond_float32(tmp_path):
     stored = np.full((3, 90 * 90 * 180), 1.0)
     stored[1, 5] = 1e300
     with pytest.raises(_native.NbrdfError, match="float32"):
-        _native.MerlTable(write_merl(tmp_path / "huge.binary", stored))
+        _native.Material(write_merl(tmp_path / "huge.binary", stored))
 
 
 def test_library_refuses_tables_without_a_valid_cell(tmp_path):
     from nbrdf_mitsuba import _native
 
     with pytest.raises(_native.NbrdfError, match="valid"):
-        _native.MerlTable(write_merl(tmp_path / "empty.binary", np.full((3, 90 * 90 * 180), -1.0)))
+        _native.Material(write_merl(tmp_path / "empty.binary", np.full((3, 90 * 90 * 180), -1.0)))
 
 
 def test_library_names_nan_in_network_json(tmp_path, network_file):
@@ -531,4 +531,4 @@ def test_library_names_nan_in_network_json(tmp_path, network_file):
     bad = tmp_path / "nan.nbrdf.json"
     bad.write_text(json.dumps(document))  # Python writes the non-standard token NaN
     with pytest.raises(_native.NbrdfError, match="NaN"):
-        _native.Network(bad)
+        _native.Material(bad)

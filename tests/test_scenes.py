@@ -531,7 +531,7 @@ def test_bench_rays_quick_json(tmp_path):
         # alias-table entry (keep probability, alias index), 32 bits each.
         from nbrdf_mitsuba import _native
 
-        table = _native.Table(_native.Network(str(network)))
+        table = _native.Sampler("tabulated", material=_native.Material(str(network)))
         rows, nt, np_ = table.rows, table.theta_bins, table.phi_bins
         want = 4 * 3 * rows * nt * np_
         assert bsdfs["nbrdf-tabulated"]["sampler_bytes"] == want

@@ -116,15 +116,14 @@ def test_pdf_matches_float64_oracle_and_backends_agree(llvm_variant, material, m
     from nbrdf_mitsuba import _native
 
     plugin, path = materials[material]
-    handle = _native.Network(path) if plugin == "nbrdf" else _native.MerlTable(path)
-    table = _native.Table(handle)
+    table = _native.Sampler("tabulated", material=_native.Material(path))
     assert (table.rows, table.theta_bins, table.phi_bins) == (16, 48, 16)
     view, light = random_pairs(4000, seed=3)
     gv, gl = grazing_pairs(1000, seed=4)
     view, light = np.concatenate([view, gv], axis=1), np.concatenate([light, gl], axis=1)
     view, light = f32(view), f32(light)
     want = table_oracle(table, view.astype(np.float64), light.astype(np.float64))
-    rust = _native.pdf(table, view, light)
+    rust = table.pdf(view, light)
     # Bin edges: float32 inputs can land in the neighbouring bin in either implementation.
     close = np.isclose(rust, want, rtol=1e-4, atol=1e-6)
     assert close.mean() > 0.995, f"{(~close).sum()} of {close.size} differ"
@@ -200,6 +199,6 @@ def test_fit_phong_stores_the_lowest_variance_strategy(llvm_variant, tmp_path, n
 
     weight = report["table_cosine_weight"]
     assert weight in (0.1, 0.05, 0.02) and stored["table_cosine_weight"] == pytest.approx(weight)
-    assert _native.Table(_native.Network(out)).cosine_weight == pytest.approx(weight)
+    assert _native.Sampler("tabulated", material=_native.Material(out)).cosine_weight == pytest.approx(weight)
     bsdf = mi.load_dict({"type": "nbrdf", "filename": str(out), "backend": "jit", "sampling": "tabulated"})
     assert bsdf._traced_table.cosine_weight == pytest.approx(weight)

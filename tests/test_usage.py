@@ -265,18 +265,30 @@ def test_native_layer_errors(tmp_path):
     from nbrdf_mitsuba import _native
 
     with pytest.raises(_native.NbrdfError) as info:
-        _native.Network(tmp_path / "nothing.nbrdf.json")
+        _native.Material(tmp_path / "nothing.nbrdf.json")
     assert info.value.status_name == "NBRDF_ERROR_IO" and "nothing.nbrdf.json" in str(info.value)
     with pytest.raises(_native.NbrdfError) as info:
-        _native.sampler("phong", float("nan"), 0.5)
+        _native.Sampler("phong", float("nan"), 0.5)
     assert info.value.status_name == "NBRDF_ERROR_INVALID_ARGUMENT"
     with pytest.raises(ValueError, match="unknown sampling strategy"):
-        _native.sampler("ggx")
+        _native.Sampler("ggx")
     assert re.fullmatch(r"\d+\.\d+\.\d+.*", _native.version())
-    s = _native.sampler("cosine")
-    np.testing.assert_allclose(_native.pdf(s, np.array([0.0, 0, 1]), np.array([0.0, 0, 1])), [1 / np.pi], rtol=1e-6)
+    s = _native.Sampler("cosine")
+    np.testing.assert_allclose(s.pdf(np.array([0.0, 0, 1]), np.array([0.0, 0, 1])), [1 / np.pi], rtol=1e-6)
     with pytest.raises(ValueError, match="differ in shape"):
-        _native.pdf(s, np.zeros((3, 2)), np.zeros((3, 3)))
+        s.pdf(np.zeros((3, 2)), np.zeros((3, 3)))
+
+
+def test_native_layer_takes_the_vocabulary_from_the_library():
+    """The strategy names and codes, and the material kinds, come from the library (its header's
+    enums and nbrdf_sampling_kind_name), not from a Python table: the canonical vocabulary."""
+    from nbrdf_mitsuba import _native, jit
+
+    names = ["uniform", "cosine", "phong", "two_lobe", "tabulated", "anisotropic_phong"]
+    assert _native.SAMPLING_KINDS == {name: code for code, name in enumerate(names)}
+    assert _native.MATERIAL_KINDS == {"network": 0, "merl": 1}
+    assert set(jit.STRATEGIES) == set(names)
+    assert _native.STATUS_NAMES[2] == "NBRDF_ERROR_INVALID_ARGUMENT"
 
 
 def test_strip_preprocessor_keeps_declarations_only():
@@ -285,7 +297,7 @@ def test_strip_preprocessor_keeps_declarations_only():
     text = strip_preprocessor(header_path().read_text())
     assert "#" not in re.sub(r"//.*|/\*.*?\*/", "", text, flags=re.S)
     assert 'extern "C"' not in text
-    assert "int32_t nbrdf_network_eval(" in text
+    assert "int32_t nbrdf_material_eval(" in text
     nested = "#ifdef __cplusplus\n#if X\nint bad;\n#endif\nint bad2;\n#endif\nint good;"
     assert strip_preprocessor(nested).split() == ["int", "good;"]
 

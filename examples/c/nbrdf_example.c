@@ -1,7 +1,7 @@
 /*
- * A small C program using libnbrdf_ffi: loads a neural BRDF (*.nbrdf.json), evaluates it for a
- * few direction pairs, importance-samples light directions and checks their pdfs, and shows
- * how errors are reported.
+ * A small C program using libnbrdf_ffi: loads a neural BRDF (*.nbrdf.json) as a material,
+ * evaluates it for a few direction pairs, importance-samples light directions with a sampler of
+ * the lobes stored in the file and checks their pdfs, and shows how errors are reported.
  *
  * Build (after `make install PREFIX=...` at the repository root):
  *     make -C examples/c PKG_CONFIG_PATH=PREFIX/lib/pkgconfig
@@ -46,20 +46,26 @@ int main(int argc, char **argv) {
     }
     printf("library %s\n", nbrdf_version());
 
-    NbrdfNetwork *network = NULL;
-    int32_t status = nbrdf_network_load(argv[1], &network);
+    /* One handle for networks and MERL tables alike; the info says which it is. */
+    NbrdfMaterial *material = NULL;
+    int32_t status = nbrdf_material_load(argv[1], &material);
     if (status != NBRDF_OK)
-        return fail("nbrdf_network_load", status);
+        return fail("nbrdf_material_load", status);
 
-    NbrdfNetworkInfo info;
-    const char *name = NULL;
-    if ((status = nbrdf_network_info(network, &info)) != NBRDF_OK)
-        return fail("nbrdf_network_info", status);
-    if ((status = nbrdf_network_name(network, &name)) != NBRDF_OK)
-        return fail("nbrdf_network_name", status);
-    printf("network name=%s hidden=%u parameters=%u has_sampling=%u exponent=%.9g specular_weight=%.9g\n",
-           name, info.hidden_width, info.parameter_count, info.has_sampling, info.exponent,
-           info.specular_weight);
+    NbrdfMaterialInfo info;
+    if ((status = nbrdf_material_info(material, &info)) != NBRDF_OK)
+        return fail("nbrdf_material_info", status);
+    if (info.kind != NBRDF_MATERIAL_NETWORK) {
+        fprintf(stderr, "nbrdf_example: %s is a MERL table, not a network\n", argv[1]);
+        return 1;
+    }
+    const NbrdfSamplerParams *stored = &info.stored_sampling;
+    const char *stored_name = NULL;
+    if ((status = nbrdf_sampling_kind_name(stored->kind, &stored_name)) != NBRDF_OK)
+        return fail("nbrdf_sampling_kind_name", status);
+    printf("network name=%s hidden=%u parameters=%u stored_sampling=%s exponent=%.9g specular_weight=%.9g\n",
+           info.name, info.hidden_width, info.parameter_count, stored_name, stored->exponent,
+           stored->specular_weight);
 
     /* Evaluate f_r * cos(theta_light) for a few (view, light) pairs. */
     const double pi = 3.14159265358979323846;
@@ -68,8 +74,8 @@ int main(int argc, char **argv) {
         set_direction(view, i, 0.15 + 0.3 * (double)i, 0.0);
         set_direction(light, i, 0.6 - 0.1 * (double)i, pi * (0.9 + 0.05 * (double)i));
     }
-    if ((status = nbrdf_network_eval(network, view, light, N, rgb)) != NBRDF_OK)
-        return fail("nbrdf_network_eval", status);
+    if ((status = nbrdf_material_eval(material, view, light, N, rgb)) != NBRDF_OK)
+        return fail("nbrdf_material_eval", status);
     for (size_t i = 0; i < N; ++i) {
         printf("eval");
         print_vec("view", view, i);
@@ -78,27 +84,25 @@ int main(int argc, char **argv) {
         printf("\n");
     }
 
-    /* Importance-sample with the Blinn-Phong parameters stored in the file, or a cosine lobe. */
-    NbrdfSampler sampler = {NBRDF_SAMPLING_COSINE, 0.0f, 0.0f};
-    if (info.has_sampling)
-        sampler = (NbrdfSampler){NBRDF_SAMPLING_PHONG, info.exponent, info.specular_weight};
-    if ((status = nbrdf_sampler_validate(&sampler)) != NBRDF_OK)
-        return fail("nbrdf_sampler_validate", status);
+    /* Importance-sample with the lobes stored in the file (a cosine lobe when it stores none). */
+    NbrdfSampler *sampler = NULL;
+    if ((status = nbrdf_sampler_create(material, stored, &sampler)) != NBRDF_OK)
+        return fail("nbrdf_sampler_create", status);
     float u[3 * N], sampled[3 * N], weight[3 * N], pdf[N], pdf_again[N];
     for (size_t i = 0; i < N; ++i) {
         u[i] = 0.2f + 0.2f * (float)i;         /* picks the lobe of the mixture */
         u[N + i] = 0.1f + 0.25f * (float)i;
         u[2 * N + i] = 0.7f - 0.15f * (float)i;
     }
-    status = nbrdf_network_sample(network, &sampler, view, u, N, sampled, weight, pdf);
+    status = nbrdf_material_sample(material, sampler, view, u, N, sampled, weight, pdf);
     if (status != NBRDF_OK)
-        return fail("nbrdf_network_sample", status);
-    if ((status = nbrdf_sampler_pdf(&sampler, view, sampled, N, pdf_again)) != NBRDF_OK)
+        return fail("nbrdf_material_sample", status);
+    if ((status = nbrdf_sampler_pdf(sampler, view, sampled, N, pdf_again)) != NBRDF_OK)
         return fail("nbrdf_sampler_pdf", status);
     int mismatches = 0;
     for (size_t i = 0; i < N; ++i) {
-        printf("sample kind=%d exponent=%.9g specular_weight=%.9g", (int)sampler.kind, sampler.exponent,
-               sampler.specular_weight);
+        printf("sample kind=%d exponent=%.9g specular_weight=%.9g", (int)stored->kind, stored->exponent,
+               stored->specular_weight);
         print_vec("view", view, i);
         print_vec("light", sampled, i);
         print_vec("weight", weight, i);
@@ -113,8 +117,8 @@ int main(int argc, char **argv) {
     }
 
     /* Errors: a status code, and a message naming the function and the file. */
-    NbrdfNetwork *missing = NULL;
-    status = nbrdf_network_load("no-such-network.nbrdf.json", &missing);
+    NbrdfMaterial *missing = NULL;
+    status = nbrdf_material_load("no-such-network.nbrdf.json", &missing);
     printf("error status=%d handle=%s\n", (int)status, missing ? "set" : "null");
     printf("message %s\n", nbrdf_last_error());
     if (status != NBRDF_ERROR_IO || missing != NULL) {
@@ -122,7 +126,8 @@ int main(int argc, char **argv) {
         return 1;
     }
 
-    nbrdf_network_free(network);
+    nbrdf_sampler_free(sampler);
+    nbrdf_material_free(material);
     printf("ok\n");
     return 0;
 }

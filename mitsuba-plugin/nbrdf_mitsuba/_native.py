@@ -16,22 +16,6 @@ import numpy as np
 
 _HERE = Path(__file__).resolve().parent
 
-#: Status codes of the C ABI (``NbrdfStatus``).
-STATUS_NAMES = {
-    0: "NBRDF_OK",
-    1: "NBRDF_ERROR_NULL_POINTER",
-    2: "NBRDF_ERROR_INVALID_ARGUMENT",
-    3: "NBRDF_ERROR_IO",
-    4: "NBRDF_ERROR_FORMAT",
-    5: "NBRDF_ERROR_PANIC",
-}
-
-#: ``NbrdfSamplingKind`` values by the names the BSDF plugins accept.
-SAMPLING_KINDS = {"uniform": 0, "cosine": 1, "phong": 2, "two_lobe": 3, "anisotropic_phong": 5}
-#: ``nbrdf_network_default_sampling`` values by name (the data-driven table is kind 4).
-DEFAULT_SAMPLING_KINDS = {1: "cosine", 2: "phong", 3: "two_lobe", 4: "tabulated"}
-
-
 class NbrdfError(RuntimeError):
     """A call into libnbrdf_ffi failed; ``status`` is the NbrdfStatus code."""
 
@@ -102,6 +86,8 @@ def _load():
 
 
 ffi, lib = _load()
+#: Status names of the C ABI by code (the header's ``NbrdfStatus``).
+STATUS_NAMES = dict(ffi.typeof("NbrdfStatus").elements)
 
 
 def last_error() -> str:
@@ -136,88 +122,109 @@ def _out(array: np.ndarray):
     return ffi.from_buffer("float[]", array, require_writable=True)
 
 
-def sampler(kind: str, exponent: float = 0.0, specular_weight: float = 0.0, exponent2: float = 0.0,
-            specular_weight2: float = 0.0):
-    """A validated ``NbrdfMixtureSampler`` (raises NbrdfError on bad parameters); the second
-    lobe is read only by ``two_lobe``."""
-    if kind not in SAMPLING_KINDS:
-        raise ValueError(f"unknown sampling strategy '{kind}' (expected one of: {', '.join(SAMPLING_KINDS)})")
-    s = ffi.new("NbrdfMixtureSampler *")
-    s.kind = SAMPLING_KINDS[kind]
-    s.exponent = exponent
-    s.specular_weight = specular_weight
-    s.exponent2 = exponent2
-    s.specular_weight2 = specular_weight2
-    check(lib.nbrdf_mixture_sampler_validate(s))
-    return s
+def _sampling_kinds() -> dict[str, int]:
+    """``NbrdfSamplingKind`` codes (the header's constants) by the library's canonical names
+    (``nbrdf_sampling_kind_name``), in code order."""
+    name = ffi.new("const char **")
+    kinds = {}
+    for code in sorted(ffi.typeof("NbrdfSamplingKind").elements):
+        check(lib.nbrdf_sampling_kind_name(code, name))
+        kinds[ffi.string(name[0]).decode()] = code
+    return kinds
 
 
-def pdf(sampler_, view, light) -> np.ndarray:
-    """Solid-angle pdfs of planar ``light`` (3, n) given planar ``view`` (3, n)."""
-    view, light = _planar(view), _planar(light)
-    if view.shape != light.shape:
-        raise ValueError(f"view {view.shape} and light {light.shape} differ in shape")
-    n = view.shape[-1]
-    out = np.empty(n, dtype=np.float32)
-    if isinstance(sampler_, Table):
-        check(lib.nbrdf_table_pdf(sampler_.ptr, _in(view), _in(light), n, _out(out)))
-    else:
-        check(lib.nbrdf_mixture_sampler_pdf(sampler_, _in(view), _in(light), n, _out(out)))
-    return out
+#: The sampling strategies by canonical name (``uniform``, ``cosine``, ``phong``, ...), as the
+#: library names them, with their ``NbrdfSamplingKind`` codes.
+SAMPLING_KINDS = _sampling_kinds()
+_SAMPLING_NAMES = {code: name for name, code in SAMPLING_KINDS.items()}
+#: ``NbrdfMaterialKind`` values by name: ``network``, ``merl``.
+MATERIAL_KINDS = {element.removeprefix("NBRDF_MATERIAL_").lower(): code
+                  for code, element in ffi.typeof("NbrdfMaterialKind").elements.items()}
+_MATERIAL_NAMES = {code: name for name, code in MATERIAL_KINDS.items()}
 
 
-def active_units(flat, hidden: int, anisotropic: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Which hidden units of the network with flat parameters ``flat`` (W1 b1 W2 b2 W3 b3) some
-    pair of directions above the horizon may activate: two boolean arrays of ``hidden``, for
-    the first and the second hidden layer (``nbrdf_network_active_units``)."""
-    flat = np.ascontiguousarray(np.asarray(flat, dtype=np.float32).reshape(-1))
-    out = np.empty(2 * hidden, dtype=np.uint8)
-    check(lib.nbrdf_network_active_units(_in(flat), flat.size, hidden, int(bool(anisotropic)),
-                                         ffi.from_buffer("uint8_t[]", out, require_writable=True),
-                                         out.size))
-    active = out.astype(bool)
-    return active[:hidden], active[hidden:]
+def _buffer(array: np.ndarray, ctype: str = "float[]"):
+    return ffi.from_buffer(ctype, array, require_writable=True)
 
 
-class Table:
-    """The tabulated sampler of a loaded network or MERL table (``sampling`` = ``tabulated``),
-    built by the library from the material; pass it where a sampler goes."""
+class Sampler:
+    """An importance sampler (``NbrdfSampler``) of a strategy of :data:`SAMPLING_KINDS`,
+    validated by the library (raises NbrdfError on bad parameters). Each strategy reads its own
+    parameters: ``phong`` ``exponent`` and ``specular_weight``; ``two_lobe`` those and
+    ``exponent2``, ``specular_weight2``; ``anisotropic_phong`` ``exponent`` (n_u),
+    ``exponent_v`` (n_v) and ``specular_weight``; ``tabulated`` is tabulated from
+    ``material``."""
 
-    def __init__(self, handle: _Handle):
-        out = ffi.new("NbrdfTable **")
-        check(getattr(lib, handle._build_table_fn)(handle._ptr, out))
-        self.ptr = ffi.gc(out[0], lib.nbrdf_table_free)
-        info = ffi.new("NbrdfTableInfo *")
-        check(lib.nbrdf_table_info(self.ptr, info))
+    def __init__(self, kind: str, exponent: float = 0.0, specular_weight: float = 0.0, exponent2: float = 0.0,
+                 specular_weight2: float = 0.0, exponent_v: float = 0.0, material: Material | None = None):
+        if kind not in SAMPLING_KINDS:
+            raise ValueError(f"unknown sampling strategy '{kind}' (expected one of: {', '.join(SAMPLING_KINDS)})")
+        params = ffi.new("NbrdfSamplerParams *")
+        params.kind = SAMPLING_KINDS[kind]
+        params.exponent, params.specular_weight = exponent, specular_weight
+        params.exponent2, params.specular_weight2 = exponent2, specular_weight2
+        params.exponent_v = exponent_v
+        out = ffi.new("NbrdfSampler **")
+        check(lib.nbrdf_sampler_create(ffi.NULL if material is None else material._ptr, params, out))
+        self.ptr = ffi.gc(out[0], lib.nbrdf_sampler_free)
+        info = ffi.new("NbrdfSamplerInfo *")
+        check(lib.nbrdf_sampler_info(self.ptr, info))
+        self.kind = _SAMPLING_NAMES[int(info.kind)]
+        #: The table's shape and cosine weight (``tabulated``; zeros otherwise).
         self.rows, self.theta_bins, self.phi_bins = int(info.rows), int(info.theta_bins), int(info.phi_bins)
         self.cosine_weight = float(info.cosine_weight)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(mass, alias_probability, alias)``: float32, float32 and uint32, each
-        ``rows * theta_bins * phi_bins`` (``nbrdf_table_arrays``)."""
+        """``(mass, alias_probability, alias)`` of a ``tabulated`` sampler: float32, float32 and
+        uint32, each ``rows * theta_bins * phi_bins`` (``nbrdf_sampler_table``)."""
         n = self.rows * self.theta_bins * self.phi_bins
         mass = np.empty(n, dtype=np.float32)
         probability = np.empty(n, dtype=np.float32)
         alias = np.empty(n, dtype=np.uint32)
-        check(lib.nbrdf_table_arrays(self.ptr, _out(mass), _out(probability),
-                                     ffi.from_buffer("uint32_t[]", alias, require_writable=True)))
+        check(lib.nbrdf_sampler_table(self.ptr, _out(mass), _out(probability), _buffer(alias, "uint32_t[]"), n))
         return mass, probability, alias
 
+    def pdf(self, view, light) -> np.ndarray:
+        """Solid-angle pdfs of planar ``light`` (3, n) given planar ``view`` (3, n)."""
+        view, light = _planar(view), _planar(light)
+        if view.shape != light.shape:
+            raise ValueError(f"view {view.shape} and light {light.shape} differ in shape")
+        n = view.shape[-1]
+        out = np.empty(n, dtype=np.float32)
+        check(lib.nbrdf_sampler_pdf(self.ptr, _in(view), _in(light), n, _out(out)))
+        return out
 
-class _Handle:
-    """Owns a native handle; the subclasses name the C functions."""
 
-    _load_fn: str
-    _free_fn: str
-    _eval_fn: str
-    _sample_fn: str
-    _ctype: str
+class Material:
+    """A loaded material (``NbrdfMaterial``): a neural BRDF (``*.nbrdf.json``, ``kind``
+    ``network``) or a MERL-format table (``.binary``, ``kind`` ``merl``), told apart by the
+    library. A network's parameters and the proof of which hidden units can fire come with the
+    handle (:meth:`network`): nothing reads the file again."""
 
     def __init__(self, path):
-        out = ffi.new(f"{self._ctype} **")
-        check(getattr(lib, self._load_fn)(os.fsencode(path), out))
-        self._ptr = ffi.gc(out[0], getattr(lib, self._free_fn))
+        out = ffi.new("NbrdfMaterial **")
+        check(lib.nbrdf_material_load(os.fsencode(path), out))
+        self._ptr = ffi.gc(out[0], lib.nbrdf_material_free)
         self.path = str(path)
+        info = ffi.new("NbrdfMaterialInfo *")
+        check(lib.nbrdf_material_info(self._ptr, info))
+        self.kind = _MATERIAL_NAMES[int(info.kind)]
+        self.name = ffi.string(info.name).decode("utf-8", "replace")
+        #: Whether the network's input carries phi_h (file format version 2).
+        self.anisotropic = bool(info.anisotropic)
+        self.hidden_width = int(info.hidden_width)
+        self.parameter_count = int(info.parameter_count)
+        #: ``(inputs, outputs)`` of the network's three dense layers.
+        self.layer_shapes = [(int(i), int(o)) for i, o in zip(info.layer_inputs, info.layer_outputs)]
+        stored = info.stored_sampling
+        #: The lobes the file stores: "phong", "two_lobe", "anisotropic_phong", or None.
+        self.stored_sampling = None if stored.kind == SAMPLING_KINDS["cosine"] else _SAMPLING_NAMES[int(stored.kind)]
+        self.has_sampling = self.stored_sampling is not None
+        self.exponent, self.specular_weight = float(stored.exponent), float(stored.specular_weight)
+        self.exponent2, self.specular_weight2 = float(stored.exponent2), float(stored.specular_weight2)
+        self.exponent_v = float(stored.exponent_v)
+        #: The file's ``sampling.default`` (lowest measured variance), or None.
+        self.default_sampling = _SAMPLING_NAMES.get(int(info.default_sampling))
 
     def eval(self, view, light) -> np.ndarray:
         """``f_r cos(theta_l)`` as planar RGB (3, n) for planar ``view`` and ``light`` (3, n)."""
@@ -226,10 +233,10 @@ class _Handle:
             raise ValueError(f"view {view.shape} and light {light.shape} differ in shape")
         n = view.shape[-1]
         out = np.empty((3, n), dtype=np.float32)
-        check(getattr(lib, self._eval_fn)(self._ptr, _in(view), _in(light), n, _out(out)))
+        check(lib.nbrdf_material_eval(self._ptr, _in(view), _in(light), n, _out(out)))
         return out
 
-    def sample(self, sampler_, view, u):
+    def sample(self, sampler_: Sampler, view, u):
         """``(light (3, n), weight (3, n), pdf (n,))`` for planar ``view`` and uniforms ``u``."""
         view, u = _planar(view), _planar(u)
         if view.shape != u.shape:
@@ -238,57 +245,37 @@ class _Handle:
         light = np.empty((3, n), dtype=np.float32)
         weight = np.empty((3, n), dtype=np.float32)
         pdf_ = np.empty(n, dtype=np.float32)
-        function, sampler_ = ((self._sample_table_fn, sampler_.ptr) if isinstance(sampler_, Table)
-                              else (self._sample_fn, sampler_))
-        check(
-            getattr(lib, function)(
-                self._ptr, sampler_, _in(view), _in(u), n, _out(light), _out(weight), _out(pdf_)
-            )
-        )
+        check(lib.nbrdf_material_sample(self._ptr, sampler_.ptr, _in(view), _in(u), n, _out(light), _out(weight),
+                                        _out(pdf_)))
         return light, weight, pdf_
 
+    def network(self) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[np.ndarray, np.ndarray]]:
+        """The network as loaded: its layers ``[(W (inputs, outputs), b (outputs,)), ...]``
+        (``y = x W + b``, float32) and which hidden units some pair of directions above the
+        horizon may activate (two boolean arrays of ``hidden_width``, proved once at load time;
+        ``nbrdf_material_network``)."""
+        flat = np.empty(self.parameter_count, dtype=np.float32)
+        active = np.empty(2 * self.hidden_width, dtype=np.uint8)
+        check(lib.nbrdf_material_network(self._ptr, _out(flat), flat.size, _buffer(active, "uint8_t[]"),
+                                         active.size))
+        layers, offset = [], 0
+        for n_in, n_out in self.layer_shapes:
+            W = flat[offset:offset + n_in * n_out].reshape(n_in, n_out)
+            offset += n_in * n_out
+            layers.append((W, flat[offset:offset + n_out]))
+            offset += n_out
+        return layers, self._split(active)
 
-class Network(_Handle):
-    """A loaded ``*.nbrdf.json`` network."""
+    def active_units(self, flat) -> tuple[np.ndarray, np.ndarray]:
+        """Which hidden units can fire once the network's parameters are ``flat`` (W1 b1 W2 b2
+        W3 b3, finite): two boolean arrays of ``hidden_width`` (``nbrdf_material_active_units``;
+        the material keeps its own parameters)."""
+        flat = np.ascontiguousarray(np.asarray(flat, dtype=np.float32).reshape(-1))
+        active = np.empty(2 * self.hidden_width, dtype=np.uint8)
+        check(lib.nbrdf_material_active_units(self._ptr, _in(flat), flat.size, _buffer(active, "uint8_t[]"),
+                                              active.size))
+        return self._split(active)
 
-    _load_fn, _free_fn = "nbrdf_network_load", "nbrdf_network_free"
-    _eval_fn, _sample_fn = "nbrdf_network_eval", "nbrdf_network_sample_mixture"
-    _sample_table_fn, _build_table_fn = "nbrdf_network_sample_table", "nbrdf_network_build_table"
-    _ctype = "NbrdfNetwork"
-
-    def __init__(self, path):
-        super().__init__(path)
-        info = ffi.new("NbrdfNetworkInfo *")
-        check(lib.nbrdf_network_info(self._ptr, info))
-        name = ffi.new("const char **")
-        check(lib.nbrdf_network_name(self._ptr, name))
-        self.name = ffi.string(name[0]).decode("utf-8", "replace")
-        self.hidden_width = int(info.hidden_width)
-        self.parameter_count = int(info.parameter_count)
-        self.has_sampling = bool(info.has_sampling)
-        self.exponent = float(info.exponent)
-        self.specular_weight = float(info.specular_weight)
-        anisotropic = ffi.new("uint32_t *")
-        check(lib.nbrdf_network_is_anisotropic(self._ptr, anisotropic))
-        #: Whether the network's input carries phi_h (file format version 2).
-        self.anisotropic = bool(anisotropic[0])
-        stored = ffi.new("NbrdfMixtureSampler *")
-        check(lib.nbrdf_network_stored_sampler(self._ptr, stored))
-        #: "two_lobe" when the file stores a second lobe, "anisotropic_phong" for an anisotropic
-        #: lobe (exponent2 is then n_v), "phong" for one, None for none.
-        self.stored_sampling = {2: "phong", 3: "two_lobe", 5: "anisotropic_phong"}.get(int(stored.kind))
-        self.exponent2 = float(stored.exponent2)
-        self.specular_weight2 = float(stored.specular_weight2)
-        default = ffi.new("int32_t *")
-        check(lib.nbrdf_network_default_sampling(self._ptr, default))
-        #: The file's ``sampling.default`` (lowest measured variance), or None.
-        self.default_sampling = DEFAULT_SAMPLING_KINDS.get(int(default[0]))
-
-
-class MerlTable(_Handle):
-    """A loaded MERL-format ``.binary`` table."""
-
-    _load_fn, _free_fn = "nbrdf_merl_load", "nbrdf_merl_free"
-    _eval_fn, _sample_fn = "nbrdf_merl_eval", "nbrdf_merl_sample_mixture"
-    _sample_table_fn, _build_table_fn = "nbrdf_merl_sample_table", "nbrdf_merl_build_table"
-    _ctype = "NbrdfMerl"
+    def _split(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        active = active.astype(bool)
+        return active[:self.hidden_width], active[self.hidden_width:]

@@ -35,7 +35,6 @@ warning). ``exponent_v`` with any other sampling is an error.
 
 from __future__ import annotations
 
-import json
 import os
 import stat
 import threading
@@ -46,7 +45,7 @@ import numpy as np
 
 from . import _llvm, _native, jit
 
-SAMPLING_NAMES = (*_native.SAMPLING_KINDS, "tabulated")
+SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
 BACKENDS = ("auto", "jit", "rust")
 # How the traced backend puts the weights into kernels: "literal" constants (fastest renders;
 # one compile per scene, an update recompiles) or "opaque" kernel parameters (updates without
@@ -206,9 +205,11 @@ def _resolve(filename: str) -> str:
 
 
 class _NativeBSDFMixin:
-    """Shared implementation; subclasses set PLUGIN and implement _load/_default_sampling."""
+    """Shared implementation; subclasses set PLUGIN and MATERIAL_KIND and implement
+    _default_sampling."""
 
     PLUGIN = ""  # the Mitsuba plugin name
+    MATERIAL_KIND = ""  # what the library must load (a key of _native.MATERIAL_KINDS)
 
     def _init_native(self, props) -> None:
         mi.BSDF.__init__(self, props)
@@ -227,13 +228,16 @@ class _NativeBSDFMixin:
             status = "NBRDF_ERROR_IO" if problem.startswith("not a regular file") else "NBRDF_ERROR_FORMAT"
             raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [{status}]')
         try:
-            self._native = self._load(path)
+            self._native = _native.Material(path)
         except _native.NbrdfError as error:
             message = _strip_function(error)
             # Library messages name the file already: say it once.
             where = "" if path in message else f'"{path}": '
             raise RuntimeError(f"{self._type_name()}: cannot load {where}{message} "
                                f"[{error.status_name}]") from None
+        if self._native.kind != self.MATERIAL_KIND:
+            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": the library read it as a '
+                               f"{self._native.kind} material, not a {self.MATERIAL_KIND} one [NBRDF_ERROR_FORMAT]")
         self._path = path
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
         if getattr(self._native, "anisotropic", False):
@@ -366,10 +370,12 @@ class _NativeBSDFMixin:
             if self._sampling == "tabulated":
                 # Built once from the material; the lobe parameters do not enter it.
                 if getattr(self, "_table", None) is None:
-                    self._table = _native.Table(self._native)
+                    self._table = _native.Sampler(self._sampling, material=self._native)
                 self._sampler = self._table
+            elif self._sampling == "anisotropic_phong":
+                self._sampler = _native.Sampler(self._sampling, exponent, weight, exponent_v=exponent2)
             else:
-                self._sampler = _native.sampler(self._sampling, exponent, weight, exponent2, weight2)
+                self._sampler = _native.Sampler(self._sampling, exponent, weight, exponent2, weight2)
         except _native.NbrdfError as error:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: '
                              f"{_strip_function(error)}") from None
@@ -468,7 +474,7 @@ class _NativeBSDFMixin:
         if not self._enabled(ctx, si.wi, wo):
             return dr.zeros(mi.Float, _width(si.wi, wo) if _is_jit() else 1)
         view, light = _directions(si.wi, wo)
-        pdf = _to_float(_native.pdf(self._sampler, view, light))
+        pdf = _to_float(self._sampler.pdf(view, light))
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
@@ -480,7 +486,7 @@ class _NativeBSDFMixin:
             return dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
         view, light = _directions(si.wi, wo)
         value = _to_color(self._native.eval(view, light))
-        pdf = _to_float(_native.pdf(self._sampler, view, light))
+        pdf = _to_float(self._sampler.pdf(view, light))
         active = _both_above(active, si.wi, wo)
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
@@ -619,26 +625,21 @@ class NbrdfMixin(_NativeBSDFMixin):
     """
 
     PLUGIN = "nbrdf"
+    MATERIAL_KIND = "network"
 
     def __init__(self, props):
         self._props_jit_weights = _get(props, "jit_weights", "literal")
         self._init_native(props)
 
-    def _load(self, path):
-        return _native.Network(path)
-
     def _trace(self, path, mode=None):
-        # The library has validated the file; its layers are plain JSON.
-        with open(path, encoding="utf-8") as file:
-            layers = json.load(file)["layers"]
+        # The network as the library loaded, validated and proved it: no second read or proof.
+        layers, active = self._native.network()
         mode = str(self._props_jit_weights if mode is None else mode).strip().lower()
         if mode not in JIT_WEIGHT_MODES:
             raise ValueError(f'{self._type_name()} "{self._filename}": unknown jit_weights "{mode}" '
                              f"(expected one of: {', '.join(JIT_WEIGHT_MODES)})")
-        return jit.TracedNetwork([
-            (np.asarray(layer["weights"], dtype=np.float32).reshape(layer["inputs"], layer["outputs"]),
-             np.asarray(layer["bias"], dtype=np.float32)) for layer in layers
-        ], weights=mode, anisotropic=self._native.anisotropic, active_units=_native.active_units)
+        return jit.TracedNetwork(layers, weights=mode, anisotropic=self._native.anisotropic,
+                                 active_units=self._native.active_units, active=active)
 
     def _traverse_traced(self, put):
         # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3, updatable through
@@ -700,7 +701,7 @@ class NbrdfMixin(_NativeBSDFMixin):
             exponent2 = self._native.exponent2 if exponent2 is None else exponent2
             weight2 = self._native.specular_weight2 if weight2 is None else weight2
         if self._native.stored_sampling == "anisotropic_phong" and sampling == "anisotropic_phong":
-            exponent2 = self._native.exponent2 if exponent2 is None else exponent2
+            exponent2 = self._native.exponent_v if exponent2 is None else exponent2
         return _NativeBSDFMixin._second_lobe(self, sampling, exponent2, weight2)
 
     def _describe(self) -> list[str]:
@@ -722,12 +723,10 @@ class MerlMixin(_NativeBSDFMixin):
     """
 
     PLUGIN = "merl"
+    MATERIAL_KIND = "merl"
 
     def __init__(self, props):
         self._init_native(props)
-
-    def _load(self, path):
-        return _native.MerlTable(path)
 
     def _trace(self, path, mode=None):
         # The library has validated size, header and values.
@@ -834,6 +833,10 @@ def _file_problem(path: str, plugin: str) -> str | None:
                 'tables (use the nbrdf BSDF for networks: "type": "nbrdf")')
     if plugin == "merl" and is_merl:
         return _merl_values_problem(path)
+    if plugin == "merl":
+        # The library reads a file without a table's header as a network, and would say why
+        # it is not one.
+        return "not a MERL table (a .binary table starts with the resolutions 90, 90, 180 as int32)"
     return None
 
 

@@ -18,10 +18,13 @@ every material, the weights loaded once per kernel launch). See ``TracedNetwork`
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from ._native import SAMPLING_KINDS
 
 # The exp argument range of nbrdf-core's network.rs (EXP_ARG_MAX / EXP_ARG_MIN): e^80 ~ 5.5e34
 # stays far below float32's maximum, and below -87 the result is -1 to float32 precision.
@@ -128,17 +131,18 @@ class TracedNetwork:
     ``flat`` (W1, b1, W2, b2, W3, b3 as one ``mi.Float``) is what ``traverse`` exposes; after an
     update call ``refresh()`` so the traced kernels see the new values.
 
-    ``active_units(flat, hidden, anisotropic)`` (the library's ``_native.active_units``), when
-    given, names in ``literal`` mode the hidden units some pair of directions above the horizon
-    can activate; the kernel leaves the others out. They output exactly 0 wherever the BSDF is
-    evaluated, so the values do not change and a trained network loses up to two thirds of its
-    multiply-adds (``network/pruning.rs``; tests/test_backends.py holds the pruned
-    kernel to the full one). ``opaque`` kernels keep every unit: their weights change without a
-    new kernel.
+    ``active`` (per hidden layer, which units some pair of directions above the horizon can
+    activate: the library's proof made when it loaded the network, ``_native.Material.network``)
+    and ``active_units(flat)`` (the library's proof for new weights,
+    ``_native.Material.active_units``), when given, name in ``literal`` mode the units the kernel
+    computes; it leaves the others out. They output exactly 0 wherever the BSDF is evaluated, so
+    the values do not change and a trained network loses up to two thirds of its multiply-adds
+    (``network/pruning.rs``; tests/test_backends.py holds the pruned kernel to the full one).
+    ``opaque`` kernels keep every unit: their weights change without a new kernel.
     """
 
     def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "literal",
-                 anisotropic: bool = False, active_units=None):
+                 anisotropic: bool = False, active_units=None, active=None):
         if weights not in ("opaque", "literal"):
             raise ValueError(f"weights must be 'opaque' or 'literal', got '{weights}'")
         self.mode = weights
@@ -149,7 +153,7 @@ class TracedNetwork:
         self._active_units = active_units
         flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
         self.flat = mi.Float(flat.astype(np.float32))
-        self.refresh()
+        self.refresh(active)
 
     def describe_index(self, k: int) -> str:
         """Where flat index ``k`` lives, e.g. ``layer 2 weight 17`` or ``layer 3 bias 0``."""
@@ -163,16 +167,16 @@ class TracedNetwork:
             offset += n_out
         return f"index {k}"
 
-    def refresh(self) -> None:
+    def refresh(self, active=None) -> None:
         """Rebuilds the per-weight scalars from ``flat`` (the caller has validated it) and keeps
-        a copy as ``good``, the state a rejected update returns to."""
+        a copy as ``good``, the state a rejected update returns to. ``active``: the proof for
+        these weights when the caller has it (else ``active_units`` proves it)."""
         values = np.array(dr.detach(self.flat).numpy(), dtype=np.float32).reshape(-1)
         self.good = values
         #: Per hidden layer, which units the kernel computes (None: all of them).
         self.active = None
-        hidden = self.shapes[0][1]
-        if self.mode == "literal" and self._active_units is not None and self.shapes[1] == (hidden, hidden):
-            self.active = self._active_units(values, hidden, self.anisotropic)
+        if self.mode == "literal":
+            self.active = active if active is not None or self._active_units is None else self._active_units(values)
         if self.mode == "literal":
             scalars = [mi.Float(float(v)) for v in values]
         else:
@@ -386,12 +390,9 @@ def anisotropic_half_vector(exponent_u, exponent_v, u1, u2) -> mi.Vector3f:
     return mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
 
 
-STRATEGIES = ("uniform", "cosine", "phong", "two_lobe", "anisotropic_phong", "tabulated")
-
-
 class TracedTable:
     """The tabulated half-vector sampler (``tabulated.rs``) from the library's arrays
-    (``_native.Table.arrays``): the view's elevation picks a row, the row's alias table a bin in
+    (``_native.Sampler.arrays``): the view's elevation picks a row, the row's alias table a bin in
     ``t = (1 - cos theta_h)^(1/4)`` and ``|phi_h - phi_v|`` over ``[0, pi]``, ``u2`` the side of
     the plane of incidence, the half vector uniform in solid angle within the bin or its mirror
     image; mixed with cosine. The pdf is the bin's mass over the solid angle of the bin and its
@@ -471,62 +472,97 @@ class TracedTable:
         return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
+#: The strategies by the library's names (``_native.SAMPLING_KINDS``, from
+#: ``nbrdf_sampling_kind_name``): a name the library does not know fails here, at import.
+KIND = SimpleNamespace(**{name: name for name in SAMPLING_KINDS})
+
+
+def _isotropic_pdf(density):
+    """The pdf of a view-independent density of ``l`` (0 off the upper hemisphere)."""
+    def pdf_(view, light, params, table):
+        v, v_ok = _unit(view)
+        l, l_ok = _unit(light)
+        return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), density(l), 0.0)
+    return pdf_
+
+
+_PDF = {
+    KIND.uniform: _isotropic_pdf(lambda l: 0.5 / math.pi),
+    KIND.cosine: _isotropic_pdf(lambda l: l.z / math.pi),
+    KIND.phong: lambda view, light, p, table: mixture_pdf(view, light, p[0], p[1]),
+    KIND.two_lobe: lambda view, light, p, table: two_lobe_pdf(view, light, *p),
+    KIND.anisotropic_phong: lambda view, light, p, table: anisotropic_pdf(view, light, p[0], p[1], p[2]),
+    KIND.tabulated: lambda view, light, p, table: table.pdf(view, light),
+}
+
+
+def _reflected(view, h):
+    v, _ = _unit(view)
+    return 2.0 * dr.dot(v, h) * h - v
+
+
+def _sample_phong(view, u0, u1, u2, p, table):
+    specular = (u0 < p[1]) | (p[1] >= 1.0)
+    return dr.select(specular, _reflected(view, blinn_phong_half_vector(p[0], u1, u2)), cosine_hemisphere(u1, u2))
+
+
+def _sample_two_lobe(view, u0, u1, u2, p, table):
+    # The component choice of sampling.rs two_lobe_component.
+    exponent, specular_weight, exponent2, specular_weight2 = p
+    total = specular_weight + specular_weight2
+    first = u0 < specular_weight
+    second = ~first & (u0 < total)
+    rest = ~first & ~second & (total >= 1.0)
+    first |= rest & ~(specular_weight2 > 0)
+    second |= rest & (specular_weight2 > 0)
+    h = blinn_phong_half_vector(dr.select(first, exponent, exponent2), u1, u2)
+    return dr.select(first | second, _reflected(view, h), cosine_hemisphere(u1, u2))
+
+
+def _sample_anisotropic(view, u0, u1, u2, p, table):
+    specular = (u0 < p[1]) | (p[1] >= 1.0)
+    h = anisotropic_half_vector(p[0], p[2], u1, u2)
+    return dr.select(specular, _reflected(view, h), cosine_hemisphere(u1, u2))
+
+
+_SAMPLE = {
+    KIND.uniform: lambda view, u0, u1, u2, p, table: uniform_hemisphere(u1, u2),
+    KIND.cosine: lambda view, u0, u1, u2, p, table: cosine_hemisphere(u1, u2),
+    KIND.phong: _sample_phong,
+    KIND.two_lobe: _sample_two_lobe,
+    KIND.anisotropic_phong: _sample_anisotropic,
+    KIND.tabulated: lambda view, u0, u1, u2, p, table: table.sample_direction(_unit(view)[0], u0, u1, u2),
+}
+#: Every strategy of the library, each with a traced pdf and sampler.
+STRATEGIES = tuple(SAMPLING_KINDS)
+if set(_PDF) != set(STRATEGIES) or set(_SAMPLE) != set(STRATEGIES):
+    raise ImportError(f"nbrdf_mitsuba.jit: the traced strategies {sorted(_SAMPLE)} are not the library's "
+                      f"{sorted(STRATEGIES)}")
+
+
+def _strategy(table: dict, strategy: str):
+    try:
+        return table[strategy]
+    except KeyError:
+        raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})") from None
+
+
 def pdf(strategy: str, view, light, exponent=0.0, specular_weight=0.0, exponent2=0.0,
         specular_weight2=0.0, table: TracedTable | None = None):
     """Density of ``light`` given ``view`` for a strategy of ``STRATEGIES`` (``tabulated``
-    needs ``table``)."""
-    if strategy == "tabulated":
-        return table.pdf(view, light)
-    if strategy == "phong":
-        return mixture_pdf(view, light, exponent, specular_weight)
-    if strategy == "two_lobe":
-        return two_lobe_pdf(view, light, exponent, specular_weight, exponent2, specular_weight2)
-    if strategy == "anisotropic_phong":
-        return anisotropic_pdf(view, light, exponent, specular_weight, exponent2)
-    v, v_ok = _unit(view)
-    l, l_ok = _unit(light)
-    density = 0.5 / math.pi if strategy == "uniform" else l.z / math.pi
-    return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), density, 0.0)
+    needs ``table``; ``exponent2`` is ``n_v`` for ``anisotropic_phong``)."""
+    params = (exponent, specular_weight, exponent2, specular_weight2)
+    return _strategy(_PDF, strategy)(view, light, params, table)
 
 
 def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0, exponent2=0.0,
            specular_weight2=0.0, table: TracedTable | None = None):
     """Draws a light direction like ``SamplingStrategy::sample``: ``(light, pdf)`` with pdf 0
     for invalid samples (a specular reflection below the horizon, a view below it)."""
+    draw = _strategy(_SAMPLE, strategy)
     u0, u1, u2 = unit_interval(u0), unit_interval(u1), unit_interval(u2)
-    if strategy == "uniform":
-        light = uniform_hemisphere(u1, u2)
-    elif strategy == "cosine":
-        light = cosine_hemisphere(u1, u2)
-    elif strategy == "phong":
-        v, _ = _unit(view)
-        h = blinn_phong_half_vector(exponent, u1, u2)
-        reflected = 2.0 * dr.dot(v, h) * h - v
-        specular = (u0 < specular_weight) | (specular_weight >= 1.0)
-        light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
-    elif strategy == "two_lobe":
-        # The component choice of sampling.rs two_lobe_component.
-        v, _ = _unit(view)
-        total = specular_weight + specular_weight2
-        first = u0 < specular_weight
-        second = ~first & (u0 < total)
-        rest = ~first & ~second & (total >= 1.0)
-        first |= rest & ~(specular_weight2 > 0)
-        second |= rest & (specular_weight2 > 0)
-        h = blinn_phong_half_vector(dr.select(first, exponent, exponent2), u1, u2)
-        reflected = 2.0 * dr.dot(v, h) * h - v
-        light = dr.select(first | second, reflected, cosine_hemisphere(u1, u2))
-    elif strategy == "anisotropic_phong":
-        v, _ = _unit(view)
-        h = anisotropic_half_vector(exponent, exponent2, u1, u2)
-        reflected = 2.0 * dr.dot(v, h) * h - v
-        specular = (u0 < specular_weight) | (specular_weight >= 1.0)
-        light = dr.select(specular, reflected, cosine_hemisphere(u1, u2))
-    elif strategy == "tabulated":
-        v, _ = _unit(view)
-        light = table.sample_direction(v, u0, u1, u2)
-    else:
-        raise ValueError(f"unknown sampling strategy '{strategy}' (one of {', '.join(STRATEGIES)})")
+    params = (exponent, specular_weight, exponent2, specular_weight2)
+    light = draw(view, u0, u1, u2, params, table)
     _, view_ok = _unit(view)
     light, light_ok = _unit(light)
     # As SamplingStrategy::sample: +z (with pdf 0) when there is no direction to return.

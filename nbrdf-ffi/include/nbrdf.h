@@ -18,7 +18,17 @@
 #include <stddef.h>
 #include <stdint.h>
 
-// Importance-sampling strategy of an `NbrdfSampler`.
+// What an `NbrdfMaterial` holds (the `kind` of `NbrdfMaterialInfo`).
+typedef enum NbrdfMaterialKind {
+  // A neural BRDF from an `*.nbrdf.json` file.
+  NBRDF_MATERIAL_NETWORK = 0,
+  // A MERL-format table from a `.binary` file.
+  NBRDF_MATERIAL_MERL = 1,
+} NbrdfMaterialKind;
+
+// Importance-sampling strategy of an `NbrdfSampler` (the `kind` of `NbrdfSamplerParams`); the
+// codes of nbrdf-core's `SamplingKind`, whose canonical names `nbrdf_sampling_kind_name`
+// gives.
 typedef enum NbrdfSamplingKind {
   // Uniform over the upper hemisphere.
   NBRDF_SAMPLING_UNIFORM = 0,
@@ -28,15 +38,13 @@ typedef enum NbrdfSamplingKind {
   NBRDF_SAMPLING_PHONG = 2,
   // Mixture of two Blinn-Phong lobes (`exponent`, `specular_weight`; `exponent2`,
   // `specular_weight2`) and a cosine lobe of weight `1 - specular_weight - specular_weight2`.
-  // Only in an `NbrdfMixtureSampler` (the `*_mixture` functions).
   NBRDF_SAMPLING_TWO_LOBE = 3,
-  // The material's data-driven table (an `NbrdfTable` and the `*_table` functions); not
-  // accepted in an `NbrdfSampler` or `NbrdfMixtureSampler`.
+  // The material's data-driven half-vector table mixed with cosine, tabulated from the
+  // material when the sampler is created.
   NBRDF_SAMPLING_TABULATED = 4,
   // Anisotropic Blinn-Phong lobe (Ashikhmin-Shirley: `exponent` = `n_u` along the tangent x,
-  // `exponent2` = `n_v` across it, weight `specular_weight`) mixed with a cosine lobe; for
-  // anisotropic networks, whose directions are in the shading frame. Only in an
-  // `NbrdfMixtureSampler`; `specular_weight2` is not read.
+  // `exponent_v` = `n_v` across it, weight `specular_weight`) mixed with a cosine lobe; for
+  // anisotropic networks, whose directions are in the shading frame.
   NBRDF_SAMPLING_ANISOTROPIC_PHONG = 5,
 } NbrdfSamplingKind;
 
@@ -57,75 +65,229 @@ typedef enum NbrdfStatus {
   NBRDF_ERROR_PANIC = 5,
 } NbrdfStatus;
 
-// A MERL-format BRDF table loaded from a `.binary` file. Immutable: one handle may be used by
-// many threads at once.
-typedef struct NbrdfMerl NbrdfMerl;
+// A material: a neural BRDF (`*.nbrdf.json`) or a MERL-format table (`.binary`), loaded by
+// `nbrdf_material_load`. Immutable: one handle may be used by many threads at once.
+typedef struct NbrdfMaterial NbrdfMaterial;
 
-// A neural BRDF loaded from an `*.nbrdf.json` file. Immutable: one handle may be used by many
-// threads at once.
-typedef struct NbrdfNetwork NbrdfNetwork;
+// An importance sampler (`nbrdf_sampler_create`): for `nbrdf_material_sample` with any
+// material, and `nbrdf_sampler_pdf`. Immutable: one handle may be used by many threads at once.
+typedef struct NbrdfSampler NbrdfSampler;
 
-// The data-driven sampler of a material (`sampling` = `tabulated`): per band of view elevation,
-// a piecewise-constant half-vector density tabulated from the material, mixed with cosine
-// (nbrdf-core `tabulated`). Built by `nbrdf_network_build_table` or `nbrdf_merl_build_table`;
-// immutable, so one handle may be used by many threads at once.
-typedef struct NbrdfTable NbrdfTable;
-
-// Summary of a loaded network.
-typedef struct NbrdfNetworkInfo {
-  // Width of the two hidden layers (21 for the paper's networks).
-  uint32_t hidden_width;
-  // Number of weights and biases (675 for width 21).
-  uint32_t parameter_count;
-  // 1 when the file carries Blinn-Phong sampling parameters, else 0.
-  uint32_t has_sampling;
-  // Blinn-Phong exponent stored with the network (0 when `has_sampling` is 0); of the first
-  // lobe when the file stores two (see `nbrdf_network_stored_sampler`).
-  float exponent;
-  // Blinn-Phong specular weight stored with the network (0 when `has_sampling` is 0).
-  float specular_weight;
-} NbrdfNetworkInfo;
-
-// An importance-sampling strategy. `exponent` (in [0, 1e6], `MAX_EXPONENT`) and `specular_weight` (in [0, 1])
-// are read only for `NBRDF_SAMPLING_PHONG`.
-typedef struct NbrdfSampler {
-  enum NbrdfSamplingKind kind;
-  float exponent;
-  float specular_weight;
-} NbrdfSampler;
-
-// An importance-sampling strategy with up to two Blinn-Phong lobes, for the `*_mixture`
-// functions: any kind of `NbrdfSamplingKind`. The first three fields are those of
-// `NbrdfSampler`; `exponent2` and `specular_weight2` are read only for
-// `NBRDF_SAMPLING_TWO_LOBE`, which takes exponents finite in [0, 1e6], weights in [0, 1] with
-// `specular_weight + specular_weight2 <= 1`; `NBRDF_SAMPLING_ANISOTROPIC_PHONG` reads
-// `exponent2` as `n_v` (finite in [0, 1e6]).
-typedef struct NbrdfMixtureSampler {
-  enum NbrdfSamplingKind kind;
+// The parameters of an importance-sampling strategy (`nbrdf_sampler_create`). Each kind reads
+// only its own fields: `NBRDF_SAMPLING_PHONG` `exponent` and `specular_weight`;
+// `NBRDF_SAMPLING_TWO_LOBE` those and `exponent2`, `specular_weight2`
+// (`specular_weight + specular_weight2 <= 1`); `NBRDF_SAMPLING_ANISOTROPIC_PHONG` `exponent`
+// (`n_u`), `exponent_v` (`n_v`) and `specular_weight`; the others none. Exponents are finite in
+// [0, 1e6] (`MAX_EXPONENT`), weights in [0, 1].
+typedef struct NbrdfSamplerParams {
+  // An `NbrdfSamplingKind` value.
+  int32_t kind;
   float exponent;
   float specular_weight;
   float exponent2;
   float specular_weight2;
-} NbrdfMixtureSampler;
+  float exponent_v;
+} NbrdfSamplerParams;
 
-// Shape of an `NbrdfTable` (`nbrdf_table_info`): `mass` (each bin's probability, row-major
+// Summary of a material (`nbrdf_material_info`).
+typedef struct NbrdfMaterialInfo {
+  // An `NbrdfMaterialKind` value.
+  int32_t kind;
+  // 1 for an anisotropic network (file format version 2: its input carries the half vector's
+  // azimuth `phi_h` in the local frame whose x axis is the tangent), else 0.
+  uint32_t anisotropic;
+  // Width of a network's two hidden layers (21 for the paper's networks); 0 for a table.
+  uint32_t hidden_width;
+  // Number of a network's weights and biases (675 for width 21); 0 for a table.
+  uint32_t parameter_count;
+  // Inputs and outputs of a network's three dense layers (`y = x W + b`, `W` row-major
+  // inputs x outputs): `6 -> hidden -> hidden -> 3`; zeros for a table.
+  uint32_t layer_inputs[3];
+  uint32_t layer_outputs[3];
+  // The network's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
+  // the handle: valid until `nbrdf_material_free`.
+  const char *name;
+  // The sampling lobes the network file stores: `NBRDF_SAMPLING_PHONG`,
+  // `NBRDF_SAMPLING_TWO_LOBE` (second lobe in `exponent2`, `specular_weight2`) or
+  // `NBRDF_SAMPLING_ANISOTROPIC_PHONG` (`exponent_v`), or `NBRDF_SAMPLING_COSINE` with zero
+  // parameters when it stores none (and for a table).
+  struct NbrdfSamplerParams stored_sampling;
+  // The strategy the file names as the material's best (`sampling.default`, chosen by
+  // `nbrdf fit-phong` for the lowest measured variance), an `NbrdfSamplingKind` value
+  // (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table).
+  int32_t default_sampling;
+} NbrdfMaterialInfo;
+
+// Shape of a sampler (`nbrdf_sampler_info`). For `NBRDF_SAMPLING_TABULATED`, the per-band
+// half-vector table: `nbrdf_sampler_table` gives `mass` (each bin's probability, row-major
 // `[row][theta bin][phi bin]`; the `phi_bins` span `|phi_h - phi_v|` over `[0, pi]`, each bin
 // standing for itself and its mirror image across the plane of incidence, so a bin's mass is
-// spread over both), `alias_probability` and `alias` (per row, Walker's alias table
-// over the row's bins: a bin `k` drawn uniformly is kept with probability
-// `alias_probability[k]`, else replaced by the bin `alias[k]`, an index within the row) each
-// have `rows * theta_bins * phi_bins` values (`nbrdf_table_arrays`).
-typedef struct NbrdfTableInfo {
+// spread over both), `alias_probability` and `alias` (per row, Walker's alias table over the
+// row's bins: a bin `k` drawn uniformly is kept with probability `alias_probability[k]`, else
+// replaced by the bin `alias[k]`, an index within the row), each `rows * theta_bins * phi_bins`
+// values. Every other kind has no table: zeros.
+typedef struct NbrdfSamplerInfo {
+  // An `NbrdfSamplingKind` value.
+  int32_t kind;
   uint32_t rows;
   uint32_t theta_bins;
   uint32_t phi_bins;
-  // Weight of the defensive cosine component of the mixture.
+  // Weight of the defensive cosine component of the tabulated mixture.
   float cosine_weight;
-} NbrdfTableInfo;
+} NbrdfSamplerInfo;
 
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
+
+// Loads a material and stores a new handle in `*out` (NULL on failure): a MERL-format table
+// (`.binary`, 34,992,012 bytes) when the file starts with a table's header (90, 90, 180 as
+// little-endian int32), else a neural BRDF (`*.nbrdf.json`), validated, and proved once which
+// of its hidden units can fire above the horizon (`nbrdf_material_network`). Free it with
+// `nbrdf_material_free`; `nbrdf_material_info` says which kind it is.
+//
+// # Safety
+// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
+int32_t nbrdf_material_load(const char *path,
+                            struct NbrdfMaterial **out);
+
+// Frees a material; NULL is accepted and ignored.
+//
+// # Safety
+// `material` is NULL or a handle from `nbrdf_material_load` that was not freed yet.
+void nbrdf_material_free(struct NbrdfMaterial *material);
+
+// Fills `*out` with the material's kind, shape, name and stored sampling.
+//
+// # Safety
+// `material` is a live handle; `out` points to a writable `NbrdfMaterialInfo`.
+int32_t nbrdf_material_info(const struct NbrdfMaterial *material,
+                            struct NbrdfMaterialInfo *out);
+
+// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
+// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
+// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A
+// network is evaluated without its hidden units that cannot fire (the same values); a table
+// by trilinear lookup.
+//
+// # Safety
+// `material` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
+// input.
+int32_t nbrdf_material_eval(const struct NbrdfMaterial *material,
+                            const float *view,
+                            const float *light,
+                            size_t n,
+                            float *out_rgb);
+
+// Importance-samples `n` light directions with `sampler` for the planar `view` directions from
+// the planar uniforms `u = [u0.., u1.., u2..]` (in [0, 1]; `u0` picks the lobe of a mixture).
+// Writes the planar light directions `out_light` (3 n), the weights
+// `f_r * cos(theta_light) / pdf` of the material as planar RGB `out_weight` (3 n) and the
+// solid-angle pdfs `out_pdf` (n), those `nbrdf_sampler_pdf` gives. Invalid samples (below the
+// horizon) have pdf 0 and weight 0.
+//
+// # Safety
+// `material` and `sampler` are live handles; the arrays have the sizes above and the outputs
+// overlap neither each other nor the inputs.
+int32_t nbrdf_material_sample(const struct NbrdfMaterial *material,
+                              const struct NbrdfSampler *sampler,
+                              const float *view,
+                              const float *u,
+                              size_t n,
+                              float *out_light,
+                              float *out_weight,
+                              float *out_pdf);
+
+// Copies a network's parameters and the proof made at load time of which hidden units can
+// fire, for a second evaluator (the Mitsuba plugin's traced kernels) that needs neither to
+// read the file nor to prove again. `out_params` receives the `parameter_count` weights and
+// biases as the file stores them, `W1, b1, W2, b2, W3, b3` (the shapes of
+// `NbrdfMaterialInfo::layer_inputs` and `layer_outputs`); `out_active` receives
+// `2 hidden_width` bytes, the first hidden layer's units then the second's, 1 for a unit that
+// some pair of directions above the horizon may activate, 0 for one proved never to (it
+// outputs exactly 0 wherever the BRDF is evaluated, so an evaluator may leave it out).
+// `params_len` and `active_len` must be those sizes (`nbrdf_material_info`);
+// `NBRDF_ERROR_INVALID_ARGUMENT` for a table.
+//
+// # Safety
+// `material` is a live handle; `out_params` points to `params_len` writable floats and
+// `out_active` to `active_len` writable bytes.
+int32_t nbrdf_material_network(const struct NbrdfMaterial *material,
+                               float *out_params,
+                               size_t params_len,
+                               uint8_t *out_active,
+                               size_t active_len);
+
+// Proves which hidden units of the material's network can fire once its parameters are
+// replaced by `params` (`count` finite floats, `W1, b1, W2, b2, W3, b3` in the shapes of the
+// loaded network: `parameter_count` of them): writes `active_len` = `2 hidden_width` bytes to
+// `out_active` as `nbrdf_material_network` does. For evaluators of updated weights (the
+// plugin's kernels after a parameter update); the material itself is not changed. Takes
+// milliseconds (a bounded interval-arithmetic proof over the hemisphere).
+// `NBRDF_ERROR_INVALID_ARGUMENT` for a table, wrong sizes and non-finite parameters.
+//
+// # Safety
+// `material` is a live handle; `params` points to `count` readable floats and `out_active` to
+// `active_len` writable bytes.
+int32_t nbrdf_material_active_units(const struct NbrdfMaterial *material,
+                                    const float *params,
+                                    size_t count,
+                                    uint8_t *out_active,
+                                    size_t active_len);
+
+// Creates a sampler from `params` and stores a new handle in `*out` (NULL on failure): checks
+// the kind and its parameters (`NBRDF_ERROR_INVALID_ARGUMENT` with a message), and for
+// `NBRDF_SAMPLING_TABULATED` tabulates `material` (about 330k evaluations, milliseconds) with
+// the defensive cosine weight its file stores (`sampling.table_cosine_weight`, chosen by
+// `nbrdf fit-phong`; 0.1 without). `material` may be NULL for every other kind; it is not
+// referenced after the call. Free the sampler with `nbrdf_sampler_free`.
+//
+// # Safety
+// `material` is NULL or a live handle; `params` points to an `NbrdfSamplerParams`; `out` to
+// writable storage for one pointer.
+int32_t nbrdf_sampler_create(const struct NbrdfMaterial *material,
+                             const struct NbrdfSamplerParams *params,
+                             struct NbrdfSampler **out);
+
+// Frees a sampler; NULL is accepted and ignored.
+//
+// # Safety
+// `sampler` is NULL or a handle from `nbrdf_sampler_create` that was not freed yet.
+void nbrdf_sampler_free(struct NbrdfSampler *sampler);
+
+// Fills `*out` with the sampler's kind and, for a tabulated one, its table's shape and cosine
+// weight.
+//
+// # Safety
+// `sampler` is a live handle; `out` points to a writable `NbrdfSamplerInfo`.
+int32_t nbrdf_sampler_info(const struct NbrdfSampler *sampler,
+                           struct NbrdfSamplerInfo *out);
+
+// Copies a tabulated sampler's arrays (probabilities as float32) into caller buffers of `len`
+// values each, `rows * theta_bins * phi_bins` (`NbrdfSamplerInfo`), for a second
+// implementation of the sampler (the plugin's Dr.Jit path). `NBRDF_ERROR_INVALID_ARGUMENT` for
+// a sampler of another kind.
+//
+// # Safety
+// `sampler` is a live handle; the outputs point to `len` writable values each.
+int32_t nbrdf_sampler_table(const struct NbrdfSampler *sampler,
+                            float *out_mass,
+                            float *out_alias_probability,
+                            uint32_t *out_alias,
+                            size_t len);
+
+// Solid-angle pdf with which `sampler` draws each planar `light` direction given the planar
+// `view` direction (`3 n` floats each); writes `n` floats to `out_pdf` (0 at or below the
+// horizon).
+//
+// # Safety
+// `sampler` is a live handle; the arrays have the sizes above and `out_pdf` overlaps neither
+// input.
+int32_t nbrdf_sampler_pdf(const struct NbrdfSampler *sampler,
+                          const float *view,
+                          const float *light,
+                          size_t n,
+                          float *out_pdf);
 
 // Message of the last failed call on this thread, prefixed with the name of the function that
 // failed; an empty string when no call has failed on this thread. Successful calls leave it
@@ -135,290 +297,17 @@ const char *nbrdf_last_error(void);
 // Version of the library (the crate version, e.g. "0.1.0"); a static string.
 const char *nbrdf_version(void);
 
-// Loads a network from an `*.nbrdf.json` file and stores a new handle in `*out` (null on
-// failure). Free it with `nbrdf_network_free`.
+// Stores in `*out_name` the canonical name of the sampling strategy `kind` (an
+// `NbrdfSamplingKind` value): "uniform", "cosine", "phong", "two_lobe", "tabulated",
+// "anisotropic_phong" (the names of network files' `sampling.default` and of the Mitsuba
+// plugin's `sampling` parameter). A static string. `NBRDF_ERROR_INVALID_ARGUMENT` for a code
+// that names no strategy (`*out_name` is then NULL), so callers can list every strategy by
+// asking until it fails.
 //
 // # Safety
-// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
-int32_t nbrdf_network_load(const char *path,
-                           struct NbrdfNetwork **out);
-
-// Frees a network handle; null is accepted and ignored.
-//
-// # Safety
-// `network` is null or a handle from `nbrdf_network_load` that was not freed yet.
-void nbrdf_network_free(struct NbrdfNetwork *network);
-
-// Fills `*out` with the hidden width, parameter count and stored sampling parameters.
-//
-// # Safety
-// `network` is a live handle; `out` points to a writable `NbrdfNetworkInfo`.
-int32_t nbrdf_network_info(const struct NbrdfNetwork *network,
-                           struct NbrdfNetworkInfo *out);
-
-// Stores in `*out` 1 when the network is anisotropic (file format version 2, input with the half
-// vector's azimuth `phi_h` in the local frame whose x axis is the tangent), else 0. A separate
-// call rather than a field of `NbrdfNetworkInfo`, whose layout stays that of version 0.1.
-//
-// # Safety
-// `network` is a live handle; `out` points to a writable `uint32_t`.
-int32_t nbrdf_network_is_anisotropic(const struct NbrdfNetwork *network,
-                                     uint32_t *out);
-
-// Stores in `*out_name` the network's name (UTF-8, NUL-terminated, possibly empty). The string
-// belongs to the handle and stays valid until `nbrdf_network_free`.
-//
-// # Safety
-// `network` is a live handle; `out_name` points to writable storage for one pointer.
-int32_t nbrdf_network_name(const struct NbrdfNetwork *network,
-                           const char **out_name);
-
-// Which hidden units of a `6 -> hidden -> hidden -> 3` network, given as its flat parameters
-// `W1, b1, W2, b2, W3, b3` (`count` floats, `hidden * hidden + 11 * hidden + 3` of them, all
-// finite), some pair of directions above the horizon may activate. Writes `2 hidden` bytes to
-// `out_active` (`out_len` must be that): the first hidden layer's units, then the second's, 1
-// for a unit that may fire, 0 for one proved never to. A 0 unit outputs exactly 0 on every
-// direction pair the BRDF is evaluated at, so an evaluator that leaves it out computes the same
-// values with fewer multiply-adds (the network handles do so; the Mitsuba plugin's traced
-// kernels ask here). `anisotropic` is 1 for a network that sees the half vector's azimuth.
-// Takes milliseconds (a bounded interval-arithmetic proof over the hemisphere).
-//
-// # Safety
-// `params` points to `count` readable floats; `out_active` to `out_len` writable bytes.
-int32_t nbrdf_network_active_units(const float *params,
-                                   size_t count,
-                                   size_t hidden,
-                                   uint32_t anisotropic,
-                                   uint8_t *out_active,
-                                   size_t out_len);
-
-// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
-// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
-// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon.
-//
-// # Safety
-// `network` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
-// input.
-int32_t nbrdf_network_eval(const struct NbrdfNetwork *network,
-                           const float *view,
-                           const float *light,
-                           size_t n,
-                           float *out_rgb);
-
-// Importance-samples `n` light directions for the planar `view` directions from the planar
-// uniforms `u = [u0.., u1.., u2..]` (in [0, 1]; `u0` picks the lobe of the Blinn-Phong mixture).
-// Writes the planar light directions `out_light` (3 n), the weights
-// `f_r * cos(theta_light) / pdf` as planar RGB `out_weight` (3 n) and the solid-angle pdfs
-// `out_pdf` (n). Invalid samples (below the horizon) have pdf 0 and weight 0.
-//
-// # Safety
-// `network` is a live handle, `sampler` points to an `NbrdfSampler`; the arrays have the sizes
-// above and the outputs overlap neither each other nor the inputs.
-int32_t nbrdf_network_sample(const struct NbrdfNetwork *network,
-                             const struct NbrdfSampler *sampler,
-                             const float *view,
-                             const float *u,
-                             size_t n,
-                             float *out_light,
-                             float *out_weight,
-                             float *out_pdf);
-
-// Loads a MERL-format table (a `.binary` file of 34,992,012 bytes) and stores a new handle in
-// `*out` (null on failure). Free it with `nbrdf_merl_free`.
-//
-// # Safety
-// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
-int32_t nbrdf_merl_load(const char *path,
-                        struct NbrdfMerl **out);
-
-// Frees a table handle; null is accepted and ignored.
-//
-// # Safety
-// `merl` is null or a handle from `nbrdf_merl_load` that was not freed yet.
-void nbrdf_merl_free(struct NbrdfMerl *merl);
-
-// Evaluates `f_r(view, light) * cos(theta_light)` of a table (trilinear lookup) for `n`
-// direction pairs; the layout is that of `nbrdf_network_eval`.
-//
-// # Safety
-// As `nbrdf_network_eval`, with a live table handle.
-int32_t nbrdf_merl_eval(const struct NbrdfMerl *merl,
-                        const float *view,
-                        const float *light,
-                        size_t n,
-                        float *out_rgb);
-
-// Importance-samples light directions for a table; the layout is that of
-// `nbrdf_network_sample`.
-//
-// # Safety
-// As `nbrdf_network_sample`, with a live table handle.
-int32_t nbrdf_merl_sample(const struct NbrdfMerl *merl,
-                          const struct NbrdfSampler *sampler,
-                          const float *view,
-                          const float *u,
-                          size_t n,
-                          float *out_light,
-                          float *out_weight,
-                          float *out_pdf);
-
-// Solid-angle pdf with which `sampler` draws each planar `light` direction given the planar
-// `view` direction (`3 n` floats each); writes `n` floats to `out_pdf` (0 at or below the
-// horizon).
-//
-// # Safety
-// `sampler` points to an `NbrdfSampler`; the arrays have the sizes above and `out_pdf` overlaps
-// neither input.
-int32_t nbrdf_sampler_pdf(const struct NbrdfSampler *sampler,
-                          const float *view,
-                          const float *light,
-                          size_t n,
-                          float *out_pdf);
-
-// Checks a sampler's kind and parameters (exponent in [0, 1e6], specular weight in [0, 1] for
-// `NBRDF_SAMPLING_PHONG`): `NBRDF_OK` or `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
-//
-// # Safety
-// `sampler` points to an `NbrdfSampler`.
-int32_t nbrdf_sampler_validate(const struct NbrdfSampler *sampler);
-
-// `nbrdf_network_sample` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
-//
-// # Safety
-// As `nbrdf_network_sample`, with `sampler` pointing to an `NbrdfMixtureSampler`.
-int32_t nbrdf_network_sample_mixture(const struct NbrdfNetwork *network,
-                                     const struct NbrdfMixtureSampler *sampler,
-                                     const float *view,
-                                     const float *u,
-                                     size_t n,
-                                     float *out_light,
-                                     float *out_weight,
-                                     float *out_pdf);
-
-// `nbrdf_merl_sample` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
-//
-// # Safety
-// As `nbrdf_merl_sample`, with `sampler` pointing to an `NbrdfMixtureSampler`.
-int32_t nbrdf_merl_sample_mixture(const struct NbrdfMerl *merl,
-                                  const struct NbrdfMixtureSampler *sampler,
-                                  const float *view,
-                                  const float *u,
-                                  size_t n,
-                                  float *out_light,
-                                  float *out_weight,
-                                  float *out_pdf);
-
-// `nbrdf_sampler_pdf` with an `NbrdfMixtureSampler` (any kind, two-lobe included).
-//
-// # Safety
-// As `nbrdf_sampler_pdf`, with `sampler` pointing to an `NbrdfMixtureSampler`.
-int32_t nbrdf_mixture_sampler_pdf(const struct NbrdfMixtureSampler *sampler,
-                                  const float *view,
-                                  const float *light,
-                                  size_t n,
-                                  float *out_pdf);
-
-// Checks an `NbrdfMixtureSampler`'s kind and parameters: `NBRDF_OK` or
-// `NBRDF_ERROR_INVALID_ARGUMENT` with a message.
-//
-// # Safety
-// `sampler` points to an `NbrdfMixtureSampler`.
-int32_t nbrdf_mixture_sampler_validate(const struct NbrdfMixtureSampler *sampler);
-
-// Fills `*out` with the sampling strategy stored in the network file: `NBRDF_SAMPLING_PHONG`
-// (second lobe zero), `NBRDF_SAMPLING_TWO_LOBE`, `NBRDF_SAMPLING_ANISOTROPIC_PHONG`
-// (`exponent2` = `n_v`), or `NBRDF_SAMPLING_COSINE` with zero parameters when the file stores
-// none.
-//
-// # Safety
-// `network` is a live handle; `out` points to a writable `NbrdfMixtureSampler`.
-int32_t nbrdf_network_stored_sampler(const struct NbrdfNetwork *network,
-                                     struct NbrdfMixtureSampler *out);
-
-// Writes to `*out` the sampling strategy the file names as the material's best
-// (`sampling.default`, chosen by `nbrdf fit-phong` for the lowest measured variance), as an
-// `NbrdfSamplingKind` value (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none.
-//
-// # Safety
-// `network` is a live handle; `out` points to a writable `int32_t`.
-int32_t nbrdf_network_default_sampling(const struct NbrdfNetwork *network,
-                                       int32_t *out);
-
-// Tabulates the network for `sampling` = `tabulated` (about 330k evaluations, milliseconds),
-// with the defensive cosine weight of its file (`sampling.table_cosine_weight`, chosen by
-// `nbrdf fit-phong`; 0.1 without); free the result with `nbrdf_table_free`. `*out` is NULL after a failure.
-//
-// # Safety
-// `network` is a live handle; `out` points to a writable pointer.
-int32_t nbrdf_network_build_table(const struct NbrdfNetwork *network,
-                                  struct NbrdfTable **out);
-
-// Tabulates a MERL table for `sampling` = `tabulated`, as `nbrdf_network_build_table`.
-//
-// # Safety
-// `merl` is a live handle; `out` points to a writable pointer.
-int32_t nbrdf_merl_build_table(const struct NbrdfMerl *merl,
-                               struct NbrdfTable **out);
-
-// Frees a table; NULL is a no-op.
-//
-// # Safety
-// `table` is NULL or came from a `*_build_table` function and was not freed yet.
-void nbrdf_table_free(struct NbrdfTable *table);
-
-// Fills `*out` with the table's shape and cosine weight.
-//
-// # Safety
-// `table` is a live handle; `out` points to a writable `NbrdfTableInfo`.
-int32_t nbrdf_table_info(const struct NbrdfTable *table,
-                         struct NbrdfTableInfo *out);
-
-// Copies the table's arrays (probabilities as float32) into caller buffers of the sizes
-// `NbrdfTableInfo` gives, for a second implementation of the sampler (the plugin's Dr.Jit
-// path).
-//
-// # Safety
-// `table` is a live handle; the outputs point to writable buffers of the documented sizes.
-int32_t nbrdf_table_arrays(const struct NbrdfTable *table,
-                           float *out_mass,
-                           float *out_alias_probability,
-                           uint32_t *out_alias);
-
-// `nbrdf_network_sample` with the tabulated sampler `table`.
-//
-// # Safety
-// As `nbrdf_network_sample`, with `table` a live `NbrdfTable`.
-int32_t nbrdf_network_sample_table(const struct NbrdfNetwork *network,
-                                   const struct NbrdfTable *table,
-                                   const float *view,
-                                   const float *u,
-                                   size_t n,
-                                   float *out_light,
-                                   float *out_weight,
-                                   float *out_pdf);
-
-// `nbrdf_merl_sample` with the tabulated sampler `table`.
-//
-// # Safety
-// As `nbrdf_merl_sample`, with `table` a live `NbrdfTable`.
-int32_t nbrdf_merl_sample_table(const struct NbrdfMerl *merl,
-                                const struct NbrdfTable *table,
-                                const float *view,
-                                const float *u,
-                                size_t n,
-                                float *out_light,
-                                float *out_weight,
-                                float *out_pdf);
-
-// `nbrdf_sampler_pdf` of the tabulated sampler `table`.
-//
-// # Safety
-// As `nbrdf_sampler_pdf`, with `table` a live `NbrdfTable`.
-int32_t nbrdf_table_pdf(const struct NbrdfTable *table,
-                        const float *view,
-                        const float *light,
-                        size_t n,
-                        float *out_pdf);
+// `out_name` points to writable storage for one pointer.
+int32_t nbrdf_sampling_kind_name(int32_t kind,
+                                 const char **out_name);
 
 #ifdef __cplusplus
 }  // extern "C"

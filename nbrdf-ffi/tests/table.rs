@@ -1,10 +1,10 @@
-//! The tabulated sampler (`NbrdfTable`, `NBRDF_SAMPLING_TABULATED`) as a C caller sees it: built
-//! from a network and from a MERL table, its samples, pdfs and arrays against nbrdf-core's
-//! `tabulated` module called directly, its pdf against a quadrature over the sphere and the rate
-//! of valid samples, and bad calls (error status and message, no panic).
+//! The tabulated sampler (`NBRDF_SAMPLING_TABULATED`) as a C caller sees it: created from a
+//! network and from a MERL table, its samples, pdfs and arrays against nbrdf-core's `tabulated`
+//! module called directly, its pdf against a quadrature over the sphere and the rate of valid
+//! samples, and bad calls (error status and message, no panic).
 //!
 //! The checks hold for any table size and cosine weight: they read the shape from
-//! `nbrdf_table_info`, never from constants of nbrdf-core.
+//! `nbrdf_sampler_info`, never from constants of nbrdf-core.
 
 mod support;
 
@@ -15,120 +15,57 @@ use nbrdf_core::sampling::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{Nbrdf, SamplingStrategy};
 use nbrdf_ffi::*;
 use std::f64::consts::TAU;
-use std::marker::PhantomData;
 use std::ptr::{null, null_mut};
 use std::sync::Arc;
 use support::*;
 
-/// A table handle, freed on drop.
-struct Table(*mut NbrdfTable);
-
-impl Drop for Table {
-    fn drop(&mut self) {
-        // SAFETY: the handle came from a `*_build_table` function.
-        unsafe { nbrdf_table_free(self.0) }
-    }
+fn tabulated() -> NbrdfSamplerParams {
+    params(NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED)
 }
 
-// SAFETY: the C contract: a table is immutable, so one handle may be used by many threads.
-unsafe impl Sync for Table {}
-
-/// `build(out)` is one of the `*_build_table` functions with its handle bound.
-fn build_table(build: impl FnOnce(*mut *mut NbrdfTable) -> i32) -> Table {
-    let mut out = null_mut();
-    assert_eq!(build(&mut out), OK, "{}", last_error());
-    assert!(!out.is_null());
-    Table(out)
+/// The tabulated sampler of `material`.
+fn table_of(material: &Material) -> Sampler {
+    sampler(material.ptr(), &tabulated())
 }
 
-fn network_table(network: &Network) -> Table {
-    // SAFETY: a live handle and a writable out pointer.
-    build_table(|out| unsafe { nbrdf_network_build_table(network.0, out) })
-}
-
-fn merl_table(merl: &Merl) -> Table {
-    // SAFETY: a live handle and a writable out pointer.
-    build_table(|out| unsafe { nbrdf_merl_build_table(merl.0, out) })
-}
-
-/// A `*_sample_table` function.
-type SampleTableFn<H> = unsafe extern "C" fn(
-    *const H,
-    *const NbrdfTable,
-    *const f32,
-    *const f32,
-    usize,
-    *mut f32,
-    *mut f32,
-    *mut f32,
-) -> i32;
-
-/// A `*_sample_table` function with its material bound.
-struct Sampler<'a, H> {
-    handle: *const H,
-    function: SampleTableFn<H>,
-    _handle: PhantomData<&'a H>,
-}
-
-// SAFETY: the C contract: handles are immutable, so one may be used by many threads.
-unsafe impl<H> Sync for Sampler<'_, H> {}
-
-fn network_sampler(network: &Network) -> Sampler<'_, NbrdfNetwork> {
-    Sampler {
-        handle: network.0,
-        function: nbrdf_network_sample_table,
-        _handle: PhantomData,
-    }
-}
-
-fn merl_sampler(merl: &Merl) -> Sampler<'_, NbrdfMerl> {
-    Sampler {
-        handle: merl.0,
-        function: nbrdf_merl_sample_table,
-        _handle: PhantomData,
-    }
-}
-
-/// The outputs of a `*_sample_table` call.
+/// The outputs of an `nbrdf_material_sample` call.
 struct Samples {
     light: Vec<f32>,
     weight: Vec<f32>,
     pdf: Vec<f32>,
 }
 
-impl<H> Sampler<'_, H> {
-    /// Samples with `table` for planar `view` and `u`; asserts success.
-    fn sample(&self, table: &Table, view: &[f32], u: &[f32]) -> Samples {
-        let n = view.len() / 3;
-        let mut s = Samples {
-            light: vec![f32::NAN; 3 * n],
-            weight: vec![f32::NAN; 3 * n],
-            pdf: vec![f32::NAN; n],
-        };
-        // SAFETY: live handles, 3 n floats per array but the pdfs' n.
-        let status = unsafe {
-            (self.function)(
-                self.handle,
-                table.0,
-                view.as_ptr(),
-                u.as_ptr(),
-                n,
-                s.light.as_mut_ptr(),
-                s.weight.as_mut_ptr(),
-                s.pdf.as_mut_ptr(),
-            )
-        };
-        assert_eq!(status, OK, "{}", last_error());
-        s
-    }
+/// Samples `material` with `table` for planar `view` and `u`; asserts success.
+fn sample(material: &Material, table: &Sampler, view: &[f32], u: &[f32]) -> Samples {
+    let n = view.len() / 3;
+    let mut s = Samples {
+        light: vec![f32::NAN; 3 * n],
+        weight: vec![f32::NAN; 3 * n],
+        pdf: vec![f32::NAN; n],
+    };
+    // SAFETY: live handles, 3 n floats per array but the pdfs' n.
+    let status = unsafe {
+        nbrdf_material_sample(
+            material.ptr(),
+            table.ptr(),
+            view.as_ptr(),
+            u.as_ptr(),
+            n,
+            s.light.as_mut_ptr(),
+            s.weight.as_mut_ptr(),
+            s.pdf.as_mut_ptr(),
+        )
+    };
+    assert_eq!(status, OK, "{}", last_error());
+    s
 }
 
-/// `nbrdf_table_pdf` of planar `view` and `light` (`n` lanes).
-fn table_pdf(table: &Table, view: &[f32], light: &[f32], n: usize) -> Vec<f32> {
+/// `nbrdf_sampler_pdf` of planar `view` and `light` (`n` lanes).
+fn table_pdf(table: &Sampler, view: &[f32], light: &[f32], n: usize) -> Vec<f32> {
     let mut pdf = vec![f32::NAN; n];
     // SAFETY: a live handle, 3 n floats per input and n for the output.
     let status =
-        unsafe { nbrdf_table_pdf(table.0, view.as_ptr(), light.as_ptr(), n, pdf.as_mut_ptr()) };
+        unsafe { nbrdf_sampler_pdf(table.0, view.as_ptr(), light.as_ptr(), n, pdf.as_mut_ptr()) };
     assert_eq!(status, OK, "{}", last_error());
     pdf
 }
@@ -162,16 +99,18 @@ fn uniforms(n: usize, seed: u64) -> Vec<Vec3> {
 /// Shape, arrays, samples, weights and pdfs of a table built through the C ABI agree with
 /// nbrdf-core's `TabulatedSampler` built from the same material; the pdf of each sample, asked
 /// again, is the pdf the sample returned.
-fn check_against_core<H>(brdf: &dyn Brdf, table: &Table, sampler: &Sampler<'_, H>) {
+fn check_against_core(brdf: &dyn Brdf, material: &Material) {
+    let table = &table_of(material);
     let core = TabulatedSampler::from_brdf(brdf, &TableConfig::default()).unwrap();
     let arrays = core.tables();
 
-    let mut info = NbrdfTableInfo::default();
+    let mut info = NbrdfSamplerInfo::default();
     // SAFETY: a live handle and a writable info.
-    assert_eq!(unsafe { nbrdf_table_info(table.0, &mut info) }, OK);
+    assert_eq!(unsafe { nbrdf_sampler_info(table.0, &mut info) }, OK);
     assert_eq!(
         info,
-        NbrdfTableInfo {
+        NbrdfSamplerInfo {
+            kind: NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED as i32,
             rows: arrays.rows as u32,
             theta_bins: arrays.theta_bins as u32,
             phi_bins: arrays.phi_bins as u32,
@@ -184,7 +123,7 @@ fn check_against_core<H>(brdf: &dyn Brdf, table: &Table, sampler: &Sampler<'_, H
     let n = 512;
     let (vs, us) = (views(n), uniforms(n, 11));
     let (view, u) = (planar(vs.iter().copied()), planar(us.iter().copied()));
-    let s = sampler.sample(table, &view, &u);
+    let s = sample(material, table, &view, &u);
     let mut valid = 0;
     for i in 0..n {
         let expected = strategy.sample(vs[i], us[i].to_array());
@@ -220,12 +159,12 @@ fn check_against_core<H>(brdf: &dyn Brdf, table: &Table, sampler: &Sampler<'_, H
     }
 }
 
-/// `nbrdf_table_arrays` writes exactly the documented sizes, the core's values (probabilities
+/// `nbrdf_sampler_table` writes exactly the documented sizes, the core's values (probabilities
 /// as float32), and per row a probability distribution whose alias table draws each bin with
 /// its mass (counted the other way round: kept plus aliased to).
 fn check_arrays(
-    table: &Table,
-    info: &NbrdfTableInfo,
+    table: &Sampler,
+    info: &NbrdfSamplerInfo,
     core: &nbrdf_core::sampling::tabulated::TableArrays,
 ) {
     let (rows, nt, np) = (
@@ -240,11 +179,12 @@ fn check_arrays(
     let mut alias = vec![u32::MAX; len + 1];
     // SAFETY: a live handle and buffers of the documented sizes.
     let status = unsafe {
-        nbrdf_table_arrays(
+        nbrdf_sampler_table(
             table.0,
             mass.as_mut_ptr(),
             probability.as_mut_ptr(),
             alias.as_mut_ptr(),
+            len,
         )
     };
     assert_eq!(status, OK, "{}", last_error());
@@ -284,8 +224,8 @@ fn check_arrays(
 }
 
 /// `int pdf(l) dl` over the whole sphere by the midpoint rule in `(cos theta, phi)` (the
-/// directions below the horizon included: the pdf must be 0 there), through `nbrdf_table_pdf`.
-fn sphere_integral(table: &Table, view: Vec3) -> f64 {
+/// directions below the horizon included: the pdf must be 0 there), through `nbrdf_sampler_pdf`.
+fn sphere_integral(table: &Sampler, view: Vec3) -> f64 {
     let (n_cos, n_phi) = (500, 1000);
     let lights: Vec<Vec3> = (0..n_cos * n_phi)
         .map(|k| {
@@ -311,8 +251,9 @@ fn sphere_integral(table: &Table, view: Vec3) -> f64 {
 
 /// The pdf integrates over the sphere to the probability that a sample is valid (samples whose
 /// half vector reflects below the horizon have pdf 0), which is close to 1; that rate is
-/// measured from `*_sample_table`.
-fn check_pdf_integral<H>(table: &Table, sampler: &Sampler<'_, H>) {
+/// measured from `nbrdf_material_sample`.
+fn check_pdf_integral(material: &Material) {
+    let table = &table_of(material);
     for view in [
         spherical(0.15, 0.4),
         spherical(0.8, 2.0),
@@ -321,7 +262,12 @@ fn check_pdf_integral<H>(table: &Table, sampler: &Sampler<'_, H>) {
         let integral = sphere_integral(table, view);
         let m = 100_000;
         let u = planar(uniforms(m, 21).into_iter());
-        let s = sampler.sample(table, &planar(std::iter::repeat(view).take(m)), &u);
+        let s = sample(
+            material,
+            table,
+            &planar(std::iter::repeat(view).take(m)),
+            &u,
+        );
         let rate = s.pdf.iter().filter(|&&p| p > 0.0).count() as f64 / m as f64;
         let sigma = (rate * (1.0 - rate) / m as f64).sqrt();
         assert!(
@@ -338,30 +284,23 @@ fn check_pdf_integral<H>(table: &Table, sampler: &Sampler<'_, H>) {
 #[test]
 fn network_tables_agree_with_the_core() {
     let (network, path) = load_network(5);
-    let table = network_table(&network);
-    let core = Nbrdf::load(&path).unwrap();
-    check_against_core(&core, &table, &network_sampler(&network));
+    check_against_core(&Nbrdf::load(&path).unwrap(), &network);
 }
 
 #[test]
 fn merl_tables_agree_with_the_core() {
     let (merl, core) = load_smooth_merl();
-    let table = merl_table(&merl);
-    check_against_core(&core, &table, &merl_sampler(&merl));
+    check_against_core(&core, &merl);
 }
 
 #[test]
 fn network_table_pdf_integrates_to_the_valid_sample_rate() {
-    let (network, _) = load_network(5);
-    let table = network_table(&network);
-    check_pdf_integral(&table, &network_sampler(&network));
+    check_pdf_integral(&load_network(5).0);
 }
 
 #[test]
 fn merl_table_pdf_integrates_to_the_valid_sample_rate() {
-    let (merl, _) = load_smooth_merl();
-    let table = merl_table(&merl);
-    check_pdf_integral(&table, &merl_sampler(&merl));
+    check_pdf_integral(&load_smooth_merl().0);
 }
 
 /// One table serves another material's sampling too (the table is only a density): the weights
@@ -370,14 +309,14 @@ fn merl_table_pdf_integrates_to_the_valid_sample_rate() {
 fn a_table_samples_any_material() {
     let (network, path) = load_network(5);
     let (merl, merl_core) = load_smooth_merl();
-    let table = network_table(&network);
+    let table = table_of(&network);
     let n = 64;
     let (view, u) = (
         planar(views(n).into_iter()),
         planar(uniforms(n, 5).into_iter()),
     );
-    let from_network = network_sampler(&network).sample(&table, &view, &u);
-    let from_merl = merl_sampler(&merl).sample(&table, &view, &u);
+    let from_network = sample(&network, &table, &view, &u);
+    let from_merl = sample(&merl, &table, &view, &u);
     assert_eq!(from_network.light, from_merl.light);
     assert_eq!(from_network.pdf, from_merl.pdf);
     let network_core = Nbrdf::load(&path).unwrap();
@@ -407,7 +346,7 @@ fn a_table_samples_any_material() {
 #[test]
 fn non_finite_lanes_are_invalid_samples_not_failures() {
     let (network, path) = load_network(5);
-    let table = network_table(&network);
+    let table = table_of(&network);
     let core =
         TabulatedSampler::from_brdf(&Nbrdf::load(&path).unwrap(), &TableConfig::default()).unwrap();
     let strategy = SamplingStrategy::Tabulated(Arc::new(core));
@@ -430,7 +369,7 @@ fn non_finite_lanes_are_invalid_samples_not_failures() {
     ];
     let n = views.len();
     let (view, u) = (planar(views.into_iter()), planar(us.into_iter()));
-    let s = network_sampler(&network).sample(&table, &view, &u);
+    let s = sample(&network, &table, &view, &u);
     for i in 0..4 {
         assert_eq!(s.pdf[i], 0.0, "lane {i}");
         assert!((0..3).all(|c| s.weight[c * n + i] == 0.0), "lane {i}");
@@ -461,184 +400,102 @@ fn non_finite_lanes_are_invalid_samples_not_failures() {
 #[test]
 fn null_pointers_name_the_argument() {
     let (network, _) = load_network(4);
-    let (merl, _) = load_smooth_merl();
-    let table = network_table(&network);
-    let (net, mer, tab) = (
-        network.0.cast_const(),
-        merl.0.cast_const(),
-        table.0.cast_const(),
-    );
+    let table = table_of(&network);
+    let tab = table.ptr();
     let check = |status: i32, argument: &str| {
         assert_eq!(status, NULL, "argument {argument}: {}", last_error());
         let message = last_error();
         assert!(message.contains(&format!("`{argument}`")), "{message}");
     };
-    let v = [0.0_f32, 0.0, 1.0];
-    let (mut l, mut w, mut p) = ([0.0_f32; 3], [0.0_f32; 3], [0.0_f32; 1]);
-    let (vp, lp, wp, pp) = (v.as_ptr(), l.as_mut_ptr(), w.as_mut_ptr(), p.as_mut_ptr());
-    let mut info = NbrdfTableInfo::default();
     let mut buf = [0.0_f32; 1];
     let bp = buf.as_mut_ptr();
     let mut alias_buffer = [0_u32; 1];
     let ap = alias_buffer.as_mut_ptr();
     // SAFETY: every pointer is null or valid; the calls fail before touching the arrays' sizes.
     unsafe {
-        // A failed build leaves NULL in `*out`, never a stale pointer.
-        let mut out = 1 as *mut NbrdfTable;
-        check(nbrdf_network_build_table(null(), &mut out), "network");
-        assert!(out.is_null());
-        out = 1 as *mut NbrdfTable;
-        check(nbrdf_merl_build_table(null(), &mut out), "merl");
-        assert!(out.is_null());
-        check(nbrdf_network_build_table(net, null_mut()), "out");
-        check(nbrdf_merl_build_table(mer, null_mut()), "out");
-
-        check(nbrdf_table_info(null(), &mut info), "table");
-        check(nbrdf_table_info(tab, null_mut()), "out");
-        check(nbrdf_table_arrays(null(), bp, bp, ap), "table");
-        check(nbrdf_table_arrays(tab, null_mut(), bp, ap), "out_mass");
+        // A failed create leaves NULL in `*out`, never a stale pointer.
+        let mut out = 1 as *mut NbrdfSampler;
         check(
-            nbrdf_table_arrays(tab, bp, null_mut(), ap),
+            nbrdf_sampler_create(null(), &tabulated(), &mut out),
+            "material",
+        );
+        assert!(out.is_null());
+        assert!(last_error().contains("tabulated"), "{}", last_error());
+        check(nbrdf_sampler_table(null(), bp, bp, ap, 1), "sampler");
+        check(nbrdf_sampler_table(tab, null_mut(), bp, ap, 1), "out_mass");
+        check(
+            nbrdf_sampler_table(tab, bp, null_mut(), ap, 1),
             "out_alias_probability",
         );
-        check(nbrdf_table_arrays(tab, bp, bp, null_mut()), "out_alias");
-
-        let sample = |net, t, view, u, light, weight, pdf| {
-            nbrdf_network_sample_table(net, t, view, u, 1, light, weight, pdf)
-        };
-        check(sample(null(), tab, vp, vp, lp, wp, pp), "network");
-        check(sample(net, null(), vp, vp, lp, wp, pp), "table");
-        check(sample(net, tab, null(), vp, lp, wp, pp), "view");
-        check(sample(net, tab, vp, null(), lp, wp, pp), "u");
-        check(sample(net, tab, vp, vp, null_mut(), wp, pp), "out_light");
-        check(sample(net, tab, vp, vp, lp, null_mut(), pp), "out_weight");
-        check(sample(net, tab, vp, vp, lp, wp, null_mut()), "out_pdf");
-        check(
-            nbrdf_merl_sample_table(null(), tab, vp, vp, 1, lp, wp, pp),
-            "merl",
-        );
-        check(
-            nbrdf_merl_sample_table(mer, null(), vp, vp, 1, lp, wp, pp),
-            "table",
-        );
-
-        check(nbrdf_table_pdf(null(), vp, vp, 1, pp), "table");
-        check(nbrdf_table_pdf(tab, null(), vp, 1, pp), "view");
-        check(nbrdf_table_pdf(tab, vp, null(), 1, pp), "light");
-        check(nbrdf_table_pdf(tab, vp, vp, 1, null_mut()), "out_pdf");
-        assert!(
-            last_error().starts_with("nbrdf_table_pdf: "),
-            "{}",
-            last_error()
-        );
-
-        // Freeing NULL is a no-op.
-        nbrdf_table_free(null_mut());
+        check(nbrdf_sampler_table(tab, bp, bp, null_mut(), 1), "out_alias");
     }
 }
 
 #[test]
-fn bad_sizes_and_alignment_are_invalid_arguments() {
+fn bad_sizes_kinds_and_alignment_are_invalid_arguments() {
     let (network, _) = load_network(4);
-    let table = network_table(&network);
+    let table = table_of(&network);
     let buf = [0.0_f32; 8];
     let mut out = [0.0_f32; 8];
     let (b, o) = (buf.as_ptr(), out.as_mut_ptr());
     let misaligned = b.cast::<u8>().wrapping_add(1).cast::<f32>();
     let huge = usize::MAX / 2;
+    let mut info = NbrdfSamplerInfo::default();
+    // SAFETY: a live handle and a writable info.
+    assert_eq!(unsafe { nbrdf_sampler_info(table.0, &mut info) }, OK);
+    let len = (info.rows * info.theta_bins * info.phi_bins) as usize;
+    let (mut mass, mut probability, mut alias) =
+        (vec![7.0f32; len], vec![7.0f32; len], vec![7u32; len]);
+    let (mp, pp, ap) = (
+        mass.as_mut_ptr(),
+        probability.as_mut_ptr(),
+        alias.as_mut_ptr(),
+    );
+    let cosine = sampler(null(), &params(NbrdfSamplingKind::NBRDF_SAMPLING_COSINE));
     // SAFETY: every call is rejected before any array is read or written.
     unsafe {
-        assert_eq!(nbrdf_table_pdf(table.0, b, b, huge, o), INVALID);
+        assert_eq!(nbrdf_sampler_pdf(table.0, b, b, huge, o), INVALID);
         assert!(
-            last_error().starts_with("nbrdf_table_pdf: "),
+            last_error().starts_with("nbrdf_sampler_pdf: "),
             "{}",
             last_error()
         );
         assert_eq!(
-            nbrdf_network_sample_table(network.0, table.0, b, b, huge, o, o, o),
+            nbrdf_material_sample(network.0, table.0, b, b, huge, o, o, o),
             INVALID
         );
         assert!(
-            last_error().starts_with("nbrdf_network_sample_table: "),
+            last_error().starts_with("nbrdf_material_sample: "),
             "{}",
             last_error()
         );
-        assert_eq!(nbrdf_table_pdf(table.0, misaligned, b, 1, o), INVALID);
+        assert_eq!(nbrdf_sampler_pdf(table.0, misaligned, b, 1, o), INVALID);
         assert!(last_error().contains("`view`"), "{}", last_error());
-        let misaligned_table = table.0.cast::<u8>().wrapping_add(1).cast::<NbrdfTable>();
-        assert_eq!(nbrdf_table_pdf(misaligned_table, b, b, 1, o), INVALID);
-        assert!(last_error().contains("`table`"), "{}", last_error());
+        let misaligned_table = table.0.cast::<u8>().wrapping_add(1).cast::<NbrdfSampler>();
+        assert_eq!(nbrdf_sampler_pdf(misaligned_table, b, b, 1, o), INVALID);
+        assert!(last_error().contains("`sampler`"), "{}", last_error());
+        // The arrays' length must be the table's.
+        for wrong in [0, len - 1, len + 1] {
+            assert_eq!(nbrdf_sampler_table(table.0, mp, pp, ap, wrong), INVALID);
+            assert!(last_error().contains("`len`"), "{}", last_error());
+        }
+        // Other kinds have no table.
+        assert_eq!(nbrdf_sampler_table(cosine.0, mp, pp, ap, len), INVALID);
+        assert!(last_error().contains("no table"), "{}", last_error());
         // Empty batches touch nothing and succeed.
-        assert_eq!(nbrdf_table_pdf(table.0, b, b, 0, o), OK);
+        assert_eq!(nbrdf_sampler_pdf(table.0, b, b, 0, o), OK);
         assert_eq!(
-            nbrdf_network_sample_table(network.0, table.0, b, b, 0, o, o, o),
+            nbrdf_material_sample(network.0, table.0, b, b, 0, o, o, o),
             OK
         );
     }
-}
-
-/// Kind 4 names the tabulated strategy, which needs a table: the generic sampler structs refuse
-/// it in every entry point with a message pointing to `NbrdfTable`.
-#[test]
-fn the_tabulated_kind_needs_a_table() {
-    let (network, _) = load_network(4);
-    let (merl, _) = load_smooth_merl();
-    let one = NbrdfSampler {
-        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED,
-        exponent: 10.0,
-        specular_weight: 0.5,
-    };
-    let mixture = NbrdfMixtureSampler {
-        kind: NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED,
-        exponent: 10.0,
-        specular_weight: 0.5,
-        exponent2: 0.0,
-        specular_weight2: 0.0,
-    };
-    let v = [0.0_f32, 0.0, 1.0];
-    let (mut l, mut w, mut p) = ([7.0_f32; 3], [7.0_f32; 3], [7.0_f32; 1]);
-    let (vp, lp, wp, pp) = (v.as_ptr(), l.as_mut_ptr(), w.as_mut_ptr(), p.as_mut_ptr());
-    let check = |status: i32, function: &str| {
-        assert_eq!(status, INVALID, "{function}: {}", last_error());
-        let message = last_error();
-        assert!(message.starts_with(&format!("{function}: ")), "{message}");
-        assert!(message.contains("NbrdfTable"), "{message}");
-    };
-    // SAFETY: valid pointers and sizes.
-    unsafe {
-        check(nbrdf_sampler_validate(&one), "nbrdf_sampler_validate");
-        check(nbrdf_sampler_pdf(&one, vp, vp, 1, pp), "nbrdf_sampler_pdf");
-        check(
-            nbrdf_network_sample(network.0, &one, vp, vp, 1, lp, wp, pp),
-            "nbrdf_network_sample",
-        );
-        check(
-            nbrdf_merl_sample(merl.0, &one, vp, vp, 1, lp, wp, pp),
-            "nbrdf_merl_sample",
-        );
-        check(
-            nbrdf_mixture_sampler_validate(&mixture),
-            "nbrdf_mixture_sampler_validate",
-        );
-        check(
-            nbrdf_mixture_sampler_pdf(&mixture, vp, vp, 1, pp),
-            "nbrdf_mixture_sampler_pdf",
-        );
-        check(
-            nbrdf_network_sample_mixture(network.0, &mixture, vp, vp, 1, lp, wp, pp),
-            "nbrdf_network_sample_mixture",
-        );
-        check(
-            nbrdf_merl_sample_mixture(merl.0, &mixture, vp, vp, 1, lp, wp, pp),
-            "nbrdf_merl_sample_mixture",
-        );
-    }
     // A refused call writes nothing.
-    assert_eq!((l, w, p), ([7.0; 3], [7.0; 3], [7.0]));
+    assert!(mass.iter().chain(&probability).all(|&v| v == 7.0));
+    assert!(alias.iter().all(|&v| v == 7));
 }
 
-/// A file whose sampling names `tabulated` as its default reports kind 4, the kind whose
-/// functions are the `*_table` ones; a file naming none reports -1.
+/// A file whose sampling names `tabulated` as its default reports kind 4, the kind
+/// `nbrdf_sampler_create` tabulates the material for; a file naming none reports -1.
 #[test]
 fn the_default_sampling_may_be_tabulated() {
     let text = network_json(4).replace(
@@ -647,33 +504,28 @@ fn the_default_sampling_may_be_tabulated() {
     );
     let (tabulated, _) = load_network_text(&text, "default-tabulated");
     let (plain, _) = load_network(4);
-    let (mut kind, mut none) = (0, 0);
-    // SAFETY: live handles and writable ints.
-    unsafe {
-        assert_eq!(nbrdf_network_default_sampling(tabulated.0, &mut kind), OK);
-        assert_eq!(nbrdf_network_default_sampling(plain.0, &mut none), OK);
-        assert_eq!(nbrdf_network_default_sampling(plain.0, null_mut()), NULL);
-    }
-    assert_eq!(kind, NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED as i32);
-    assert_eq!(none, -1);
+    assert_eq!(
+        tabulated.info().default_sampling,
+        NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED as i32
+    );
+    assert_eq!(plain.info().default_sampling, -1);
 }
 
-/// A table is immutable: threads sampling and evaluating the same handle at once get what one
-/// thread gets alone.
+/// A sampler is immutable: threads sampling and evaluating the same handles at once get what
+/// one thread gets alone.
 #[test]
 fn one_table_serves_many_threads() {
     let (network, _) = load_network(4);
-    let table = network_table(&network);
+    let table = table_of(&network);
     let n = 256;
     let (view, u) = (
         planar(views(n).into_iter()),
         planar(uniforms(n, 9).into_iter()),
     );
-    let sampler = network_sampler(&network);
-    let alone = sampler.sample(&table, &view, &u);
+    let alone = sample(&network, &table, &view, &u);
     std::thread::scope(|scope| {
         let handles: Vec<_> = (0..4)
-            .map(|_| scope.spawn(|| sampler.sample(&table, &view, &u)))
+            .map(|_| scope.spawn(|| sample(&network, &table, &view, &u)))
             .collect();
         for handle in handles {
             let s = handle.join().unwrap();

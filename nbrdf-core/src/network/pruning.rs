@@ -10,8 +10,9 @@
 //! inactive only when every box bounds it at or below `-margin`, margins far above float32's
 //! rounding. What the budget cannot settle stays.
 //!
-//! Twin: none (the plugin asks through `nbrdf_network_active_units`). Tests: `network::tests`
-//! and the fuzz target `network_pruning`.
+//! Twin: none (the plugin takes the proof from the C library: `nbrdf_material_network`, and
+//! `nbrdf_material_active_units` for new weights). Tests: `network::tests` and the fuzz target
+//! `network_pruning`.
 
 use super::{Layer, Nbrdf, INPUTS};
 use crate::coords::{network_input_from_angles_for, RusinkiewiczAngles};
@@ -351,9 +352,16 @@ impl Nbrdf {
     /// off the hemisphere ([`Nbrdf::eval_input`] of arbitrary vectors, tabulation at angles
     /// with a direction below the horizon), where a dropped unit may fire.
     pub fn without_inactive_units(&self) -> Nbrdf {
-        let active = self.active_units();
+        self.with_units(&self.active_units())
+    }
+
+    /// The network restricted to the units `active` keeps: [`Nbrdf::without_inactive_units`]
+    /// when `active` is [`Nbrdf::active_units`], for callers that also hand the proof on (the C
+    /// library gives it to the plugin's kernels) and so run it once. `active` has this network's
+    /// hidden widths.
+    pub fn with_units(&self, active: &ActiveUnits) -> Nbrdf {
         let mut pruned = self.clone();
-        pruned.layers = keep_units(&self.layers, &active);
+        pruned.layers = keep_units(&self.layers, active);
         pruned
     }
 }

@@ -1,5 +1,5 @@
 //! What the C ABI tests share: status codes, the last error, scratch files, a small network and a
-//! smooth MERL table loaded through the C ABI, planar arrays.
+//! smooth MERL table loaded through the C ABI as materials, samplers, planar arrays.
 
 // Each test crate uses a part of this module.
 #![allow(dead_code)]
@@ -71,48 +71,63 @@ pub fn network_json(hidden: usize) -> String {
     )
 }
 
-/// A network handle, freed on drop.
-pub struct Network(pub *mut NbrdfNetwork);
+/// A material handle, freed on drop.
+pub struct Material(pub *mut NbrdfMaterial);
 
-impl Drop for Network {
+impl Drop for Material {
     fn drop(&mut self) {
-        // SAFETY: the handle came from nbrdf_network_load.
-        unsafe { nbrdf_network_free(self.0) }
+        // SAFETY: the handle came from nbrdf_material_load.
+        unsafe { nbrdf_material_free(self.0) }
     }
 }
 
-// SAFETY: the C contract: a network is immutable, so one handle may be used by many threads.
-unsafe impl Sync for Network {}
+// SAFETY: the C contract: a material is immutable, so one handle may be used by many threads.
+unsafe impl Sync for Material {}
 
-/// Loads the JSON text `json` through the C ABI; returns the handle and the file.
-pub fn load_network_text(json: &str, name: &str) -> (Network, PathBuf) {
-    let path = scratch(name).join("test.nbrdf.json");
-    std::fs::write(&path, json).unwrap();
+impl Material {
+    pub fn ptr(&self) -> *const NbrdfMaterial {
+        self.0
+    }
+
+    pub fn info(&self) -> NbrdfMaterialInfo {
+        let mut info = std::mem::MaybeUninit::uninit();
+        // SAFETY: a live handle and a writable info; initialised by a successful call.
+        unsafe {
+            assert_eq!(
+                nbrdf_material_info(self.0, info.as_mut_ptr()),
+                OK,
+                "{}",
+                last_error()
+            );
+            info.assume_init()
+        }
+    }
+}
+
+/// Loads `path` through the C ABI.
+pub fn load_material(path: &Path) -> Material {
     let mut handle = null_mut();
     // SAFETY: valid path and out pointer.
-    let status = unsafe { nbrdf_network_load(c_path(&path).as_ptr(), &mut handle) };
+    let status = unsafe { nbrdf_material_load(c_path(path).as_ptr(), &mut handle) };
     assert_eq!(status, OK, "{}", last_error());
     assert!(!handle.is_null());
-    (Network(handle), path)
+    Material(handle)
 }
 
-pub fn load_network(hidden: usize) -> (Network, PathBuf) {
+/// Loads the JSON text `json` through the C ABI; returns the handle and the file.
+pub fn load_network_text(json: &str, name: &str) -> (Material, PathBuf) {
+    let path = scratch(name).join("test.nbrdf.json");
+    std::fs::write(&path, json).unwrap();
+    (load_material(&path), path)
+}
+
+pub fn load_network(hidden: usize) -> (Material, PathBuf) {
     load_network_text(&network_json(hidden), &format!("net{hidden}"))
-}
-
-/// A MERL table handle, freed on drop.
-pub struct Merl(pub *mut NbrdfMerl);
-
-impl Drop for Merl {
-    fn drop(&mut self) {
-        // SAFETY: the handle came from nbrdf_merl_load.
-        unsafe { nbrdf_merl_free(self.0) }
-    }
 }
 
 /// A smooth table (the value grows along each axis, with one unmeasured region), written to a
 /// scratch file and loaded through the C ABI; also returned as the core's table.
-pub fn load_smooth_merl() -> (Merl, MerlTable) {
+pub fn load_smooth_merl() -> (Material, MerlTable) {
     let cells = nbrdf_core::merl::CELLS;
     let mut stored = vec![0.0_f64; 3 * cells];
     for (i, value) in stored.iter_mut().enumerate() {
@@ -127,12 +142,64 @@ pub fn load_smooth_merl() -> (Merl, MerlTable) {
     let table = MerlTable::from_stored(stored).unwrap();
     let path = scratch("merl").join("smooth.binary");
     table.write(&path).unwrap();
-    let mut handle = null_mut();
-    // SAFETY: valid pointers.
-    let status = unsafe { nbrdf_merl_load(c_path(&path).as_ptr(), &mut handle) };
-    assert_eq!(status, OK, "{}", last_error());
+    let handle = load_material(&path);
     std::fs::remove_file(&path).unwrap();
-    (Merl(handle), table)
+    (handle, table)
+}
+
+/// A sampler handle, freed on drop.
+pub struct Sampler(pub *mut NbrdfSampler);
+
+impl Drop for Sampler {
+    fn drop(&mut self) {
+        // SAFETY: the handle came from nbrdf_sampler_create.
+        unsafe { nbrdf_sampler_free(self.0) }
+    }
+}
+
+// SAFETY: the C contract: a sampler is immutable, so one handle may be used by many threads.
+unsafe impl Sync for Sampler {}
+
+impl Sampler {
+    pub fn ptr(&self) -> *const NbrdfSampler {
+        self.0
+    }
+}
+
+/// Sampler parameters of `kind`, every parameter zero.
+pub fn params(kind: NbrdfSamplingKind) -> NbrdfSamplerParams {
+    NbrdfSamplerParams {
+        kind: kind as i32,
+        ..NbrdfSamplerParams::cosine()
+    }
+}
+
+/// Phong sampler parameters.
+pub fn phong(exponent: f32, specular_weight: f32) -> NbrdfSamplerParams {
+    NbrdfSamplerParams {
+        exponent,
+        specular_weight,
+        ..params(NbrdfSamplingKind::NBRDF_SAMPLING_PHONG)
+    }
+}
+
+/// `nbrdf_sampler_create` of `params` for `material` (may be null): the status and the handle
+/// (null on failure).
+pub fn try_sampler(material: *const NbrdfMaterial, params: &NbrdfSamplerParams) -> (i32, Sampler) {
+    let mut handle = 1 as *mut NbrdfSampler; // must be overwritten
+                                             // SAFETY: valid pointers.
+    let status = unsafe { nbrdf_sampler_create(material, params, &mut handle) };
+    if status != OK {
+        assert!(handle.is_null(), "a failed create left a handle");
+    }
+    (status, Sampler(handle))
+}
+
+/// A sampler that must be accepted.
+pub fn sampler(material: *const NbrdfMaterial, params: &NbrdfSamplerParams) -> Sampler {
+    let (status, sampler) = try_sampler(material, params);
+    assert_eq!(status, OK, "{params:?}: {}", last_error());
+    sampler
 }
 
 pub fn planar(vectors: impl Iterator<Item = Vec3> + Clone) -> Vec<f32> {

@@ -1,0 +1,454 @@
+//! `NbrdfMaterial`: a neural BRDF or a MERL table behind one handle, told apart on load, with
+//! one entry point per operation (load, free, info, eval, sample; a network's parameters and
+//! active units).
+
+use crate::args::{directions, exact_len, free_boxed, read_path, write};
+use crate::sampler::{NbrdfSampler, NbrdfSamplerParams};
+use crate::status::guard;
+use crate::vocabulary::NbrdfSamplingKind;
+use nbrdf_core::brdf::{Brdf, DirectionsMut, RgbMut};
+use nbrdf_core::error::regular_file_size;
+use nbrdf_core::merl::{N_PHI_D, N_THETA_D, N_THETA_H};
+use nbrdf_core::network::ActiveUnits;
+use nbrdf_core::sampling;
+use nbrdf_core::sampling::tabulated::TableConfig;
+use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
+use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference, Failure, FfiResult};
+use std::ffi::{c_char, CString};
+use std::io::Read;
+use std::path::Path;
+
+/// What an `NbrdfMaterial` holds (the `kind` of `NbrdfMaterialInfo`).
+#[repr(C)]
+#[allow(non_camel_case_types)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NbrdfMaterialKind {
+    /// A neural BRDF from an `*.nbrdf.json` file.
+    NBRDF_MATERIAL_NETWORK = 0,
+    /// A MERL-format table from a `.binary` file.
+    NBRDF_MATERIAL_MERL = 1,
+}
+
+/// A material: a neural BRDF (`*.nbrdf.json`) or a MERL-format table (`.binary`), loaded by
+/// `nbrdf_material_load`. Immutable: one handle may be used by many threads at once.
+pub struct NbrdfMaterial {
+    source: Source,
+    /// The network's name (empty for a table), for `NbrdfMaterialInfo::name`.
+    name: CString,
+}
+
+enum Source {
+    Network(Box<LoadedNetwork>),
+    Merl(MerlTable),
+}
+
+/// A network as the file stores it, the proof of which hidden units can fire, and the network
+/// without the others: what eval, sample and tables evaluate.
+struct LoadedNetwork {
+    network: Nbrdf,
+    active: ActiveUnits,
+    renderer: Nbrdf,
+}
+
+/// Summary of a material (`nbrdf_material_info`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NbrdfMaterialInfo {
+    /// An `NbrdfMaterialKind` value.
+    pub kind: i32,
+    /// 1 for an anisotropic network (file format version 2: its input carries the half vector's
+    /// azimuth `phi_h` in the local frame whose x axis is the tangent), else 0.
+    pub anisotropic: u32,
+    /// Width of a network's two hidden layers (21 for the paper's networks); 0 for a table.
+    pub hidden_width: u32,
+    /// Number of a network's weights and biases (675 for width 21); 0 for a table.
+    pub parameter_count: u32,
+    /// Inputs and outputs of a network's three dense layers (`y = x W + b`, `W` row-major
+    /// inputs x outputs): `6 -> hidden -> hidden -> 3`; zeros for a table.
+    pub layer_inputs: [u32; 3],
+    pub layer_outputs: [u32; 3],
+    /// The network's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
+    /// the handle: valid until `nbrdf_material_free`.
+    pub name: *const c_char,
+    /// The sampling lobes the network file stores: `NBRDF_SAMPLING_PHONG`,
+    /// `NBRDF_SAMPLING_TWO_LOBE` (second lobe in `exponent2`, `specular_weight2`) or
+    /// `NBRDF_SAMPLING_ANISOTROPIC_PHONG` (`exponent_v`), or `NBRDF_SAMPLING_COSINE` with zero
+    /// parameters when it stores none (and for a table).
+    pub stored_sampling: NbrdfSamplerParams,
+    /// The strategy the file names as the material's best (`sampling.default`, chosen by
+    /// `nbrdf fit-phong` for the lowest measured variance), an `NbrdfSamplingKind` value
+    /// (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table).
+    pub default_sampling: i32,
+}
+
+/// `default_sampling` of a material whose file names no default.
+const NO_DEFAULT_SAMPLING: i32 = -1;
+
+/// Whether the file at `path` starts with a MERL table's header (resolutions 90, 90, 180 as
+/// little-endian int32), the rule that tells tables from networks. Files that cannot be
+/// inspected (missing, special, unreadable) are not: the network reader reports them.
+fn starts_like_merl(path: &Path) -> bool {
+    if regular_file_size(path, u64::MAX, "a material").is_err() {
+        return false; // before opening: a FIFO would block
+    }
+    let header: Vec<u8> = [N_THETA_H, N_THETA_D, N_PHI_D]
+        .iter()
+        .flat_map(|&n| (n as i32).to_le_bytes())
+        .collect();
+    let mut head = Vec::with_capacity(header.len());
+    std::fs::File::open(path)
+        .and_then(|file| file.take(header.len() as u64).read_to_end(&mut head))
+        .is_ok_and(|_| head == header)
+}
+
+impl NbrdfMaterial {
+    fn load(path: &Path) -> Result<Self, NbrdfError> {
+        if starts_like_merl(path) {
+            return Ok(NbrdfMaterial {
+                source: Source::Merl(MerlTable::read(path)?),
+                name: CString::default(),
+            });
+        }
+        let network = Nbrdf::load(path)?;
+        let name = CString::new(network.name.replace('\0', "")).unwrap_or_default();
+        let active = network.active_units();
+        let renderer = network.with_units(&active);
+        Ok(NbrdfMaterial {
+            source: Source::Network(Box::new(LoadedNetwork {
+                network,
+                active,
+                renderer,
+            })),
+            name,
+        })
+    }
+
+    /// What eval, sample and the tabulated sampler evaluate.
+    pub(crate) fn brdf(&self) -> &dyn Brdf {
+        match &self.source {
+            Source::Network(loaded) => &loaded.renderer,
+            Source::Merl(table) => table,
+        }
+    }
+
+    /// How to tabulate the material for `NBRDF_SAMPLING_TABULATED`: with the cosine weight a
+    /// network file stores (`nbrdf fit-phong`), if any.
+    pub(crate) fn table_config(&self) -> TableConfig {
+        match &self.source {
+            Source::Network(loaded) => loaded.network.table_config(),
+            Source::Merl(_) => TableConfig::default(),
+        }
+    }
+
+    /// The network, or an error for a table.
+    fn loaded_network(&self) -> FfiResult<&LoadedNetwork> {
+        match &self.source {
+            Source::Network(loaded) => Ok(loaded),
+            Source::Merl(_) => Err(Failure::invalid(
+                "the material is a MERL table, not a network",
+            )),
+        }
+    }
+
+    fn info(&self) -> NbrdfMaterialInfo {
+        let to_u32 = |value: usize| u32::try_from(value).unwrap_or(u32::MAX);
+        let mut info = NbrdfMaterialInfo {
+            kind: NbrdfMaterialKind::NBRDF_MATERIAL_MERL as i32,
+            anisotropic: 0,
+            hidden_width: 0,
+            parameter_count: 0,
+            layer_inputs: [0; 3],
+            layer_outputs: [0; 3],
+            name: self.name.as_ptr(),
+            stored_sampling: NbrdfSamplerParams::cosine(),
+            default_sampling: NO_DEFAULT_SAMPLING,
+        };
+        if let Source::Network(loaded) = &self.source {
+            let network = &loaded.network;
+            info.kind = NbrdfMaterialKind::NBRDF_MATERIAL_NETWORK as i32;
+            info.anisotropic = u32::from(network.anisotropic);
+            info.hidden_width = to_u32(network.hidden_width());
+            info.parameter_count = to_u32(network.parameter_count());
+            info.layer_inputs = network.layers.each_ref().map(|l| to_u32(l.inputs));
+            info.layer_outputs = network.layers.each_ref().map(|l| to_u32(l.outputs));
+            info.stored_sampling = stored_sampling(network);
+            info.default_sampling = network
+                .sampling
+                .as_ref()
+                .and_then(|s| s.default)
+                .map_or(NO_DEFAULT_SAMPLING, |kind| {
+                    NbrdfSamplingKind::of(kind) as i32
+                });
+        }
+        info
+    }
+}
+
+/// The lobes a network file stores, as sampler parameters (see `NbrdfMaterialInfo`).
+fn stored_sampling(network: &Nbrdf) -> NbrdfSamplerParams {
+    let mut params = NbrdfSamplerParams::cosine();
+    if let Some(stored) = &network.sampling {
+        params.kind = NbrdfSamplingKind::NBRDF_SAMPLING_PHONG as i32;
+        params.exponent = stored.exponent;
+        params.specular_weight = stored.specular_weight;
+        if let Some(second) = stored.second_lobe {
+            params.kind = NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE as i32;
+            params.exponent2 = second.exponent;
+            params.specular_weight2 = second.specular_weight;
+        }
+        if let Some(exponent_v) = stored.exponent_v {
+            params.kind = NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG as i32;
+            params.exponent_v = exponent_v;
+        }
+    }
+    params
+}
+
+/// Writes the flags of `active` (first hidden layer, then the second) as bytes.
+fn write_flags(active: &ActiveUnits, out: &mut [u8]) {
+    for (byte, &flag) in out
+        .iter_mut()
+        .zip(active.hidden1.iter().chain(&active.hidden2))
+    {
+        *byte = u8::from(flag);
+    }
+}
+
+/// Loads a material and stores a new handle in `*out` (NULL on failure): a MERL-format table
+/// (`.binary`, 34,992,012 bytes) when the file starts with a table's header (90, 90, 180 as
+/// little-endian int32), else a neural BRDF (`*.nbrdf.json`), validated, and proved once which
+/// of its hidden units can fire above the horizon (`nbrdf_material_network`). Free it with
+/// `nbrdf_material_free`; `nbrdf_material_info` says which kind it is.
+///
+/// # Safety
+/// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_load(
+    path: *const c_char,
+    out: *mut *mut NbrdfMaterial,
+) -> i32 {
+    guard("nbrdf_material_load", || {
+        // SAFETY: forwarded contract; cleared first so that `*out` never holds a stale pointer
+        // after a failure.
+        unsafe { write(out, "out", std::ptr::null_mut())? };
+        // SAFETY: forwarded contract.
+        let path = unsafe { read_path(path)? };
+        let material = NbrdfMaterial::load(&path)?;
+        // SAFETY: as above.
+        unsafe { write(out, "out", Box::into_raw(Box::new(material))) }
+    })
+}
+
+/// Frees a material; NULL is accepted and ignored.
+///
+/// # Safety
+/// `material` is NULL or a handle from `nbrdf_material_load` that was not freed yet.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_free(material: *mut NbrdfMaterial) {
+    // SAFETY: forwarded contract.
+    unsafe { free_boxed(material) }
+}
+
+/// Fills `*out` with the material's kind, shape, name and stored sampling.
+///
+/// # Safety
+/// `material` is a live handle; `out` points to a writable `NbrdfMaterialInfo`.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_info(
+    material: *const NbrdfMaterial,
+    out: *mut NbrdfMaterialInfo,
+) -> i32 {
+    guard("nbrdf_material_info", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        // SAFETY: forwarded contract.
+        unsafe { write(out, "out", material.info()) }
+    })
+}
+
+/// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
+/// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
+/// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A
+/// network is evaluated without its hidden units that cannot fire (the same values); a table
+/// by trilinear lookup.
+///
+/// # Safety
+/// `material` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
+/// input.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_eval(
+    material: *const NbrdfMaterial,
+    view: *const f32,
+    light: *const f32,
+    n: usize,
+    out_rgb: *mut f32,
+) -> i32 {
+    guard("nbrdf_material_eval", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        check_pointer(view, "view")?;
+        check_pointer(light, "light")?;
+        check_pointer(out_rgb, "out_rgb")?;
+        let len = array_len(n, 3)?;
+        if n == 0 {
+            return Ok(());
+        }
+        // SAFETY: checked above; sizes and aliasing are the caller's contract.
+        let (view, light, rgb) =
+            unsafe { (input(view, len), input(light, len), output(out_rgb, len)) };
+        let rgb = RgbMut::from_planar(rgb).expect("planar buffers have length 3 n");
+        material
+            .brdf()
+            .eval_cos_batch(directions(view), directions(light), rgb);
+        Ok(())
+    })
+}
+
+/// Importance-samples `n` light directions with `sampler` for the planar `view` directions from
+/// the planar uniforms `u = [u0.., u1.., u2..]` (in [0, 1]; `u0` picks the lobe of a mixture).
+/// Writes the planar light directions `out_light` (3 n), the weights
+/// `f_r * cos(theta_light) / pdf` of the material as planar RGB `out_weight` (3 n) and the
+/// solid-angle pdfs `out_pdf` (n), those `nbrdf_sampler_pdf` gives. Invalid samples (below the
+/// horizon) have pdf 0 and weight 0.
+///
+/// # Safety
+/// `material` and `sampler` are live handles; the arrays have the sizes above and the outputs
+/// overlap neither each other nor the inputs.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_sample(
+    material: *const NbrdfMaterial,
+    sampler: *const NbrdfSampler,
+    view: *const f32,
+    u: *const f32,
+    n: usize,
+    out_light: *mut f32,
+    out_weight: *mut f32,
+    out_pdf: *mut f32,
+) -> i32 {
+    guard("nbrdf_material_sample", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        // SAFETY: forwarded contract.
+        let sampler = unsafe { reference(sampler, "sampler")? };
+        check_pointer(view, "view")?;
+        check_pointer(u, "u")?;
+        check_pointer(out_light, "out_light")?;
+        check_pointer(out_weight, "out_weight")?;
+        check_pointer(out_pdf, "out_pdf")?;
+        let len = array_len(n, 3)?;
+        if n == 0 {
+            return Ok(());
+        }
+        // SAFETY: checked above; sizes and aliasing are the caller's contract.
+        let (view, u, light, weight, pdf) = unsafe {
+            (
+                input(view, len),
+                input(u, len),
+                output(out_light, len),
+                output(out_weight, len),
+                output(out_pdf, n),
+            )
+        };
+        sampling::sample_batch(
+            sampler.strategy(),
+            material.brdf(),
+            directions(view),
+            directions(u),
+            DirectionsMut::from_planar(light).expect("planar buffers have length 3 n"),
+            RgbMut::from_planar(weight).expect("planar buffers have length 3 n"),
+            pdf,
+        );
+        Ok(())
+    })
+}
+
+/// Copies a network's parameters and the proof made at load time of which hidden units can
+/// fire, for a second evaluator (the Mitsuba plugin's traced kernels) that needs neither to
+/// read the file nor to prove again. `out_params` receives the `parameter_count` weights and
+/// biases as the file stores them, `W1, b1, W2, b2, W3, b3` (the shapes of
+/// `NbrdfMaterialInfo::layer_inputs` and `layer_outputs`); `out_active` receives
+/// `2 hidden_width` bytes, the first hidden layer's units then the second's, 1 for a unit that
+/// some pair of directions above the horizon may activate, 0 for one proved never to (it
+/// outputs exactly 0 wherever the BRDF is evaluated, so an evaluator may leave it out).
+/// `params_len` and `active_len` must be those sizes (`nbrdf_material_info`);
+/// `NBRDF_ERROR_INVALID_ARGUMENT` for a table.
+///
+/// # Safety
+/// `material` is a live handle; `out_params` points to `params_len` writable floats and
+/// `out_active` to `active_len` writable bytes.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_network(
+    material: *const NbrdfMaterial,
+    out_params: *mut f32,
+    params_len: usize,
+    out_active: *mut u8,
+    active_len: usize,
+) -> i32 {
+    guard("nbrdf_material_network", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        let loaded = material.loaded_network()?;
+        check_pointer(out_params, "out_params")?;
+        check_pointer(out_active, "out_active")?;
+        let params = loaded.network.to_flat();
+        exact_len(
+            "out_params",
+            params_len,
+            params.len(),
+            "NbrdfMaterialInfo::parameter_count",
+        )?;
+        let hidden = loaded.network.hidden_width();
+        exact_len("out_active", active_len, 2 * hidden, "2 hidden_width")?;
+        // SAFETY: non-null and aligned (checked), `params_len` writable floats by contract.
+        unsafe { output(out_params, params_len) }.copy_from_slice(&params);
+        // SAFETY: non-null, `active_len` writable bytes by contract.
+        let active = unsafe { std::slice::from_raw_parts_mut(out_active, active_len) };
+        write_flags(&loaded.active, active);
+        Ok(())
+    })
+}
+
+/// Proves which hidden units of the material's network can fire once its parameters are
+/// replaced by `params` (`count` finite floats, `W1, b1, W2, b2, W3, b3` in the shapes of the
+/// loaded network: `parameter_count` of them): writes `active_len` = `2 hidden_width` bytes to
+/// `out_active` as `nbrdf_material_network` does. For evaluators of updated weights (the
+/// plugin's kernels after a parameter update); the material itself is not changed. Takes
+/// milliseconds (a bounded interval-arithmetic proof over the hemisphere).
+/// `NBRDF_ERROR_INVALID_ARGUMENT` for a table, wrong sizes and non-finite parameters.
+///
+/// # Safety
+/// `material` is a live handle; `params` points to `count` readable floats and `out_active` to
+/// `active_len` writable bytes.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_active_units(
+    material: *const NbrdfMaterial,
+    params: *const f32,
+    count: usize,
+    out_active: *mut u8,
+    active_len: usize,
+) -> i32 {
+    guard("nbrdf_material_active_units", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        let loaded = material.loaded_network()?;
+        check_pointer(params, "params")?;
+        check_pointer(out_active, "out_active")?;
+        let hidden = loaded.network.hidden_width();
+        exact_len(
+            "params",
+            count,
+            loaded.network.parameter_count(),
+            "NbrdfMaterialInfo::parameter_count",
+        )?;
+        exact_len("out_active", active_len, 2 * hidden, "2 hidden_width")?;
+        // SAFETY: non-null and aligned (checked), `count` readable floats by contract; the
+        // count is that of a loaded network, so it fits in isize.
+        let params = unsafe { input(params, count) };
+        let mut network = Nbrdf::from_flat("parameters", hidden, params)?;
+        network.anisotropic = loaded.network.anisotropic;
+        // SAFETY: non-null, `active_len` writable bytes by contract.
+        let active = unsafe { std::slice::from_raw_parts_mut(out_active, active_len) };
+        write_flags(&network.active_units(), active);
+        Ok(())
+    })
+}
