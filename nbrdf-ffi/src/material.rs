@@ -11,7 +11,7 @@ use nbrdf_core::error::regular_file_size;
 use nbrdf_core::merl::{N_PHI_D, N_THETA_D, N_THETA_H};
 use nbrdf_core::network::ActiveUnits;
 use nbrdf_core::sampling;
-use nbrdf_core::tabulated::TableConfig;
+use nbrdf_core::sampling::tabulated::TableConfig;
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
 use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference, Failure, FfiResult};
 use std::ffi::{c_char, CString};
@@ -135,7 +135,7 @@ impl NbrdfMaterial {
     /// network file stores (`nbrdf fit-phong`), if any.
     pub(crate) fn table_config(&self) -> TableConfig {
         match &self.source {
-            Source::Network(loaded) => TableConfig::for_network(&loaded.network),
+            Source::Network(loaded) => loaded.network.table_config(),
             Source::Merl(_) => TableConfig::default(),
         }
     }

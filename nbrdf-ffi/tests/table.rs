@@ -11,7 +11,7 @@ mod support;
 use glam::Vec3;
 use nbrdf_core::brdf::Brdf;
 use nbrdf_core::rng::SplitMix64;
-use nbrdf_core::tabulated::{TableConfig, TabulatedSampler};
+use nbrdf_core::sampling::tabulated::{TableConfig, TabulatedSampler};
 use nbrdf_core::{Nbrdf, SamplingStrategy};
 use nbrdf_ffi::*;
 use std::f64::consts::TAU;
@@ -165,7 +165,7 @@ fn check_against_core(brdf: &dyn Brdf, material: &Material) {
 fn check_arrays(
     table: &Sampler,
     info: &NbrdfSamplerInfo,
-    core: &nbrdf_core::tabulated::TableArrays,
+    core: &nbrdf_core::sampling::tabulated::TableArrays,
 ) {
     let (rows, nt, np) = (
         info.rows as usize,

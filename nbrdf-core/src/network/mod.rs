@@ -25,6 +25,7 @@ use crate::coords::network_input_for;
 use crate::error::{NbrdfError, Result};
 use crate::fastmath::MulAdd;
 use crate::rng::{SplitMix64, Stream};
+use crate::sampling::tabulated::TableConfig;
 use crate::sampling::{SamplingKind, SamplingStrategy};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Deserializer, Serialize};
@@ -95,7 +96,7 @@ pub struct SamplingParams {
     )]
     pub default: Option<SamplingKind>,
     /// Weight of the defensive cosine component of the tabulated sampler
-    /// ([`crate::tabulated::TableConfig::for_network`]), in `(0, 1)`: the lowest-variance
+    /// ([`Nbrdf::table_config`]), in `(0, 1)`: the lowest-variance
     /// candidate of `nbrdf fit-phong`. Optional: files without it mix 0.1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub table_cosine_weight: Option<f32>,
@@ -137,7 +138,7 @@ pub struct SamplingVariances {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub anisotropic: Option<f64>,
     pub cosine: f64,
-    /// The tabulated sampler's ([`crate::tabulated`]), when it was measured.
+    /// The tabulated sampler's ([`crate::sampling::tabulated`]), when it was measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tabulated: Option<f64>,
 }
@@ -385,6 +386,13 @@ impl Nbrdf {
             light.as_vec3(),
         ))
         .map(f64::from)
+    }
+
+    /// The tabulated sampler's settings, with the cosine weight the file stores, if any.
+    pub fn table_config(&self) -> TableConfig {
+        TableConfig::with_stored_cosine_weight(
+            self.sampling.as_ref().and_then(|s| s.table_cosine_weight),
+        )
     }
 
     /// The stored sampling strategy, if the file has one and it is valid.

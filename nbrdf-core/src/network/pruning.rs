@@ -1,31 +1,17 @@
 //! Hidden units that no pair of directions above the horizon can switch on, proved by interval
-//! arithmetic, and the narrower network without them.
+//! arithmetic, and the narrower network without them (docs/design.md section 4). A dead unit
+//! outputs exactly 0, so dropping its row and column changes no value the renderer uses.
 //!
-//! Trained NBRDFs carry dead ReLUs: on the paper's 21-wide networks 0-8 units of the first hidden
-//! layer and 0-14 of the second never fire anywhere on the hemisphere (docs/design.md, section
-//! 4). A dead unit's output is exactly 0, so its row and column only add `0 * w` to sums:
-//! dropping them changes no value the renderer uses and saves up to two thirds of the
-//! multiply-adds of every evaluation.
-//!
-//! Why a proof and not sampling: a unit that fires only in a small corner (grazing light, a thin
-//! band of `phi_d`) would be missed by any finite set of samples, and dropping it would change
-//! the BRDF there. The proof covers the network's whole input domain: `theta_h` and `theta_d` in
-//! `[0, pi/2]`, `phi_d` (and for anisotropic networks `phi_h`) over the full circle, keeping only
-//! configurations whose two directions are both above the horizon
-//! (`cos theta_h cos theta_d >= sin theta_h sin theta_d |cos phi_d|`, from the light's and the
-//! view's elevations). Boxes of that domain are bounded layer by layer; a box on which some
-//! candidate unit may still be positive is split, up to a depth and a budget of boxes and of
-//! work (so a very wide network proves less rather than stalling its load), and a unit
-//! positive at a box centre is active outright. A unit counts as inactive only when every box
-//! of a cover bounds it at or below `-margin`; the margins (on the inputs and relative to each
-//! sum's magnitude) are far above float32's rounding, so the float32 evaluation of a dropped unit
-//! would also have been exactly 0. Whatever cannot be proved within the budget stays.
+//! A proof, not sampling: a unit that fires only in a small corner would be missed by finite
+//! samples. Boxes of the input domain (`theta_h`, `theta_d` in `[0, pi/2]`, `phi_d` and for
+//! anisotropic networks `phi_h` over the circle, both directions above the horizon:
+//! `cos theta_h cos theta_d >= sin theta_h sin theta_d |cos phi_d|`) are bounded layer by layer
+//! and split where a candidate may be positive, within a budget of boxes and work; a unit is
+//! inactive only when every box bounds it at or below `-margin`, margins far above float32's
+//! rounding. What the budget cannot settle stays.
 //!
 //! Twin: none (the plugin takes the proof from the C library: `nbrdf_material_network`, and
-//! `nbrdf_material_active_units` for new weights). Tests:
-//! `network::tests` (dropped units change no value on dense and grazing directions, a unit
-//! alive only in a sliver is kept, a unit alive only where a direction is below the horizon is
-//! dropped, float32 overflow keeps every unit, the work budget) and the fuzz target
+//! `nbrdf_material_active_units` for new weights). Tests: `network::tests` and the fuzz target
 //! `network_pruning`.
 
 use super::{Layer, Nbrdf, INPUTS};

@@ -779,7 +779,7 @@ fn table_cosine_weight_round_trips_and_is_checked_on_load() {
     net.sampling = Some(lobe.clone());
     let back = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap();
     assert_eq!(back, net);
-    let config = crate::tabulated::TableConfig::for_network(&back);
+    let config = back.table_config();
     assert_eq!(config.cosine_weight, f64::from(0.02f32));
     for bad in [0.0, -0.1, 1.0, 3.0] {
         net.sampling = Some(SamplingParams {
@@ -794,7 +794,7 @@ fn table_cosine_weight_round_trips_and_is_checked_on_load() {
         table_cosine_weight: None,
         ..lobe
     });
-    let config = crate::tabulated::TableConfig::for_network(&net);
+    let config = net.table_config();
     assert_eq!(config.cosine_weight, 0.1);
 }
 

@@ -10,9 +10,11 @@ use crate::merl::PhiFold;
 use crate::metrics::Material;
 use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
 use crate::phong_fit::FitConfig;
+use crate::sampling::tabulated::{TableConfig, TabulatedSampler, COSINE_WEIGHT_CANDIDATES};
 use crate::sampling::{SamplingKind, SamplingStrategy};
-use crate::tabulated::{TableConfig, TabulatedSampler, COSINE_WEIGHT_CANDIDATES};
 use crate::target::material_target;
+use crate::train::dataset::TargetFn;
+use glam::DVec3;
 use serde::Serialize;
 use std::fmt;
 use std::path::PathBuf;
@@ -74,6 +76,17 @@ pub struct RelativeVariances {
     /// The tabulated sampler's (built from the material as the plugin builds it at load time),
     /// with the lowest-variance cosine weight of [`COSINE_WEIGHT_CANDIDATES`].
     pub tabulated: f64,
+}
+
+/// The tabulated sampler of a material given by Rusinkiewicz angles: its `f_r` (mean over
+/// RGB, negative channels as 0) by direction, as [`TabulatedSampler::from_brdf`] tabulates a
+/// renderer's.
+fn table_from_target(target: &TargetFn<'_>, config: &TableConfig) -> Result<TabulatedSampler> {
+    let f = |v: DVec3, l: DVec3| {
+        let a = crate::coords::to_rusinkiewicz(v, l);
+        target(&a).map_or(0.0, |rgb| rgb.iter().map(|c| c.max(0.0)).sum::<f64>() / 3.0)
+    };
+    TabulatedSampler::build(&f, config)
 }
 
 /// The tabulated sampler's variance with the cosine weight that gives the lowest.
@@ -191,11 +204,54 @@ impl fmt::Display for FitPhongReport {
     }
 }
 
+/// What the searches of one `fit-phong` run measured.
+struct Measured {
+    analysis: LobeAnalysis,
+    two_lobes: Option<TwoLobeFit>,
+    anisotropic: Option<AnisotropicLobeFit>,
+    tabulated: TableChoice,
+}
+
+/// The lobes to store: the one-lobe choice, or the first of two with the second beside it.
+struct StoredLobes {
+    exponent: f64,
+    specular_weight: f64,
+    second_lobe: Option<SecondLobe>,
+    /// The one-lobe choice's relative variance (of `request.lobe`).
+    one_lobe_variance: f64,
+    /// The stored strategy and its relative variance.
+    variance: (SamplingKind, f64),
+}
+
 /// Fits the model and searches the lowest-variance lobe of the input; a network gets the lobe
 /// of `request.lobe` as its "fit" sampling.
 pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
     super::limits::check_fit_samples(request.fit.samples)?;
     let material = Material::read_folded(&request.input, request.phi_fold)?;
+    check_request(request, &material)?;
+    let measured = measure(request, &material)?;
+    let lobes = stored_lobes(request, &measured);
+    let default_sampling = default_sampling(&measured, &lobes);
+    let sampling = sampling_params(&measured, &lobes, default_sampling);
+    let mut written = None;
+    if let Material::Network(mut net) = material {
+        net.sampling = Some(sampling.clone());
+        net.validate()?;
+        let out = request.output.as_ref().unwrap_or(&request.input);
+        net.save(out)?;
+        written = Some(out.display().to_string());
+    }
+    Ok(report(
+        request,
+        &measured,
+        sampling,
+        default_sampling,
+        written,
+    ))
+}
+
+/// The option combinations `fit-phong` refuses.
+fn check_request(request: &FitPhongRequest, material: &Material) -> Result<()> {
     if request.output.is_some() && matches!(material, Material::Table(_)) {
         return Err(NbrdfError::Usage(
             "-o/--output applies to networks; for a table the fit is printed".into(),
@@ -207,90 +263,126 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 .into(),
         ));
     }
+    Ok(())
+}
+
+/// Runs the model fit and the lobe searches the request asks for, and scores the tabulated
+/// sampler.
+fn measure(request: &FitPhongRequest, material: &Material) -> Result<Measured> {
     // Anisotropic networks get the anisotropic lobe unless two (isotropic) lobes are asked for.
-    let search_anisotropic = matches!(&material, Material::Network(net) if net.anisotropic)
+    let search_anisotropic = matches!(material, Material::Network(net) if net.anisotropic)
         && request.lobe == LobeChoice::LowestVariance
         && request.lobes != LobeCount::Two;
     let search_two = request.lobes != LobeCount::One
         && request.lobe == LobeChoice::LowestVariance
         && !search_anisotropic;
     let lobe_config = LobeFitConfig::default();
-    let (analysis, two_lobes, anisotropic, tabulated) =
-        with_threads(request.threads, || -> Result<_> {
-            let target = material_target(&material);
-            let anisotropic: Option<AnisotropicLobeFit> = if search_anisotropic {
-                Some(fit_anisotropic_lobe(
-                    &*target,
-                    &AnisotropicLobeFitConfig::default(),
-                )?)
-            } else {
-                None
-            };
-            let table = TabulatedSampler::from_target(&*target, &TableConfig::default())?;
-            let tabulated = lowest_variance_cosine_weight(
-                &LobeQuadrature::new(&*target, &lobe_config)?,
-                &table,
-            )?;
-            if search_two {
-                let (analysis, two) =
-                    LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
-                Ok((analysis, Some(two), anisotropic, tabulated))
-            } else {
-                Ok((
-                    LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
-                    None,
-                    anisotropic,
-                    tabulated,
-                ))
-            }
-        })?
-        .map_err(super::about_data(&request.input.display().to_string()))?;
+    with_threads(request.threads, || -> Result<_> {
+        let target = material_target(material);
+        let anisotropic: Option<AnisotropicLobeFit> = if search_anisotropic {
+            Some(fit_anisotropic_lobe(
+                &*target,
+                &AnisotropicLobeFitConfig::default(),
+            )?)
+        } else {
+            None
+        };
+        let table = table_from_target(&*target, &TableConfig::default())?;
+        let tabulated =
+            lowest_variance_cosine_weight(&LobeQuadrature::new(&*target, &lobe_config)?, &table)?;
+        let (analysis, two_lobes) = if search_two {
+            let (analysis, two) =
+                LobeAnalysis::with_two_lobes(&*target, &request.fit, &lobe_config)?;
+            (analysis, Some(two))
+        } else {
+            (
+                LobeAnalysis::new(&*target, &request.fit, &lobe_config)?,
+                None,
+            )
+        };
+        Ok(Measured {
+            analysis,
+            two_lobes,
+            anisotropic,
+            tabulated,
+        })
+    })?
+    .map_err(super::about_data(&request.input.display().to_string()))
+}
+
+/// The lobe of `request.lobe`, replaced by two lobes where `request.lobes` asks for them or
+/// (`Auto`) they gain enough.
+fn stored_lobes(request: &FitPhongRequest, measured: &Measured) -> StoredLobes {
+    let analysis = &measured.analysis;
     let (exponent, specular_weight) = analysis.lobe(request.lobe);
     let one_lobe_variance = match request.lobe {
         LobeChoice::LowestVariance => analysis.lowest_variance.relative_variance,
         LobeChoice::Model => analysis.model_relative_variance,
     };
-    let stored_two = two_lobes.filter(|two| match request.lobes {
+    let stored_two = measured.two_lobes.filter(|two| match request.lobes {
         LobeCount::Two => true,
         LobeCount::One => false,
         LobeCount::Auto => two.relative_variance < TWO_LOBE_MIN_GAIN * one_lobe_variance,
     });
-    let (exponent, specular_weight, second_lobe) = match stored_two {
+    match stored_two {
         Some(TwoLobeFit {
-            exponents, weights, ..
-        }) => (
-            exponents[0],
-            weights[0],
-            Some(SecondLobe {
+            exponents,
+            weights,
+            relative_variance,
+            ..
+        }) => StoredLobes {
+            exponent: exponents[0],
+            specular_weight: weights[0],
+            second_lobe: Some(SecondLobe {
                 exponent: exponents[1] as f32,
                 specular_weight: weights[1] as f32,
             }),
+            one_lobe_variance,
+            variance: (SamplingKind::TwoLobe, relative_variance),
+        },
+        None => StoredLobes {
+            exponent,
+            specular_weight,
+            second_lobe: None,
+            one_lobe_variance,
+            variance: (SamplingKind::Phong, one_lobe_variance),
+        },
+    }
+}
+
+/// The strategy of lowest relative variance: cosine, the stored lobes or the table. The table
+/// is built over the half vector's azimuth relative to the view's (an isotropic material's); an
+/// anisotropic network samples with its anisotropic lobe, the stored lobe the plugin picks when
+/// the file names no default.
+fn default_sampling(measured: &Measured, lobes: &StoredLobes) -> SamplingKind {
+    if measured.anisotropic.is_some() {
+        return SamplingKind::AnisotropicPhong;
+    }
+    [
+        (
+            SamplingKind::Cosine,
+            measured.analysis.lowest_variance.cosine_relative_variance,
         ),
-        None => (exponent, specular_weight, None),
-    };
-    let cosine_variance = analysis.lowest_variance.cosine_relative_variance;
-    let stored_lobes_variance = match stored_two {
-        Some(two) => (SamplingKind::TwoLobe, two.relative_variance),
-        None => (SamplingKind::Phong, one_lobe_variance),
-    };
-    // The table is built over the half vector's azimuth relative to the view's (an isotropic
-    // material's); an anisotropic network samples with its anisotropic lobe, the stored lobe
-    // the plugin picks when the file names no default.
-    let default_sampling = if anisotropic.is_some() {
-        SamplingKind::AnisotropicPhong
-    } else {
-        [
-            (SamplingKind::Cosine, cosine_variance),
-            stored_lobes_variance,
-            (SamplingKind::Tabulated, tabulated.relative_variance),
-        ]
-        .into_iter()
-        .filter(|(_, v)| v.is_finite())
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(SamplingKind::Cosine, |(kind, _)| kind)
-    };
-    let stored_default = (anisotropic.is_none()).then_some(default_sampling);
-    let sampling = match anisotropic {
+        lobes.variance,
+        (
+            SamplingKind::Tabulated,
+            measured.tabulated.relative_variance,
+        ),
+    ]
+    .into_iter()
+    .filter(|(_, v)| v.is_finite())
+    .min_by(|a, b| a.1.total_cmp(&b.1))
+    .map_or(SamplingKind::Cosine, |(kind, _)| kind)
+}
+
+/// The sampling a network file gets: the anisotropic lobe where it was searched (with no
+/// stored default), else the stored lobes with the default and the table's cosine weight.
+fn sampling_params(
+    measured: &Measured,
+    lobes: &StoredLobes,
+    default_sampling: SamplingKind,
+) -> SamplingParams {
+    match measured.anisotropic {
         Some(a) => SamplingParams {
             model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
             exponent: a.exponent_u as f32,
@@ -305,37 +397,45 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
                 cosine: a.cosine_relative_variance,
                 tabulated: None,
             }),
-            default: stored_default,
+            default: None,
             table_cosine_weight: None,
         },
         None => SamplingParams {
             model: SAMPLING_MODEL_BLINN_PHONG.to_string(),
-            exponent: exponent as f32,
-            specular_weight: specular_weight as f32,
+            exponent: lobes.exponent as f32,
+            specular_weight: lobes.specular_weight as f32,
             source: "fit".to_string(),
-            second_lobe,
+            second_lobe: lobes.second_lobe,
             exponent_v: None,
             relative_variance: Some(SamplingVariances {
-                one_lobe: one_lobe_variance,
-                two_lobe: two_lobes.map(|two| two.relative_variance),
+                one_lobe: lobes.one_lobe_variance,
+                two_lobe: measured.two_lobes.map(|two| two.relative_variance),
                 anisotropic: None,
-                cosine: cosine_variance,
-                tabulated: Some(tabulated.relative_variance),
+                cosine: measured.analysis.lowest_variance.cosine_relative_variance,
+                tabulated: Some(measured.tabulated.relative_variance),
             }),
-            default: stored_default,
-            table_cosine_weight: Some(tabulated.cosine_weight as f32),
+            default: Some(default_sampling),
+            table_cosine_weight: Some(measured.tabulated.cosine_weight as f32),
         },
-    };
-    let mut written = None;
-    if let Material::Network(mut net) = material {
-        net.sampling = Some(sampling.clone());
-        net.validate()?;
-        let out = request.output.as_ref().unwrap_or(&request.input);
-        net.save(out)?;
-        written = Some(out.display().to_string());
     }
+}
+
+/// What `fit-phong` prints: the stored sampling, the model fit and every candidate's variance.
+fn report(
+    request: &FitPhongRequest,
+    measured: &Measured,
+    sampling: SamplingParams,
+    default_sampling: SamplingKind,
+    written: Option<String>,
+) -> FitPhongReport {
+    let Measured {
+        analysis,
+        two_lobes,
+        anisotropic,
+        tabulated,
+    } = measured;
     let p = &analysis.model.params;
-    Ok(FitPhongReport {
+    FitPhongReport {
         model: sampling.model,
         exponent: sampling.exponent,
         specular_weight: sampling.specular_weight,
@@ -368,7 +468,7 @@ pub fn fit_phong(request: &FitPhongRequest) -> Result<FitPhongReport> {
         written,
         default_sampling,
         choice: request.lobe,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -391,7 +491,7 @@ mod tests {
         ];
         for (target, want) in cases {
             let quadrature = LobeQuadrature::new(target, &config).unwrap();
-            let table = TabulatedSampler::from_target(target, &TableConfig::default()).unwrap();
+            let table = table_from_target(target, &TableConfig::default()).unwrap();
             let choice = lowest_variance_cosine_weight(&quadrature, &table).unwrap();
             assert_eq!(choice.cosine_weight, want, "{choice:?}");
             let strategy =

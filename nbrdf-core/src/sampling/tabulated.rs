@@ -1,54 +1,24 @@
-//! A data-driven sampler: per band of view elevations, a piecewise-constant density over the
-//! half vector, tabulated from the material itself (`f_r cos` times the Jacobian), mixed with a
-//! little cosine sampling so the pdf is positive wherever `f_r cos` can be.
-//!
-//! Half-vector parametrisation: `t = (1 - cos theta_h)^(1/4)` (dense near the normal, where it
-//! grows like `sqrt(theta_h)` as the MERL grid and [`crate::lobe_fit`]'s quadrature do, so sharp
-//! peaks get bins of their own) and `|phi|`, `phi = phi_h - phi_v`, over `[0, pi]`: the material
-//! is isotropic, so its `f_r cos` is the same at `phi` and `-phi` (mirrored across the plane of
-//! incidence) and one bin stands for both, which halves the table; the sampler picks the side
-//! with one bit of `u2`. Both come without an arc tangent of the elevation: `1 - cos theta_h` is
-//! `(h.x^2 + h.y^2) / (1 + h.z)` (precise near the normal) and the bin edges are `(k / bins)^4`,
-//! and `phi` is one `atan2` in the view's azimuthal frame; that keeps the pdf, evaluated for
-//! every sample and every light sample under MIS, cheap (docs/results/performance.md). Bins get the mass of
-//! `f_r cos` (mean over RGB) through the half-vector Jacobian; within a bin the half vector is
-//! uniform in solid angle (no singularity at the normal). The row is chosen deterministically
-//! from the view's elevation, `floor(theta_v / (pi/2) * rows)`, and nothing is interpolated
-//! across rows, so the density of a sample is exactly
+//! The data-driven sampler (docs/design.md section 6): per band of view elevations, a
+//! piecewise-constant density over the half vector, tabulated from the material's `f_r cos`
+//! through the half-vector Jacobian, mixed with a defensive share `c` of cosine sampling:
 //!
 //! `pdf(l) = c l.z / pi + (1 - c) P_row(bin) / Ω(bin) / (4 v.h)`
 //!
-//! with `Ω(bin) = 2 (phi_1 - phi_0) (cos theta_0 - cos theta_1)` the solid angle of the bin and
-//! its mirror image and
-//! `dω_l = 4 v.h dω_h`. Half vectors whose reflection falls below the horizon are rejected
-//! (pdf 0), like the Blinn-Phong lobes.
+//! Bins run over `t = (1 - cos theta_h)^(1/4)` (dense near the normal, where sharp peaks are) and
+//! `|phi_h - phi_v|` in `[0, pi]`: an isotropic material's `f_r cos` is the same on both sides
+//! of the plane of incidence, so a bin stands for itself and its mirror image (`Ω` counts both)
+//! and one bit of `u2` picks the side. The row is `floor(theta_v / (pi/2) rows)`, nothing is
+//! interpolated, so the density of a sample is exact; a row averages the normalised densities
+//! of views from its band's lower edge, which reaches every bin a view of the band can. A bin is
+//! drawn through its row's alias table, the half vector uniform in solid angle within it.
 //!
-//! A row stands for every view of its band: it is the mean of the densities of
-//! [`TableConfig::views_per_row`] views spread from the band's lower edge, each normalised to
-//! its own integral. The lower edge sees the most of the hemisphere near the horizon (the
-//! reflection of a half vector tilted away from the view sinks as the view descends), so every
-//! bin that a view of the band can reach gets mass; and normalising keeps the view with the
-//! largest reflectance (the grazing Fresnel peak of a plastic, orders of magnitude above the
-//! rest) from leaving the others to the cosine component. Without both, the grazing band of
-//! gray-plastic sampled with a relative variance of 14 (one lobe: 1.7); docs/results/sampling.md.
-//!
-//! A bin is drawn through its row's alias table (Walker's method, Vose's construction): `u0`
-//! picks cosine (below `c`) or the table and, rescaled, the bin; `u1` places the half vector
-//! within the bin in elevation, `u2` picks the side (below or above 1/2) and, rescaled, the
-//! azimuth.
-//!
-//! The table is built when a material is loaded (a few milliseconds for a network), so the file
-//! format carries no table; `nbrdf fit-phong` stores only which strategy samples best and the
-//! cosine weight `c` of lowest variance ([`COSINE_WEIGHT_CANDIDATES`]).
-//!
-//! Twin: `mitsuba-plugin/nbrdf_mitsuba/jit.py` `TracedTable` (sampling and pdf from the exported
+//! Twin: `mitsuba-plugin/nbrdf_mitsuba/jit.py` `TracedTable` (from the exported
 //! [`TabulatedSampler::tables`]); held together by `tests/test_tabulated.py`.
 
+use super::hemisphere::cosine_hemisphere;
+use super::reflect;
 use crate::brdf::Brdf;
 use crate::error::{NbrdfError, Result};
-use crate::sampling::cosine_hemisphere;
-#[cfg(feature = "train")]
-use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
@@ -59,8 +29,8 @@ pub struct TableConfig {
     /// Bands of view elevation, uniform in `theta_v` over `[0, pi/2)`.
     pub rows: usize,
     /// Bins in `t = (1 - cos theta_h)^(1/4)` and in `|phi_h - phi_v|` over `[0, pi]` (each
-    /// standing for itself and its mirror image). 48 x 16: 48 `t` bins sample with 10-40 % less
-    /// variance than 32 on the MERL set; 64 gain nothing more (docs/results/sampling.md).
+    /// standing for itself and its mirror image); the default 48 x 16 was chosen on the MERL
+    /// set (docs/results/sampling.md).
     pub theta_bins: usize,
     pub phi_bins: usize,
     /// Points per bin side when averaging the material over a bin.
@@ -74,15 +44,15 @@ pub struct TableConfig {
 
 /// The defensive cosine weights `nbrdf fit-phong` compares; it stores the one of lowest
 /// variance as `sampling.table_cosine_weight`. A glossy material's variance falls with the
-/// weight (the cosine share is spent where `f_r` is small: `R - 1` 0.085 at 0.1, 0.032 at 0.02
-/// on cc_ibiza_sunset), a near-diffuse one's rises a little (0.016 to 0.020 on paper_white);
-/// below 0.02 a table that misses a view's lobe has too little to fall back on.
+/// weight (the cosine share is spent where `f_r` is small), a near-diffuse one's rises a little
+/// (docs/results/sampling.md); below 0.02 a table that misses a view's lobe has too little to
+/// fall back on.
 pub const COSINE_WEIGHT_CANDIDATES: [f64; 3] = [0.1, 0.05, 0.02];
 
 impl TableConfig {
-    /// The default table with the cosine weight a network's file stores, if any.
-    pub fn for_network(net: &crate::network::Nbrdf) -> Self {
-        let stored = net.sampling.as_ref().and_then(|s| s.table_cosine_weight);
+    /// The default table with the cosine weight a network's file stores
+    /// (`sampling.table_cosine_weight`), if any.
+    pub fn with_stored_cosine_weight(stored: Option<f32>) -> Self {
         TableConfig {
             cosine_weight: stored.map_or(Self::default().cosine_weight, f64::from),
             ..Self::default()
@@ -116,8 +86,8 @@ pub struct TabulatedSampler {
     /// Per row, Walker's alias table over the row's bins (same layout as `mass`): a bin `k`
     /// drawn uniformly is kept with probability `alias_probability[k]`, else replaced by
     /// `alias[k]` (an index within the row), so a bin costs two lookups whatever the table's
-    /// size (binary searches in CDFs cost 11 dependent lookups at 48 x 32; the render-time
-    /// difference is in docs/results/performance.md).
+    /// size, where a binary search in a CDF costs a chain of dependent ones (render times in
+    /// docs/results/performance.md).
     alias_probability: Vec<f64>,
     alias: Vec<u32>,
 }
@@ -199,16 +169,6 @@ impl TabulatedSampler {
         let f = |v: DVec3, l: DVec3| {
             let rgb = brdf.eval(v.as_vec3(), l.as_vec3());
             rgb.iter().map(|&c| f64::from(c.max(0.0))).sum::<f64>() / 3.0
-        };
-        Self::build(&f, config)
-    }
-
-    /// Tabulates a material given by Rusinkiewicz angles (what `nbrdf fit-phong` reads).
-    #[cfg(feature = "train")]
-    pub fn from_target(target: &TargetFn<'_>, config: &TableConfig) -> Result<Self> {
-        let f = |v: DVec3, l: DVec3| {
-            let a = crate::coords::to_rusinkiewicz(v, l);
-            target(&a).map_or(0.0, |rgb| rgb.iter().map(|c| c.max(0.0)).sum::<f64>() / 3.0)
         };
         Self::build(&f, config)
     }
@@ -408,7 +368,7 @@ impl TabulatedSampler {
             sin_h * (cos_p * cy + sin_p * cx),
             cos_h,
         );
-        2.0 * v.dot(h) * h - v
+        reflect(v, h)
     }
 
     /// Density per unit solid angle of `l` given `v` (both unit, above the horizon).
