@@ -1,30 +1,18 @@
 //! Choosing the Blinn-Phong sampling lobe `(n, w)` of a material for the lowest variance of
-//! BSDF sampling.
+//! BSDF sampling (docs/design.md section 6), rather than the model fit's shape-matching lobe
+//! ([`crate::phong_fit`]), which on a weak sharp spike over a diffuse base sends almost no
+//! samples where the energy is. With `g(l) = f_r(l, v) cos(theta_l)` (mean over RGB) and the
+//! mixture density `p`, the estimator `g / p` has the relative second moment
 //!
-//! The 7-parameter model fit of [`crate::phong_fit`] (docs/design.md section 6) matches the BRDF's
-//! shape in log space, which is the right label for a predictor but often a poor sampling
-//! density: on materials with a weak, very sharp spike over a diffuse base it returns
-//! `n ~ 1e4..1e5` with `w ~ 0.01`, so almost no samples go where most of the reflected energy is,
-//! and renders are no better than cosine sampling. Here the lobe is chosen for what sampling
-//! needs. With `g(l) = f_r(l, v) cos(theta_l)` (mean over RGB) and the mixture density `p`, the
-//! estimator `g / p` of `I = int g` has the relative second moment
+//! `R(v) = int g^2 / p  /  I^2`,  `I = int g`   (`R - 1` is its relative variance),
 //!
-//! `R(v) = int g^2 / p  /  I^2`   (`R - 1` is its relative variance; 1 means zero variance),
+//! computed by quadrature over the half vector (`theta_h = pi/2 s^2`, dense near the normal),
+//! averaged over view elevations and minimised over a grid of `(n, w)`. [`LobeChoice`] names the
+//! two candidates; [`choose_lobe`] and [`LobeAnalysis::lobe`] pick one.
 //!
-//! which is also the mean second moment of BSDF sampling towards a small light at a random
-//! direction. `R` is computed by quadrature over the half vector (`theta_h = pi/2 s^2`, dense
-//! near the normal like the MERL grid, so lobes of `n ~ 1e5` are resolved), averaged over view
-//! elevations, and minimised over a grid of `(n, w)`.
-//!
-//! [`LobeChoice`] names the two candidates (this search and the model fit's lobe);
-//! [`choose_lobe`] and [`LobeAnalysis::lobe`] are where one of them is picked.
-//!
-//! Two lobes ([`LobeQuadrature::fit_two_lobes`]): `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2)
-//! cosine` on the same quadrature and objective, for a sharp peak over a broader halo or a
-//! diffuse base. A coarse grid over both exponents and weights (each exponent pair's lobe
-//! densities computed once, the weights only rescale them), then a pattern search with halving
-//! steps from the better of the grid's best and the one-lobe lobe (a candidate with `w2 = 0`):
-//! never worse than one lobe on the quadrature.
+//! Two lobes ([`LobeQuadrature::fit_two_lobes`]): the same objective for
+//! `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine`, a coarse grid then a pattern search
+//! from the better of its best and the one-lobe lobe, so never worse than one lobe.
 
 use crate::coords::to_rusinkiewicz;
 use crate::error::{NbrdfError, Result};

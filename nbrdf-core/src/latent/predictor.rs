@@ -1,22 +1,16 @@
-//! The Blinn-Phong parameter predictor (docs/design.md section 7): a shallow MLP from the 32-value
-//! code to the sampling parameters `(n, w)`, supervised by Blinn-Phong fits of the training
-//! split.
+//! The Blinn-Phong parameter predictor (docs/design.md section 7): a shallow MLP from the
+//! 32-value code to the sampling lobe `(n, w)`, supervised by the lobe fits of the training split.
 //!
 //! Network: linear `32 -> 2` with weight decay by default (`32 -> H (tanh) -> 2` optional) on
-//! standardised codes, an ensemble of 8. Output 0 is `ln n`, clamped to
-//! `[ln 1e-3, ln MAX_EXPONENT]` so that `n = e^o0` lies in `(0, 1e6]`; output 1 goes through a
-//! logistic so that `w` lies in `[0, 1]`: every output is a valid sampling lobe by construction.
-//! Loss, full-batch Adam, one of:
-//!
+//! standardised codes, an ensemble of 8. Output 0 is `ln n`, clamped so that `n` lies in
+//! `(0, MAX_EXPONENT]`; output 1 goes through a logistic so that `w` lies in `[0, 1]`: every
+//! output is a valid lobe. Loss (full-batch Adam), one of:
 //! * labels: `(o0 - ln max(n, 1e-3))^2 + 25 (w_pred - w)^2` (a weight error of 0.2 costs as
 //!   much as a factor e in the exponent);
-//! * variance (default of the CLI): what the fitted label was chosen for. `nbrdf fit-phong`
-//!   picks the lobe of lowest relative variance of BSDF sampling over a grid of `(n, w)`
-//!   ([`crate::lobe_fit`]); the loss is that objective at the predicted lobe, `ln(R - 1)`
-//!   interpolated bilinearly on the grid, minus its value at the label, plus 0.05 x the label
-//!   loss (a pull towards the label where the landscape is flat). An exponent 3x off costs
-//!   nothing on a material whose variance barely depends on it and much on a sharp metal, which
-//!   the label loss cannot tell apart.
+//! * variance (the CLI's default): the lobe search's objective ([`crate::lobe_fit`]) at the
+//!   predicted lobe, `ln(R - 1)` interpolated on its grid minus its value at the label, plus
+//!   0.05 x the label loss. It tells a material whose variance barely depends on the exponent
+//!   from a sharp metal, which the label loss cannot.
 
 use super::mlp::Mlp;
 use crate::coords::{network_input_from_angles, RusinkiewiczAngles};
@@ -236,6 +230,54 @@ impl VarianceGrid {
     }
 }
 
+/// The summed loss of the examples (standardised codes `xs`) and its gradient, added into
+/// `grad`, of the mean loss: the label loss, or with `grids` the variance loss.
+fn loss_and_gradient(
+    mlp: &Mlp,
+    xs: &[Vec<f32>],
+    examples: &[Example],
+    grids: Option<&[&VarianceGrid]>,
+    grad: &mut [f32],
+) -> f64 {
+    let n = examples.len() as f64;
+    let mut loss = 0.0;
+    for (i, (x, e)) in xs.iter().zip(examples).enumerate() {
+        let acts = mlp.forward(x);
+        let o = acts.last().cloned().unwrap_or_default();
+        let ln_n = (e.1.max(1e-3)).ln() as f32;
+        let w = sigmoid(o[1]);
+        let (d0, d1) = (o[0] - ln_n, w - e.2 as f32);
+        let inv = 1.0 / n as f32;
+        let label_loss = d0 * d0 + WEIGHT_LOSS * d1 * d1;
+        let (mut g0, mut g1) = (2.0 * d0, 2.0 * WEIGHT_LOSS * d1);
+        match grids {
+            Some(grids) => {
+                let (excess, d_ln_n, d_w) = grids[i].excess(o[0], w);
+                loss += (excess + LABEL_SHARE * label_loss) as f64;
+                g0 = d_ln_n + LABEL_SHARE * g0;
+                g1 = d_w + LABEL_SHARE * g1;
+            }
+            None => loss += label_loss as f64,
+        }
+        let g = [g0 * inv, g1 * w * (1.0 - w) * inv];
+        mlp.backward(&acts, &g, grad);
+    }
+    loss
+}
+
+/// Adds `decay w` to the gradient of each weight (not the biases) of the flat `params`.
+fn add_weight_decay(mlp: &Mlp, params: &[f32], decay: f32, grad: &mut [f32]) {
+    // Each layer's weights come before its biases in the flat vector.
+    let mut at = 0;
+    for layer in &mlp.layers {
+        let weights = at..at + layer.weights.len();
+        for (g, w) in grad[weights.clone()].iter_mut().zip(&params[weights]) {
+            *g += decay * w;
+        }
+        at += layer.weights.len() + layer.bias.len();
+    }
+}
+
 impl PhongPredictor {
     /// The predictor's input for a network and its code: the code, followed by the network's
     /// [`highlight_profile`] where the predictor was trained with it.
@@ -359,38 +401,9 @@ impl PhongPredictor {
         let mut loss = 0.0;
         for _ in 0..iterations {
             let mut grad = vec![0.0f32; params.len()];
-            loss = 0.0;
-            for (i, (x, e)) in xs.iter().zip(examples).enumerate() {
-                let acts = p.mlp.forward(x);
-                let o = acts.last().cloned().unwrap_or_default();
-                let ln_n = (e.1.max(1e-3)).ln() as f32;
-                let w = sigmoid(o[1]);
-                let (d0, d1) = (o[0] - ln_n, w - e.2 as f32);
-                let inv = 1.0 / n as f32;
-                let label_loss = d0 * d0 + WEIGHT_LOSS * d1 * d1;
-                let (mut g0, mut g1) = (2.0 * d0, 2.0 * WEIGHT_LOSS * d1);
-                match grids {
-                    Some(grids) => {
-                        let (excess, d_ln_n, d_w) = grids[i].excess(o[0], w);
-                        loss += (excess + LABEL_SHARE * label_loss) as f64;
-                        g0 = d_ln_n + LABEL_SHARE * g0;
-                        g1 = d_w + LABEL_SHARE * g1;
-                    }
-                    None => loss += label_loss as f64,
-                }
-                let g = [g0 * inv, g1 * w * (1.0 - w) * inv];
-                p.mlp.backward(&acts, &g, &mut grad);
-            }
+            loss = loss_and_gradient(&p.mlp, &xs, examples, grids, &mut grad);
             if config.weight_decay > 0.0 {
-                // Weights only: each layer's weights come before its biases in the flat vector.
-                let mut at = 0;
-                for layer in &p.mlp.layers {
-                    let weights = at..at + layer.weights.len();
-                    for (g, w) in grad[weights.clone()].iter_mut().zip(&params[weights]) {
-                        *g += config.weight_decay * w;
-                    }
-                    at += layer.weights.len() + layer.bias.len();
-                }
+                add_weight_decay(&p.mlp, &params, config.weight_decay, &mut grad);
             }
             adam.step(&mut params, &grad, 3e-3);
             p.mlp.set_flat(&params);

@@ -39,9 +39,8 @@ pub enum Interpolation {
 /// not measured), so a read/write round trip is exact.
 ///
 /// The three channels of a cell are kept side by side: a lookup then touches a few cache lines
-/// instead of one per channel (lookups at random directions are memory-bound; this layout made
-/// nearest lookups about 2x and trilinear ones about 1.5x faster). The file's channel-major
-/// layout is built on demand by
+/// instead of one per channel (lookups at random directions are memory-bound; lookup rates in
+/// docs/results/performance.md). The file's channel-major layout is built on demand by
 /// [`MerlTable::stored`].
 #[derive(Clone)]
 pub struct MerlTable {

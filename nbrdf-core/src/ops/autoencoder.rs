@@ -132,12 +132,8 @@ fn training_materials(
     Ok((materials, hidden, split, family))
 }
 
-/// Trains the autoencoder (of the best of `request.seeds` seeds) and writes it with its
-/// history and, with several seeds, the choice in its provenance.
-pub fn train_autoencoder(
-    request: &AeTrainRequest,
-    observer: &mut (dyn AeTrainObserver + Send),
-) -> Result<AeTrainReport> {
+/// The settings' ranges (docs/hardening.md).
+fn check_train_request(request: &AeTrainRequest) -> Result<()> {
     let c = &request.config;
     limits::check_range("--hidden", c.hidden, 1, limits::MAX_HIDDEN)?;
     limits::check_range("--epochs", c.max_epochs, 1, limits::MAX_EPOCHS)?;
@@ -152,36 +148,63 @@ pub fn train_autoencoder(
         limits::MAX_ITERATIONS,
     )?;
     let seeds = usize::try_from(request.seeds).unwrap_or(usize::MAX);
-    limits::check_range("--seeds", seeds, 1, limits::MAX_ITERATIONS)?;
-    let nets = read_nbrdf_dir(&request.nbrdfs)?;
-    let (materials, hidden, split, family) =
-        training_materials(&nets, request.extra_nbrdfs.as_deref())?;
-    let config = &request.config;
-    let lobes: Vec<(String, f64, f64)> = if config.lobe_weight > 0.0 {
+    limits::check_range("--seeds", seeds, 1, limits::MAX_ITERATIONS)
+}
+
+/// The sampling lobe of each training material, for the lobe term of the loss (none when its
+/// weight is 0).
+fn training_lobes(
+    request: &AeTrainRequest,
+    nets: &[(String, Nbrdf)],
+    split: &Split,
+) -> Result<Vec<(String, f64, f64)>> {
+    if request.config.lobe_weight > 0.0 {
         with_threads(request.threads, || {
             nets.par_iter()
                 .filter(|(name, _)| split.train.contains(name))
                 .map(|(name, net)| lobe_label(net, false).map(|(n, w)| (name.clone(), n, w)))
                 .collect::<Result<_>>()
-        })??
+        })?
     } else {
-        Vec::new()
-    };
+        Ok(Vec::new())
+    }
+}
+
+/// What the autoencoder trains on.
+struct TrainingSet {
+    materials: FlatNetworks,
+    lobes: Vec<(String, f64, f64)>,
+    hidden: usize,
+    split: Split,
+}
+
+/// Trains one autoencoder per seed of `request.seeds` and keeps the one whose refined
+/// validation loss is lowest (the only one, with one seed), with its history and every seed's
+/// score.
+fn train_best_seed(
+    request: &AeTrainRequest,
+    set: &TrainingSet,
+    observer: &mut (dyn AeTrainObserver + Send),
+) -> Result<(AutoEncoder, Vec<AeEpoch>, Vec<SeedCandidate>)> {
     let several = request.seeds > 1;
-    let start = Instant::now();
     let mut best: Option<(f64, AutoEncoder, Vec<AeEpoch>)> = None;
     let mut candidates = Vec::new();
-    let first = config.seed;
+    let first = request.config.seed;
     for seed in first..first.saturating_add(request.seeds.max(1)) {
         let config = AeConfig {
             seed,
-            ..config.clone()
+            ..request.config.clone()
         };
         observer.seed_started(seed, config.max_epochs, several);
         let (ae, history) = with_threads(request.threads, || {
-            AutoEncoder::train(&materials, &lobes, hidden, split.clone(), &config, |e| {
-                observer.epoch(e)
-            })
+            AutoEncoder::train(
+                &set.materials,
+                &set.lobes,
+                set.hidden,
+                set.split.clone(),
+                &config,
+                |e| observer.epoch(e),
+            )
         })??;
         observer.seed_finished();
         if !several {
@@ -189,7 +212,7 @@ pub fn train_autoencoder(
             break;
         }
         let loss = with_threads(request.threads, || {
-            ae.refined_validation_loss(&materials, request.select_refine)
+            ae.refined_validation_loss(&set.materials, request.select_refine)
         })??;
         observer.seed_scored(seed, loss);
         candidates.push(SeedCandidate {
@@ -200,12 +223,34 @@ pub fn train_autoencoder(
             best = Some((loss, ae, history));
         }
     }
-    let Some((_, mut ae, history)) = best else {
+    let Some((_, ae, history)) = best else {
         return Err(invalid("no autoencoder trained".into()));
     };
+    Ok((ae, history, candidates))
+}
+
+/// Trains the autoencoder (of the best of `request.seeds` seeds) and writes it with its
+/// history and, with several seeds, the choice in its provenance.
+pub fn train_autoencoder(
+    request: &AeTrainRequest,
+    observer: &mut (dyn AeTrainObserver + Send),
+) -> Result<AeTrainReport> {
+    check_train_request(request)?;
+    let nets = read_nbrdf_dir(&request.nbrdfs)?;
+    let (materials, hidden, split, family) =
+        training_materials(&nets, request.extra_nbrdfs.as_deref())?;
+    let lobes = training_lobes(request, &nets, &split)?;
+    let set = TrainingSet {
+        materials,
+        lobes,
+        hidden,
+        split,
+    };
+    let start = Instant::now();
+    let (mut ae, history, candidates) = train_best_seed(request, &set, observer)?;
     let seconds = start.elapsed().as_secs_f64();
     if let Some(obj) = ae.provenance.as_object_mut() {
-        if several {
+        if request.seeds > 1 {
             obj.insert(
                 "selection".into(),
                 serde_json::json!({
@@ -229,7 +274,7 @@ pub fn train_autoencoder(
     Ok(AeTrainReport {
         output: request.output.clone(),
         train_materials: ae.split.train.len(),
-        permutations: if config.augment { 6 } else { 1 },
+        permutations: if request.config.augment { 6 } else { 1 },
         test_materials: ae.split.test.len(),
         seconds,
         epochs: history.len(),
@@ -362,6 +407,58 @@ pub fn interpolate(
         net.save(output.join(format!("{name}.nbrdf.json")))?;
     }
     Ok(())
+}
+
+/// The autoencoder's image errors on one material decoded from its code, the encoding time
+/// (ms), and with `refine > 0` the refinement time (ms) and errors of the refined code.
+type AeErrors = (ImageErrors, f64, Option<(f64, ImageErrors)>);
+
+/// [`AeErrors`] of one material.
+fn ae_errors(ae: &AutoEncoder, net: &Nbrdf, name: &str, refine: usize) -> Result<AeErrors> {
+    let theta = LIGHT_THETA_DEG.to_radians();
+    let t = Instant::now();
+    let code = ae.encode(net)?;
+    let encode_ms = t.elapsed().as_secs_f64() * 1e3;
+    let rec = ae.decode(&code, name)?;
+    let reference = render_sphere(net, SIZE, theta);
+    let errors = image_errors(&reference, &render_sphere(&rec, SIZE, theta));
+    let refined = if refine > 0 {
+        let t = Instant::now();
+        let refined = ae.refine_code(&net.to_flat(), &code, refine);
+        let refine_ms = t.elapsed().as_secs_f64() * 1e3;
+        let rec = ae.decode(&refined, name)?;
+        let e = image_errors(&reference, &render_sphere(&rec, SIZE, theta));
+        Some((refine_ms, e))
+    } else {
+        None
+    };
+    Ok((errors, encode_ms, refined))
+}
+
+/// The MERL cell values of a material that the PCA baseline decomposes: its SGD fit's or its
+/// network's (`net` is asked only then).
+fn pca_cell_values<'a>(
+    tables: PcaTables,
+    name: &str,
+    net: impl FnOnce() -> Result<&'a Nbrdf>,
+) -> Result<Box<CellValues<'a>>> {
+    match tables {
+        PcaTables::Sgd => {
+            let brdf = AnalyticBrdf::from_catalogue(ModelKind::Sgd, name)?;
+            Ok(Box::new(move |cell: usize| {
+                let (h, d, p) = merl::cell_coordinates(cell);
+                let (v, l) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
+                brdf.eval_f64(v, l)
+            }))
+        }
+        PcaTables::Nbrdf => {
+            let net = net()?;
+            Ok(Box::new(move |cell: usize| {
+                let (h, d, p) = merl::cell_coordinates(cell);
+                net.eval_at_angles(&merl::cell_centre_angles(h, d, p))
+            }))
+        }
+    }
 }
 
 /// Which tables the PCA baseline of `ae eval` decomposes.
@@ -501,47 +598,13 @@ pub fn evaluate_autoencoder(ae: &AutoEncoder, request: &AeEvalRequest) -> Result
         let evaluated = request.split.of(&ae.split);
         let mut rows = Vec::new();
         for name in evaluated {
-            let net = get(name)?;
-            let t = Instant::now();
-            let code = ae.encode(net)?;
-            let encode_ms = t.elapsed().as_secs_f64() * 1e3;
-            let rec = ae.decode(&code, name)?;
-            let reference = render_sphere(net, SIZE, theta);
-            let errors = image_errors(&reference, &render_sphere(&rec, SIZE, theta));
-            let refined = if request.refine > 0 {
-                let t = Instant::now();
-                let refined = ae.refine_code(&net.to_flat(), &code, request.refine);
-                let refine_ms = t.elapsed().as_secs_f64() * 1e3;
-                let rec = ae.decode(&refined, name)?;
-                let e = image_errors(&reference, &render_sphere(&rec, SIZE, theta));
-                Some((refine_ms, e))
-            } else {
-                None
-            };
+            let (errors, encode_ms, refined) = ae_errors(ae, get(name)?, name, request.refine)?;
             rows.push((name, errors, encode_ms, refined));
         }
         let ae_eval_seconds = t0.elapsed().as_secs_f64();
         // PCA: cell values of each material.
         let t0 = Instant::now();
-        let cell_fn = |name: &String| -> Result<Box<CellValues<'_>>> {
-            match request.pca_tables {
-                PcaTables::Sgd => {
-                    let brdf = AnalyticBrdf::from_catalogue(ModelKind::Sgd, name)?;
-                    Ok(Box::new(move |cell: usize| {
-                        let (h, d, p) = merl::cell_coordinates(cell);
-                        let (v, l) = from_rusinkiewicz(&merl::cell_centre_angles(h, d, p));
-                        brdf.eval_f64(v, l)
-                    }))
-                }
-                PcaTables::Nbrdf => {
-                    let net = get(name)?;
-                    Ok(Box::new(move |cell: usize| {
-                        let (h, d, p) = merl::cell_coordinates(cell);
-                        net.eval_at_angles(&merl::cell_centre_angles(h, d, p))
-                    }))
-                }
-            }
-        };
+        let cell_fn = |name: &String| pca_cell_values(request.pca_tables, name, || get(name));
         let train: Vec<Box<CellValues<'_>>> =
             ae.split.train.iter().map(cell_fn).collect::<Result<_>>()?;
         let refs: Vec<&CellValues<'_>> = train.iter().map(|b| b.as_ref()).collect();

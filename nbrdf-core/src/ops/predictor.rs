@@ -162,16 +162,18 @@ pub fn train_predictor(
     with_threads(request.threads, || train_on_split(request, ae, &nets))?
 }
 
-fn train_on_split(
+/// The labels of the training materials and, where the loss or cross-validation needs them,
+/// their lobe-search quadratures and variance grids.
+struct SplitLabels {
+    labels: Vec<(f64, f64)>,
+    quadratures: Vec<LobeQuadrature>,
+    grids: Vec<VarianceGrid>,
+}
+
+fn split_labels(
     request: &PredictorTrainRequest,
-    ae: &AutoEncoder,
-    nets: &[(String, Nbrdf)],
-) -> Result<PredictorTrainReport> {
-    let t0 = Instant::now();
-    let train: Vec<&(String, Nbrdf)> = nets
-        .iter()
-        .filter(|(n, _)| ae.split.train.contains(n))
-        .collect();
+    train: &[&(String, Nbrdf)],
+) -> Result<SplitLabels> {
     let labels: Vec<(f64, f64)> = train
         .par_iter()
         .map(|(_, net)| lobe_label(net, request.refit))
@@ -193,8 +195,22 @@ fn train_on_split(
     } else {
         Vec::new()
     };
-    let label_seconds = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
+    Ok(SplitLabels {
+        labels,
+        quadratures,
+        grids,
+    })
+}
+
+/// The training examples, each RGB permutation of each material: its (refined) code with the
+/// material's highlight profile, and its label; with the index of their material and, for the
+/// variance loss, its grid.
+fn training_examples<'g>(
+    request: &PredictorTrainRequest,
+    ae: &AutoEncoder,
+    train: &[&(String, Nbrdf)],
+    split: &'g SplitLabels,
+) -> (Vec<Example>, Vec<usize>, Vec<&'g VarianceGrid>) {
     // The lobe (and its variance, computed on the mean over RGB) is invariant under RGB
     // permutations, so every augmented code shares it.
     let inputs: Vec<(usize, Vec<f32>)> = train
@@ -224,21 +240,39 @@ fn train_on_split(
     let mut examples = Vec::new();
     let mut example_grids = Vec::new();
     for ((m, _), mut code) in inputs.iter().zip(codes) {
-        let (n, w) = labels[*m];
+        let (n, w) = split.labels[*m];
         code.extend_from_slice(&profiles[*m]);
         examples.push((code, n, w));
-        example_grids.extend(grids.get(*m));
+        example_grids.extend(split.grids.get(*m));
     }
+    let example_material = inputs.iter().map(|(m, _)| *m).collect();
+    (examples, example_material, example_grids)
+}
+
+fn train_on_split(
+    request: &PredictorTrainRequest,
+    ae: &AutoEncoder,
+    nets: &[(String, Nbrdf)],
+) -> Result<PredictorTrainReport> {
+    let t0 = Instant::now();
+    let train: Vec<&(String, Nbrdf)> = nets
+        .iter()
+        .filter(|(n, _)| ae.split.train.contains(n))
+        .collect();
+    let split = split_labels(request, &train)?;
+    let label_seconds = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let (examples, example_material, example_grids) =
+        training_examples(request, ae, &train, &split);
     let grids_arg = (!example_grids.is_empty()).then_some(example_grids.as_slice());
     let config = &request.config;
     let cross_validation = if request.cross_validate > 1 {
         let names: Vec<&str> = train.iter().map(|(n, _)| n.as_str()).collect();
-        let example_material: Vec<usize> = inputs.iter().map(|(m, _)| *m).collect();
         Some(cross_validate(
             &CrossValidationData {
                 names: &names,
-                labels: &labels,
-                quadratures: &quadratures,
+                labels: &split.labels,
+                quadratures: &split.quadratures,
                 examples: &examples,
                 example_material: &example_material,
                 grids: grids_arg,
@@ -256,7 +290,7 @@ fn train_on_split(
     if let Some(o) = pred.provenance.as_object_mut() {
         let recorded: Vec<Label<'_>> = train
             .iter()
-            .zip(&labels)
+            .zip(&split.labels)
             .map(|((name, _), &(exponent, specular_weight))| Label {
                 name,
                 exponent,

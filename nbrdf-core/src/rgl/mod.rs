@@ -83,51 +83,61 @@ fn float32_range_problem(rgb: &[f32], jacobian: Option<(&[f32], &[f32])>) -> Opt
     })
 }
 
-impl RglMeasurement {
-    /// Reads and validates the RGL measurement at `path`.
-    pub fn load(path: impl AsRef<Path>) -> Result<RglMeasurement> {
-        let file = TensorFile::read(path)?;
-        RglMeasurement::from_tensor_file(&file)
+/// Refuses a file without RGB data, naming a spectral measurement as such.
+fn check_is_rgb(file: &TensorFile) -> Result<()> {
+    if file.has_field("rgb") {
+        return Ok(());
+    }
+    let message = if file.has_field("wavelengths") {
+        "this is a spectral measurement (*_spec.bsdf); only the RGB files (*_rgb.bsdf) can be evaluated, as in Mitsuba's RGB variants"
+    } else {
+        "missing (not an RGL measurement?)"
+    };
+    Err(file.error("rgb", message.into()))
+}
+
+/// `theta_i` and `phi_i`, each non-empty and strictly increasing.
+fn read_angles(file: &TensorFile) -> Result<(Vec<f32>, Vec<f32>)> {
+    let (_, theta_i) = file.f32_array("theta_i", 1)?;
+    let (_, phi_i) = file.f32_array("phi_i", 1)?;
+    for (name, values) in [("theta_i", &theta_i), ("phi_i", &phi_i)] {
+        if values.is_empty() {
+            return Err(file.error(name, "is empty".into()));
+        }
+        if !values.windows(2).all(|w| w[0] < w[1]) {
+            return Err(file.error(
+                name,
+                format!("angles {values:?} are not strictly increasing"),
+            ));
+        }
+    }
+    Ok((theta_i, phi_i))
+}
+
+/// The tensor fields of a measurement as read, with their shapes, before validation.
+struct RawFields {
+    ndf: (Vec<usize>, Vec<f32>),
+    sigma: (Vec<usize>, Vec<f32>),
+    vndf: (Vec<usize>, Vec<f32>),
+    luminance_shape: Vec<usize>,
+    rgb: (Vec<usize>, Vec<f32>),
+    jacobian: (Vec<usize>, Vec<u8>),
+}
+
+impl RawFields {
+    fn read(file: &TensorFile) -> Result<Self> {
+        Ok(RawFields {
+            ndf: file.f32_array("ndf", 2)?,
+            sigma: file.f32_array("sigma", 2)?,
+            vndf: file.f32_array("vndf", 4)?,
+            luminance_shape: file.f32_array("luminance", 4)?.0,
+            rgb: file.f32_array("rgb", 5)?,
+            jacobian: file.u8_array("jacobian", 1)?,
+        })
     }
 
-    /// Builds the measurement from a parsed tensor file, validating every field Mitsuba's
-    /// `measured` plugin reads (presence, dtype, shape, finite values) and the preconditions of
-    /// its interpolants that Mitsuba leaves unchecked (sorted angles, positive normalisations).
-    pub fn from_tensor_file(file: &TensorFile) -> Result<RglMeasurement> {
-        let path = file.path().to_path_buf();
-        let fail = |name: &str, message: String| Err(file.error(name, message));
-
-        if !file.has_field("rgb") {
-            let message = if file.has_field("wavelengths") {
-                "this is a spectral measurement (*_spec.bsdf); only the RGB files (*_rgb.bsdf) can be evaluated, as in Mitsuba's RGB variants"
-            } else {
-                "missing (not an RGL measurement?)"
-            };
-            return fail("rgb", message.into());
-        }
-        let (_, description) = file.u8_array("description", 1)?;
-        let description = String::from_utf8_lossy(&description).into_owned();
-        let (_, theta_i) = file.f32_array("theta_i", 1)?;
-        let (_, phi_i) = file.f32_array("phi_i", 1)?;
-        for (name, values) in [("theta_i", &theta_i), ("phi_i", &phi_i)] {
-            if values.is_empty() {
-                return fail(name, "is empty".into());
-            }
-            if !values.windows(2).all(|w| w[0] < w[1]) {
-                return fail(
-                    name,
-                    format!("angles {values:?} are not strictly increasing"),
-                );
-            }
-        }
-        let (ndf_shape, ndf) = file.f32_array("ndf", 2)?;
-        let (sigma_shape, sigma) = file.f32_array("sigma", 2)?;
-        let (vndf_shape, vndf) = file.f32_array("vndf", 4)?;
-        let (luminance_shape, _) = file.f32_array("luminance", 4)?;
-        let (rgb_shape, rgb) = file.f32_array("rgb", 5)?;
-        let (jacobian_shape, jacobian) = file.u8_array("jacobian", 1)?;
-
-        let (n_phi, n_theta) = (phi_i.len(), theta_i.len());
+    /// Checks the shapes against each other and the `n_phi` x `n_theta` incident angles.
+    fn check_shapes(&self, file: &TensorFile, n_phi: usize, n_theta: usize) -> Result<()> {
         let expect = |name: &str, shape: &[usize], ok: bool, expected: String| {
             if ok {
                 Ok(())
@@ -136,51 +146,55 @@ impl RglMeasurement {
             }
         };
         let grid_ok = |h: usize, w: usize| h >= 2 && w >= 2;
+        let (ndf, sigma, vndf, rgb) = (&self.ndf.0, &self.sigma.0, &self.vndf.0, &self.rgb.0);
         expect(
             "ndf",
-            &ndf_shape,
-            grid_ok(ndf_shape[0], ndf_shape[1]),
+            ndf,
+            grid_ok(ndf[0], ndf[1]),
             "at least [2, 2]".into(),
         )?;
         expect(
             "sigma",
-            &sigma_shape,
-            grid_ok(sigma_shape[0], sigma_shape[1]),
+            sigma,
+            grid_ok(sigma[0], sigma[1]),
             "at least [2, 2]".into(),
         )?;
         expect(
             "vndf",
-            &vndf_shape,
-            vndf_shape[..2] == [n_phi, n_theta] && grid_ok(vndf_shape[2], vndf_shape[3]),
+            vndf,
+            vndf[..2] == [n_phi, n_theta] && grid_ok(vndf[2], vndf[3]),
             format!("[{n_phi} (phi_i), {n_theta} (theta_i), >= 2, >= 2]"),
         )?;
-        let (res_y, res_x) = (rgb_shape[3], rgb_shape[4]);
+        let (res_y, res_x) = (rgb[3], rgb[4]);
         expect(
             "rgb",
-            &rgb_shape,
-            rgb_shape[..3] == [n_phi, n_theta, 3] && res_y == res_x && res_x >= 2,
+            rgb,
+            rgb[..3] == [n_phi, n_theta, 3] && res_y == res_x && res_x >= 2,
             format!("[{n_phi} (phi_i), {n_theta} (theta_i), 3, n, n] with n >= 2"),
         )?;
         expect(
             "luminance",
-            &luminance_shape,
-            luminance_shape[..] == [n_phi, n_theta, res_y, res_x],
+            &self.luminance_shape,
+            self.luminance_shape[..] == [n_phi, n_theta, res_y, res_x],
             format!("[{n_phi}, {n_theta}, {res_y}, {res_x}] (as phi_i, theta_i and rgb)"),
         )?;
-        expect(
-            "jacobian",
-            &jacobian_shape,
-            jacobian_shape[..] == [1],
-            "[1]".into(),
-        )?;
-        let jacobian = match jacobian[0] {
+        let jacobian = &self.jacobian.0;
+        expect("jacobian", jacobian, jacobian[..] == [1], "[1]".into())
+    }
+
+    /// Checks the values (densities non-negative, areas positive, RGB within float32 once
+    /// evaluated) and returns the Jacobian flag.
+    fn check_values(&self, file: &TensorFile) -> Result<bool> {
+        let fail = |name: &str, message: String| Err(file.error(name, message));
+        let jacobian = match self.jacobian.1[0] {
             0 => false,
             1 => true,
             other => return fail("jacobian", format!("flag is {other}, expected 0 or 1")),
         };
-        if let Some(v) = vndf.iter().find(|v| **v < 0.0) {
+        if let Some(v) = self.vndf.1.iter().find(|v| **v < 0.0) {
             return fail("vndf", format!("holds the negative density {v}"));
         }
+        let (ndf, sigma) = (&self.ndf.1, &self.sigma.1);
         if jacobian {
             if let Some(v) = ndf.iter().find(|v| **v < 0.0) {
                 return fail("ndf", format!("holds the negative density {v}"));
@@ -197,37 +211,66 @@ impl RglMeasurement {
                 );
             }
         }
-
-        if let Some(problem) = float32_range_problem(&rgb, jacobian.then_some((&ndf, &sigma))) {
+        if let Some(problem) = float32_range_problem(&self.rgb.1, jacobian.then_some((ndf, sigma)))
+        {
             return fail("rgb", problem);
         }
+        Ok(jacobian)
+    }
 
-        let isotropic = n_phi <= 2;
-        let reduction = if isotropic {
-            ISOTROPIC_REDUCTION
-        } else {
-            let span = phi_i[n_phi - 1] - phi_i[0];
-            (2.0 * std::f32::consts::PI / span).round_ties_even() as i32
-        };
+    /// The `ndf`, `sigma`, `vndf` and `rgb` interpolants, with the arguments measured.cpp
+    /// constructs its Marginal2D tables with.
+    fn tables(self, file: &TensorFile, phi_i: &[f32], theta_i: &[f32]) -> Result<[Marginal2D; 4]> {
         let structure = |name: &str, e: NbrdfError| match e {
             NbrdfError::InvalidArgument(message) => file.error(name, message),
             other => other,
         };
-        let angles = vec![phi_i.clone(), theta_i.clone()];
-        // Arguments as measured.cpp constructs its Marginal2D tables.
+        let (ndf_shape, ndf) = self.ndf;
+        let (sigma_shape, sigma) = self.sigma;
+        let (vndf_shape, vndf) = self.vndf;
+        let (rgb_shape, rgb) = self.rgb;
+        let angles = vec![phi_i.to_vec(), theta_i.to_vec()];
         let ndf = Marginal2D::new(&ndf, ndf_shape[1], ndf_shape[0], vec![], false, false)
             .map_err(|e| structure("ndf", e))?;
         let sigma = Marginal2D::new(&sigma, sigma_shape[1], sigma_shape[0], vec![], false, false)
             .map_err(|e| structure("sigma", e))?;
         let vndf = Marginal2D::new(&vndf, vndf_shape[3], vndf_shape[2], angles, true, true)
             .map_err(|e| structure("vndf", e))?;
-        let mut rgb_params = vec![phi_i.clone(), theta_i.clone()];
-        rgb_params.push(vec![0.0, 1.0, 2.0]);
-        let rgb = Marginal2D::new(&rgb, res_x, res_y, rgb_params, false, false)
+        let rgb_params = vec![phi_i.to_vec(), theta_i.to_vec(), vec![0.0, 1.0, 2.0]];
+        let rgb = Marginal2D::new(&rgb, rgb_shape[4], rgb_shape[3], rgb_params, false, false)
             .map_err(|e| structure("rgb", e))?;
+        Ok([ndf, sigma, vndf, rgb])
+    }
+}
 
+impl RglMeasurement {
+    /// Reads and validates the RGL measurement at `path`.
+    pub fn load(path: impl AsRef<Path>) -> Result<RglMeasurement> {
+        let file = TensorFile::read(path)?;
+        RglMeasurement::from_tensor_file(&file)
+    }
+
+    /// Builds the measurement from a parsed tensor file, validating every field Mitsuba's
+    /// `measured` plugin reads (presence, dtype, shape, finite values) and the preconditions of
+    /// its interpolants that Mitsuba leaves unchecked (sorted angles, positive normalisations).
+    pub fn from_tensor_file(file: &TensorFile) -> Result<RglMeasurement> {
+        check_is_rgb(file)?;
+        let (_, description) = file.u8_array("description", 1)?;
+        let description = String::from_utf8_lossy(&description).into_owned();
+        let (theta_i, phi_i) = read_angles(file)?;
+        let fields = RawFields::read(file)?;
+        fields.check_shapes(file, phi_i.len(), theta_i.len())?;
+        let jacobian = fields.check_values(file)?;
+        let isotropic = phi_i.len() <= 2;
+        let reduction = if isotropic {
+            ISOTROPIC_REDUCTION
+        } else {
+            let span = phi_i[phi_i.len() - 1] - phi_i[0];
+            (2.0 * std::f32::consts::PI / span).round_ties_even() as i32
+        };
+        let [ndf, sigma, vndf, rgb] = fields.tables(file, &phi_i, &theta_i)?;
         Ok(RglMeasurement {
-            path,
+            path: file.path().to_path_buf(),
             description,
             theta_i,
             phi_i,

@@ -46,6 +46,89 @@ fn lerp(a: f32, b: f32, t: f32) -> f32 {
     b.mul_add(t, (-a).mul_add(t, a))
 }
 
+fn invalid<T>(message: String) -> Result<T> {
+    Err(NbrdfError::InvalidArgument(format!(
+        "Marginal2D: {message}"
+    )))
+}
+
+/// Per parameter its stride in slices (0 for a parameter with one value; the first parameter
+/// varies slowest), and the number of slices.
+fn param_strides(param_values: &[Vec<f32>]) -> Result<(Vec<usize>, usize)> {
+    if param_values.len() > MAX_PARAMS {
+        return invalid(format!(
+            "{} parameters, at most {MAX_PARAMS}",
+            param_values.len()
+        ));
+    }
+    let mut param_strides = vec![0; param_values.len()];
+    let mut slices = 1usize;
+    for (i, values) in param_values.iter().enumerate().rev() {
+        if values.is_empty() {
+            return invalid(format!("parameter {i} has no values"));
+        }
+        if !values.windows(2).all(|w| w[0] < w[1]) {
+            return invalid(format!("parameter {i} values are not strictly increasing"));
+        }
+        param_strides[i] = if values.len() > 1 { slices } else { 0 };
+        slices *= values.len();
+    }
+    Ok((param_strides, slices))
+}
+
+/// Appends the running integrals of a `w x h` slice (trapezoids, summed in float64 as Mitsuba
+/// does) to the CDFs: `w - 1` along each row, `h - 1` over rows. With `normalize` they are scaled
+/// to end at one and the scale is returned (else 1).
+fn push_cdfs(
+    slice: &[f32],
+    [w, h]: [usize; 2],
+    normalize: bool,
+    marg_cdf: &mut Vec<f32>,
+    cond_cdf: &mut Vec<f32>,
+) -> f32 {
+    let scale_x = 0.5 / (w - 1) as f64;
+    let scale_y = 0.5 / (h - 1) as f64;
+    let cond_start = cond_cdf.len();
+    let marg_start = marg_cdf.len();
+    let mut row_sums = Vec::with_capacity(h);
+    for row in slice.chunks_exact(w) {
+        let mut accum = 0.0f64;
+        for x in 0..w - 1 {
+            accum += scale_x * (row[x] as f64 + row[x + 1] as f64);
+            cond_cdf.push(accum as f32);
+        }
+        row_sums.push(accum);
+    }
+    let mut accum = 0.0f64;
+    for y in 0..h - 1 {
+        accum += scale_y * (row_sums[y] + row_sums[y + 1]);
+        marg_cdf.push(accum as f32);
+    }
+    let norm = if normalize { (1.0 / accum) as f32 } else { 1.0 };
+    cond_cdf[cond_start..].iter_mut().for_each(|v| *v *= norm);
+    marg_cdf[marg_start..].iter_mut().for_each(|v| *v *= norm);
+    debug_assert_eq!(cond_cdf.len() - cond_start, (w - 1) * h);
+    debug_assert_eq!(marg_cdf.len() - marg_start, h - 1);
+    norm
+}
+
+/// The scale that makes a `w x h` slice integrate to one over its bilinear patches.
+fn slice_norm(slice: &[f32], [w, h]: [usize; 2]) -> f32 {
+    let scale_x = 0.5 / (w - 1) as f64;
+    let scale_y = 0.5 / (h - 1) as f64;
+    let mut sum = 0.0f64;
+    for y in 0..h - 1 {
+        for x in 0..w - 1 {
+            let i = y * w + x;
+            sum += slice[i] as f64
+                + slice[i + 1] as f64
+                + slice[i + w] as f64
+                + slice[i + w + 1] as f64;
+        }
+    }
+    (1.0 / (scale_x * scale_y * sum)) as f32
+}
+
 impl Marginal2D {
     /// Builds the density from `data` (`slices * height * width` values, row-major) and the
     /// parameter grids `param_values` (each sorted ascending; their lengths multiply to `slices`).
@@ -62,30 +145,12 @@ impl Marginal2D {
         normalize: bool,
         enable_sampling: bool,
     ) -> Result<Marginal2D> {
-        let invalid = |m: String| Err(NbrdfError::InvalidArgument(format!("Marginal2D: {m}")));
         if width < 2 || height < 2 {
             return invalid(format!(
                 "resolution {width} x {height}, must be at least 2 x 2"
             ));
         }
-        if param_values.len() > MAX_PARAMS {
-            return invalid(format!(
-                "{} parameters, at most {MAX_PARAMS}",
-                param_values.len()
-            ));
-        }
-        let mut param_strides = vec![0; param_values.len()];
-        let mut slices = 1usize;
-        for (i, values) in param_values.iter().enumerate().rev() {
-            if values.is_empty() {
-                return invalid(format!("parameter {i} has no values"));
-            }
-            if !values.windows(2).all(|w| w[0] < w[1]) {
-                return invalid(format!("parameter {i} values are not strictly increasing"));
-            }
-            param_strides[i] = if values.len() > 1 { slices } else { 0 };
-            slices *= values.len();
-        }
+        let (param_strides, slices) = param_strides(&param_values)?;
         let n_data = width * height;
         if data.len() != slices * n_data {
             return invalid(format!(
@@ -93,52 +158,17 @@ impl Marginal2D {
                 data.len()
             ));
         }
-
         let (w, h) = (width, height);
-        let (n_marg, n_cond) = (h - 1, (w - 1) * h);
-        let scale_x = 0.5 / (w - 1) as f64;
-        let scale_y = 0.5 / (h - 1) as f64;
         let mut data_out = Vec::with_capacity(data.len());
         let (mut marg_cdf, mut cond_cdf) = (Vec::new(), Vec::new());
         for slice in data.chunks_exact(n_data) {
-            let mut norm = 1.0f32;
-            if enable_sampling {
-                let cond_start = cond_cdf.len();
-                let marg_start = marg_cdf.len();
-                let mut row_sums = Vec::with_capacity(h);
-                for row in slice.chunks_exact(w) {
-                    let mut accum = 0.0f64;
-                    for x in 0..w - 1 {
-                        accum += scale_x * (row[x] as f64 + row[x + 1] as f64);
-                        cond_cdf.push(accum as f32);
-                    }
-                    row_sums.push(accum);
-                }
-                let mut accum = 0.0f64;
-                for y in 0..h - 1 {
-                    accum += scale_y * (row_sums[y] + row_sums[y + 1]);
-                    marg_cdf.push(accum as f32);
-                }
-                if normalize {
-                    norm = (1.0 / accum) as f32;
-                }
-                cond_cdf[cond_start..].iter_mut().for_each(|v| *v *= norm);
-                marg_cdf[marg_start..].iter_mut().for_each(|v| *v *= norm);
-                debug_assert_eq!(cond_cdf.len() - cond_start, n_cond);
-                debug_assert_eq!(marg_cdf.len() - marg_start, n_marg);
+            let norm = if enable_sampling {
+                push_cdfs(slice, [w, h], normalize, &mut marg_cdf, &mut cond_cdf)
             } else if normalize {
-                let mut sum = 0.0f64;
-                for y in 0..h - 1 {
-                    for x in 0..w - 1 {
-                        let i = y * w + x;
-                        sum += slice[i] as f64
-                            + slice[i + 1] as f64
-                            + slice[i + w] as f64
-                            + slice[i + w + 1] as f64;
-                    }
-                }
-                norm = (1.0 / (scale_x * scale_y * sum)) as f32;
-            }
+                slice_norm(slice, [w, h])
+            } else {
+                1.0
+            };
             if !norm.is_finite() {
                 return invalid("a slice integrates to zero and cannot be normalised".into());
             }

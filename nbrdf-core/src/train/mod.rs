@@ -33,11 +33,10 @@ pub const TRAINER_VERSION: &str = concat!("nbrdf-core ", env!("CARGO_PKG_VERSION
 
 /// Everything that decides a training run.
 ///
-/// The defaults are the paper's recipe. Alternatives measured on SGD tables (chrome, white-paint)
-/// did not pay off: a larger constant step (5e-3) stalls chrome at a loss of 5.8e-2, exponential
-/// decay from 1e-3 or 2e-3 and halving on plateaus end no lower than the constant 5e-4 in the
-/// same time, and 200k samples with more epochs match 800k on diffuse materials but lose 30% on
-/// chrome. What does save time is early stopping, which diffuse materials reach first.
+/// The defaults are the paper's recipe. Alternatives measured on SGD tables (a larger constant
+/// step, exponential decay, halving on plateaus, fewer samples with more epochs) did not pay
+/// off (docs/experiments.md); what does save time is early stopping, which diffuse materials
+/// reach first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainConfig {
     pub sampling: AngularSampling,

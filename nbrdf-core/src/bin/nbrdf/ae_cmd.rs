@@ -111,7 +111,7 @@ pub struct AeEncodeArgs {
     #[arg(long)]
     timing: bool,
     /// Refine the encoder's code by this many Levenberg-Marquardt iterations on the image
-    /// loss against the network's own sphere image (analysis by synthesis; ~10 ms each).
+    /// loss against the network's own sphere image (analysis by synthesis).
     #[arg(long, default_value_t = 0)]
     refine: usize,
     #[command(flatten)]

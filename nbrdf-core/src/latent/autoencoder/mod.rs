@@ -1,26 +1,17 @@
-//! The NBRDF autoencoder (docs/design.md section 7): flattened networks (675 values at width 21)
-//! `-> 32 -> 675`, trained with the image loss of [`super::sphere`].
+//! The NBRDF autoencoder (docs/design.md section 7): flattened networks `-> 32 -> ` flattened
+//! networks, encoder `675 -> 96 (tanh) -> 32`, decoder `32 -> 96 (tanh) -> 675` (width 21),
+//! linear code and output, inputs standardised per dimension over the augmented training set.
 //!
-//! Architecture: encoder `675 -> 96 (tanh) -> 32`, decoder `32 -> 96 (tanh) -> 675`, linear code
-//! and output. The decoder has `32*96 + 96 + 96*675 + 675 = 68,571` parameters, about 102
-//! NBRDFs (the paper's decoder: ~70k, ~105 NBRDFs). Inputs are standardised per dimension over
-//! the (augmented) training set; the decoder's output is de-standardised into network weights.
+//! Training: Adam on mini-batches of the training materials times the 6 RGB permutations plus
+//! weight-space mixtures ([`AeConfig::mixup`]). The first `warmup_epochs` minimise the squared
+//! error of the standardised weights, a warm start near real networks, where the image loss of
+//! [`super::sphere`] through `exp` is well behaved (from a random decoder it gives exploding or
+//! dead pixels); then the image loss with gradient-norm clipping and early stopping on a
+//! validation subset. Deterministic per seed (per-sample gradients summed in sample order).
 //!
-//! Training: Adam, mini-batches over the training materials times the 6 permutations of the
-//! RGB outputs (augmentation) plus fresh weight-space mixtures of two training examples every
-//! epoch ([`AeConfig::mixup`]), image loss on the 64 x 64 sphere at 45 degrees. The first
-//! `warmup_epochs` minimise the squared error of the standardised weights instead (a warm start
-//! that puts the decoded networks near real ones, where the image loss through `exp` is well
-//! behaved; the image loss alone from a random decoder gives exploding or dead pixels). Global
-//! gradient-norm clipping guards the image phase. Early stopping on the image loss of a
-//! validation subset of the training split (identity permutation), keeping the best epoch.
-//! Deterministic per seed: per-sample gradients are computed in parallel and summed in sample
-//! order.
-//!
-//! Where each part lives: the model, its file and its use (this module); the training data
-//! (`data`: examples, augmentation, target images, the initial autoencoder); the training
-//! phases (`phases`: the weight-space warm start, the image phase, mixup, early stopping);
-//! code refinement and the refined validation loss (`refine`).
+//! Here: the model, its file and its use; `data`: examples, augmentation, target images, the
+//! initial autoencoder; `phases`: warm start, image phase, mixup, early stopping; `refine`: code
+//! refinement and the refined validation loss.
 
 mod data;
 mod phases;

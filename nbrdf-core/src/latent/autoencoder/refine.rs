@@ -19,7 +19,7 @@ impl AutoEncoder {
     /// gap between what the encoder predicts for an unseen material and the best the decoder
     /// can express.
     /// With 32 unknowns the Jacobian costs 32 extra renders (forward differences) and the
-    /// damped normal equations are a 32 x 32 solve, so each iteration is a few milliseconds and
+    /// damped normal equations are a 32 x 32 solve, so each iteration is cheap and
     /// converges where first-order steps crawl along the loss's ill-conditioned valleys.
     /// Returns the best code visited (the start if nothing improves).
     pub fn refine_code(&self, flat: &[f32], code: &[f32], iterations: usize) -> Vec<f32> {
