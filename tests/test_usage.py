@@ -69,6 +69,27 @@ def scene_dict(bsdf: dict, integrator: str) -> dict:
     }
 
 
+def test_loading_a_network_reads_the_file_once_in_the_library(variant, network_file, monkeypatch):
+    """The plugin takes the parsed, validated and pruned network from the C library: its own load
+    path opens no file (the library's read does not go through Python)."""
+    import builtins
+    import io
+
+    opened = []
+    real_open = builtins.open
+
+    def spy(file, *args, **kwargs):
+        opened.append(str(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", spy)
+    monkeypatch.setattr(io, "open", spy)
+    for backend in ("rust", "jit") if mi.variant().startswith(("llvm", "cuda")) else ("rust",):
+        bsdf = mi.load_dict({"type": "nbrdf", "filename": str(network_file), "backend": backend})
+        assert bsdf is not None
+    assert not [path for path in opened if path.endswith(network_file.name)], opened
+
+
 @pytest.mark.parametrize("integrator", ["direct", "path"])
 def test_tiny_scene_renders(variant, integrator, network_file, merl_table):
     for bsdf in ({"type": "nbrdf", "filename": str(network_file)},

@@ -222,22 +222,30 @@ class _NativeBSDFMixin:
                              f'(e.g. <string name="filename" value="..."/>)')
         self._filename = str(filename)
         path = _resolve(self._filename)
-        problem = _file_problem(path, self.PLUGIN)
-        if problem:
-            # The status names of the library's own checks (I/O for special files, else format).
-            status = "NBRDF_ERROR_IO" if problem.startswith("not a regular file") else "NBRDF_ERROR_FORMAT"
-            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [{status}]')
+        special = _special_file_problem(path)
+        if special:
+            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {special} [NBRDF_ERROR_IO]')
+        # The library reads the file once; the plugin looks into it only to explain a failure.
         try:
             self._native = _native.Material(path)
         except _native.NbrdfError as error:
+            problem = _format_problem(path, self.PLUGIN)
+            if problem:
+                raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} '
+                                   f"[NBRDF_ERROR_FORMAT]") from None
             message = _strip_function(error)
             # Library messages name the file already: say it once.
             where = "" if path in message else f'"{path}": '
             raise RuntimeError(f"{self._type_name()}: cannot load {where}{message} "
                                f"[{error.status_name}]") from None
+        problem = None
         if self._native.kind != self.MATERIAL_KIND:
-            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": the library read it as a '
-                               f"{self._native.kind} material, not a {self.MATERIAL_KIND} one [NBRDF_ERROR_FORMAT]")
+            problem = _format_problem(path, self.PLUGIN) or (
+                f"the library read it as a {self._native.kind} material, not a {self.MATERIAL_KIND} one")
+        elif self.PLUGIN == "merl":
+            problem = _merl_values_problem(path)
+        if problem:
+            raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [NBRDF_ERROR_FORMAT]')
         self._path = path
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
         if getattr(self._native, "anisotropic", False):
@@ -806,20 +814,26 @@ def _sampling_problem(exponent: float, weight: float, second=None, two_lobe: boo
     return None
 
 
-def _file_problem(path: str, plugin: str) -> str | None:
-    """What is wrong with ``path`` as input of ``plugin``, judged before the library reads it:
-    special files (a FIFO would block, /dev/zero never ends) and the other plugin's format."""
+def _special_file_problem(path: str) -> str | None:
+    """Why ``path`` cannot be read as a BSDF without blocking (a FIFO would block, /dev/zero
+    never ends), judged from its metadata alone."""
     try:
         info = os.stat(path)
     except OSError:
         return None  # the library reports missing and unreadable files
     if not stat.S_ISREG(info.st_mode):
         return "not a regular file (a directory, FIFO or device cannot be read as a BSDF)"
+    return None
+
+
+def _format_problem(path: str, plugin: str) -> str | None:
+    """Why the library could not load ``path`` for ``plugin`` (or loaded the other plugin's
+    kind), in the user's terms: the other plugin's format, binary data, a table's values."""
     try:
         with open(path, "rb") as file:
             head = file.read(64)
-    except OSError as error:
-        return error.strerror or str(error)
+    except OSError:
+        return None  # the library's I/O error says it
     is_merl = head[:12] == _MERL_HEADER
     is_json = head.lstrip()[:1] in (b"{", b"[")
     if plugin == "nbrdf" and is_merl:
