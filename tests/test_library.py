@@ -417,7 +417,7 @@ def test_dask_cluster_at_an_address(converted, sources_dir, tmp_path):
     src.mkdir()
     shutil.copy(sources_dir / "diffuse.json", src / "diffuse.json")
     out = tmp_path / "lib"
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         result = library(src, "-o", out, *FAST, "--no-progress", "--executor", "dask", "--address",
                          cluster.scheduler_address)
         assert result.returncode == 0, result.stderr
