@@ -1,4 +1,4 @@
-"""The data-driven sampler ``sampling = "tabulated"`` (``nbrdf-core/src/tabulated.rs``, its
+"""The data-driven sampler ``sampling = "tabulated"`` (``nbrdf-core/src/sampling/tabulated.rs``, its
 Dr.Jit twin ``jit.py`` ``TracedTable``): Mitsuba's chi^2 test in both backends on a glossy
 network, a near-diffuse one, a stiff (very peaked) table and grazing views; the pdf against a
 NumPy float64 oracle over the library's exported table; pdf(sample) == the returned pdf; the
@@ -88,7 +88,7 @@ def test_chi2_stiff_zoomed_and_grazing(llvm_variant, backend, theta_deg, materia
 
 
 def table_oracle(table, view: np.ndarray, light: np.ndarray) -> np.ndarray:
-    """float64 NumPy density of the tabulated sampler (module docs of tabulated.rs) from the
+    """float64 NumPy density of the tabulated sampler (module docs of sampling/tabulated.rs) from the
     library's exported arrays; planar (3, n) inputs."""
     mass, _, _ = (a.astype(np.float64) for a in table.arrays())
     rows, nt, np_, c = table.rows, table.theta_bins, table.phi_bins, table.cosine_weight
@@ -98,7 +98,7 @@ def table_oracle(table, view: np.ndarray, light: np.ndarray) -> np.ndarray:
     h = s / np.linalg.norm(s, axis=0)
     v_dot_h = np.sum(v * h, axis=0)
     t = (1.0 - np.cos(np.arctan2(np.hypot(h[0], h[1]), h[2]))) ** 0.25
-    # At the normal the view's azimuth is taken as 0 (tabulated.rs view_azimuth).
+    # At the normal the view's azimuth is taken as 0 (sampling/tabulated.rs view_azimuth).
     # |phi_h - phi_v| in [0, pi]: one bin stands for itself and its mirror image.
     phi = np.abs(np.angle(np.exp(1j * (np.arctan2(h[1], h[0]) - np.arctan2(v[1], v[0])))))
     row = np.minimum((np.arctan2(np.hypot(v[0], v[1]), v[2]) / HALF_PI * rows).astype(int), rows - 1)

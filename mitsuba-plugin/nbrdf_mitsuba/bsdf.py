@@ -433,7 +433,7 @@ class _NativeBSDFMixin:
         bs.sampled_component = mi.UInt32(0)
         f_cos = self._traced.eval(si.wi, light) * jit.cos_theta(light)
         weight = f_cos / dr.select(active, pdf, 1.0)
-        # As sampling.rs sample_weight: 0 where a tiny pdf would overflow the quotient.
+        # As sampling/mod.rs sample_weight: 0 where a tiny pdf would overflow the quotient.
         weight = dr.select(active & dr.all(dr.isfinite(weight)), weight, 0.0)
         return bs, weight
 
@@ -807,7 +807,7 @@ def _sampling_problem(exponent: float, weight: float, second=None, two_lobe: boo
             return f"{weight_name} is {_non_finite_name(w)} (must be in [0, 1])"
         if not 0.0 <= w <= 1.0:
             return f"{weight_name} {w:g} is outside [0, 1]"
-    # The library's tolerance (sampling.rs WEIGHT_SUM_TOLERANCE): float32 weights may sum to 1 + ulp.
+    # The library's tolerance (sampling/two_lobe.rs WEIGHT_SUM_TOLERANCE): float32 weights may sum to 1 + ulp.
     if two_lobe and second is not None and weight + second[1] > 1.0 + 1e-6:
         return (f"specular_weight {weight:g} + specular_weight2 {second[1]:g} is above 1 (the "
                 "cosine lobe takes 1 - specular_weight - specular_weight2)")

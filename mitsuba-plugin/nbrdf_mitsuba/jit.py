@@ -26,7 +26,7 @@ import numpy as np
 
 from ._native import SAMPLING_KINDS
 
-# The exp argument range of nbrdf-core's network.rs (EXP_ARG_MAX / EXP_ARG_MIN): e^80 ~ 5.5e34
+# The exp argument range of nbrdf-core's fastmath.rs (EXP_ARG_MAX / EXP_ARG_MIN): e^80 ~ 5.5e34
 # stays far below float32's maximum, and below -87 the result is -1 to float32 precision.
 EXP_ARGUMENT_MAX = 80.0
 EXP_ARGUMENT_MIN = -87.0
@@ -37,12 +37,12 @@ MAX_EXPONENT = 1e6
 
 
 def relu(v):
-    """``max(v, 0)`` with NaN -> 0 (``network.rs`` ``relu``: ``if v > 0 { v } else { 0 }``)."""
+    """``max(v, 0)`` with NaN -> 0 (``fastmath.rs`` ``relu``: ``if v > 0 { v } else { 0 }``)."""
     return dr.select(v > 0, v, 0.0)
 
 
 def clamp_exp_argument(z):
-    """``network.rs`` ``clamp_exp_arg``: into ``[EXP_ARGUMENT_MIN, EXP_ARGUMENT_MAX]``, NaN to the
+    """``fastmath.rs`` ``clamp_exp_arg``: into ``[EXP_ARGUMENT_MIN, EXP_ARGUMENT_MAX]``, NaN to the
     lower end (compare-selects, not min/max, whose NaN handling is backend-specific)."""
     z = dr.select(z > EXP_ARGUMENT_MIN, z, EXP_ARGUMENT_MIN)
     return dr.select(z < EXP_ARGUMENT_MAX, z, EXP_ARGUMENT_MAX)
@@ -51,7 +51,7 @@ def clamp_exp_argument(z):
 def unit_vector(x, y, z):
     """``(x, y, z) / |(x, y, z)|`` and whether it exists (false for zero, infinite and NaN input).
 
-    Divides by the largest component first, as ``network.rs`` ``rescale_out_of_range`` does, so
+    Divides by the largest component first, as ``network/kernel.rs`` ``rescale_out_of_range`` does, so
     that vectors far too short or long to square in float32 keep their direction."""
     m = dr.maximum(dr.maximum(dr.abs(x), dr.abs(y)), dr.abs(z))
     finite = dr.isfinite(x) & dr.isfinite(y) & dr.isfinite(z)
@@ -214,7 +214,7 @@ class TracedNetwork:
 
     def eval(self, view: mi.Vector3f, light: mi.Vector3f) -> mi.Color3f:
         """``f_r(light, view)``, zero at or below the horizon and for zero or non-finite
-        directions (``network.rs`` ``eval_chunks``)."""
+        directions (``network/kernel.rs`` ``eval_chunks``)."""
         f = self.eval_input(network_input(view, light, self.anisotropic))
         return dr.select(_both_valid_above(view, light), f, 0.0)
 
@@ -235,7 +235,7 @@ def _log1m(x):
 
 
 def _cos_power_from_one_minus(one_minus_cos, exponent):
-    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling.rs`` ``cos_power_from_one_minus``), with
+    """cos^n = exp(n ln(1 - (1 - cos))) from ``1 - cos`` (``sampling/phong.rs`` ``cos_power_from_one_minus``), with
     n = 0 -> 1 and cos <= 0 -> 0 (never NaN)."""
     positive = one_minus_cos < 1.0
     value = dr.exp(exponent * _log1m(dr.select(positive, dr.maximum(one_minus_cos, 0.0), 0.0)))
@@ -249,7 +249,7 @@ def _spherical(cos_theta, sin_theta, u):
 
 
 def unit_interval(u):
-    """``sampling.rs`` ``unit_interval``: clamped into [0, 1], NaN -> 0."""
+    """``sampling/mod.rs`` ``unit_interval``: clamped into [0, 1], NaN -> 0."""
     return dr.select(u >= 0, dr.minimum(u, 1.0), 0.0)
 
 
@@ -336,7 +336,7 @@ def mixture_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight
 def two_lobe_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weight, exponent2,
                  specular_weight2):
     """``w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine`` per unit solid angle of ``light``
-    (``sampling.rs`` ``two_lobe_mixture_density``; the cosine weight clamped at 0), zero unless
+    (``sampling/two_lobe.rs`` ``density``; the cosine weight clamped at 0), zero unless
     both directions are above the horizon."""
     v, v_ok = _unit(view)
     l, l_ok = _unit(light)
@@ -355,7 +355,7 @@ def two_lobe_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent, specular_weigh
 def anisotropic_pdf(view: mi.Vector3f, light: mi.Vector3f, exponent_u, specular_weight, exponent_v):
     """The anisotropic Blinn-Phong mixture (Ashikhmin-Shirley half-vector density, ``n_u`` along
     the tangent x, ``n_v`` across) per unit solid angle of ``light``, zero unless both directions
-    are above the horizon (``sampling.rs`` ``anisotropic_mixture_density``)."""
+    are above the horizon (``sampling/anisotropic.rs`` ``density``)."""
     v, v_ok = _unit(view)
     l, l_ok = _unit(light)
     one_minus_cos, v_dot_h, h_ok = _half_vector_terms(view, light)
@@ -391,7 +391,7 @@ def anisotropic_half_vector(exponent_u, exponent_v, u1, u2) -> mi.Vector3f:
 
 
 class TracedTable:
-    """The tabulated half-vector sampler (``tabulated.rs``) from the library's arrays
+    """The tabulated half-vector sampler (``sampling/tabulated.rs``) from the library's arrays
     (``_native.Sampler.arrays``): the view's elevation picks a row, the row's alias table a bin in
     ``t = (1 - cos theta_h)^(1/4)`` and ``|phi_h - phi_v|`` over ``[0, pi]``, ``u2`` the side of
     the plane of incidence, the half vector uniform in solid angle within the bin or its mirror
@@ -411,21 +411,21 @@ class TracedTable:
         return dr.minimum(mi.UInt32(dr.maximum(theta_v * (2.0 / math.pi) * self.rows, 0.0)), self.rows - 1)
 
     def _edge(self, i):
-        """``1 - cos theta_h`` at the ``t``-bin edge ``i`` (``tabulated.rs`` ``bin_one_minus_cos``)."""
+        """``1 - cos theta_h`` at the ``t``-bin edge ``i`` (``sampling/tabulated.rs`` ``bin_one_minus_cos``)."""
         t = mi.Float(i) * (1.0 / self.theta_bins)
         t2 = t * t
         return t2 * t2
 
     @staticmethod
     def _view_azimuth(v: mi.Vector3f):
-        """``(cos phi_v, sin phi_v)``, +x at the normal (``tabulated.rs`` ``view_azimuth``)."""
+        """``(cos phi_v, sin phi_v)``, +x at the normal (``sampling/tabulated.rs`` ``view_azimuth``)."""
         length = dr.sqrt(dr.fma(v.x, v.x, v.y * v.y))
         inside = length > 0
         inv = dr.rcp(dr.select(inside, length, 1.0))
         return dr.select(inside, v.x * inv, 1.0), dr.select(inside, v.y * inv, 0.0)
 
     def pick(self, row, u):
-        """``tabulated.rs`` ``pick``: the bin (within the row) of the rescaled uniform ``u``
+        """``sampling/tabulated.rs`` ``pick``: the bin (within the row) of the rescaled uniform ``u``
         through the row's alias table."""
         n = self.theta_bins * self.phi_bins
         scaled = u * n
@@ -507,7 +507,7 @@ def _sample_phong(view, u0, u1, u2, p, table):
 
 
 def _sample_two_lobe(view, u0, u1, u2, p, table):
-    # The component choice of sampling.rs two_lobe_component.
+    # The component choice of sampling/two_lobe.rs two_lobe_component.
     exponent, specular_weight, exponent2, specular_weight2 = p
     total = specular_weight + specular_weight2
     first = u0 < specular_weight
@@ -570,7 +570,7 @@ def sample(strategy: str, view, u0, u1, u2, exponent=0.0, specular_weight=0.0, e
     return light, pdf(strategy, view, light, exponent, specular_weight, exponent2, specular_weight2, table)
 
 
-# MERL grid (docs/design.md section 3), as in nbrdf-core's merl.rs.
+# MERL grid (docs/design.md section 3), as in nbrdf-core's merl/grid.rs.
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
 MERL_SCALE = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
 

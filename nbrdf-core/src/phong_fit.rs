@@ -17,8 +17,8 @@ use crate::train::rng::Stream;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
-/// Largest exponent the fit returns.
-pub const MAX_EXPONENT: f64 = 1e6;
+/// Largest exponent the fit returns: the largest the samplers accept.
+pub use crate::sampling::MAX_EXPONENT;
 /// Bounds of `ln kd` and `ln ks`: below `e^-30` a lobe is absent, above `e^12` not physical.
 const LN_MIN: f64 = -30.0;
 const LN_MAX: f64 = 12.0;
