@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import cffi
 import numpy as np
@@ -137,6 +138,9 @@ def _sampling_kinds() -> dict[str, int]:
 #: library names them, with their ``NbrdfSamplingKind`` codes.
 SAMPLING_KINDS = _sampling_kinds()
 _SAMPLING_NAMES = {code: name for name, code in SAMPLING_KINDS.items()}
+#: The strategies' names as attributes (``KIND.two_lobe == "two_lobe"``), so that code comparing
+#: with a strategy names it through the library: a name the library does not know fails at import.
+KIND = SimpleNamespace(**{name: name for name in SAMPLING_KINDS})
 #: ``NbrdfMaterialKind`` values by name: ``network``, ``merl``.
 MATERIAL_KINDS = {element.removeprefix("NBRDF_MATERIAL_").lower(): code
                   for code, element in ffi.typeof("NbrdfMaterialKind").elements.items()}

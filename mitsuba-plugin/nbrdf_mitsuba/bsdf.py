@@ -44,6 +44,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import _llvm, _native, jit
+from ._native import KIND
 
 SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
 BACKENDS = ("auto", "jit", "rust")
@@ -321,7 +322,7 @@ class _NativeBSDFMixin:
         self._set_sampler(exponent, weight, exponent2, weight2)
         # What traverse exposes: updated in place by SceneParameters, read only by
         # parameters_changed (the kernels use validated copies, see _apply_traced_state).
-        anisotropic = sampling == "anisotropic_phong"
+        anisotropic = sampling == KIND.anisotropic_phong
         self.exponent = _parameter(exponent)
         self.specular_weight = _parameter(weight)
         self.exponent2 = _parameter(0.0 if anisotropic else exponent2)
@@ -332,7 +333,7 @@ class _NativeBSDFMixin:
         """(second exponent, specular_weight2) as the sampler takes them: ``exponent_v`` for
         anisotropic_phong (``exponent2`` there is its deprecated alias), ``exponent2`` otherwise."""
         exponent2, weight2 = second
-        if sampling != "anisotropic_phong":
+        if sampling != KIND.anisotropic_phong:
             if exponent_v is not None:
                 raise ValueError(f'{self._type_name()} "{self._filename}": "exponent_v" (n_v) is a parameter '
                                  f'of sampling "anisotropic_phong" only (this BSDF uses "{sampling}")')
@@ -349,10 +350,10 @@ class _NativeBSDFMixin:
     def _second_lobe(self, sampling, exponent2, weight2) -> tuple[float, float]:
         """(exponent2, specular_weight2) with file defaults applied; errors when two_lobe lacks
         them."""
-        if sampling == "two_lobe" and (exponent2 is None or weight2 is None):
+        if sampling == KIND.two_lobe and (exponent2 is None or weight2 is None):
             raise ValueError(f'{self._type_name()} "{self._filename}": sampling "two_lobe" needs '
                              '"exponent2" and "specular_weight2" (or a file that stores two lobes)')
-        if sampling == "anisotropic_phong":
+        if sampling == KIND.anisotropic_phong:
             if exponent2 is None:
                 raise ValueError(f'{self._type_name()} "{self._filename}": sampling "anisotropic_phong" '
                                  'needs "exponent_v" (n_v, across the tangent; or a file that stores an '
@@ -363,24 +364,24 @@ class _NativeBSDFMixin:
 
     def _phong_parameters(self, sampling, exponent, weight) -> tuple[float, float]:
         """(exponent, weight) with file defaults applied; errors when phong lacks them."""
-        if sampling in ("phong", "anisotropic_phong") and (exponent is None or weight is None):
+        if sampling in (KIND.phong, KIND.anisotropic_phong) and (exponent is None or weight is None):
             raise ValueError(f'{self._type_name()} "{self._filename}": sampling "{sampling}" needs '
                              '"exponent" and "specular_weight"')
         return _as_float(self, "exponent", exponent, 0.0), _as_float(self, "specular_weight", weight, 0.0)
 
     def _set_sampler(self, exponent: float, weight: float, exponent2: float = 0.0,
                      weight2: float = 0.0) -> None:
-        problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe",
+        problem = _sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == KIND.two_lobe,
                                     self._second_exponent_name())
         if problem:
             raise ValueError(f'{self._type_name()} "{self._filename}": invalid sampling parameters: {problem}')
         try:
-            if self._sampling == "tabulated":
+            if self._sampling == KIND.tabulated:
                 # Built once from the material; the lobe parameters do not enter it.
                 if getattr(self, "_table", None) is None:
                     self._table = _native.Sampler(self._sampling, material=self._native)
                 self._sampler = self._table
-            elif self._sampling == "anisotropic_phong":
+            elif self._sampling == KIND.anisotropic_phong:
                 self._sampler = _native.Sampler(self._sampling, exponent, weight, exponent_v=exponent2)
             else:
                 self._sampler = _native.Sampler(self._sampling, exponent, weight, exponent2, weight2)
@@ -391,7 +392,7 @@ class _NativeBSDFMixin:
         self._exponent2_value, self._weight2_value = exponent2, weight2
 
     def _second_exponent_name(self) -> str:
-        return "exponent_v" if self._sampling == "anisotropic_phong" else "exponent2"
+        return "exponent_v" if self._sampling == KIND.anisotropic_phong else "exponent2"
 
     def _apply_traced_state(self) -> None:
         """The traced kernels' copies of the validated sampling parameters: kernel parameters
@@ -401,7 +402,7 @@ class _NativeBSDFMixin:
         self._exponent2_jit = mi.Float(self._exponent2_value)
         self._weight2_jit = mi.Float(self._weight2_value)
         dr.make_opaque(self._exponent_jit, self._weight_jit, self._exponent2_jit, self._weight2_jit)
-        if self._sampling == "tabulated" and getattr(self, "_traced_table", None) is None:
+        if self._sampling == KIND.tabulated and getattr(self, "_traced_table", None) is None:
             t = self._table
             self._traced_table = jit.TracedTable(t.rows, t.theta_bins, t.phi_bins, t.cosine_weight,
                                                  *t.arrays())
@@ -552,7 +553,7 @@ class _NativeBSDFMixin:
             unused = "exponent2" if name == "exponent_v" else "exponent_v"
             unused_value = _scalar(getattr(self, unused), unused)
             weight2 = _scalar(self.specular_weight2, "specular_weight2")
-            problem = (_sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == "two_lobe", name)
+            problem = (_sampling_problem(exponent, weight, (exponent2, weight2), self._sampling == KIND.two_lobe, name)
                        or _sampling_problem(0.0, 0.0, (unused_value, 0.0), False, unused))
             if problem:
                 raise ValueError(f"invalid sampling parameters: {problem}")
@@ -572,9 +573,9 @@ class _NativeBSDFMixin:
             self._unused_second = unused_value
         if new != old:
             self._set_sampler(*new)  # validated above: cannot fail
-            if self._sampling not in ("phong", "two_lobe", "anisotropic_phong") or (
-                    self._sampling == "phong" and new[2:] != old[2:]) or (
-                    self._sampling == "anisotropic_phong" and new[3] != old[3]):
+            if self._sampling not in (KIND.phong, KIND.two_lobe, KIND.anisotropic_phong) or (
+                    self._sampling == KIND.phong and new[2:] != old[2:]) or (
+                    self._sampling == KIND.anisotropic_phong and new[3] != old[3]):
                 mi.Log(mi.LogLevel.Warn, f'{self._type_name()} "{self._filename}": exponent and '
                                          f'specular_weight only affect sampling "phong", "two_lobe" and '
                                          f'"anisotropic_phong", exponent2 and specular_weight2 only '
@@ -590,7 +591,7 @@ class _NativeBSDFMixin:
     def _restore_parameters(self) -> None:
         _assign(self.exponent, self._exponent_value)
         _assign(self.specular_weight, self._weight_value)
-        used, unused = ((self.exponent_v, self.exponent2) if self._sampling == "anisotropic_phong"
+        used, unused = ((self.exponent_v, self.exponent2) if self._sampling == KIND.anisotropic_phong
                         else (self.exponent2, self.exponent_v))
         _assign(used, self._exponent2_value)
         _assign(unused, self._unused_value())
@@ -610,11 +611,11 @@ class _NativeBSDFMixin:
     def to_string(self):
         lines = [f'filename = "{self._filename}"', *self._describe(), f"backend = {self._backend}",
                  f"sampling = {self._sampling}"]
-        if self._sampling in ("phong", "two_lobe", "anisotropic_phong"):
+        if self._sampling in (KIND.phong, KIND.two_lobe, KIND.anisotropic_phong):
             lines += [f"exponent = {self._exponent_value:g}", f"specular_weight = {self._weight_value:g}"]
-        if self._sampling == "anisotropic_phong":
+        if self._sampling == KIND.anisotropic_phong:
             lines += [f"exponent_v = {self._exponent2_value:g}"]
-        if self._sampling == "two_lobe":
+        if self._sampling == KIND.two_lobe:
             lines += [f"exponent2 = {self._exponent2_value:g}", f"specular_weight2 = {self._weight2_value:g}"]
         return f"{type(self).__name__}[\n" + ",\n".join("  " + line for line in lines) + "\n]"
 
@@ -692,11 +693,11 @@ class NbrdfMixin(_NativeBSDFMixin):
         # The file's measured best (nbrdf fit-phong), unless the scene gives lobe parameters.
         if self._native.default_sampling and exponent is None and weight is None:
             return self._native.default_sampling
-        if self._native.stored_sampling in ("two_lobe", "anisotropic_phong"):
+        if self._native.stored_sampling in (KIND.two_lobe, KIND.anisotropic_phong):
             return self._native.stored_sampling
         if self._native.has_sampling or (exponent is not None and weight is not None):
-            return "two_lobe" if None not in second else "phong"
-        return "cosine"
+            return KIND.two_lobe if None not in second else KIND.phong
+        return KIND.cosine
 
     def _phong_parameters(self, sampling, exponent, weight):
         if self._native.has_sampling:
@@ -705,10 +706,10 @@ class NbrdfMixin(_NativeBSDFMixin):
         return _NativeBSDFMixin._phong_parameters(self, sampling, exponent, weight)
 
     def _second_lobe(self, sampling, exponent2, weight2):
-        if self._native.stored_sampling == "two_lobe":
+        if self._native.stored_sampling == KIND.two_lobe:
             exponent2 = self._native.exponent2 if exponent2 is None else exponent2
             weight2 = self._native.specular_weight2 if weight2 is None else weight2
-        if self._native.stored_sampling == "anisotropic_phong" and sampling == "anisotropic_phong":
+        if self._native.stored_sampling == KIND.anisotropic_phong and sampling == KIND.anisotropic_phong:
             exponent2 = self._native.exponent_v if exponent2 is None else exponent2
         return _NativeBSDFMixin._second_lobe(self, sampling, exponent2, weight2)
 
@@ -746,8 +747,8 @@ class MerlMixin(_NativeBSDFMixin):
 
     def _default_sampling(self, exponent, weight, second=(None, None)) -> str:
         if exponent is None or weight is None:
-            return "cosine"
-        return "two_lobe" if None not in second else "phong"
+            return KIND.cosine
+        return KIND.two_lobe if None not in second else KIND.phong
 
     def _describe(self) -> list[str]:
         return []

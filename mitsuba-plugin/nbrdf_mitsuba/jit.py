@@ -18,13 +18,12 @@ every material, the weights loaded once per kernel launch). See ``TracedNetwork`
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ._native import SAMPLING_KINDS
+from ._native import KIND, SAMPLING_KINDS
 
 # The exp argument range of nbrdf-core's fastmath.rs (EXP_ARG_MAX / EXP_ARG_MIN): e^80 ~ 5.5e34
 # stays far below float32's maximum, and below -87 the result is -1 to float32 precision.
@@ -472,9 +471,6 @@ class TracedTable:
         return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 
-#: The strategies by the library's names (``_native.SAMPLING_KINDS``, from
-#: ``nbrdf_sampling_kind_name``): a name the library does not know fails here, at import.
-KIND = SimpleNamespace(**{name: name for name in SAMPLING_KINDS})
 
 
 def _isotropic_pdf(density):
