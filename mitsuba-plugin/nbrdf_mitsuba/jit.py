@@ -277,7 +277,7 @@ def _phong_elevation(exponent, u):
     return cos_theta, dr.safe_sqrt(one_minus_cos * (1.0 + cos_theta))
 
 
-def blinn_phong_half_vector(exponent, u1, u2) -> mi.Vector3f:
+def phong_half_vector(exponent, u1, u2) -> mi.Vector3f:
     """``cos theta_h = u1^(1/(n+1))``, the azimuth ``2 pi u2``."""
     return _spherical(*_phong_elevation(exponent, u1), u2)
 
@@ -499,7 +499,7 @@ def _reflected(view, h):
 
 def _sample_phong(view, u0, u1, u2, p, table):
     specular = (u0 < p[1]) | (p[1] >= 1.0)
-    return dr.select(specular, _reflected(view, blinn_phong_half_vector(p[0], u1, u2)), cosine_hemisphere(u1, u2))
+    return dr.select(specular, _reflected(view, phong_half_vector(p[0], u1, u2)), cosine_hemisphere(u1, u2))
 
 
 def _sample_two_lobe(view, u0, u1, u2, p, table):
@@ -511,7 +511,7 @@ def _sample_two_lobe(view, u0, u1, u2, p, table):
     rest = ~first & ~second & (total >= 1.0)
     first |= rest & ~(specular_weight2 > 0)
     second |= rest & (specular_weight2 > 0)
-    h = blinn_phong_half_vector(dr.select(first, exponent, exponent2), u1, u2)
+    h = phong_half_vector(dr.select(first, exponent, exponent2), u1, u2)
     return dr.select(first | second, _reflected(view, h), cosine_hemisphere(u1, u2))
 
 

@@ -91,7 +91,7 @@ fn anisotropic_specular_density(v: DVec3, l: DVec3, [nu, nv]: [f64; 2]) -> f64 {
 }
 
 /// The anisotropic mixture's density over the whole sphere of light directions (the anisotropic
-/// counterpart of [`super::blinn_phong_lobe_density`]): integrates to 1 for every view; 0 for
+/// counterpart of [`super::phong_lobe_density`]): integrates to 1 for every view; 0 for
 /// invalid parameters or directions.
 pub fn anisotropic_lobe_density(
     view: DVec3,

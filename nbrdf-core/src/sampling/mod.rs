@@ -28,7 +28,7 @@ use std::sync::Arc;
 pub use anisotropic::{anisotropic_half_vector, anisotropic_lobe_density};
 pub use hemisphere::{cosine_hemisphere, uniform_hemisphere};
 pub use kind::{ParsedKind, SamplingKind, UnknownSamplingCode, UnknownSamplingKind};
-pub use phong::{blinn_phong_half_vector, blinn_phong_lobe_density};
+pub use phong::{phong_half_vector, phong_lobe_density};
 pub use tabulated::TabulatedSampler;
 pub use two_lobe::two_lobe_density;
 
@@ -50,7 +50,7 @@ pub enum SamplingStrategy {
     Uniform,
     Cosine,
     /// Mixture of a Blinn-Phong lobe (exponent `n >= 0`) with weight `w` in `[0, 1]` and a
-    /// cosine lobe ([`blinn_phong_lobe_density`]).
+    /// cosine lobe ([`phong_lobe_density`]).
     Phong {
         exponent: f64,
         specular_weight: f64,

@@ -36,7 +36,7 @@ pub(super) fn sample(
     [u0, u1, u2]: [f64; 3],
 ) -> DVec3 {
     if picks_lobe(u0, specular_weight) {
-        reflect(v, blinn_phong_half_vector(exponent, u1, u2))
+        reflect(v, phong_half_vector(exponent, u1, u2))
     } else {
         cosine_hemisphere(u1, u2)
     }
@@ -59,7 +59,7 @@ pub(super) fn half_vector_elevation(exponent: f64, u: f64) -> (f64, f64) {
 }
 
 /// Half vector with `cos(theta_h) = u1^(1/(n+1))` and azimuth `2 pi u2`.
-pub fn blinn_phong_half_vector(exponent: f64, u1: f64, u2: f64) -> DVec3 {
+pub fn phong_half_vector(exponent: f64, u1: f64, u2: f64) -> DVec3 {
     let (cos, sin) = half_vector_elevation(exponent, u1);
     spherical(cos, sin, u2)
 }
@@ -109,12 +109,7 @@ pub(super) fn specular_density(v: DVec3, l: DVec3, n: f64) -> f64 {
 /// the upper hemisphere. It integrates to 1 for every view; [`SamplingStrategy::pdf`] is this
 /// restricted to both directions above the horizon. Inputs need not be unit length; invalid
 /// parameters or directions give 0.
-pub fn blinn_phong_lobe_density(
-    view: DVec3,
-    light: DVec3,
-    exponent: f64,
-    specular_weight: f64,
-) -> f64 {
+pub fn phong_lobe_density(view: DVec3, light: DVec3, exponent: f64, specular_weight: f64) -> f64 {
     SamplingStrategy::Phong {
         exponent,
         specular_weight,

@@ -72,7 +72,7 @@ fn density_integral(v: DVec3, density: impl Fn(DVec3) -> f64 + Sync) -> f64 {
 
 /// [`density_integral`] of the Blinn-Phong mixture.
 fn lobe_integral(v: DVec3, n: f64, w: f64) -> f64 {
-    density_integral(v, |l| blinn_phong_lobe_density(v, l, n, w))
+    density_integral(v, |l| phong_lobe_density(v, l, n, w))
 }
 
 #[test]
@@ -154,7 +154,7 @@ fn anisotropic_density_reduces_to_blinn_phong_and_orients_by_axis() {
     for _ in 0..500 {
         let v = uniform_hemisphere(rng.next_f64(), rng.next_f64());
         let l = uniform_hemisphere(rng.next_f64(), rng.next_f64());
-        let want = blinn_phong_lobe_density(v, l, 40.0, 0.6);
+        let want = phong_lobe_density(v, l, 40.0, 0.6);
         let got = anisotropic_lobe_density(v, l, [40.0, 40.0], 0.6);
         assert!((got - want).abs() <= 1e-12 * want, "{got} vs {want}");
     }
@@ -191,7 +191,7 @@ fn blinn_phong_density_integrates_to_one_over_the_sphere() {
         }
     }
     let total = cap_integral(DVec3::Z, 0.5 * PI, 800, 64, |l| {
-        blinn_phong_lobe_density(DVec3::Z, l, 50.0, 0.0)
+        phong_lobe_density(DVec3::Z, l, 50.0, 0.0)
     });
     assert!((total - 1.0).abs() < 1e-5, "{total}");
 }
@@ -215,7 +215,7 @@ fn pdf_is_the_lobe_density_above_the_horizon_and_zero_below() {
             assert_eq!(p, 0.0);
             assert_eq!(strategy.pdf_f64(-v, -l), 0.0);
         } else {
-            let want = blinn_phong_lobe_density(v, l, 30.0, 0.6);
+            let want = phong_lobe_density(v, l, 30.0, 0.6);
             assert!((p - want).abs() <= 1e-12 * want, "{p} vs {want}");
         }
     }

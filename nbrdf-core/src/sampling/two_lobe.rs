@@ -3,7 +3,7 @@
 //! halo or a diffuse base.
 
 use super::hemisphere::{cosine_hemisphere, with_cosine};
-use super::phong::{blinn_phong_half_vector, specular_density};
+use super::phong::{phong_half_vector, specular_density};
 use super::{exponent_in_range, reflect, weighted, SamplingStrategy, MAX_EXPONENT};
 use glam::DVec3;
 
@@ -60,7 +60,7 @@ pub(super) fn sample(
     match two_lobe_component(u0, weight1, weight2) {
         Some(lobe) => {
             let exponent = if lobe == 1 { exponent1 } else { exponent2 };
-            reflect(v, blinn_phong_half_vector(exponent, u1, u2))
+            reflect(v, phong_half_vector(exponent, u1, u2))
         }
         None => cosine_hemisphere(u1, u2),
     }
@@ -82,7 +82,7 @@ pub(super) fn density(
 }
 
 /// The two-lobe mixture's density over the whole sphere of light directions (the two-lobe
-/// counterpart of [`super::blinn_phong_lobe_density`]): integrates to 1 for every view when the
+/// counterpart of [`super::phong_lobe_density`]): integrates to 1 for every view when the
 /// weights sum to at most 1; 0 for invalid parameters or directions.
 pub fn two_lobe_density(view: DVec3, light: DVec3, exponents: [f64; 2], weights: [f64; 2]) -> f64 {
     SamplingStrategy::TwoLobe {
