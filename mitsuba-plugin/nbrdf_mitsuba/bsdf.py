@@ -2,7 +2,9 @@
 MERL-format ``.binary`` table).
 
 Mitsuba's ``BSDF`` base class differs per variant, so :func:`classes` builds the two plugin
-classes for the current variant from the variant-independent mixins below. RGB variants only.
+classes for the current variant from the variant-independent mixins below. RGB, monochrome and
+polarized variants (see :func:`_to_spectrum`); spectral variants are refused until the RGB data
+is uplifted to spectra.
 
 Two backends (parameter ``backend``):
 
@@ -162,6 +164,23 @@ def _to_color(rgb: np.ndarray):
     return mi.Color3f(float(rgb[0, 0]), float(rgb[1, 0]), float(rgb[2, 0]))
 
 
+def _to_spectrum(color):
+    """The variant's ``mi.Spectrum`` of an RGB value (``mi.Color3f``).
+
+    Monochrome variants take its luminance, as Mitsuba converts RGB data there (``mi.luminance``,
+    Rec. 709 weights). Polarized variants get the depolarizer's Mueller matrix times the value, as
+    Mitsuba's own non-polarizing BSDFs (``diffuse``, ``roughplastic``) return: a depolarizer
+    needs no rotation between the BSDF's and Mitsuba's Stokes frames.
+    """
+    if mi.is_monochromatic:
+        color = mi.UnpolarizedSpectrum(mi.luminance(color))
+    return mi.depolarizer(color) if mi.is_polarized else color
+
+
+def _zero_spectrum(n: int):
+    return dr.zeros(mi.Spectrum, n) if _is_jit() else mi.Spectrum(0.0)
+
+
 def _to_vector(xyz: np.ndarray):
     if _is_jit():
         return mi.Vector3f(xyz)
@@ -214,9 +233,10 @@ class _NativeBSDFMixin:
 
     def _init_native(self, props) -> None:
         mi.BSDF.__init__(self, props)
-        if not mi.is_rgb or mi.is_polarized:
-            raise RuntimeError(f"{self._type_name()}: only RGB variants are supported (the current variant is "
-                               f"{mi.variant()}; use e.g. scalar_rgb or llvm_ad_rgb)")
+        if mi.is_spectral:
+            raise RuntimeError(f"{self._type_name()}: spectral variants are not supported yet (the current "
+                               f"variant is {mi.variant()}; use an RGB or monochrome variant, e.g. "
+                               "scalar_rgb, llvm_ad_rgb or llvm_ad_mono, polarized or not)")
         filename = _get(props, "filename")
         if not filename:
             raise ValueError(f'{self._type_name()}: the "filename" parameter is required '
@@ -413,7 +433,7 @@ class _NativeBSDFMixin:
 
     def _jit_eval(self, si, wo, active):
         f = self._traced.eval(si.wi, wo)
-        return dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0)
+        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0))
 
     def _jit_pdf(self, si, wo, active):
         pdf = jit.pdf(self._sampling, si.wi, wo, self._exponent_jit, self._weight_jit,
@@ -436,7 +456,7 @@ class _NativeBSDFMixin:
         weight = f_cos / dr.select(active, pdf, 1.0)
         # As sampling/mod.rs sample_weight: 0 where a tiny pdf would overflow the quotient.
         weight = dr.select(active & dr.all(dr.isfinite(weight)), weight, 0.0)
-        return bs, weight
+        return bs, _to_spectrum(weight)
 
     def _traced_path(self, *values) -> bool:
         """Whether this call goes through the traced code: the jit backend, or the rust backend
@@ -472,10 +492,10 @@ class _NativeBSDFMixin:
             enabled = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
             return self._jit_eval(si, wo, active & enabled)
         if not self._enabled(ctx, si.wi, wo):
-            return dr.zeros(mi.Color3f, _width(si.wi, wo) if _is_jit() else 1)
+            return _zero_spectrum(_width(si.wi, wo) if _is_jit() else 1)
         view, light = _directions(si.wi, wo)
         value = _to_color(self._native.eval(view, light))
-        return dr.select(_both_above(active, si.wi, wo), value, 0.0)
+        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), value, 0.0))
 
     def pdf(self, ctx, si, wo, active=True):
         if self._traced_path(si.wi, wo):
@@ -492,12 +512,12 @@ class _NativeBSDFMixin:
             return self._jit_eval(si, wo, active), self._jit_pdf(si, wo, active)
         if not self._enabled(ctx, si.wi, wo):
             n = _width(si.wi, wo) if _is_jit() else 1
-            return dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
+            return _zero_spectrum(n), dr.zeros(mi.Float, n)
         view, light = _directions(si.wi, wo)
         value = _to_color(self._native.eval(view, light))
         pdf = _to_float(self._sampler.pdf(view, light))
         active = _both_above(active, si.wi, wo)
-        return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+        return _to_spectrum(dr.select(active, value, 0.0)), dr.select(active, pdf, 0.0)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         if self._traced_path(si.wi, sample1, sample2):
@@ -505,7 +525,7 @@ class _NativeBSDFMixin:
         n = _width(si.wi, sample1, sample2) if _is_jit() else 1
         bs = dr.zeros(mi.BSDFSample3f, n) if _is_jit() else mi.BSDFSample3f()
         if not self._enabled(ctx, si.wi, sample1, sample2):
-            return bs, dr.zeros(mi.Color3f, n) if _is_jit() else mi.Color3f(0.0)
+            return bs, _zero_spectrum(n)
         _evaluate(si.wi, sample1, sample2)
         view = _planar(_vector_rows(si.wi), n)
         u = _planar([sample1, sample2.x, sample2.y], n)
@@ -517,7 +537,7 @@ class _NativeBSDFMixin:
         bs.sampled_component = mi.UInt32(0)
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (bs.pdf > 0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
-        return bs, dr.select(active, _to_color(weight), 0.0)
+        return bs, _to_spectrum(dr.select(active, _to_color(weight), 0.0))
 
     @staticmethod
     def _enabled(ctx, *values) -> bool:
