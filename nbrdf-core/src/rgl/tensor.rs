@@ -205,9 +205,15 @@ impl TensorFile {
 }
 
 /// Bounds-checked little-endian reads from a byte buffer.
+/// Fields by name.
+type FieldIndex = BTreeMap<String, Field>;
+
+/// A step of the parse, or the message saying what is wrong (the caller names the file).
+type FormatResult<T> = std::result::Result<T, String>;
+
 /// The version and field index of a tensor file's `bytes`, or the message saying what is wrong
 /// (the caller names the file).
-fn index_fields(bytes: &[u8]) -> std::result::Result<((u8, u8), BTreeMap<String, Field>), String> {
+fn index_fields(bytes: &[u8]) -> FormatResult<((u8, u8), FieldIndex)> {
     let (version, count) = read_preamble(bytes)?;
     let mut reader = Reader {
         bytes,
@@ -225,7 +231,7 @@ fn index_fields(bytes: &[u8]) -> std::result::Result<((u8, u8), BTreeMap<String,
 
 /// Checks the magic and version and returns them with the field count, which is bounded by
 /// what the file can hold so nothing is allocated from an absurd count.
-fn read_preamble(bytes: &[u8]) -> std::result::Result<((u8, u8), usize), String> {
+fn read_preamble(bytes: &[u8]) -> FormatResult<((u8, u8), usize)> {
     if bytes.len() < PREAMBLE {
         return Err(format!(
             "{} bytes, too short for a tensor file header (truncated?)",
@@ -257,7 +263,7 @@ fn read_field_header(
     reader: &mut Reader<'_>,
     index: usize,
     count: usize,
-) -> std::result::Result<(String, Field), String> {
+) -> FormatResult<(String, Field)> {
     let truncated = || format!("field header {index} of {count} is truncated");
     let name_len = reader.u16().ok_or_else(truncated)?;
     let name = reader.take(name_len as usize).ok_or_else(truncated)?;
