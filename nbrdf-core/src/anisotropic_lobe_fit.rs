@@ -164,20 +164,25 @@ impl AnisotropicLobeQuadrature {
 
     /// The lowest-variance lobe: isotropic grid, `(n_u, n_v)` grid, pattern search.
     pub fn fit(&self, config: &AnisotropicLobeFitConfig) -> Result<AnisotropicLobeFit> {
-        let base = &config.base;
-        let exponents_ok = |e: &[f64]| e.iter().all(|n| (0.0..=MAX_EXPONENT).contains(n));
-        if !exponents_ok(&base.exponents)
-            || !exponents_ok(&config.grid_exponents)
-            || base.weights.iter().any(|w| !(0.0..=1.0).contains(w))
-            || base.exponents.is_empty()
-            || base.weights.is_empty()
-        {
-            return Err(NbrdfError::InvalidArgument(
-                "anisotropic lobe fit: exponents must be in [0, MAX_EXPONENT], weights in [0, 1]"
-                    .into(),
-            ));
-        }
+        check_config(config)?;
         let cosine = self.relative_variance(0.0, 0.0, 0.0);
+        let iso = self.isotropic_start(&config.base, cosine);
+        let start = self.grid_start(&config.grid_exponents, iso);
+        let end = self.refine(start, config.refine_levels);
+        Ok(AnisotropicLobeFit {
+            exponent_u: end.1,
+            exponent_v: end.2,
+            specular_weight: end.3,
+            relative_variance: end.0,
+            isotropic: (iso.1, iso.3),
+            isotropic_relative_variance: iso.0,
+            cosine_relative_variance: cosine,
+        })
+    }
+
+    /// The best isotropic lobe of the `(n, w)` grid of `base`; the cosine (variance `cosine`)
+    /// when no lobe scores finitely.
+    fn isotropic_start(&self, base: &LobeFitConfig, cosine: f64) -> Candidate {
         let no_lobe = (f64::INFINITY, 0.0, 0.0, 0.0);
         let isotropic: Vec<Candidate> = base
             .exponents
@@ -188,22 +193,29 @@ impl AnisotropicLobeQuadrature {
             .map(|&(n, w)| self.score(n, n, w))
             .collect();
         let iso = best(isotropic.into_iter(), no_lobe);
-        let iso = if iso.0.is_finite() {
+        if iso.0.is_finite() {
             iso
         } else {
             (cosine, 0.0, 0.0, 0.0)
-        };
-        let pairs: Vec<(f64, f64)> = config
-            .grid_exponents
+        }
+    }
+
+    /// The best of `iso` and every `(n_u, n_v)` pair of `exponents` at `iso`'s weight.
+    fn grid_start(&self, exponents: &[f64], iso: Candidate) -> Candidate {
+        let pairs: Vec<(f64, f64)> = exponents
             .iter()
-            .flat_map(|&nu| config.grid_exponents.iter().map(move |&nv| (nu, nv)))
+            .flat_map(|&nu| exponents.iter().map(move |&nv| (nu, nv)))
             .collect();
         let grid: Vec<Candidate> = pairs
             .par_iter()
             .map(|&(nu, nv)| self.score(nu, nv, iso.3))
             .collect();
-        let start = best(grid.into_iter(), iso);
-        // Pattern search in (ln(1 + n_u), ln(1 + n_v), w); steps start at a grid spacing.
+        best(grid.into_iter(), iso)
+    }
+
+    /// Pattern search from `start` in `(ln(1 + n_u), ln(1 + n_v), w)`, `levels` halvings of
+    /// steps that start at a grid spacing.
+    fn refine(&self, start: Candidate, levels: usize) -> Candidate {
         let step_log = 0.5 * 10f64.ln() / 4.0;
         let search = PatternSearch {
             moves: vec![
@@ -217,7 +229,7 @@ impl AnisotropicLobeQuadrature {
                 [0.0, 0.0, -1.0],
             ],
             steps: [step_log, step_log, 0.05],
-            levels: config.refine_levels,
+            levels,
             max_passes: usize::MAX,
         };
         let coordinates = |(nu, nv, w): (f64, f64, f64)| [nu.ln_1p(), nv.ln_1p(), w];
@@ -239,17 +251,27 @@ impl AnisotropicLobeQuadrature {
             },
             |&(nu, nv, w)| self.relative_variance(nu, nv, w),
         );
-        let current = (end.score, end.params.0, end.params.1, end.params.2);
-        Ok(AnisotropicLobeFit {
-            exponent_u: current.1,
-            exponent_v: current.2,
-            specular_weight: current.3,
-            relative_variance: current.0,
-            isotropic: (iso.1, iso.3),
-            isotropic_relative_variance: iso.0,
-            cosine_relative_variance: cosine,
-        })
+        (end.score, end.params.0, end.params.1, end.params.2)
     }
+}
+
+/// Rejects exponents outside `[0, MAX_EXPONENT]`, weights outside `[0, 1]` and an empty
+/// isotropic grid.
+fn check_config(config: &AnisotropicLobeFitConfig) -> Result<()> {
+    let base = &config.base;
+    let exponents_ok = |e: &[f64]| e.iter().all(|n| (0.0..=MAX_EXPONENT).contains(n));
+    if !exponents_ok(&base.exponents)
+        || !exponents_ok(&config.grid_exponents)
+        || base.weights.iter().any(|w| !(0.0..=1.0).contains(w))
+        || base.exponents.is_empty()
+        || base.weights.is_empty()
+    {
+        return Err(NbrdfError::InvalidArgument(
+            "anisotropic lobe fit: exponents must be in [0, MAX_EXPONENT], weights in [0, 1]"
+                .into(),
+        ));
+    }
+    Ok(())
 }
 
 /// Builds the quadrature of `target` and fits its lobe.

@@ -165,6 +165,27 @@ impl SphereRenderer {
         self.render(flat, s).into_iter().map(tone).collect()
     }
 
+    /// Sum of squared differences to `target` of the pixels no sample covers, which stay at
+    /// the tone map's floor whatever the network: a constant of the loss.
+    fn unlit_loss(&self, target: &[f32]) -> f64 {
+        let n = self.size * self.size;
+        let floor_tone = tone(0.0);
+        let mut lit = vec![false; n];
+        for &p in &self.pixels {
+            lit[p] = true;
+        }
+        let mut loss = 0.0f64;
+        for k in 0..OUTPUTS {
+            for (p, &is_lit) in lit.iter().enumerate() {
+                if !is_lit {
+                    let d = (floor_tone - target[k * n + p]) as f64;
+                    loss += d * d;
+                }
+            }
+        }
+        loss
+    }
+
     /// Loss `mean (tone(render(flat)) - target)^2` over the whole image (`target` tone-mapped,
     /// planar, e.g. from [`SphereRenderer::render_toned`]) and, if `grad` is given, its gradient
     /// with respect to the flat parameters, written into `grad`.
@@ -186,21 +207,7 @@ impl SphereRenderer {
         let n = self.size * self.size;
         assert_eq!(target.len(), 3 * n, "target image size");
         let inv = 1.0 / (3 * n) as f32;
-        let floor_tone = tone(0.0);
-        // Pixels that are always black contribute a constant.
-        let mut lit = vec![false; n];
-        for &p in &self.pixels {
-            lit[p] = true;
-        }
-        let mut loss = 0.0f64;
-        for k in 0..OUTPUTS {
-            for (p, &is_lit) in lit.iter().enumerate() {
-                if !is_lit {
-                    let d = (floor_tone - target[k * n + p]) as f64;
-                    loss += d * d;
-                }
-            }
-        }
+        let mut loss = self.unlit_loss(target);
         if grad.is_some() {
             s.grad_padded.fill(0.0);
         }
@@ -222,25 +229,14 @@ impl SphereRenderer {
                     let t = tone(r);
                     let d = t - target[k * n + self.pixels[i]];
                     chunk_loss += (d as f64) * (d as f64);
-                    let in_range =
-                        z > crate::fastmath::EXP_ARG_MIN && z < crate::fastmath::EXP_ARG_MAX;
-                    let g = if self.surrogate_floor > 0.0 {
-                        // Surrogate: the tone map's slope taken at `max(r, r0)` and the
-                        // clamp of `expm1` at 0 passed through, so that pixels decoded too dark
-                        // (or black) still pull their network output up.
-                        let r_eff = r.max(self.surrogate_floor);
-                        let slope = GAMMA_INV * tone(r_eff) / r_eff;
-                        if in_range {
-                            2.0 * d * inv * slope * cos * (y_raw + 1.0)
-                        } else {
-                            0.0
-                        }
-                    } else if y_raw > 0.0 && r > FLOOR && in_range {
-                        // d t / d r = t / (2.2 r); d r / d z = cos e^z.
-                        2.0 * d * inv * GAMMA_INV * t / r * cos * (y_raw + 1.0)
-                    } else {
-                        0.0
+                    let pixel = PixelValue {
+                        z,
+                        y_raw,
+                        cos,
+                        r,
+                        t,
                     };
+                    let g = pixel_gradient(&pixel, 2.0 * d * inv, self.surrogate_floor);
                     s.chunk.set_output_gradient(lane, k, g);
                 }
             }
@@ -259,6 +255,40 @@ impl SphereRenderer {
             }
         }
         loss * inv as f64
+    }
+}
+
+/// One output of one lit pixel as [`SphereRenderer::loss`] evaluates it: the network's
+/// pre-activation `z`, `y_raw = expm1(z)`, the cosine, the radiance `r = max(y_raw, 0) cos` and
+/// its tone-mapped value `t`.
+struct PixelValue {
+    z: f32,
+    y_raw: f32,
+    cos: f32,
+    r: f32,
+    t: f32,
+}
+
+/// Gradient of the loss with respect to the pixel's `z`, given `d_loss_d_t` (`2 d / (3 n)`):
+/// the exact one for `surrogate_floor == 0`, else the surrogate of [`SphereRenderer::loss`].
+fn pixel_gradient(p: &PixelValue, d_loss_d_t: f32, surrogate_floor: f32) -> f32 {
+    let in_range = p.z > crate::fastmath::EXP_ARG_MIN && p.z < crate::fastmath::EXP_ARG_MAX;
+    if surrogate_floor > 0.0 {
+        // Surrogate: the tone map's slope taken at `max(r, r0)` and the clamp of `expm1` at 0
+        // passed through, so that pixels decoded too dark (or black) still pull their network
+        // output up.
+        let r_eff = p.r.max(surrogate_floor);
+        let slope = GAMMA_INV * tone(r_eff) / r_eff;
+        if in_range {
+            d_loss_d_t * slope * p.cos * (p.y_raw + 1.0)
+        } else {
+            0.0
+        }
+    } else if p.y_raw > 0.0 && p.r > FLOOR && in_range {
+        // d t / d r = t / (2.2 r); d r / d z = cos e^z.
+        d_loss_d_t * GAMMA_INV * p.t / p.r * p.cos * (p.y_raw + 1.0)
+    } else {
+        0.0
     }
 }
 

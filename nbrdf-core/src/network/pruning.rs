@@ -287,27 +287,12 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
         let centre = domain.centre();
         if Domain::above_horizon(centre) {
             fire_at(layers, centre, &mut hidden);
-            for (flags, values) in candidate.iter_mut().zip(&hidden) {
-                for (flag, &value) in flags.iter_mut().zip(values) {
-                    *flag &= value <= 0.0;
-                }
-            }
+            clear_fired(&mut candidate, &hidden);
         }
         bounded += 1;
         affine_bounds(&layers[0], &domain.input_bounds(), &mut first);
         affine_bounds(&layers[1], &relu_bounds(&first), &mut second);
-        let open: Vec<(usize, usize)> = [&first, &second]
-            .iter()
-            .enumerate()
-            .flat_map(|(l, bounds)| {
-                let candidate = &candidate[l];
-                bounds
-                    .iter()
-                    .enumerate()
-                    .filter(move |&(k, z)| candidate[k] && z.hi > 0.0)
-                    .map(move |(k, _)| (l, k))
-            })
-            .collect();
+        let open = open_units(&candidate, [&first, &second]);
         if open.is_empty() {
             continue;
         }
@@ -324,15 +309,46 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
                 .map(|child| (child, depth + 1)),
         );
     }
+    active_from_dead(all_active, &candidate)
+}
+
+/// Drops from the candidates the units `hidden` (a point's hidden outputs) shows firing.
+fn clear_fired(candidate: &mut [Vec<bool>; 2], hidden: &[Vec<f32>; 2]) {
+    for (flags, values) in candidate.iter_mut().zip(hidden) {
+        for (flag, &value) in flags.iter_mut().zip(values) {
+            *flag &= value <= 0.0;
+        }
+    }
+}
+
+/// The `(layer, unit)` candidates whose pre-activation `bounds` over a box may be positive:
+/// those the box does not prove dead.
+fn open_units(candidate: &[Vec<bool>; 2], bounds: [&Vec<Interval>; 2]) -> Vec<(usize, usize)> {
+    bounds
+        .iter()
+        .enumerate()
+        .flat_map(|(l, bounds)| {
+            let candidate = &candidate[l];
+            bounds
+                .iter()
+                .enumerate()
+                .filter(move |&(k, z)| candidate[k] && z.hi > 0.0)
+                .map(move |(k, _)| (l, k))
+        })
+        .collect()
+}
+
+/// The active units once the search ends: all but the `dead` ones (candidates left), keeping a
+/// layer's first unit when all of it is dead, since a layer needs a width.
+fn active_from_dead(all_active: ActiveUnits, dead: &[Vec<bool>; 2]) -> ActiveUnits {
     let mut active = all_active;
-    for (flags, candidate) in [&mut active.hidden1, &mut active.hidden2]
+    for (flags, dead) in [&mut active.hidden1, &mut active.hidden2]
         .into_iter()
-        .zip(&candidate)
+        .zip(dead)
     {
-        for (flag, &dead) in flags.iter_mut().zip(candidate) {
+        for (flag, &dead) in flags.iter_mut().zip(dead) {
             *flag = !dead;
         }
-        // A layer needs a width: keep its first unit when all of them are dead.
         if flags.iter().all(|&a| !a) {
             flags[0] = true;
         }

@@ -119,90 +119,15 @@ impl TensorFile {
     /// Indexes `bytes`, the content of the file `path` (named in errors).
     pub fn parse(bytes: Vec<u8>, path: impl Into<PathBuf>) -> Result<TensorFile> {
         let path = path.into();
-        let fail =
-            |message: String| Err(NbrdfError::format(&path, format!("tensor file: {message}")));
-        if bytes.len() < PREAMBLE {
-            return fail(format!(
-                "{} bytes, too short for a tensor file header (truncated?)",
-                bytes.len()
-            ));
+        match index_fields(&bytes) {
+            Ok((version, fields)) => Ok(TensorFile {
+                path,
+                bytes,
+                fields,
+                version,
+            }),
+            Err(message) => Err(NbrdfError::format(&path, format!("tensor file: {message}"))),
         }
-        if &bytes[..12] != MAGIC {
-            return fail("not a tensor file (missing the \"tensor_file\" header)".into());
-        }
-        let version = (bytes[12], bytes[13]);
-        if version.1 != 0 {
-            return fail(format!("unsupported version {}.{}", version.0, version.1));
-        }
-        let mut reader = Reader {
-            bytes: &bytes,
-            pos: 14,
-        };
-        let count = reader.u32().unwrap_or(0) as usize;
-        // Every field header takes at least MIN_FIELD_HEADER bytes: a count the file cannot hold
-        // is rejected before anything is allocated from it.
-        if count > (bytes.len() - PREAMBLE) / MIN_FIELD_HEADER {
-            return fail(format!(
-                "header claims {count} fields, more than the {} byte file can hold",
-                bytes.len()
-            ));
-        }
-        let mut fields = BTreeMap::new();
-        for index in 0..count {
-            let truncated = || format!("field header {index} of {count} is truncated");
-            let Some(name_len) = reader.u16() else {
-                return fail(truncated());
-            };
-            let Some(name) = reader.take(name_len as usize) else {
-                return fail(truncated());
-            };
-            let Ok(name) = std::str::from_utf8(name).map(str::to_owned) else {
-                return fail(format!("field {index}: name is not UTF-8"));
-            };
-            let (Some(ndim), Some(code), Some(offset)) = (reader.u16(), reader.u8(), reader.u64())
-            else {
-                return fail(truncated());
-            };
-            let Some(dtype) = DType::from_code(code) else {
-                return fail(format!("field \"{name}\": unknown dtype code {code}"));
-            };
-            let mut shape = Vec::with_capacity((ndim as usize).min(reader.remaining() / 8));
-            for _ in 0..ndim {
-                let Some(extent) = reader.u64() else {
-                    return fail(truncated());
-                };
-                shape.push(extent);
-            }
-            let elements = shape.iter().try_fold(1u64, |acc, &n| acc.checked_mul(n));
-            let end = elements
-                .and_then(|n| n.checked_mul(dtype.size() as u64))
-                .and_then(|size| size.checked_add(offset));
-            match end {
-                Some(end) if end <= bytes.len() as u64 => {}
-                _ => {
-                    return fail(format!(
-                        "field \"{name}\" ({dtype}, shape {shape:?}, offset {offset}) extends past the end of the {} byte file (truncated?)",
-                        bytes.len()
-                    ))
-                }
-            }
-            let field = Field {
-                dtype,
-                // Fits usize: bounded by the file length above.
-                shape: shape.iter().map(|&n| n as usize).collect(),
-                offset: offset as usize,
-                len: elements.unwrap_or(0) as usize,
-            };
-            if fields.insert(name.clone(), field).is_some() {
-                return fail(format!("field \"{name}\" appears twice"));
-            }
-        }
-        Ok(TensorFile {
-            path,
-            bytes,
-            fields,
-            version,
-        })
     }
 
     pub fn path(&self) -> &Path {
@@ -280,6 +205,104 @@ impl TensorFile {
 }
 
 /// Bounds-checked little-endian reads from a byte buffer.
+/// Fields by name.
+type FieldIndex = BTreeMap<String, Field>;
+
+/// A step of the parse, or the message saying what is wrong (the caller names the file).
+type FormatResult<T> = std::result::Result<T, String>;
+
+/// The version and field index of a tensor file's `bytes`, or the message saying what is wrong
+/// (the caller names the file).
+fn index_fields(bytes: &[u8]) -> FormatResult<((u8, u8), FieldIndex)> {
+    let (version, count) = read_preamble(bytes)?;
+    let mut reader = Reader {
+        bytes,
+        pos: PREAMBLE,
+    };
+    let mut fields = BTreeMap::new();
+    for index in 0..count {
+        let (name, field) = read_field_header(&mut reader, index, count)?;
+        if fields.insert(name.clone(), field).is_some() {
+            return Err(format!("field \"{name}\" appears twice"));
+        }
+    }
+    Ok((version, fields))
+}
+
+/// Checks the magic and version and returns them with the field count, which is bounded by
+/// what the file can hold so nothing is allocated from an absurd count.
+fn read_preamble(bytes: &[u8]) -> FormatResult<((u8, u8), usize)> {
+    if bytes.len() < PREAMBLE {
+        return Err(format!(
+            "{} bytes, too short for a tensor file header (truncated?)",
+            bytes.len()
+        ));
+    }
+    if &bytes[..12] != MAGIC {
+        return Err("not a tensor file (missing the \"tensor_file\" header)".into());
+    }
+    let version = (bytes[12], bytes[13]);
+    if version.1 != 0 {
+        return Err(format!("unsupported version {}.{}", version.0, version.1));
+    }
+    let count = Reader { bytes, pos: 14 }.u32().unwrap_or(0) as usize;
+    // Every field header takes at least MIN_FIELD_HEADER bytes: a count the file cannot hold
+    // is rejected before anything is allocated from it.
+    if count > (bytes.len() - PREAMBLE) / MIN_FIELD_HEADER {
+        return Err(format!(
+            "header claims {count} fields, more than the {} byte file can hold",
+            bytes.len()
+        ));
+    }
+    Ok((version, count))
+}
+
+/// Reads header `index` (of `count`) at the reader's position: the field's name and its
+/// description, whose data is checked to lie inside the file.
+fn read_field_header(
+    reader: &mut Reader<'_>,
+    index: usize,
+    count: usize,
+) -> FormatResult<(String, Field)> {
+    let truncated = || format!("field header {index} of {count} is truncated");
+    let name_len = reader.u16().ok_or_else(truncated)?;
+    let name = reader.take(name_len as usize).ok_or_else(truncated)?;
+    let Ok(name) = std::str::from_utf8(name).map(str::to_owned) else {
+        return Err(format!("field {index}: name is not UTF-8"));
+    };
+    let (Some(ndim), Some(code), Some(offset)) = (reader.u16(), reader.u8(), reader.u64()) else {
+        return Err(truncated());
+    };
+    let Some(dtype) = DType::from_code(code) else {
+        return Err(format!("field \"{name}\": unknown dtype code {code}"));
+    };
+    let mut shape = Vec::with_capacity((ndim as usize).min(reader.remaining() / 8));
+    for _ in 0..ndim {
+        shape.push(reader.u64().ok_or_else(truncated)?);
+    }
+    let file_len = reader.bytes.len();
+    let elements = shape.iter().try_fold(1u64, |acc, &n| acc.checked_mul(n));
+    let end = elements
+        .and_then(|n| n.checked_mul(dtype.size() as u64))
+        .and_then(|size| size.checked_add(offset));
+    match end {
+        Some(end) if end <= file_len as u64 => {}
+        _ => {
+            return Err(format!(
+                "field \"{name}\" ({dtype}, shape {shape:?}, offset {offset}) extends past the end of the {file_len} byte file (truncated?)"
+            ))
+        }
+    }
+    let field = Field {
+        dtype,
+        // Fits usize: bounded by the file length above.
+        shape: shape.iter().map(|&n| n as usize).collect(),
+        offset: offset as usize,
+        len: elements.unwrap_or(0) as usize,
+    };
+    Ok((name, field))
+}
+
 struct Reader<'a> {
     bytes: &'a [u8],
     pos: usize,

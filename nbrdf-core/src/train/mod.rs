@@ -269,9 +269,7 @@ pub fn train_on_sets(
     let mut trainer = Trainer::new(config.hidden, config.batch, config.adam, config.seed);
     let mut order: Vec<u32> = Vec::new();
     let mut best = (f64::INFINITY, 0usize, trainer.weights.p.clone());
-    let mut reference = f64::INFINITY;
-    let mut since_improvement = 0;
-    let mut decays_left = config.lr_decays;
+    let mut schedule = Schedule::new(config);
     let mut history = Vec::with_capacity(config.max_epochs);
     for epoch in 1..=config.max_epochs {
         let train_loss = trainer.epoch(&train_set.samples, &mut order, config.seed, epoch as u64);
@@ -286,12 +284,7 @@ pub fn train_on_sets(
         if validation_loss < best.0 {
             best = (validation_loss, epoch, trainer.weights.p.clone());
         }
-        if validation_loss < reference * (1.0 - config.min_improvement) {
-            reference = validation_loss;
-            since_improvement = 0;
-        } else {
-            since_improvement += 1;
-        }
+        schedule.observe(validation_loss, config.min_improvement);
         on_epoch(&EpochStats {
             epoch,
             max_epochs: config.max_epochs,
@@ -301,24 +294,19 @@ pub fn train_on_sets(
             best_epoch: best.1,
             seconds: start.elapsed().as_secs_f64(),
         });
-        if epoch >= config.min_epochs && best.0 <= config.target_loss {
-            break;
-        }
-        if since_improvement >= config.patience && epoch >= config.min_epochs {
-            if decays_left == 0 {
-                break;
+        match schedule.next_step(config, epoch, best.0) {
+            Step::Continue => {}
+            Step::Stop => break,
+            Step::DecayLearningRate => {
+                trainer.set_learning_rate(trainer.learning_rate() * config.lr_decay_factor)
             }
-            decays_left -= 1;
-            trainer.set_learning_rate(trainer.learning_rate() * config.lr_decay_factor);
-            since_improvement = 0;
         }
     }
-    let epochs_run = history.len();
     let report = TrainReport {
-        epochs_run,
+        epochs_run: history.len(),
         best_epoch: best.1,
         best_validation_loss: best.0,
-        stopped_early: epochs_run < config.max_epochs,
+        stopped_early: history.len() < config.max_epochs,
         seconds: start.elapsed().as_secs_f64(),
         train_samples: train_set.samples.len(),
         validation_samples: validation.samples.len(),
@@ -326,15 +314,69 @@ pub fn train_on_sets(
         dropped_invalid: train_set.invalid,
         history,
     };
-    let layers = trainer.weights.layout.unpad(&best.2);
     let network = Nbrdf {
         name: name.to_string(),
-        layers,
+        layers: trainer.weights.layout.unpad(&best.2),
         anisotropic: config.anisotropic,
         sampling: None,
         provenance: serde_json::Value::Null,
     };
     Ok(TrainOutcome { network, report })
+}
+
+/// What [`train_on_sets`] does after an epoch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Step {
+    Continue,
+    Stop,
+    DecayLearningRate,
+}
+
+/// Early stopping and learning-rate decay on a plateau of the validation loss.
+#[derive(Clone, Debug, PartialEq)]
+struct Schedule {
+    /// The validation loss an epoch must beat by `min_improvement` to count as progress.
+    reference: f64,
+    since_improvement: usize,
+    decays_left: usize,
+}
+
+impl Schedule {
+    fn new(config: &TrainConfig) -> Self {
+        Schedule {
+            reference: f64::INFINITY,
+            since_improvement: 0,
+            decays_left: config.lr_decays,
+        }
+    }
+
+    /// Counts the epochs since the validation loss last improved by a relative `min_improvement`.
+    fn observe(&mut self, validation_loss: f64, min_improvement: f64) {
+        if validation_loss < self.reference * (1.0 - min_improvement) {
+            self.reference = validation_loss;
+            self.since_improvement = 0;
+        } else {
+            self.since_improvement += 1;
+        }
+    }
+
+    /// After `epoch` (best validation loss `best_loss` so far): stop once past `min_epochs`
+    /// when the target loss is reached, or on a plateau with no decays left; decay the learning
+    /// rate on a plateau otherwise.
+    fn next_step(&mut self, config: &TrainConfig, epoch: usize, best_loss: f64) -> Step {
+        if epoch >= config.min_epochs && best_loss <= config.target_loss {
+            return Step::Stop;
+        }
+        if self.since_improvement >= config.patience && epoch >= config.min_epochs {
+            if self.decays_left == 0 {
+                return Step::Stop;
+            }
+            self.decays_left -= 1;
+            self.since_improvement = 0;
+            return Step::DecayLearningRate;
+        }
+        Step::Continue
+    }
 }
 
 /// The training target of a MERL table: its trilinear lookup, where at least one neighbour cell
@@ -542,6 +584,42 @@ mod tests {
     use super::*;
     use crate::merl::{self, cell_coordinates, CELLS, SCALE};
     use crate::phong_fit::PhongParams;
+
+    /// The plateau rule as `TrainConfig` documents it: `patience` epochs without a relative
+    /// improvement of `min_improvement` decay the rate, `lr_decays` times, then stop; nothing
+    /// before `min_epochs`; the target loss stops at once after `min_epochs`.
+    #[test]
+    fn schedule_decays_on_plateaus_then_stops() {
+        use Step::{Continue as C, DecayLearningRate as D, Stop as S};
+        let config = TrainConfig {
+            patience: 2,
+            lr_decays: 1,
+            min_epochs: 3,
+            min_improvement: 0.1,
+            target_loss: 0.5,
+            ..TrainConfig::default()
+        };
+        let mut schedule = Schedule::new(&config);
+        // 0.95 is within 10 % of 1.0: not an improvement.
+        let losses = [1.0, 0.95, 0.95, 0.95, 0.8, 0.8, 0.8, 0.8];
+        let steps: Vec<Step> = losses
+            .iter()
+            .enumerate()
+            .map(|(i, &loss)| {
+                schedule.observe(loss, config.min_improvement);
+                schedule.next_step(&config, i + 1, 0.8)
+            })
+            .collect();
+        // Epoch 3 is the second without improvement and the first allowed to act; epoch 5
+        // improves on 0.95 by more than 10 %; epochs 6-7 are its plateau with no decay left.
+        assert_eq!(steps, [C, C, D, C, C, C, S, S]);
+        assert_eq!(
+            Schedule::new(&config).next_step(&config, 3, 0.5),
+            Step::Stop,
+            "the target loss stops once min_epochs are done"
+        );
+        assert_eq!(Schedule::new(&config).next_step(&config, 2, 0.1), C);
+    }
 
     /// A glossy Blinn-Phong material (smooth enough for a short test run).
     fn glossy(a: &RusinkiewiczAngles) -> Option<[f64; 3]> {

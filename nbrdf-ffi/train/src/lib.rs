@@ -419,6 +419,81 @@ pub unsafe extern "C" fn nbrdf_train_directions(
     })
 }
 
+/// The fold of `nbrdf_train_from_arrays`'s `fold` argument (an `NbrdfTrainFold`).
+fn read_fold(fold: i32) -> FfiResult<RglFold> {
+    match fold {
+        0 => Ok(RglFold::AsMeasured),
+        1 => Ok(RglFold::ReciprocalMean),
+        other => Err(Failure::invalid(format!(
+            "unknown fold {other} (expected 0 = as given, 1 = reciprocal mean)"
+        ))),
+    }
+}
+
+/// The arrays of `nbrdf_train_from_arrays`, copied out of the caller's planar buffers.
+struct OwnedArrays {
+    view: Vec<Vec3>,
+    light: Vec<Vec3>,
+    eval_cos: Vec<[f32; 3]>,
+    swapped_eval_cos: Option<Vec<[f32; 3]>>,
+}
+
+/// Reads `[view, light, eval_cos, swapped_eval_cos]`, planar `3 n` floats each; the swapped
+/// values only for the reciprocal-mean fold.
+///
+/// # Safety
+/// The first three pointers are null or valid for `3 n` floats, and so is the fourth under
+/// `RglFold::ReciprocalMean`.
+unsafe fn read_arrays(
+    fold: RglFold,
+    pointers: [*const f32; 4],
+    n: usize,
+) -> FfiResult<OwnedArrays> {
+    let [view, light, eval_cos, swapped_eval_cos] = pointers;
+    let len = array_len(n, 3)?;
+    for (ptr, argument) in [(view, "view"), (light, "light"), (eval_cos, "eval_cos")] {
+        check_pointer(ptr, argument)?;
+    }
+    let swapped_eval_cos = match fold {
+        RglFold::ReciprocalMean => {
+            check_pointer(swapped_eval_cos, "swapped_eval_cos")?;
+            // SAFETY: checked; `3 n` floats by contract.
+            Some(planar_colours(unsafe { input(swapped_eval_cos, len) }))
+        }
+        RglFold::AsMeasured => None,
+    };
+    // SAFETY: checked; `3 n` floats each by contract.
+    let (view, light, eval_cos) = unsafe {
+        (
+            planar_vectors(input(view, len)),
+            planar_vectors(input(light, len)),
+            planar_colours(input(eval_cos, len)),
+        )
+    };
+    Ok(OwnedArrays {
+        view,
+        light,
+        eval_cos,
+        swapped_eval_cos,
+    })
+}
+
+/// The provenance details of `nbrdf_train_from_arrays`: none for a null `details_json`, else its
+/// JSON value.
+///
+/// # Safety
+/// `details_json` is null or a NUL-terminated string.
+unsafe fn read_details(details_json: *const c_char) -> FfiResult<Option<serde_json::Value>> {
+    if details_json.is_null() {
+        return Ok(None);
+    }
+    // SAFETY: non-null, NUL-terminated by contract.
+    let text = unsafe { read_str(details_json, "details_json")? };
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| Failure::invalid(format!("argument `details_json` is not JSON: {e}")))
+}
+
 /// Trains a network named `name` on `n` pairs and stores its JSON text (an `*.nbrdf.json` file's
 /// content, as `nbrdf train` writes it) in `*out_json`; free it with `nbrdf_train_string_free`.
 ///
@@ -462,53 +537,20 @@ pub unsafe extern "C" fn nbrdf_train_from_arrays(
         unsafe { out_json.write(std::ptr::null_mut()) };
         // SAFETY: forwarded contract.
         let (config, threads) = unsafe { read_config(config)? };
-        let fold = match fold {
-            0 => RglFold::AsMeasured,
-            1 => RglFold::ReciprocalMean,
-            other => {
-                return Err(Failure::invalid(format!(
-                    "unknown fold {other} (expected 0 = as given, 1 = reciprocal mean)"
-                )))
-            }
-        };
-        let len = array_len(n, 3)?;
-        for (ptr, argument) in [(view, "view"), (light, "light"), (eval_cos, "eval_cos")] {
-            check_pointer(ptr, argument)?;
-        }
-        let swapped = match (fold, swapped_eval_cos.is_null()) {
-            (RglFold::ReciprocalMean, _) => {
-                check_pointer(swapped_eval_cos, "swapped_eval_cos")?;
-                // SAFETY: checked; `3 n` floats by contract.
-                Some(planar_colours(unsafe { input(swapped_eval_cos, len) }))
-            }
-            _ => None,
-        };
-        // SAFETY: checked; `3 n` floats each by contract.
-        let (view, light, eval_cos) = unsafe {
-            (
-                planar_vectors(input(view, len)),
-                planar_vectors(input(light, len)),
-                planar_colours(input(eval_cos, len)),
-            )
-        };
+        let fold = read_fold(fold)?;
+        // SAFETY: forwarded contract.
+        let arrays = unsafe { read_arrays(fold, [view, light, eval_cos, swapped_eval_cos], n)? };
         // SAFETY: forwarded contract.
         let name = unsafe { read_str(name, "name")? };
         let source = unsafe { read_str(source, "source")? };
-        let source_details = if details_json.is_null() {
-            None
-        } else {
-            // SAFETY: non-null, NUL-terminated by contract.
-            let text = unsafe { read_str(details_json, "details_json")? };
-            Some(serde_json::from_str(&text).map_err(|e| {
-                Failure::invalid(format!("argument `details_json` is not JSON: {e}"))
-            })?)
-        };
+        // SAFETY: forwarded contract.
+        let source_details = unsafe { read_details(details_json)? };
         let request = DistillRequest {
             arrays: SampledArrays {
-                view: &view,
-                light: &light,
-                eval_cos: &eval_cos,
-                swapped_eval_cos: swapped.as_deref(),
+                view: &arrays.view,
+                light: &arrays.light,
+                eval_cos: &arrays.eval_cos,
+                swapped_eval_cos: arrays.swapped_eval_cos.as_deref(),
                 validation: n_validation,
             },
             fold,
