@@ -223,3 +223,23 @@ def test_chi2_in_a_spectral_variant(plugin, sampling, backend, files, restore_va
                              sample_dim=3, sample_count=100_000, res=41)
         assert chi2.run(significance_level=0.01, test_count=8, quiet=True), (
             f"{plugin}/{sampling}/{backend} at theta_i = {theta}: {chi2.messages}")
+
+
+@pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
+def test_veach_renders_follow_the_rgb_render(plugin, files, restore_variant):
+    """The Veach scene, tiny (nbrdf_tools.variants_report's renders): llvm_ad_mono is the luminance
+    of llvm_ad_rgb at the same seed (direct lighting is linear in the BSDF value and the lights
+    are grey), llvm_ad_spectral_polarized is llvm_ad_spectral, and no image has NaN."""
+    from nbrdf_tools.variants_report import render_variant
+    from test_variants import LUMINANCE  # written out from Mitsuba's definition there
+
+    for variant in ("llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral", "llvm_ad_spectral_polarized"):
+        _use(variant)
+    bsdf = {"type": plugin, "filename": str(files[plugin])}
+    images = {v: render_variant(v, bsdf, (24, 16), 4, seed=0)[0]
+              for v in ("llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral", "llvm_ad_spectral_polarized")}
+    for variant, image in images.items():
+        assert np.all(np.isfinite(image)) and image.max() > 0, variant
+    luminance = images["llvm_ad_rgb"] @ LUMINANCE
+    np.testing.assert_allclose(images["llvm_ad_mono"][..., 0], luminance, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(images["llvm_ad_spectral_polarized"], images["llvm_ad_spectral"], rtol=1e-5, atol=1e-6)

@@ -1,6 +1,7 @@
 """The rendering formulas of the Rust library written as Dr.Jit arithmetic: the network input and
 forward pass, the MERL lookup, the hemisphere warps, the Phong, two-lobe and anisotropic lobes
-and the tabulated sampler.
+and the tabulated sampler; and, for spectral variants, Mitsuba's RGB-to-spectrum lookup per lane
+(:class:`SrgbModel`, :func:`spectrum_from_rgb`).
 
 Why a second copy: traced into Mitsuba's own kernels, a scene with NBRDFs keeps Dr.Jit's symbolic
 (megakernel) mode and runs on CUDA as well as LLVM. The Rust code stays the reference; each
