@@ -26,6 +26,7 @@ BSDF, one column per variant) and the EXR renders under WORK.
 from __future__ import annotations
 
 import argparse
+import io
 import sys
 import time
 from pathlib import Path
@@ -136,10 +137,20 @@ def figure(images: dict[str, dict[str, np.ndarray]], path: Path) -> Path:
             if c == 0:
                 ax.set_ylabel(name, fontsize=8)
     fig.tight_layout(pad=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
     plt.close(fig)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    small_png(buffer, path)
     return path
+
+
+def small_png(png, path: Path) -> None:
+    """``png`` (a file or buffer) re-encoded with a 256-colour palette, as the README's picture:
+    the figure stays a small file in the repository."""
+    from PIL import Image
+
+    Image.open(png).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
 
 
 def markdown(command: str, settings: dict, results: dict, comparisons: dict, figure_path: Path) -> str:
