@@ -1,7 +1,7 @@
-"""Variants (issue 31): the BSDFs load and render in Mitsuba's RGB, monochrome and polarized
-variants; spectral variants are refused with one clear message (the RGB data needs the spectral
-uplift, a later step). Values in the other variants are checked against the same BSDF evaluated
-in the RGB variant, converted with Mitsuba's definitions written out here."""
+"""Variants (issue 31): the BSDFs load and render in Mitsuba's RGB, monochrome, spectral and
+polarized variants. Values in the monochrome and polarized variants are checked here against the
+same BSDF evaluated in the RGB variant, converted with Mitsuba's definitions written out here;
+spectral values against an independent uplift in tests/test_spectral.py."""
 
 from __future__ import annotations
 
@@ -47,19 +47,8 @@ def _use(variant: str) -> None:
     mi.set_variant(variant)
 
 
-@pytest.mark.parametrize("variant", SPECTRAL)
-@pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
-def test_spectral_variants_are_refused_clearly(variant, plugin, files, restore_variant):
-    _use(variant)
-    with pytest.raises(RuntimeError) as error:
-        mi.load_dict({"type": plugin, "filename": str(files[plugin])})
-    message = str(error.value)
-    assert f'(plugin "{plugin}"): spectral variants are not supported yet' in message
-    assert f"the current variant is {variant};" in message and "llvm_ad_mono" in message
-
-
 def test_rgb_variant_loads(files, restore_variant):
-    """The same files load in scalar_rgb (the refusal above is about the variant, not the file)."""
+    """The same files load in scalar_rgb."""
     mi.set_variant("scalar_rgb")
     assert "NbrdfBSDF" in str(mi.load_dict({"type": "nbrdf", "filename": str(files["nbrdf"])}))
     assert "MerlBSDF" in str(mi.load_dict({"type": "merl", "filename": str(files["merl"])}))
@@ -128,7 +117,7 @@ def test_values_follow_the_rgb_variant(variant, plugin, backend, files, restore_
         np.testing.assert_allclose(value, expected, rtol=1e-5, atol=1e-7, err_msg=key)
 
 
-@pytest.mark.parametrize("variant", OTHER)
+@pytest.mark.parametrize("variant", OTHER + SPECTRAL)
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
 def test_tiny_render_has_no_nan(variant, plugin, files, restore_variant):
     _use(variant)

@@ -2,9 +2,9 @@
 MERL-format ``.binary`` table).
 
 Mitsuba's ``BSDF`` base class differs per variant, so :func:`classes` builds the two plugin
-classes for the current variant from the variant-independent mixins below. RGB, monochrome and
-polarized variants (see :func:`_to_spectrum`); spectral variants are refused until the RGB data
-is uplifted to spectra.
+classes for the current variant from the variant-independent mixins below. Every variant: RGB,
+monochrome, spectral (the RGB value uplifted per wavelength as Mitsuba uplifts unbounded RGB data)
+and polarized (see :func:`_to_spectrum`).
 
 Two backends (parameter ``backend``):
 
@@ -164,16 +164,22 @@ def _to_color(rgb: np.ndarray):
     return mi.Color3f(float(rgb[0, 0]), float(rgb[1, 0]), float(rgb[2, 0]))
 
 
-def _to_spectrum(color):
-    """The variant's ``mi.Spectrum`` of an RGB value (``mi.Color3f``).
+def _to_spectrum(color, si):
+    """The variant's ``mi.Spectrum`` of an RGB value (``mi.Color3f``) at ``si.wavelengths``.
 
     Monochrome variants take its luminance, as Mitsuba converts RGB data there (``mi.luminance``,
-    Rec. 709 weights). Polarized variants get the depolarizer's Mueller matrix times the value, as
-    Mitsuba's own non-polarizing BSDFs (``diffuse``, ``roughplastic``) return: a depolarizer
-    needs no rotation between the BSDF's and Mitsuba's Stokes frames.
+    Rec. 709 weights). Spectral variants uplift it per evaluation (each direction has its own
+    colour) as Mitsuba uplifts unbounded RGB data (:func:`jit.spectrum_from_rgb`); sample and pdf
+    never see the wavelengths, so there is one density. A material with spectral output (not
+    built yet) would evaluate its own spectrum here instead. Polarized variants get the
+    depolarizer's Mueller matrix times the value, as Mitsuba's own non-polarizing BSDFs
+    (``diffuse``, ``roughplastic``) return: a depolarizer needs no rotation between the BSDF's
+    and Mitsuba's Stokes frames.
     """
     if mi.is_monochromatic:
         color = mi.UnpolarizedSpectrum(mi.luminance(color))
+    elif mi.is_spectral:
+        color = jit.spectrum_from_rgb(color, si.wavelengths)
     return mi.depolarizer(color) if mi.is_polarized else color
 
 
@@ -233,10 +239,6 @@ class _NativeBSDFMixin:
 
     def _init_native(self, props) -> None:
         mi.BSDF.__init__(self, props)
-        if mi.is_spectral:
-            raise RuntimeError(f"{self._type_name()}: spectral variants are not supported yet (the current "
-                               f"variant is {mi.variant()}; use an RGB or monochrome variant, e.g. "
-                               "scalar_rgb, llvm_ad_rgb or llvm_ad_mono, polarized or not)")
         filename = _get(props, "filename")
         if not filename:
             raise ValueError(f'{self._type_name()}: the "filename" parameter is required '
@@ -291,6 +293,8 @@ class _NativeBSDFMixin:
                     _llvm.check_backend()
                 except RuntimeError as error:
                     raise RuntimeError(f"{self._type_name()}: {error}") from None
+            if mi.is_spectral:
+                jit.srgb_model()  # Mitsuba's model file, read once per variant and before any trace
             # The rust backend keeps a traced twin for symbolic scopes: Dr.Jit traces a symbolic
             # call through every live BSDF, wherever it was built, and native code cannot run
             # there (see _traced_path).
@@ -433,7 +437,7 @@ class _NativeBSDFMixin:
 
     def _jit_eval(self, si, wo, active):
         f = self._traced.eval(si.wi, wo)
-        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0))
+        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0), si)
 
     def _jit_pdf(self, si, wo, active):
         pdf = jit.pdf(self._sampling, si.wi, wo, self._exponent_jit, self._weight_jit,
@@ -456,7 +460,7 @@ class _NativeBSDFMixin:
         weight = f_cos / dr.select(active, pdf, 1.0)
         # As sampling/mod.rs sample_weight: 0 where a tiny pdf would overflow the quotient.
         weight = dr.select(active & dr.all(dr.isfinite(weight)), weight, 0.0)
-        return bs, _to_spectrum(weight)
+        return bs, _to_spectrum(weight, si)
 
     def _traced_path(self, *values) -> bool:
         """Whether this call goes through the traced code: the jit backend, or the rust backend
@@ -495,7 +499,7 @@ class _NativeBSDFMixin:
             return _zero_spectrum(_width(si.wi, wo) if _is_jit() else 1)
         view, light = _directions(si.wi, wo)
         value = _to_color(self._native.eval(view, light))
-        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), value, 0.0))
+        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), value, 0.0), si)
 
     def pdf(self, ctx, si, wo, active=True):
         if self._traced_path(si.wi, wo):
@@ -517,7 +521,7 @@ class _NativeBSDFMixin:
         value = _to_color(self._native.eval(view, light))
         pdf = _to_float(self._sampler.pdf(view, light))
         active = _both_above(active, si.wi, wo)
-        return _to_spectrum(dr.select(active, value, 0.0)), dr.select(active, pdf, 0.0)
+        return _to_spectrum(dr.select(active, value, 0.0), si), dr.select(active, pdf, 0.0)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         if self._traced_path(si.wi, sample1, sample2):
@@ -537,7 +541,7 @@ class _NativeBSDFMixin:
         bs.sampled_component = mi.UInt32(0)
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (bs.pdf > 0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
-        return bs, _to_spectrum(dr.select(active, _to_color(weight), 0.0))
+        return bs, _to_spectrum(dr.select(active, _to_color(weight), 0.0), si)
 
     @staticmethod
     def _enabled(ctx, *values) -> bool:
