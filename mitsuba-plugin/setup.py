@@ -163,6 +163,10 @@ class build_py(_build_py):
             shutil.copyfile(header, target / "nbrdf.h")
             shutil.copyfile(train_library, target / TRAIN_LIBRARY)
             shutil.copyfile(train_header, target / "nbrdf_train.h")
+            # The pretrained autoencoder, whose decoder nbrdf_mitsuba.latent reads (the C ABI carries no models).
+            models = (_workspace() or HERE) / "nbrdf-core" / "data" / "models" / "autoencoder.json"
+            if models.is_file():
+                shutil.copyfile(models, target / "autoencoder.json")
             print(f"nbrdf-mitsuba build: bundled {library}, {train_library} and their headers into {target}",
                   flush=True)
 

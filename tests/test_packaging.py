@@ -130,6 +130,7 @@ def test_wheel_is_manylinux_and_complete(wheel):
     assert tags and all(re.fullmatch(r"py3-none-(manylinux_\d+_\d+|manylinux\d+)_(x86_64|aarch64)", t) for t in tags)
     assert "nbrdf_mitsuba/libnbrdf_ffi.so" in names and "nbrdf_mitsuba/nbrdf.h" in names
     assert "nbrdf_mitsuba/libnbrdf_train.so" in names and "nbrdf_mitsuba/nbrdf_train.h" in names
+    assert "nbrdf_mitsuba/autoencoder.json" in names  # the decoder of nbrdf_mitsuba.latent
     assert f"nbrdf_mitsuba-{VERSION}.data/scripts/nbrdf" in names
     assert "License-Expression: MIT" in metadata
     assert "Project-URL: " in metadata and "Keywords: " in metadata

@@ -1,0 +1,577 @@
+"""``python -m nbrdf_mitsuba.estimate SCENE.xml --images IMG... --bsdf-id ID -o OUT``: a material
+estimated from images of a known scene by differentiable rendering (Mitsuba's ``prb``).
+
+The scene holds the object whose BSDF (the one with id ``ID``, whatever its type) is to be
+estimated, its sensors and emitters; image ``i`` (EXR, linear RGB) is the scene seen by its
+``i``-th sensor. That BSDF is replaced by the model (``--model``) and the model's parameters
+are optimised by Adam on the images' log-radiance error, every view each step:
+
+* ``nbrdf`` (default): first the 32-value latent code through the pretrained decoder
+  (:mod:`nbrdf_mitsuba.latent`: the gradient of the weights, which ``jit_weights="opaque"``
+  makes scene parameters, chained to the code), starting from the best of a few training codes;
+  then the 675 weights themselves, held near the decoded ones by a penalty (the squared distance
+  in the autoencoder's standardised weight space, ``--prior-weight``). Writes an
+  ``*.nbrdf.json`` with ``nbrdf fit-phong``'s sampling.
+* ``nbrdf-no-prior``: the weights alone, from the common initialisation (the trainer's seed-0
+  start, twin of ``network/mod.rs`` ``paper_init``).
+* ``principled``, ``roughconductor``, ``roughplastic``: Mitsuba's BSDFs' parameters (colours and
+  roughness through a sigmoid into their ranges). Writes the fitted BSDF as a ``mi.load_dict``
+  JSON dictionary.
+
+Robust: images of the wrong count or size, non-finite pixels, no BSDF with the id, a variant
+without automatic differentiation or images that do not depend on the BSDF are errors (exit
+status 2, one line naming the problem). A step whose loss or gradient is not finite (or whose
+weights the BSDF rejects) is taken back and the step size halved; no non-finite result is ever
+written. Deterministic for a seed (each render's seed derives from it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from . import _llvm
+
+_llvm.configure()  # must precede the first import of drjit
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
+#: Share of the steps spent on the latent code before the weights (model ``nbrdf``).
+CODE_SHARE = 0.6
+#: Adam step sizes per kind of variable (measured on the synthetic test scenes and the report).
+LEARNING_RATES = {"code": 0.05, "weights": 0.003, "analytic": 0.05}
+#: Times the step may halve after non-finite losses before the estimate gives up.
+MAX_HALVINGS = 12
+#: Training codes tried as starts of the latent phase (evenly spaced through the anchors).
+SCREENED_STARTS = 8
+INIT_RANGE = 0.05  # network/mod.rs INIT_RANGE
+HIDDEN = 21
+
+
+class EstimateError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+# -- the common initialisation (twin of network/mod.rs paper_init) --------------------------------
+
+_GAMMA = 0x9E3779B97F4A7C15
+_MASK = (1 << 64) - 1
+_INIT_STREAM = 3  # rng.rs Stream::Init
+
+
+def _mix64(z: int) -> int:
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK
+    return z ^ (z >> 31)
+
+
+def common_initialisation(hidden: int = HIDDEN, seed: int = 0) -> np.ndarray:
+    """The flat weights ``W1 b1 W2 b2 W3 b3`` every network of the autoencoder was trained
+    from (``paper_init``: ``SplitMix64(seed, Init, 0)``, weights ``0.05 (2 u - 1)`` in float32
+    with ``u = next_f64`` rounded to float32, zero biases)."""
+    state = (_mix64(seed ^ _mix64(_INIT_STREAM + 1))) & _MASK
+    flat = []
+    for n_in, n_out in ((6, hidden), (hidden, hidden), (hidden, 3)):
+        for _ in range(n_in * n_out):
+            state = (state + _GAMMA) & _MASK
+            u = np.float32((_mix64(state) >> 11) * (1.0 / (1 << 53)))
+            flat.append(np.float32(INIT_RANGE) * (np.float32(2.0) * u - np.float32(1.0)))
+        flat.extend([np.float32(0.0)] * n_out)
+    return np.asarray(flat, dtype=np.float32)
+
+
+# -- the scene -----------------------------------------------------------------------------------
+
+
+def parse_defines(items: list[str]) -> dict:
+    defines = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise EstimateError(f"-D {item}: expected key=value")
+        defines[key] = value
+    return defines
+
+
+def require_differentiable_variant(variant: str | None) -> str:
+    """``variant`` or llvm_ad_rgb; an error where the variant cannot differentiate."""
+    variant = variant or "llvm_ad_rgb"
+    if variant not in mi.variants():
+        raise EstimateError(f"Mitsuba variant '{variant}' is not available (these are: {', '.join(mi.variants())})")
+    if "_ad_" not in variant or not variant.endswith("_rgb"):
+        raise EstimateError(f"variant '{variant}' is not differentiable: the estimate needs an *_ad_rgb variant "
+                            "(e.g. llvm_ad_rgb)")
+    if variant.startswith("llvm") and _llvm.problem() is not None:
+        raise EstimateError(f"variant {variant} cannot run: {_llvm.problem()}")
+    mi.set_variant(variant)
+    return variant
+
+
+def _resolver():
+    return mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+
+
+def _mitsuba_message(error: Exception) -> str:
+    lines = str(error).strip().splitlines()
+    return lines[-1] if lines else type(error).__name__
+
+
+class Scene:
+    """The scene XML with the BSDF ``bsdf_id`` replaceable by another element."""
+
+    def __init__(self, path: Path, bsdf_id: str, defines: dict):
+        if not path.is_file():
+            raise EstimateError(f"{path}: no such file")
+        self.path, self.bsdf_id, self.defines = path, bsdf_id, defines
+        try:
+            self.tree = ET.parse(path)
+        except ET.ParseError as error:
+            raise EstimateError(f"{path}: not XML: {error}") from None
+        self.element = next((e for e in self.tree.iter("bsdf") if e.get("id") == bsdf_id), None)
+        _resolver().prepend(str(path.resolve().parent))
+        if self.element is None:
+            ids = sorted({e.get("id") for e in self.tree.iter("bsdf") if e.get("id")})
+            raise EstimateError(f"{path}: no BSDF with id '{bsdf_id}' (BSDF ids there: {', '.join(ids) or 'none'})")
+
+    def load(self, replacement: ET.Element | None = None):
+        """The scene, the marked BSDF replaced by ``replacement`` (its id kept)."""
+        element = self.element
+        parent = next(p for p in self.tree.iter() if element in list(p))
+        index = list(parent).index(element)
+        if replacement is not None:
+            replacement.set("id", self.bsdf_id)
+            parent[index] = replacement
+        try:
+            text = ET.tostring(self.tree.getroot(), encoding="unicode")
+            return mi.load_string(text, **self.defines)
+        except Exception as error:  # Mitsuba reports malformed scenes as plain exceptions
+            raise EstimateError(f"{self.path}: Mitsuba cannot load it: {_mitsuba_message(error)}") from None
+        finally:
+            parent[index] = element
+
+
+def load_images(paths: list[Path], scene) -> list:
+    """The reference images as ``mi.TensorXf`` (h, w, 3), checked against the scene's sensors."""
+    sensors = scene.sensors()
+    if len(paths) != len(sensors):
+        raise EstimateError(f"{len(paths)} images for {len(sensors)} sensors: give one image per sensor, "
+                            "in the scene's order")
+    images = []
+    for i, (path, sensor) in enumerate(zip(paths, sensors)):
+        if not path.is_file():
+            raise EstimateError(f"image {i} {path}: no such file")
+        try:
+            bitmap = mi.Bitmap(str(path)).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+        except Exception as error:
+            raise EstimateError(f"image {i} {path}: cannot read it: {_mitsuba_message(error)}") from None
+        array = np.array(bitmap, dtype=np.float32)
+        width, height = (int(v) for v in sensor.film().crop_size())
+        if array.shape[:2] != (height, width):
+            raise EstimateError(f"image {i} {path} is {array.shape[1]}x{array.shape[0]}, sensor {i} renders "
+                                f"{width}x{height}")
+        bad = ~np.isfinite(array)
+        if bad.any():
+            y, x, _ = np.argwhere(bad)[0]
+            raise EstimateError(f"image {i} {path}: {int(bad.any(axis=2).sum())} pixels are NaN or infinite "
+                                f"(the first at x={x}, y={y})")
+        if (array < 0).any():
+            raise EstimateError(f"image {i} {path}: {int((array < 0).any(axis=2).sum())} pixels are negative "
+                                "(expected linear radiance)")
+        images.append(mi.TensorXf(array))
+    return images
+
+
+# -- the models ------------------------------------------------------------------------------------
+
+
+def _sigmoid(x):
+    return dr.rcp(1.0 + dr.exp(-x))
+
+
+def _logit(p: float) -> float:
+    p = min(max(p, 1e-4), 1 - 1e-4)
+    return math.log(p / (1 - p))
+
+
+def _rgb(value) -> dict:
+    return {"type": "rgb", "value": [float(v) for v in value]}
+
+
+class Analytic:
+    """A Mitsuba BSDF's parameters, each ``lo + (hi - lo) sigmoid(theta)``: ``(key, size, lo,
+    hi, start)`` per parameter, ``key`` the traversed name below the BSDF's id."""
+
+    PARAMETERS = {
+        "principled": [("base_color.value", 3, 0.0, 1.0, 0.5), ("roughness.value", 1, 0.01, 1.0, 0.4),
+                       ("metallic.value", 1, 0.0, 1.0, 0.2), ("specular", 1, 0.0, 1.0, 0.5)],
+        "roughconductor": [("specular_reflectance.value", 3, 0.0, 1.0, 0.5), ("alpha.value", 1, 0.01, 1.0, 0.2)],
+        "roughplastic": [("diffuse_reflectance.value", 3, 0.0, 1.0, 0.5), ("alpha", 1, 0.01, 1.0, 0.2)],
+    }
+
+    def __init__(self, kind: str):
+        self.kind = kind
+        self.parameters = self.PARAMETERS[kind]
+
+    def element(self, workdir: Path) -> ET.Element:
+        element = ET.Element("bsdf", type=self.kind)
+        for key, size, _, _, start in self.parameters:
+            name = key.split(".")[0]
+            if size == 3:
+                ET.SubElement(element, "rgb", name=name, value=f"{start}, {start}, {start}")
+            else:
+                ET.SubElement(element, "float", name=name, value=str(start))
+        return element
+
+    def phases(self, steps: int):
+        theta = np.concatenate([[_logit((start - lo) / (hi - lo))] * size for _, size, lo, hi, start in self.parameters])
+        return [Phase("analytic", theta, steps, self._apply, None)]
+
+    def _values(self, theta):
+        out, at = {}, 0
+        for key, size, lo, hi, _ in self.parameters:
+            # One gather per component: indexing a Dr.Jit array (value[0]) would detach it.
+            parts = [lo + (hi - lo) * _sigmoid(dr.gather(type(theta), theta, at + k)) for k in range(size)]
+            out[key] = mi.Color3f(*parts) if size == 3 else parts[0]
+            at += size
+        return out
+
+    def _apply(self, params, bsdf_id: str, theta) -> None:
+        for key, value in self._values(theta).items():
+            params[f"{bsdf_id}.{key}"] = value
+
+    def result(self, theta: np.ndarray) -> dict:
+        values = {k: np.asarray(dr.detach(v).numpy(), dtype=np.float64).reshape(-1)
+                  for k, v in self._values(mi.Float(theta)).items()}
+        result = {"type": self.kind}
+        for key, value in values.items():
+            name = key.split(".")[0]
+            result[name] = _rgb(value) if value.size == 3 else float(value[0])
+        return result
+
+
+class Phase:
+    """One optimisation: ``theta`` (NumPy) set into the scene by ``apply(params, id, theta_ad)``,
+    or, for weights, the gradient of ``weights`` chained by ``chain``; ``penalty(theta)``:
+    ``(value, gradient)`` added to the image loss."""
+
+    def __init__(self, kind, theta, steps, apply, penalty):
+        self.kind, self.steps, self.apply, self.penalty = kind, steps, apply, penalty
+        self.theta = np.asarray(theta, np.float64)
+
+
+class Network:
+    """``nbrdf`` (latent code, then weights near the decoded ones) or ``nbrdf-no-prior``."""
+
+    def __init__(self, prior: bool, prior_weight: float):
+        self.prior, self.prior_weight = prior, prior_weight
+        self.start = common_initialisation()
+
+    def element(self, workdir: Path) -> ET.Element:
+        path = workdir / "start.nbrdf.json"
+        write_network(path, self.start, "start", {})
+        element = ET.Element("bsdf", type="nbrdf")
+        ET.SubElement(element, "string", name="filename", value=str(path))
+        ET.SubElement(element, "string", name="jit_weights", value="opaque")
+        ET.SubElement(element, "string", name="backend", value="jit")
+        return element
+
+    @staticmethod
+    def _set_weights(params, bsdf_id, weights):
+        params[f"{bsdf_id}.weights"] = weights
+
+
+def write_network(path: Path, flat: np.ndarray, name: str, provenance: dict) -> None:
+    """An ``*.nbrdf.json`` (docs/design.md section 4) of flat width-21 weights; refuses
+    non-finite weights."""
+    flat = np.asarray(flat, dtype=np.float32)
+    if flat.size != HIDDEN * HIDDEN + 11 * HIDDEN + 3 or not np.all(np.isfinite(flat)):
+        raise EstimateError("internal: refusing to write a network with non-finite or missing weights")
+    layers, at = [], 0
+    for n_in, n_out in ((6, HIDDEN), (HIDDEN, HIDDEN), (HIDDEN, 3)):
+        W = flat[at:at + n_in * n_out]
+        at += n_in * n_out
+        b = flat[at:at + n_out]
+        at += n_out
+        layers.append({"inputs": n_in, "outputs": n_out, "weights": [float(v) for v in W],
+                       "bias": [float(v) for v in b]})
+    document = {"format": "nbrdf", "version": 1, "name": name, "layers": layers, "provenance": provenance}
+    path.write_text(json.dumps(document))
+
+
+# -- the optimisation ------------------------------------------------------------------------------
+
+
+class Adam:
+    """Adam on a NumPy vector (float64, so that a seed gives the same steps everywhere)."""
+
+    def __init__(self, size: int, rate: float, betas=(0.9, 0.999), eps=1e-8):
+        self.rate, self.betas, self.eps = rate, betas, eps
+        self.m, self.v, self.t = np.zeros(size), np.zeros(size), 0
+
+    def state(self):
+        return self.m.copy(), self.v.copy(), self.t
+
+    def restore(self, state) -> None:
+        self.m, self.v, self.t = state[0].copy(), state[1].copy(), state[2]
+
+    def step(self, theta: np.ndarray, grad: np.ndarray) -> np.ndarray:
+        b1, b2 = self.betas
+        self.t += 1
+        self.m = b1 * self.m + (1 - b1) * grad
+        self.v = b2 * self.v + (1 - b2) * grad * grad
+        m_hat = self.m / (1 - b1 ** self.t)
+        v_hat = self.v / (1 - b2 ** self.t)
+        return theta - self.rate * m_hat / (np.sqrt(v_hat) + self.eps)
+
+
+def image_loss(images: list, references: list):
+    """Mean squared error of ``ln(1 + radiance)`` over every view, pixel and channel (the log
+    keeps highlights from swamping the rest of the object)."""
+    total = 0.0
+    for image, reference in zip(images, references):
+        d = dr.log(1.0 + dr.maximum(image, 0.0)) - dr.log(1.0 + reference)
+        total = total + dr.mean(dr.square(d), axis=None)
+    return total / len(images)
+
+
+def render_seed(seed: int, step: int, view: int) -> int:
+    return (_mix64((seed << 32) ^ (step << 8) ^ view) >> 33) & 0x7FFFFFFF
+
+
+class Estimator:
+    """The loaded scene with the model in place of the marked BSDF, and its optimiser."""
+
+    def __init__(self, scene_file: Scene, model, images: list[Path], spp: int, seed: int, max_depth: int,
+                 workdir: Path):
+        self.model, self.spp, self.seed = model, spp, seed
+        self.bsdf_id = scene_file.bsdf_id
+        self.scene = scene_file.load(model.element(workdir))
+        self.references = load_images(images, self.scene)
+        self.integrator = mi.load_dict({"type": "prb", "max_depth": max_depth})
+        self.params = mi.traverse(self.scene)
+        self.halvings = 0
+        self.history: list[float] = []
+
+    def render_all(self, step: int, spp: int | None = None) -> list:
+        return [mi.render(self.scene, self.params, sensor=i, integrator=self.integrator, spp=spp or self.spp,
+                          seed=render_seed(self.seed, step, i)) for i in range(len(self.references))]
+
+    def loss_and_grad(self, phase: Phase, theta: np.ndarray, step: int):
+        """(loss, gradient) at ``theta``, or ``(nan, None)`` where either is not finite or the
+        BSDF rejects the values."""
+        variable = mi.Float(theta.astype(np.float32))
+        dr.enable_grad(variable)
+        try:
+            phase.apply(self.params, self.bsdf_id, variable)
+            self.params.update()
+        except ValueError:
+            return math.nan, None
+        loss = image_loss(self.render_all(step), self.references)
+        dr.backward(loss)
+        grad = np.asarray(dr.grad(variable).numpy(), dtype=np.float64)
+        value = float(loss.array[0]) if hasattr(loss, "array") else float(np.asarray(loss.numpy()).reshape(-1)[0])
+        if phase.penalty is not None:
+            extra, extra_grad = phase.penalty(theta)
+            value, grad = value + extra, grad + extra_grad
+        if not (math.isfinite(value) and np.all(np.isfinite(grad))):
+            return math.nan, None
+        return value, grad
+
+    def run(self, phase: Phase, bar, first_step: int) -> np.ndarray:
+        adam = Adam(phase.theta.size, LEARNING_RATES[phase.kind])
+        theta = phase.theta.copy()
+        accepted = (theta.copy(), adam.state())
+        step = 0
+        while step < phase.steps:
+            value, grad = self.loss_and_grad(phase, theta, first_step + step)
+            if grad is None:
+                # A diverging step: back to the last state with a finite loss, half the step.
+                self.halvings += 1
+                if self.halvings > MAX_HALVINGS:
+                    raise EstimateError(f"the optimisation diverged: the loss stayed non-finite after "
+                                        f"{MAX_HALVINGS} halvings of the step")
+                theta = accepted[0].copy()
+                adam.restore(accepted[1])
+                adam.rate *= 0.5
+                continue
+            accepted = (theta.copy(), adam.state())
+            self.history.append(value)
+            if step == 0 and first_step == 0 and not np.any(grad != 0):
+                raise EstimateError(f"the images do not depend on BSDF '{self.bsdf_id}' (zero gradient at the "
+                                    "start): is the object visible to the sensors and lit?")
+            theta = adam.step(theta, grad)
+            step += 1
+            bar.update(1)
+            bar.set_postfix(loss=f"{value:.4g}", phase=phase.kind)
+        return theta if np.all(np.isfinite(theta)) else accepted[0]
+
+    def screen_codes(self, decoder, candidates: np.ndarray) -> np.ndarray:
+        """The candidate code whose renders (a quarter of the samples) fit the images best."""
+        best, best_loss = candidates[0], math.inf
+        for code in candidates:
+            with dr.suspend_grad():
+                self.params[f"{self.bsdf_id}.weights"] = decoder.decode(mi.Float(code.astype(np.float32)))
+                self.params.update()
+                loss = image_loss(self.render_all(-1, max(1, self.spp // 4)), self.references)
+            value = float(np.asarray(loss.numpy()).reshape(-1)[0])
+            if value < best_loss:
+                best, best_loss = code, value
+        return best
+
+
+def estimate(args) -> dict:
+    """Runs the estimate of the parsed ``args``, writes ``args.output``; a summary."""
+    require_differentiable_variant(args.variant)
+    if args.threads is not None and args.threads < 1:
+        raise EstimateError("--threads must be at least 1")
+    previous = dr.thread_count()
+    try:
+        return _estimate(args)
+    finally:
+        dr.set_thread_count(previous)
+
+
+def _estimate(args) -> dict:
+    if args.steps < 1 or args.spp < 1:
+        raise EstimateError("--steps and --spp must be at least 1")
+    scene_file = Scene(args.scene, args.bsdf_id, parse_defines(args.define))
+    model = Network(args.model == "nbrdf", args.prior_weight) if args.model.startswith("nbrdf") else Analytic(args.model)
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="nbrdf-estimate-") as workdir:
+        est = Estimator(scene_file, model, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
+        if args.threads is not None:
+            # One thread fixes the order of the gradients' float sums (bit-identical reruns). Set
+            # after loading: Mitsuba builds the Python plugins on its worker threads.
+            dr.set_thread_count(args.threads)
+        from tqdm import tqdm
+
+        with tqdm(total=args.steps, unit="step", desc=f"estimate {args.model}", disable=args.quiet,
+                  file=sys.stderr) as bar:
+            result = _optimise(est, model, args, bar)
+    result["seconds"] = time.perf_counter() - start
+    result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
+    result["halvings"] = est.halvings
+    return result
+
+
+def _optimise(est: Estimator, model, args, bar) -> dict:
+    summary = {"output": str(args.output), "model": args.model, "steps": args.steps}
+    if isinstance(model, Analytic):
+        (phase,) = model.phases(args.steps)
+        theta = est.run(phase, bar, 0)
+        fitted = model.result(theta)
+        args.output.write_text(json.dumps(fitted, indent=2) + "\n")
+        summary["bsdf"] = fitted
+        return summary
+    if model.prior:
+        from .latent import Decoder, LatentError
+
+        try:
+            decoder = Decoder(args.ae)
+        except LatentError as error:
+            raise EstimateError(str(error)) from None
+        picks = np.linspace(0, len(decoder.anchors) - 1, SCREENED_STARTS).round().astype(int)
+        candidates = np.concatenate([decoder.anchors.mean(axis=0, keepdims=True), decoder.anchors[picks]])
+        code_steps = max(1, round(CODE_SHARE * args.steps)) if args.steps > 1 else 1
+        code0 = est.screen_codes(decoder, candidates)
+        code = est.run(Phase("code", code0, code_steps, lambda p, i, c: p.__setitem__(f"{i}.weights", decoder.decode(c)),
+                             None), bar, 0)
+        decoded = decoder.decode_numpy(code).astype(np.float64)
+        std2 = decoder.std.astype(np.float64) ** 2
+        weight = args.prior_weight
+
+        def penalty(w):
+            d = w - decoded
+            return weight * float(np.mean(d * d / std2)), weight * 2.0 * d / std2 / d.size
+
+        weights = est.run(Phase("weights", decoded, args.steps - code_steps, Network._set_weights, penalty), bar,
+                          code_steps) if args.steps > code_steps else decoded
+        summary["code"] = [float(c) for c in code]
+    else:
+        weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
+    provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
+                  "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
+                  "scene": str(args.scene), "bsdf_id": args.bsdf_id}
+    if "code" in summary:
+        provenance["code"] = summary["code"]
+    name = args.output.name.split(".")[0]
+    write_network(args.output, weights, name, provenance)
+    summary["sampling"] = fit_sampling(args.output)
+    return summary
+
+
+def nbrdf_command() -> str | None:
+    beside = Path(sys.executable).parent / "nbrdf"
+    return str(beside) if beside.is_file() else shutil.which("nbrdf")
+
+
+def fit_sampling(path: Path) -> str:
+    """Stores ``nbrdf fit-phong``'s sampling in the network file (as for a trained network)."""
+    command = nbrdf_command()
+    if command is None:
+        return "not fitted: the nbrdf command is not installed (the file samples the cosine lobe)"
+    done = subprocess.run([command, "fit-phong", str(path)], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise EstimateError(f"nbrdf fit-phong {path} failed: {done.stderr.strip().splitlines()[-1:]}")
+    return "fit-phong"
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m nbrdf_mitsuba.estimate",
+        description="Estimate a material from images of a known scene by differentiable rendering (prb): the BSDF "
+                    "with the given id is replaced by the model, whose parameters are fitted to the images.")
+    p.add_argument("scene", type=Path, help="the scene (Mitsuba 3 XML): object, sensors, emitters")
+    p.add_argument("--images", type=Path, nargs="+", required=True,
+                   help="one EXR (linear RGB) per sensor of the scene, in the scene's order")
+    p.add_argument("--bsdf-id", required=True, help="the id of the BSDF to estimate")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="OUT.nbrdf.json (nbrdf models) or OUT.json (analytic models: a mi.load_dict dictionary)")
+    p.add_argument("--model", choices=MODELS, default="nbrdf", help="what to fit (default: nbrdf, with the prior)")
+    p.add_argument("--steps", type=int, default=150, help="optimisation steps, each rendering every view (default: 150)")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel of each render (default: 16)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the renders (default: 0)")
+    p.add_argument("--max-depth", type=int, default=3, help="prb's path depth (default: 3, direct light and one "
+                                                            "bounce)")
+    p.add_argument("--prior-weight", type=float, default=1e-3,
+                   help="weight of the penalty holding the weights near the decoded ones (default: 1e-3)")
+    p.add_argument("--ae", type=Path, help="the autoencoder (default: the pretrained one)")
+    p.add_argument("-D", dest="define", action="append", default=[], metavar="KEY=VALUE",
+                   help="set a scene parameter ($KEY in the XML), as for rendering")
+    p.add_argument("--threads", type=int,
+                   help="Dr.Jit's worker threads (default: one per core). A seed gives the same result to float "
+                        "rounding (the gradients' sums run in thread order); with --threads 1, bit for bit")
+    p.add_argument("--variant", help="Mitsuba variant, an *_ad_rgb one (default: llvm_ad_rgb)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        summary = estimate(args)
+    except EstimateError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted; nothing written", file=sys.stderr)
+        return 130
+    print(f"wrote {summary['output']} ({summary['model']}): loss {summary['loss_first']:.4g} -> "
+          f"{summary['loss_last']:.4g} in {summary['steps']} steps, {summary['seconds']:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

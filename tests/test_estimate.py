@@ -1,0 +1,205 @@
+"""``python -m nbrdf_mitsuba.estimate`` (issue 33): the user's errors, a synthetic recovery,
+determinism, a diverging step taken back, and the common initialisation's twin.
+
+Tiny on purpose: 16 x 16 images of a sphere seen by two sensors, a few steps."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+SENSOR = """
+    <sensor type="perspective">
+        <float name="fov" value="30"/>
+        <transform name="to_world"><lookat origin="{origin}" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/>
+            <rfilter type="box"/></film>
+    </sensor>"""
+SCENE = """<scene version="3.0.0">
+    <default name="res" value="16"/>
+    <integrator type="path"><integer name="max_depth" value="3"/></integrator>
+    {sensors}
+    <bsdf type="roughplastic" id="mat">
+        <rgb name="diffuse_reflectance" value="0.6, 0.2, 0.1"/>
+        <float name="alpha" value="0.15"/>
+    </bsdf>
+    <shape type="sphere"><ref id="mat"/></shape>
+    <emitter type="point"><point name="position" x="3" y="3" z="4"/><rgb name="intensity" value="40"/></emitter>
+    <emitter type="constant"><rgb name="radiance" value="0.1"/></emitter>
+</scene>"""
+VIEWS = ["0, 0, 4", "3, 1, 2.5"]
+NOVEL = "-3, 1.5, 2.5"
+TRUTH = {"diffuse_reflectance": [0.6, 0.2, 0.1], "alpha": 0.15}
+
+
+def write_scene(path: Path, origins=VIEWS) -> Path:
+    path.write_text(SCENE.format(sensors="".join(SENSOR.format(origin=o) for o in origins)))
+    return path
+
+
+def render_views(scene_file: Path, out: Path, spp=128, prefix="view", **defines) -> list[Path]:
+    scene = mi.load_file(str(scene_file), **defines)
+    paths = []
+    for i in range(len(scene.sensors())):
+        image = mi.render(scene, sensor=i, spp=spp, seed=99)
+        paths.append(out / f"{prefix}{i}.exr")
+        mi.Bitmap(image).write(str(paths[-1]))
+    return paths
+
+
+@pytest.fixture
+def setup(llvm_variant, tmp_path):
+    scene = write_scene(tmp_path / "scene.xml")
+    return scene, render_views(scene, tmp_path)
+
+
+def run(scene, images, out, *extra):
+    from nbrdf_mitsuba import estimate
+
+    return estimate.main([str(scene), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out), "-q", *extra])
+
+
+def expect_error(capsys, status, out, *needles):
+    assert status == 2
+    message = capsys.readouterr().err
+    for needle in needles:
+        assert needle in message, message
+    assert not out.exists()
+
+
+def test_wrong_image_count_and_size(setup, tmp_path, capsys):
+    scene, images = setup
+    out = tmp_path / "out.json"
+    expect_error(capsys, run(scene, images[:1], out, "--model", "roughplastic"), out, "1 images for 2 sensors")
+    small = tmp_path / "small.exr"
+    mi.Bitmap(np.ones((8, 8, 3), dtype=np.float32)).write(str(small))
+    expect_error(capsys, run(scene, [images[0], small], out, "--model", "roughplastic"), out,
+                 "image 1", "is 8x8, sensor 1 renders 16x16")
+
+
+def test_nan_pixels_are_an_error(setup, tmp_path, capsys):
+    scene, images = setup
+    array = np.array(mi.Bitmap(str(images[1])), dtype=np.float32)
+    array[3, 5, 1] = np.nan
+    bad = tmp_path / "nan.exr"
+    mi.Bitmap(array).write(str(bad))
+    out = tmp_path / "out.nbrdf.json"
+    expect_error(capsys, run(scene, [images[0], bad], out), out, "1 pixels are NaN or infinite", "x=5, y=3")
+
+
+def test_missing_bsdf_and_non_differentiable_variant(setup, tmp_path, capsys):
+    scene, images = setup
+    out = tmp_path / "out.nbrdf.json"
+    status = run(scene, images, out, "--bsdf-id", "nothing")
+    expect_error(capsys, status, out, "no BSDF with id 'nothing'", "mat")
+    expect_error(capsys, run(scene, images, out, "--variant", "scalar_rgb"), out, "not differentiable")
+    mi.set_variant("llvm_ad_rgb")
+
+
+def test_images_that_do_not_see_the_object_are_an_error(llvm_variant, tmp_path, capsys):
+    # Sensors behind the light looking away from the sphere: the images hold the background only.
+    scene = write_scene(tmp_path / "away.xml", ["0, 0, 4"])
+    scene.write_text(scene.read_text().replace('target="0, 0, 0"', 'target="0, 0, 8"'))
+    images = render_views(scene, tmp_path, spp=4)
+    out = tmp_path / "out.json"
+    expect_error(capsys, run(scene, images, out, "--model", "roughplastic", "--steps", "2"), out,
+                 "do not depend on BSDF 'mat'")
+
+
+def test_analytic_recovery(setup, tmp_path):
+    scene, images = setup
+    out = tmp_path / "fit.json"
+    assert run(scene, images, out, "--model", "roughplastic", "--steps", "40", "--spp", "4") == 0
+    fitted = json.loads(out.read_text())
+    assert fitted["type"] == "roughplastic"
+    rgb = np.array(fitted["diffuse_reflectance"]["value"])
+    start_error = np.abs(0.5 - np.array(TRUTH["diffuse_reflectance"])).sum() + abs(0.2 - TRUTH["alpha"])
+    error = np.abs(rgb - TRUTH["diffuse_reflectance"]).sum() + abs(fitted["alpha"] - TRUTH["alpha"])
+    assert error < 0.5 * start_error, (fitted, error, start_error)
+    mi.load_dict(fitted)  # a dictionary Mitsuba loads
+
+
+def novel_error(tmp_path, network: Path, reference: np.ndarray) -> float:
+    scene = write_scene(tmp_path / "novel.xml", [NOVEL])
+    text = scene.read_text()
+    start, stop = text.index('<bsdf type="roughplastic"'), text.index("</bsdf>") + len("</bsdf>")
+    scene.write_text(text[:start] + f'<bsdf type="nbrdf" id="mat"><string name="filename" value="{network}"/></bsdf>'
+                     + text[stop:])
+    image = np.array(mi.render(mi.load_file(str(scene)), spp=64, seed=5))
+    return float(np.mean((np.log1p(np.maximum(image, 0)) - np.log1p(reference)) ** 2))
+
+
+def test_network_recovery_with_the_prior(setup, tmp_path):
+    """Images of a roughplastic sphere: the estimate's loss falls, the written network is finite
+    and has fit-phong's sampling, and on a view it did not train on it is closer to the truth
+    than its start (the estimate after one step)."""
+    scene, images = setup
+    truth = write_scene(tmp_path / "truth.xml", [NOVEL])
+    reference = np.array(mi.render(mi.load_file(str(truth)), spp=64, seed=5))
+    errors = {}
+    for steps in (1, 16):
+        out = tmp_path / f"steps{steps}.nbrdf.json"
+        assert run(scene, images, out, "--steps", str(steps), "--spp", "4") == 0
+        network = json.loads(out.read_text())
+        flat = np.concatenate([np.r_[layer["weights"], layer["bias"]] for layer in network["layers"]])
+        assert flat.size == 675 and np.all(np.isfinite(flat))
+        assert "sampling" in network and len(network["provenance"]["code"]) == 32
+        errors[steps] = novel_error(tmp_path, out, reference)
+    assert errors[16] < 0.8 * errors[1], errors
+
+
+def test_deterministic_for_a_seed(setup, tmp_path):
+    scene, images = setup
+    outs = []
+    for k, seed in enumerate((3, 3, 4)):
+        outs.append(tmp_path / f"run{k}.json")
+        assert run(scene, images, outs[-1], "--model", "principled", "--steps", "3", "--spp", "2",
+                   "--seed", str(seed), "--threads", "1") == 0
+    assert outs[0].read_bytes() == outs[1].read_bytes()
+    assert outs[0].read_bytes() != outs[2].read_bytes()
+
+
+def test_a_non_finite_loss_steps_back_and_halves_the_step(setup, tmp_path):
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    model = E.Analytic("roughconductor")
+    est = E.Estimator(E.Scene(scene, "mat", {}), model, images, 2, 0, 3, tmp_path)
+    (phase,) = model.phases(4)
+    calls = []
+
+    def penalty(theta):
+        calls.append(1)
+        return (math.nan if len(calls) == 2 else 0.0), np.zeros_like(theta)
+
+    phase.penalty = penalty
+
+    class Bar:
+        def update(self, n):
+            pass
+
+        def set_postfix(self, **kw):
+            pass
+
+    theta = est.run(phase, Bar(), 0)
+    assert est.halvings == 1 and len(est.history) == 4 and np.all(np.isfinite(theta))
+
+
+def test_common_initialisation_is_the_trainers_seed_0_start():
+    from nbrdf_mitsuba.estimate import common_initialisation
+    from nbrdf_tools.compare_materials import splitmix_uniforms
+
+    flat = common_initialisation()
+    assert flat.size == 675 and flat.dtype == np.float32
+    # paper_init draws 6*21 + 21*21 + 21*3 weights from one SplitMix64(0, Init = 3, 0) stream.
+    u = splitmix_uniforms(0, 3, 0, (6 * 21 + 21 * 21 + 21 * 3 + 3) // 4).ravel().astype(np.float32)
+    expected = np.float32(0.05) * (np.float32(2.0) * u - np.float32(1.0))
+    weights = np.concatenate([flat[:126], flat[147:588], flat[609:672]])
+    np.testing.assert_array_equal(weights, expected[: weights.size])
+    assert not flat[126:147].any() and not flat[588:609].any() and not flat[672:].any()
