@@ -109,7 +109,8 @@ def _rgb_variant(variant: str) -> str:
 
 @pytest.mark.parametrize("backend", ["rust", "jit"])
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
-@pytest.mark.parametrize("variant", ["scalar_spectral", "llvm_ad_spectral", "llvm_ad_spectral_polarized"])
+@pytest.mark.parametrize("variant", ["scalar_spectral", "scalar_spectral_polarized", "llvm_ad_spectral",
+                                     "llvm_ad_spectral_polarized"])
 def test_spectral_value_is_the_uplift_of_the_rgb_value(variant, plugin, backend, files, restore_variant):
     """Polarized: the depolarizer times that value ([0, 0], zeros elsewhere)."""
     _use(variant)

@@ -3,7 +3,7 @@ and Mitsuba's own ``roughconductor`` and ``diffuse`` (RGB parameters) as the yar
 Mitsuba's spectral uplift does to RGB data (issue 31).
 
     python -m nbrdf_tools.variants_report [--out docs/results/variants.md] [--figure docs/images/variants.png]
-        [--width 192] [--spp 256] [--scalar-width 72] [--scalar-spp 16] [--work out/variants]
+        [--width 192] [--spp 256] [--scalar-width 72] [--scalar-spp 16] [--timing-repeats 5] [--work out/variants]
 
 Renders ``scalar_rgb``, ``scalar_spectral``, ``llvm_ad_rgb``, ``llvm_ad_mono``, ``llvm_ad_spectral``
 and ``llvm_ad_spectral_polarized`` (each BSDF's default backend: ``rust`` in scalar variants, ``jit``
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import os
 import sys
 import time
 from pathlib import Path
@@ -153,7 +154,8 @@ def small_png(png, path: Path) -> None:
     Image.open(png).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
 
 
-def markdown(command: str, settings: dict, results: dict, comparisons: dict, figure_path: Path) -> str:
+def markdown(command: str, settings: dict, results: dict, comparisons: dict, figure_path: Path,
+             timing: list[str]) -> str:
     lines = ["# Every variant: the Veach scene in RGB, mono, spectral and polarized variants", "",
              "```sh", command, "```", "",
              f"Mitsuba {mi.__version__}. LLVM variants: {settings['width']} x {settings['height']} pixels, "
@@ -193,7 +195,48 @@ def markdown(command: str, settings: dict, results: dict, comparisons: dict, fig
     lines += ["", summary(comparisons)]
     lines += ["", "MAE: `nbrdf_tools.metrics.mae` (all pixels and channels). Times "
               "include loading the scene and compiling its kernels, on a shared 2-core machine."]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + timing) + "\n"
+
+
+TIMED_VARIANTS = ("llvm_ad_rgb", "llvm_ad_spectral")
+
+
+def timings(materials: dict, resolution: tuple[int, int], spp: int, repeats: int) -> dict:
+    """Median (wall, CPU) seconds of a render with compiled kernels, per (BSDF, variant): every
+    scene loaded and rendered once first, then the renders interleaved (A, B, A, B ...) so that
+    load from other jobs spreads over all of them. CPU time is the process's (Dr.Jit's threads
+    included)."""
+    import drjit as dr
+
+    scenes = {}
+    for variant in TIMED_VARIANTS:
+        mi.set_variant(variant)
+        for name, bsdf in materials.items():
+            scenes[name, variant] = mi.load_dict(veach_scene_dict(bsdf, resolution=resolution, spp=spp))
+            render(scenes[name, variant], spp, seed=2**31 - 1)
+    samples = {key: [] for key in scenes}
+    for r in progress.bar(range(repeats), desc="timing", unit="round"):
+        for (name, variant), scene in scenes.items():
+            mi.set_variant(variant)
+            wall, cpu = time.perf_counter(), time.process_time()
+            dr.eval(mi.render(scene, spp=spp, seed=r))
+            dr.sync_thread()
+            samples[name, variant].append((time.perf_counter() - wall, time.process_time() - cpu))
+    return {key: np.median(np.asarray(value), axis=0) for key, value in samples.items()}
+
+
+def timing_lines(times: dict, resolution: tuple[int, int], spp: int, repeats: int) -> list[str]:
+    lines = ["", "## Cost of the uplift", "",
+             f"Warm renders (kernels compiled), {resolution[0]} x {resolution[1]} pixels, {spp} spp, median of "
+             f"{repeats} interleaved rounds; wall and CPU seconds of the whole process, on the shared 2-core "
+             f"machine (load average {os.getloadavg()[0]:.1f} at the end):", "",
+             "| BSDF | " + " | ".join(f"`{v}` wall / CPU (s)" for v in TIMED_VARIANTS) + " | spectral / RGB, CPU |",
+             "|---|" + "---:|" * (len(TIMED_VARIANTS) + 1)]
+    for name in dict.fromkeys(name for name, _ in times):
+        cells = [f"{times[name, v][0]:.2f} / {times[name, v][1]:.2f}" for v in TIMED_VARIANTS]
+        ratio = times[name, TIMED_VARIANTS[1]][1] / times[name, TIMED_VARIANTS[0]][1]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {ratio:.2f} |")
+    return lines
 
 
 def summary(comparisons: dict) -> str:
@@ -213,7 +256,7 @@ def summary(comparisons: dict) -> str:
             "uplift on the same scale): " + "; ".join(parts) + ".")
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--material", default=DEFAULT_MATERIAL, help="MERL material name (nbrdf list-materials)")
     parser.add_argument("--samples", type=int, default=800_000, help="training samples of the network")
@@ -221,13 +264,51 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--spp", type=int, default=256, help="LLVM variants' samples per pixel")
     parser.add_argument("--scalar-width", type=int, default=72, help="scalar variants' image width")
     parser.add_argument("--scalar-spp", type=int, default=16, help="scalar variants' samples per pixel")
+    parser.add_argument("--timing-repeats", type=int, default=5,
+                        help="interleaved warm renders timed per BSDF in llvm_ad_rgb and llvm_ad_spectral (0: none)")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS, help="variants to render")
     parser.add_argument("--work", type=Path, default=default_out("variants"), help="materials and EXR renders")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="the Markdown page (default: %(default)s)")
     parser.add_argument("--figure", type=Path, default=DEFAULT_FIGURE, help="the figure (default: %(default)s)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="nbrdf CLI (default: %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def render_all(materials: dict, args: argparse.Namespace) -> tuple[dict, dict, dict]:
+    """(results, images, noise images) per BSDF and variant; EXRs under WORK."""
+    results = {name: {} for name in materials}
+    images = {name: {} for name in materials}
+    noise = {name: {} for name in materials}
+    jobs = [(name, variant) for name in materials for variant in args.variants]
+    for name, variant in progress.bar(jobs, desc="rendering", unit="image"):
+        scalar = variant.startswith("scalar")
+        width, spp = (args.scalar_width, args.scalar_spp) if scalar else (args.width, args.spp)
+        resolution = (width, width * 2 // 3)
+        image, seconds = render_variant(variant, materials[name], resolution, spp, seed=0)
+        if "spectral" in variant and not variant.endswith("polarized"):
+            noise[name][variant] = render_variant(variant, materials[name], resolution, spp, seed=1)[0]
+        images[name][variant] = image
+        bad = metrics.nonfinite_count(image)
+        results[name][variant] = {"seconds": seconds, "nonfinite": bad,
+                                  "mean": metrics.tone_map(image).reshape(-1, 3).mean(axis=0)}
+        write_exr(args.work / f"veach-{name}-{variant}.exr", image)
+        progress.log(f"{name:15s} {variant:28s} {seconds:6.1f} s  mean {np.mean(image):.4f}  non-finite {bad}")
+    return results, images, noise
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The command that regenerates the page (the options that differ from the defaults)."""
+    return "python -m nbrdf_tools.variants_report" + "".join(
+        f" {flag} {value}" for flag, value, default in (
+            ("--width", args.width, 192), ("--spp", args.spp, 256), ("--scalar-width", args.scalar_width, 72),
+            ("--scalar-spp", args.scalar_spp, 16), ("--material", args.material, DEFAULT_MATERIAL),
+            ("--timing-repeats", args.timing_repeats, 5))
+        if value != default)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_arguments(argv)
     progress.set_enabled(not args.no_progress)
     missing = [v for v in args.variants if v not in mi.variants()]
     if missing:
@@ -246,37 +327,21 @@ def main(argv: list[str] | None = None) -> int:
                 "scalar_width": args.scalar_width, "scalar_height": args.scalar_width * 2 // 3,
                 "scalar_spp": args.scalar_spp}
     materials = bsdfs(network, table)
-    jobs = [(name, variant) for name in materials for variant in args.variants]
-    results = {name: {} for name in materials}
-    images = {name: {} for name in materials}
-    noise = {name: {} for name in materials}
-    failed = False
-    for name, variant in progress.bar(jobs, desc="rendering", unit="image"):
-        scalar = variant.startswith("scalar")
-        width, spp = (args.scalar_width, args.scalar_spp) if scalar else (args.width, args.spp)
-        resolution = (width, width * 2 // 3)
-        image, seconds = render_variant(variant, materials[name], resolution, spp, seed=0)
-        if "spectral" in variant and not variant.endswith("polarized"):
-            noise[name][variant] = render_variant(variant, materials[name], resolution, spp, seed=1)[0]
-        images[name][variant] = image
-        bad = metrics.nonfinite_count(image)
-        failed |= bad > 0
-        results[name][variant] = {"seconds": seconds, "nonfinite": bad,
-                                  "mean": metrics.tone_map(image).reshape(-1, 3).mean(axis=0)}
-        write_exr(args.work / f"veach-{name}-{variant}.exr", image)
-        progress.log(f"{name:15s} {variant:28s} {seconds:6.1f} s  mean {np.mean(image):.4f}  non-finite {bad}")
+    results, images, noise = render_all(materials, args)
     comparisons = {name: {v: compare(v, images[name], noise[name]) for v in args.variants} for name in materials}
     figure_path = figure(images, args.figure)
-    command = "python -m nbrdf_tools.variants_report" + "".join(
-        f" {flag} {value}" for flag, value, default in (
-            ("--width", args.width, 192), ("--spp", args.spp, 256), ("--scalar-width", args.scalar_width, 72),
-            ("--scalar-spp", args.scalar_spp, 16), ("--material", args.material, DEFAULT_MATERIAL))
-        if value != default)
-    page = markdown(command, settings, results, comparisons, figure_path)
+    timing = []
+    if args.timing_repeats > 0 and all(v in mi.variants() for v in TIMED_VARIANTS):
+        timed = {name: materials[name] for name in ("nbrdf", "merl", "roughconductor")}
+        resolution, spp = (args.width, args.width * 2 // 3), max(1, args.spp // 8)
+        timing = timing_lines(timings(timed, resolution, spp, args.timing_repeats), resolution, spp,
+                              args.timing_repeats)
+    page = markdown(command_line(args), settings, results, comparisons, figure_path, timing)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(page)
     print(page)
     print(f"figure: {figure_path}\nrenders: {args.work}")
+    failed = any(r["nonfinite"] for per_variant in results.values() for r in per_variant.values())
     return 1 if failed else 0
 
 
