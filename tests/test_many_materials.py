@@ -181,3 +181,28 @@ def test_a_broken_file_among_many_is_named(llvm, tmp_path):
         message = str(error.value)
         assert str(bad) in message, message
         assert not any(str(f) in message for f in scene_files if f != bad), message
+
+
+def test_bench_many_quick_json(llvm, tmp_path):
+    """The benchmark's CI size: every figure present and finite, the kernel auto chose named."""
+    import subprocess
+    import sys
+
+    from nbrdf_tools.paths import default_cli
+
+    if not default_cli().exists():
+        pytest.skip(f"the nbrdf CLI {default_cli()} is not built (make build)")
+    out = tmp_path / "bench.json"
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_many", "--quick", "--no-progress",
+                          "--modes", "auto,roughconductor", "--out", str(tmp_path), "--json", str(out)],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["count"], r["mode"]) for r in rows] == [(1, "auto"), (1, "roughconductor"), (4, "auto"),
+                                                       (4, "roughconductor")]
+    for row in rows:
+        for key in ("load_s", "first_render_s", "later_render_s", "later_render_cpu_s", "rss_per_material"):
+            assert np.isfinite(row[key]) and row[key] >= 0, (row, key)
+        assert row["mean"] > 0
+    auto = [r for r in rows if r["mode"] == "auto"]
+    assert all(r["kernel"] == "literal" and r["weights_bytes"] == 4 * 675 for r in auto)
