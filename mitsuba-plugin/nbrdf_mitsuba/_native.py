@@ -253,22 +253,29 @@ class Material:
                                         _out(pdf_)))
         return light, weight, pdf_
 
-    def network(self) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[np.ndarray, np.ndarray]]:
+    def network(self, prove: bool = True) -> tuple[list[tuple[np.ndarray, np.ndarray]],
+                                                    tuple[np.ndarray, np.ndarray] | None]:
         """The network as loaded: its layers ``[(W (inputs, outputs), b (outputs,)), ...]``
         (``y = x W + b``, float32) and which hidden units some pair of directions above the
-        horizon may activate (two boolean arrays of ``hidden_width``, proved once at load time;
-        ``nbrdf_material_network``)."""
+        horizon may activate (two boolean arrays of ``hidden_width``, proved once per handle, on
+        first use; ``nbrdf_material_network``), or None with ``prove=False`` (no proof made)."""
         flat = np.empty(self.parameter_count, dtype=np.float32)
+        if not prove:
+            check(lib.nbrdf_material_network(self._ptr, _out(flat), flat.size, ffi.NULL, 0))
+            return self._layers(flat), None
         active = np.empty(2 * self.hidden_width, dtype=np.uint8)
         check(lib.nbrdf_material_network(self._ptr, _out(flat), flat.size, _buffer(active, "uint8_t[]"),
                                          active.size))
+        return self._layers(flat), self._split(active)
+
+    def _layers(self, flat: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         layers, offset = [], 0
         for n_in, n_out in self.layer_shapes:
             W = flat[offset:offset + n_in * n_out].reshape(n_in, n_out)
             offset += n_in * n_out
             layers.append((W, flat[offset:offset + n_out]))
             offset += n_out
-        return layers, self._split(active)
+        return layers
 
     def active_units(self, flat) -> tuple[np.ndarray, np.ndarray]:
         """Which hidden units can fire once the network's parameters are ``flat`` (W1 b1 W2 b2

@@ -51,9 +51,11 @@ from ._native import KIND
 SAMPLING_NAMES = tuple(_native.SAMPLING_KINDS)
 BACKENDS = ("auto", "jit", "rust")
 # How the traced backend puts the weights into kernels: "literal" constants (fastest renders;
-# one compile per scene, an update recompiles) or "opaque" kernel parameters (updates without
-# recompiling, gradients flow to the weights; a few to 15 % slower).
-JIT_WEIGHT_MODES = ("literal", "opaque")
+# one compile per network, an update recompiles), "opaque" kernel parameters (updates without
+# recompiling, gradients flow to the weights; one kernel shared by every network of a shape) or
+# "auto" (the default: literals for a few live networks, the shared kernel for more, so that a
+# scene of hundreds of materials compiles once; jit.AUTO_LITERAL_MAX).
+JIT_WEIGHT_MODES = jit.WEIGHT_MODES
 _default_backend = "auto"
 #: Widest hidden layer the traced backend takes. Its kernels unroll the network into straight-line
 #: code, so tracing and compiling grow with width^2. Measured: construction plus the first eval
@@ -661,23 +663,25 @@ class NbrdfMixin(_NativeBSDFMixin):
     MATERIAL_KIND = "network"
 
     def __init__(self, props):
-        self._props_jit_weights = _get(props, "jit_weights", "literal")
+        self._props_jit_weights = _get(props, "jit_weights", "auto")
         self._init_native(props)
 
     def _trace(self, path, mode=None):
         # The network as the library loaded, validated and proved it: no second read or proof.
-        layers, active = self._native.network()
+        # Only literal kernels leave units out; "auto" proves when it first traces one.
         mode = str(self._props_jit_weights if mode is None else mode).strip().lower()
         if mode not in JIT_WEIGHT_MODES:
             raise ValueError(f'{self._type_name()} "{self._filename}": unknown jit_weights "{mode}" '
                              f"(expected one of: {', '.join(JIT_WEIGHT_MODES)})")
+        layers, active = self._native.network(prove=mode == "literal")
         return jit.TracedNetwork(layers, weights=mode, anisotropic=self._native.anisotropic,
                                  active_units=self._native.active_units, active=active)
 
     def _traverse_traced(self, put):
         # The network's 675 (for width 21) weights, W1 b1 W2 b2 W3 b3, updatable through
-        # params.update(). Only kernel parameters ("opaque") carry gradients; literals are
-        # constants of the kernel, and an update recompiles it.
+        # params.update(). Only "opaque" weights carry gradients; literals are constants of the
+        # kernel, and an update recompiles it ("auto": literal or shared-kernel parameters, no
+        # gradients, so that its kernels never depend on whether gradients are on).
         differentiable = self._traced.mode == "opaque"
         put("weights", self._traced.flat,
             mi.ParamFlags.Differentiable if differentiable else mi.ParamFlags.NonDifferentiable)
@@ -743,6 +747,8 @@ class NbrdfMixin(_NativeBSDFMixin):
                  f"parameter_count = {net.parameter_count}", f"anisotropic = {str(net.anisotropic).lower()}"]
         if self._backend == "jit":
             lines.append(f"jit_weights = {self._traced.mode}")
+            if self._traced.mode == "auto":
+                lines.append(f"kernel = {self._traced.kernel()}")
         return lines
 
 

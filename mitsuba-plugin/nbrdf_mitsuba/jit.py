@@ -12,13 +12,16 @@ Sharp lobes: ``1 - cos(theta_h)`` is computed from ``|h_xy|^2`` (never as ``1 - 
 cancels in float32), so the pdf keeps its accuracy up to :data:`MAX_EXPONENT`.
 
 Weights enter the kernel either as literals (``literal``: constant-folded, fastest, but one kernel
-per material) or as opaque scalar variables (``opaque``: one kernel per network width shared by
-every material, the weights loaded once per kernel launch). See ``TracedNetwork``.
+per material), as kernel parameters (``opaque``: one kernel per network shape shared by every
+material, the weights passed per instance) or as whichever suits the scene (``auto``: literals for
+a few networks, the shared kernel for more). See ``TracedNetwork``.
 """
 
 from __future__ import annotations
 
 import math
+import threading
+import weakref
 
 import drjit as dr
 import mitsuba as mi
@@ -125,26 +128,51 @@ def expm1(x):
     return dr.fma(scale, dr.fma(p * r, r, r), scale - 1.0)
 
 
+#: ``jit_weights = "auto"`` traces literal kernels while at most this many traced networks are
+#: alive in the variant, and the shared kernel (kernel parameters) beyond. Each literal network
+#: is its own callable in Mitsuba's symbolic call, compiled on the first render (about 0.3 s on
+#: two cores); kernel-parameter networks of one shape trace to the same code, which Dr.Jit
+#: compiles once. Measured: docs/results/performance.md, "Many materials".
+AUTO_LITERAL_MAX = 4
+WEIGHT_MODES = ("auto", "literal", "opaque")
+_live: dict[str, weakref.WeakSet] = {}
+_live_lock = threading.Lock()  # Mitsuba builds a scene's plugins on several threads
+
+
+def live_networks() -> int:
+    """How many traced networks of the current variant are alive: what Mitsuba's symbolic call
+    traces (it traces every live BSDF instance, not only one scene's)."""
+    with _live_lock:
+        return len(_live.get(mi.variant(), ()))
+
+
 class TracedNetwork:
     """An NBRDF as Dr.Jit arithmetic. ``layers`` are ``(W, b)`` NumPy pairs with ``y = x W + b``.
 
     ``flat`` (W1, b1, W2, b2, W3, b3 as one ``mi.Float``) is what ``traverse`` exposes; after an
     update call ``refresh()`` so the traced kernels see the new values.
 
+    ``weights``: ``literal`` (constants of the kernel: one kernel per network), ``opaque``
+    (kernel parameters gathered from ``flat``: gradients reach ``flat``) or ``auto`` (literal
+    constants while :func:`live_networks` is at most :data:`AUTO_LITERAL_MAX`, else kernel
+    parameters; no gradients, as ``literal``). Kernel-parameter networks of one shape trace to
+    identical code: Mitsuba's symbolic call over hundreds of them compiles one callable and
+    passes each instance's weights as call data (the shared kernel).
+
     ``active`` (per hidden layer, which units some pair of directions above the horizon can
     activate: the library's proof made when it loaded the network, ``_native.Material.network``)
     and ``active_units(flat)`` (the library's proof for new weights,
-    ``_native.Material.active_units``), when given, name in ``literal`` mode the units the kernel
+    ``_native.Material.active_units``), when given, name in literal kernels the units the kernel
     computes; it leaves the others out. They output exactly 0 wherever the BSDF is evaluated, so
     the values do not change and a trained network loses up to two thirds of its multiply-adds
     (``network/pruning.rs``; tests/test_backends.py holds the pruned kernel to the full one).
-    ``opaque`` kernels keep every unit: their weights change without a new kernel.
+    Kernel-parameter kernels keep every unit: their code must not depend on the weights.
     """
 
     def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], weights: str = "literal",
                  anisotropic: bool = False, active_units=None, active=None):
-        if weights not in ("opaque", "literal"):
-            raise ValueError(f"weights must be 'opaque' or 'literal', got '{weights}'")
+        if weights not in WEIGHT_MODES:
+            raise ValueError(f"weights must be one of {', '.join(WEIGHT_MODES)}, got '{weights}'")
         self.mode = weights
         #: Whether the input carries phi_h (file format version 2, ``"anisotropic": true``).
         self.anisotropic = bool(anisotropic)
@@ -154,6 +182,8 @@ class TracedNetwork:
         flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
         self.flat = mi.Float(flat.astype(np.float32))
         self.refresh(active)
+        with _live_lock:
+            _live.setdefault(mi.variant(), weakref.WeakSet()).add(self)
 
     def describe_index(self, k: int) -> str:
         """Where flat index ``k`` lives, e.g. ``layer 2 weight 17`` or ``layer 3 bias 0``."""
@@ -173,34 +203,66 @@ class TracedNetwork:
         these weights when the caller has it (else ``active_units`` proves it)."""
         values = np.array(dr.detach(self.flat).numpy(), dtype=np.float32).reshape(-1)
         self.good = values
-        #: Per hidden layer, which units the kernel computes (None: all of them).
-        self.active = None
+        self._active = active
+        if self.mode == "literal" and active is None and self._active_units is not None:
+            self._active = self._active_units(values)
+        #: The weights of each kind of kernel this network traces: "literal", "parameters".
+        self._kernels = {}
         if self.mode == "literal":
-            self.active = active if active is not None or self._active_units is None else self._active_units(values)
-        if self.mode == "literal":
-            scalars = [mi.Float(float(v)) for v in values]
-        else:
+            self._kernels["literal"] = self._split([mi.Float(float(v)) for v in values])
+        if self.mode == "opaque":
             # Gathers at literal indices give 675 size-1 variables; make_opaque evaluates them in
-            # one small kernel so they become kernel parameters, not constants.
+            # one small kernel so they become kernel parameters, not constants, and keeps their
+            # AD edges to ``flat``.
             scalars = [dr.gather(mi.Float, self.flat, k) for k in range(dr.width(self.flat))]
             dr.make_opaque(*scalars)
-        self._layers = []
-        offset = 0
+            self._kernels["parameters"] = self._split(scalars)
+        elif self.mode == "auto":
+            # No AD edges needed: each value becomes its own one-element buffer, no kernel runs.
+            scalars = [mi.Float(float(v)) for v in values]
+            dr.make_opaque(*scalars)
+            self._kernels["parameters"] = self._split(scalars)
+
+    @property
+    def active(self):
+        """Per hidden layer, which units literal kernels compute (None: all of them). ``auto``
+        proves it when a literal kernel first needs it: a network that only ever runs in the
+        shared kernel never pays for the proof (most of a load's time)."""
+        if self.mode == "opaque":
+            return None
+        if self._active is None and self._active_units is not None:
+            self._active = self._active_units(self.good)
+        return self._active
+
+    def _split(self, scalars: list) -> list:
+        layers, offset = [], 0
         for n_in, n_out in self.shapes:
             W = [scalars[offset + i * n_out : offset + (i + 1) * n_out] for i in range(n_in)]
             offset += n_in * n_out
             b = scalars[offset : offset + n_out]
             offset += n_out
-            self._layers.append((W, b))
+            layers.append((W, b))
+        return layers
+
+    def kernel(self) -> str:
+        """Which kernel the next trace uses: ``literal`` or ``parameters`` (see the class)."""
+        if self.mode == "auto":
+            return "literal" if live_networks() <= AUTO_LITERAL_MAX else "parameters"
+        return "literal" if self.mode == "literal" else "parameters"
 
     def eval_input(self, x: list) -> mi.Color3f:
         """The network on an input list (``None`` entries are zeros): ``f_r``, clamped at 0."""
         h = x
-        last = len(self._layers) - 1
-        for k, (W, b) in enumerate(self._layers):
+        kernel = self.kernel()
+        if kernel not in self._kernels:  # "auto" makes its literals when it first needs them
+            self._kernels[kernel] = self._split([mi.Float(float(v)) for v in self.good])
+        layers = self._kernels[kernel]
+        active = self.active if kernel == "literal" else None
+        last = len(layers) - 1
+        for k, (W, b) in enumerate(layers):
             out = []
             for o in range(len(b)):
-                if k < last and self.active is not None and not self.active[k][o]:
+                if k < last and active is not None and not active[k][o]:
                     out.append(None)  # never fires above the horizon: exactly 0
                     continue
                 acc = b[o]
@@ -402,6 +464,14 @@ class TracedTable:
                  mass: np.ndarray, alias_probability: np.ndarray, alias: np.ndarray):
         self.rows, self.theta_bins, self.phi_bins = int(rows), int(theta_bins), int(phi_bins)
         self.cosine_weight = float(cosine_weight)
+        # Kernel parameters rather than literals, so that tables of different cosine weights trace
+        # to the same code (one callable for hundreds of materials); each is the float32 of the
+        # float64 value a literal would hold, so the values do not change.
+        self._cosine = mi.Float(self.cosine_weight)
+        self._rest = mi.Float(1.0 - self.cosine_weight)
+        # (A table of cosine weight 1 never picks a bin: u0 < 1 selects the cosine lobe.)
+        self._inv_rest = mi.Float(1.0 / (1.0 - self.cosine_weight) if self.cosine_weight < 1.0 else 0.0)
+        dr.make_opaque(self._cosine, self._rest, self._inv_rest)
         self.mass = mi.Float(np.asarray(mass, dtype=np.float32))
         self.alias_probability = mi.Float(np.asarray(alias_probability, dtype=np.float32))
         self.alias = mi.UInt32(np.asarray(alias, dtype=np.uint32))
@@ -435,8 +505,8 @@ class TracedTable:
         return dr.select(keep, k, dr.gather(mi.UInt32, self.alias, index, ~keep))
 
     def sample_direction(self, v: mi.Vector3f, u0, u1, u2) -> mi.Vector3f:
-        c = self.cosine_weight
-        bin_ = self.pick(self._row(v), (u0 - c) * (1.0 / (1.0 - c)))
+        c = self._cosine
+        bin_ = self.pick(self._row(v), (u0 - c) * self._inv_rest)
         i, j = bin_ // self.phi_bins, bin_ % self.phi_bins
         o0, o1 = self._edge(i), self._edge(i + 1)
         one_minus_cos = dr.fma(u1, o1 - o0, o0)
@@ -454,7 +524,7 @@ class TracedTable:
     def pdf(self, view: mi.Vector3f, light: mi.Vector3f):
         v, v_ok = _unit(view)
         l, l_ok = _unit(light)
-        cosine = self.cosine_weight * dr.maximum(l.z, 0.0) / math.pi
+        cosine = self._cosine * dr.maximum(l.z, 0.0) / math.pi
         s = v + l
         h = dr.normalize(s)
         v_dot_h = dr.dot(v, h)
@@ -468,7 +538,7 @@ class TracedTable:
         p = dr.gather(mi.Float, self.mass, (self._row(v) * nt + i) * np_ + j, valid)
         solid_angle = (self._edge(i + 1) - self._edge(i)) * (2.0 * math.pi / np_)  # with the mirror
         table = p / solid_angle / (4.0 * v_dot_h)
-        pdf = cosine + (1.0 - self.cosine_weight) * dr.select(valid, table, 0.0)
+        pdf = cosine + self._rest * dr.select(valid, table, 0.0)
         return dr.select(v_ok & l_ok & (v.z > 0) & (l.z > 0), pdf, 0.0)
 
 

@@ -143,7 +143,8 @@ extern "C" {
 // Loads a material and stores a new handle in `*out` (NULL on failure): a MERL-format table
 // (`.binary`, 34,992,012 bytes) when the file starts with a table's header (90, 90, 180 as
 // little-endian int32), else a neural BRDF (`*.nbrdf.json`), validated, and proved once which
-// of its hidden units can fire above the horizon (`nbrdf_material_network`). Free it with
+// of its hidden units can fire above the horizon (`nbrdf_material_network`; the proof is made
+// on the first call that needs it: evaluation, sampling or `nbrdf_material_network`). Free it with
 // `nbrdf_material_free`; `nbrdf_material_info` says which kind it is.
 //
 // # Safety
@@ -207,11 +208,12 @@ int32_t nbrdf_material_sample(const struct NbrdfMaterial *material,
 // some pair of directions above the horizon may activate, 0 for one proved never to (it
 // outputs exactly 0 wherever the BRDF is evaluated, so an evaluator may leave it out).
 // `params_len` and `active_len` must be those sizes (`nbrdf_material_info`);
-// `NBRDF_ERROR_INVALID_ARGUMENT` for a table.
+// `NBRDF_ERROR_INVALID_ARGUMENT` for a table. `out_active` NULL with `active_len` 0 asks for
+// the parameters alone: the proof (milliseconds) is then not made.
 //
 // # Safety
 // `material` is a live handle; `out_params` points to `params_len` writable floats and
-// `out_active` to `active_len` writable bytes.
+// `out_active` to `active_len` writable bytes (or is NULL with `active_len` 0).
 int32_t nbrdf_material_network(const struct NbrdfMaterial *material,
                                float *out_params,
                                size_t params_len,

@@ -17,6 +17,7 @@ use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference, Failu
 use std::ffi::{c_char, CString};
 use std::io::Read;
 use std::path::Path;
+use std::sync::OnceLock;
 
 /// What an `NbrdfMaterial` holds (the `kind` of `NbrdfMaterialInfo`).
 #[repr(C)]
@@ -42,12 +43,28 @@ enum Source {
     Merl(MerlTable),
 }
 
-/// A network as the file stores it, the proof of which hidden units can fire, and the network
-/// without the others: what eval, sample and tables evaluate.
+/// A network as the file stores it and, made on first use, the proof of which hidden units can
+/// fire and the network without the others (what eval, sample and tables evaluate). Lazy
+/// because the proof is most of a load's time (tens of milliseconds) and an evaluator that
+/// keeps every unit (the plugin's kernel shared by many materials) never asks for it.
 struct LoadedNetwork {
     network: Nbrdf,
+    proved: OnceLock<Proved>,
+}
+
+struct Proved {
     active: ActiveUnits,
     renderer: Nbrdf,
+}
+
+impl LoadedNetwork {
+    fn proved(&self) -> &Proved {
+        self.proved.get_or_init(|| {
+            let active = self.network.active_units();
+            let renderer = self.network.with_units(&active);
+            Proved { active, renderer }
+        })
+    }
 }
 
 /// Summary of a material (`nbrdf_material_info`).
@@ -111,13 +128,10 @@ impl NbrdfMaterial {
         }
         let network = Nbrdf::load(path)?;
         let name = CString::new(network.name.replace('\0', "")).unwrap_or_default();
-        let active = network.active_units();
-        let renderer = network.with_units(&active);
         Ok(NbrdfMaterial {
             source: Source::Network(Box::new(LoadedNetwork {
                 network,
-                active,
-                renderer,
+                proved: OnceLock::new(),
             })),
             name,
         })
@@ -126,7 +140,7 @@ impl NbrdfMaterial {
     /// What eval, sample and the tabulated sampler evaluate.
     pub(crate) fn brdf(&self) -> &dyn Brdf {
         match &self.source {
-            Source::Network(loaded) => &loaded.renderer,
+            Source::Network(loaded) => &loaded.proved().renderer,
             Source::Merl(table) => table,
         }
     }
@@ -217,7 +231,8 @@ fn write_flags(active: &ActiveUnits, out: &mut [u8]) {
 /// Loads a material and stores a new handle in `*out` (NULL on failure): a MERL-format table
 /// (`.binary`, 34,992,012 bytes) when the file starts with a table's header (90, 90, 180 as
 /// little-endian int32), else a neural BRDF (`*.nbrdf.json`), validated, and proved once which
-/// of its hidden units can fire above the horizon (`nbrdf_material_network`). Free it with
+/// of its hidden units can fire above the horizon (`nbrdf_material_network`; the proof is made
+/// on the first call that needs it: evaluation, sampling or `nbrdf_material_network`). Free it with
 /// `nbrdf_material_free`; `nbrdf_material_info` says which kind it is.
 ///
 /// # Safety
@@ -371,11 +386,12 @@ pub unsafe extern "C" fn nbrdf_material_sample(
 /// some pair of directions above the horizon may activate, 0 for one proved never to (it
 /// outputs exactly 0 wherever the BRDF is evaluated, so an evaluator may leave it out).
 /// `params_len` and `active_len` must be those sizes (`nbrdf_material_info`);
-/// `NBRDF_ERROR_INVALID_ARGUMENT` for a table.
+/// `NBRDF_ERROR_INVALID_ARGUMENT` for a table. `out_active` NULL with `active_len` 0 asks for
+/// the parameters alone: the proof (milliseconds) is then not made.
 ///
 /// # Safety
 /// `material` is a live handle; `out_params` points to `params_len` writable floats and
-/// `out_active` to `active_len` writable bytes.
+/// `out_active` to `active_len` writable bytes (or is NULL with `active_len` 0).
 #[no_mangle]
 pub unsafe extern "C" fn nbrdf_material_network(
     material: *const NbrdfMaterial,
@@ -389,7 +405,10 @@ pub unsafe extern "C" fn nbrdf_material_network(
         let material = unsafe { reference(material, "material")? };
         let loaded = material.loaded_network()?;
         check_pointer(out_params, "out_params")?;
-        check_pointer(out_active, "out_active")?;
+        let parameters_only = out_active.is_null() && active_len == 0;
+        if !parameters_only {
+            check_pointer(out_active, "out_active")?;
+        }
         let params = loaded.network.to_flat();
         exact_len(
             "out_params",
@@ -398,12 +417,16 @@ pub unsafe extern "C" fn nbrdf_material_network(
             "NbrdfMaterialInfo::parameter_count",
         )?;
         let hidden = loaded.network.hidden_width();
-        exact_len("out_active", active_len, 2 * hidden, "2 hidden_width")?;
+        if !parameters_only {
+            exact_len("out_active", active_len, 2 * hidden, "2 hidden_width")?;
+        }
         // SAFETY: non-null and aligned (checked), `params_len` writable floats by contract.
         unsafe { output(out_params, params_len) }.copy_from_slice(&params);
-        // SAFETY: non-null, `active_len` writable bytes by contract.
-        let active = unsafe { std::slice::from_raw_parts_mut(out_active, active_len) };
-        write_flags(&loaded.active, active);
+        if !parameters_only {
+            // SAFETY: non-null, `active_len` writable bytes by contract.
+            let active = unsafe { std::slice::from_raw_parts_mut(out_active, active_len) };
+            write_flags(&loaded.proved().active, active);
+        }
         Ok(())
     })
 }

@@ -749,6 +749,14 @@ fn the_loaded_proof_and_parameters_are_the_core_ones_and_handles_evaluate_withou
     assert_eq!(status, OK, "{}", last_error());
     assert_eq!(out, expected);
     assert_eq!(params, Nbrdf::load(&path).unwrap().to_flat());
+    // The parameters alone (no proof asked for): NULL flags of length 0.
+    let mut alone = vec![f32::NAN; flat.len()];
+    // SAFETY: a buffer of the size passed; no flags.
+    let status = unsafe {
+        nbrdf_material_network(handle.ptr(), alone.as_mut_ptr(), alone.len(), null_mut(), 0)
+    };
+    assert_eq!(status, OK, "{}", last_error());
+    assert_eq!(alone, params);
     // New weights are proved again, through the same material.
     assert_eq!(active_units(&handle, &flat, 12), (OK, expected.clone()));
     let mut all_fire = flat.clone();
