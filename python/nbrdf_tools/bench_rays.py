@@ -116,11 +116,13 @@ def candidates(network: Path, table: Path, mode: str, measured: Path | None = No
         bsdfs["merl"] = {"type": "merl", "filename": str(table), "backend": "rust"}
         bsdfs.update(builtin_bsdfs())
         return bsdfs
-    bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit"}
+    # The table times the literal kernels by name: with more than jit.AUTO_LITERAL_MAX networks
+    # alive (this process holds six) the default "auto" would pick the shared kernel instead.
+    bsdfs["nbrdf"] = {"type": "nbrdf", "filename": str(network), "backend": "jit", "jit_weights": "literal"}
     bsdfs["nbrdf-opaque"] = {"type": "nbrdf", "filename": str(network), "backend": "jit", "jit_weights": "opaque"}
     for strategy in NBRDF_STRATEGIES:
         bsdfs[f"nbrdf-{strategy}"] = {"type": "nbrdf", "filename": str(network), "backend": "jit",
-                                      "sampling": strategy}
+                                      "jit_weights": "literal", "sampling": strategy}
     bsdfs["merl"] = {"type": "merl", "filename": str(table), "backend": "jit"}
     if measured is not None:
         bsdfs["measured"] = {"type": "measured", "filename": str(measured)}
