@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from test_rgl_reader import ATOL_OF_PEAK, RTOL, _direction_pairs, build_rgl_eval
 
-from nbrdf_tools import spectral_rgl
+from nbrdf_tools import spectral_basis, spectral_rgl
 from nbrdf_tools.paths import default_cli
 
 MATERIALS = ["paper_white_rgb", "cc_iris_purple_gem_rgb"]
@@ -22,8 +22,6 @@ MATERIALS = ["paper_white_rgb", "cc_iris_purple_gem_rgb"]
 # intervals is exercised; Mitsuba samples 360-830 nm, all inside.
 WAVELENGTHS = np.array([360.0, 372.5, 401.0, 430.0, 447.0, 470.0, 488.5, 512.0, 530.0, 556.0, 581.0,
                         600.0, 618.5, 640.0, 672.0, 700.0, 733.0, 780.0, 830.0, 900.0, 1000.0])
-# Mitsuba's MI_CIE_Y_NORMALIZATION (include/mitsuba/core/spectrum.h), not exposed to Python.
-CIE_Y_NORMALIZATION = 1.0 / 106.7502593994140625
 
 
 @pytest.fixture(scope="module")
@@ -108,33 +106,15 @@ def test_per_wavelength_eval_matches_mitsuba_measured(material, variant, spectra
     assert peak > 0.1 and len(lit) > 0.05 * above.sum() and np.std(lit / lit.mean(1, keepdims=True)) > 0.05
 
 
-def _srgb_projection_oracle(wavelengths) -> np.ndarray:
-    """Float64 NumPy: per sample wavelength the linear sRGB of its hat function under D65, from
-    Mitsuba's CIE 1931 and D65 tables (read at their 5 nm nodes through Mitsuba's Python API and
-    interpolated linearly as Mitsuba does) integrated on a 0.005 nm trapezoid grid."""
-    mi.set_variant("scalar_rgb")
-    nodes = np.linspace(360.0, 830.0, 95)
-    cmf = np.array([list(mi.cie1931_xyz(float(w))) for w in nodes], np.float64)
-    d65 = np.array([mi.cie_d65(float(w)) for w in nodes], np.float64)
-    to_srgb = np.array([list(mi.xyz_to_srgb(mi.Color3f(*e))) for e in np.eye(3)]).T
-    lo, hi = max(360.0, wavelengths[0]), min(830.0, wavelengths[-1])
-    grid = np.linspace(lo, hi, int(round((hi - lo) / 0.005)) + 1)
-    weight = np.stack([np.interp(grid, nodes, cmf[:, c]) for c in range(3)], 1)
-    weight *= np.interp(grid, nodes, d65)[:, None]
-    out = np.empty((len(wavelengths), 3))
-    for k in range(len(wavelengths)):
-        hat = np.interp(grid, wavelengths, np.eye(len(wavelengths))[k])
-        out[k] = to_srgb @ np.trapezoid(weight * hat[:, None], grid, axis=0) * CIE_Y_NORMALIZATION
-    return out
-
-
 @pytest.mark.parametrize("material", MATERIALS)
 def test_srgb_projection_matches_a_float64_integral(material, shared, spectral_files, rgl_eval,
                                                     restore_variant):
     # The spectral file holds rgb . basis(l) per cell, and everything between the cells and the
     # sRGB value is linear: its RGB evaluation must be the RGB file's evaluation times the matrix
     # of the projected basis (from the float64 oracle), up to float32 rounding.
-    weights = _srgb_projection_oracle(WAVELENGTHS)
+    mi.set_variant("scalar_rgb")
+    # The float64 oracle: Mitsuba's CIE tables integrated by the trapezoid rule in NumPy.
+    weights = spectral_basis.srgb_weights(WAVELENGTHS)
     basis = spectral_rgl.basis_spectra(WAVELENGTHS.astype(np.float32))
     matrix = basis @ weights          # row c: the sRGB value of basis spectrum c
     # A check of the oracle itself against Mitsuba's own (1000-point) projection of a reflectance
