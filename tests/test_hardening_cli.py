@@ -138,3 +138,30 @@ def test_latent_commands_refuse_anisotropic_networks(cli, tmp_path):
         assert len(lines) == 1 and "brushed" in lines[0] and "is anisotropic" in lines[0], (args, result.stderr)
     assert not (tmp_path / "out.nbrdf.json").exists() and not (tmp_path / "ae.json").exists()
     assert not (tmp_path / "path").exists()
+
+
+@pytest.mark.parametrize("defect, field, words", [
+    ("count", "spectra", "(wavelengths)"),
+    ("order", "wavelengths", "strictly increasing"),
+    ("nan", "wavelengths", "finite"),
+    ("micrometres", "wavelengths", "nanometres"),
+])
+def test_bad_spectral_measurements_name_the_field(cli, shared, tmp_path, defect, field, words):
+    from nbrdf_tools import spectral_rgl
+
+    rgb = spectral_rgl.read_tensor_file(shared / "data" / "rgl" / "paper_white_rgb.bsdf")
+    fields = spectral_rgl.spectral_fields(rgb, np.linspace(360.0, 1000.0, 9))
+    wavelengths = fields["wavelengths"]
+    if defect == "count":            # spectra has 9 wavelengths, the field 8
+        fields["wavelengths"] = wavelengths[:-1].copy()
+    elif defect == "order":
+        wavelengths[[3, 4]] = wavelengths[[4, 3]]
+    elif defect == "nan":
+        wavelengths[5] = np.nan
+    else:
+        fields["wavelengths"] = wavelengths / 1000.0
+    path = spectral_rgl.write_tensor_file(tmp_path / f"{defect}_spec.bsdf", fields)
+    result = run(cli, "train", path, "-o", tmp_path / "x.nbrdf.json", "--quiet")
+    assert result.returncode == 1, result.stderr
+    assert str(path) in result.stderr and f'field "{field}"' in result.stderr and words in result.stderr
+    assert not (tmp_path / "x.nbrdf.json").exists()

@@ -26,14 +26,19 @@ RTOL = 3e-4
 ATOL_OF_PEAK = 1e-7
 
 
-@pytest.fixture(scope="module")
-def rgl_eval() -> Path:
+def build_rgl_eval() -> Path:
+    """Builds the example binary and returns its path."""
     target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
     if not target.is_absolute():
         target = REPO / target
     subprocess.run(["cargo", "build", "--release", "-q", "-p", "nbrdf-core", "--example", "rgl_eval"],
                    cwd=REPO, check=True)
     return target / "release" / "examples" / "rgl_eval"
+
+
+@pytest.fixture(scope="module")
+def rgl_eval() -> Path:
+    return build_rgl_eval()
 
 
 def _hemisphere(rng, n, z_range=(0.0, 1.0)):

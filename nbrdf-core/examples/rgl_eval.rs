@@ -5,6 +5,10 @@
 //! light xyz; view = Mitsuba's `si.wi`, light = its `wo`) from stdin and writes, per row, six
 //! little-endian float64: Mitsuba's `eval` (`f_r cos(theta_light)`, RGB) then `f_r` (RGB).
 //!
+//! `rgl_eval --spectral FILE < rows > values`: for a spectral file (`*_spec.bsdf`), rows of ten
+//! little-endian float32 (view xyz, light xyz, four wavelengths in nm, as a Mitsuba spectral
+//! variant evaluates) and, per row, four little-endian float64: `f_r cos(theta_light)` at each.
+//!
 //! `rgl_eval --bench N FILE`: evaluates N random direction pairs in the upper hemisphere on all
 //! cores (rayon) and prints evaluations per second.
 
@@ -22,8 +26,13 @@ fn main() -> ExitCode {
             Ok(n) => bench(file, n),
             Err(_) => Err(format!("--bench expects a count, got '{n}'")),
         },
+        [flag, file] if flag == "--spectral" => eval_spectral_stdin(file),
         [file] => eval_stdin(file),
-        _ => Err("usage: rgl_eval FILE < directions   |   rgl_eval --bench N FILE".into()),
+        _ => Err(
+            "usage: rgl_eval FILE < directions   |   rgl_eval --spectral FILE < rows   |   \
+             rgl_eval --bench N FILE"
+                .into(),
+        ),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -34,22 +43,47 @@ fn main() -> ExitCode {
     }
 }
 
-fn eval_stdin(file: &str) -> Result<(), String> {
-    let measurement = RglMeasurement::load(file).map_err(|e| e.to_string())?;
+/// Stdin as rows of `width` little-endian float32.
+fn read_rows(width: usize) -> Result<Vec<f32>, String> {
     let mut input = Vec::new();
     std::io::stdin()
         .read_to_end(&mut input)
         .map_err(|e| e.to_string())?;
-    if input.len() % 24 != 0 {
+    if input.len() % (4 * width) != 0 {
         return Err(format!(
-            "{} bytes on stdin, not rows of six float32",
+            "{} bytes on stdin, not rows of {width} float32",
             input.len()
         ));
     }
-    let floats: Vec<f32> = input
+    Ok(input
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
+        .collect())
+}
+
+fn eval_spectral_stdin(file: &str) -> Result<(), String> {
+    let measurement = RglMeasurement::load(file).map_err(|e| e.to_string())?;
+    let floats = read_rows(10)?;
+    let mut output = Vec::with_capacity(floats.len() / 10 * 32);
+    let mut values = [0.0f32; 4];
+    for row in floats.chunks_exact(10) {
+        let view = Vec3::new(row[0], row[1], row[2]);
+        let light = Vec3::new(row[3], row[4], row[5]);
+        measurement
+            .eval_spectrum_cos_f32(view, light, &row[6..], &mut values)
+            .map_err(|e| e.to_string())?;
+        for v in values {
+            output.extend_from_slice(&(v as f64).to_le_bytes());
+        }
+    }
+    std::io::stdout()
+        .write_all(&output)
+        .map_err(|e| e.to_string())
+}
+
+fn eval_stdin(file: &str) -> Result<(), String> {
+    let measurement = RglMeasurement::load(file).map_err(|e| e.to_string())?;
+    let floats = read_rows(6)?;
     let mut output = Vec::with_capacity(floats.len() / 6 * 48);
     for row in floats.chunks_exact(6) {
         let view = Vec3::new(row[0], row[1], row[2]);

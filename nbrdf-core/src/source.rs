@@ -12,6 +12,9 @@
 //!   The reciprocal mean's swapped term carries `cos_light / cos_view`, which grows without bound
 //!   at grazing views; samples with either cosine below [`GRAZING_COS`] are dropped there.
 //! * Out-of-gamut RGB values (slightly negative) are clamped to 0, as the `Brdf` impl does.
+//! * A spectral measurement (`*_spec.bsdf`) is learnt through its linear sRGB projection under
+//!   D65 (`RglMeasurement::eval` of such a file; docs/design.md section 9): the network is an
+//!   RGB network, as for an RGB file.
 
 use crate::coords::{from_rusinkiewicz, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
@@ -86,10 +89,12 @@ impl TrainingSource {
         }
     }
 
-    /// `"merl-table"` or `"rgl-measurement"`, for provenance.
+    /// `"merl-table"`, `"rgl-measurement"` or `"rgl-spectral-measurement"` (learnt through its
+    /// sRGB projection), for provenance.
     pub fn kind(&self) -> &'static str {
         match self {
             TrainingSource::Table { .. } => "merl-table",
+            TrainingSource::Rgl(m) if m.spectra().is_some() => "rgl-spectral-measurement",
             TrainingSource::Rgl(_) => "rgl-measurement",
         }
     }

@@ -364,19 +364,6 @@ fn wrong_dtypes_shapes_and_values_are_refused() {
 }
 
 #[test]
-fn spectral_measurements_are_refused_as_mitsuba_rgb_variants_do() {
-    let fields = Fields::valid(true).without("rgb");
-    let mut fields = fields.0;
-    fields.push((
-        "wavelengths".into(),
-        DType::Float32,
-        vec![2],
-        f32_bytes(&[400.0, 700.0]),
-    ));
-    refused(Fields(fields).bytes(), &["spectral", "_rgb.bsdf"]);
-}
-
-#[test]
 fn batches_match_single_evaluations() {
     use nbrdf_core::brdf::{Directions, RgbMut};
     let m = parse(Fields::valid(true).bytes()).unwrap();
@@ -774,4 +761,244 @@ fn opposite_grazing_directions_give_zero() {
     let (view, light) = (Vec3::new(-1.0, 0.0, 1e-30), Vec3::new(1.0, 0.0, 1e-30));
     assert_eq!(m.eval_cos_f32(view, light), [0.0; 3]);
     assert_eq!(Brdf::eval(&m, view, light), [0.0; 3]);
+}
+
+/// Spectral files (`*_spec.bsdf`): `wavelengths` and `spectra` instead of `rgb`.
+mod spectral {
+    use super::*;
+    use nbrdf_core::source::{rgl_target, RglFold, TrainingSource};
+    use nbrdf_core::spectrum::SrgbProjection;
+
+    /// The sampled spectrum, the same in every cell and incident direction (so the tables are
+    /// constant along all but the wavelength axis and evaluate to a closed form).
+    const WAVELENGTHS: [f32; 5] = [360.0, 450.0, 550.0, 700.0, 830.0];
+    const SPECTRUM: [f32; 5] = [0.1, 0.6, 0.3, 0.9, 0.2];
+
+    fn spectral_fields(jacobian: bool, wavelengths: &[f32], spectrum: &[f32]) -> Fields {
+        let spectra: Vec<f32> = (0..N_THETA)
+            .flat_map(|_| {
+                spectrum
+                    .iter()
+                    .flat_map(|&c| std::iter::repeat(c).take(RES * RES))
+            })
+            .collect();
+        let mut fields = Fields::valid(jacobian).without("rgb").0;
+        let shape = vec![1, N_THETA, spectrum.len(), RES, RES];
+        fields.push(("spectra".into(), DType::Float32, shape, f32_bytes(&spectra)));
+        let n = wavelengths.len();
+        let wavelengths = f32_bytes(wavelengths);
+        fields.push(("wavelengths".into(), DType::Float32, vec![n], wavelengths));
+        Fields(fields)
+    }
+
+    fn valid(jacobian: bool) -> RglMeasurement {
+        parse(spectral_fields(jacobian, &WAVELENGTHS, &SPECTRUM).bytes()).expect("valid file")
+    }
+
+    /// The spectrum's piecewise-linear interpolant, in float64.
+    fn interpolated(l: f64) -> f64 {
+        let k = WAVELENGTHS
+            .windows(2)
+            .position(|w| l <= w[1] as f64)
+            .unwrap();
+        let (l0, l1) = (WAVELENGTHS[k] as f64, WAVELENGTHS[k + 1] as f64);
+        let t = (l - l0) / (l1 - l0);
+        (1.0 - t) * SPECTRUM[k] as f64 + t * SPECTRUM[k + 1] as f64
+    }
+
+    #[test]
+    fn per_wavelength_values_interpolate_the_spectrum() {
+        for jacobian in [false, true] {
+            let m = valid(jacobian);
+            assert_eq!(m.spectra().unwrap().wavelengths(), WAVELENGTHS);
+            let scale = if jacobian {
+                (NDF / (4.0 * SIGMA)) as f64
+            } else {
+                1.0
+            };
+            let queries = [360.0, 400.0, 450.0, 517.3, 699.9, 830.0];
+            let mut out = [f32::NAN; 6];
+            for (view, light) in directions().into_iter().take(80) {
+                m.eval_spectrum_cos_f32(view, light, &queries, &mut out)
+                    .unwrap();
+                for (q, got) in queries.iter().zip(out) {
+                    let want = interpolated(*q as f64) * scale;
+                    assert!(
+                        (got as f64 - want).abs() <= 2e-6 * want,
+                        "{q}: {got} vs {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Outside the measured range, and at wavelengths that are not numbers, there is no
+    /// measurement: 0, never NaN (Mitsuba clamps to the end values there instead).
+    #[test]
+    fn wavelengths_outside_the_measurement_or_not_finite_give_zero() {
+        let narrow = [450.0, 550.0, 700.0];
+        let m = parse(spectral_fields(true, &narrow, &[0.6, 0.3, 0.9]).bytes()).unwrap();
+        let queries = [
+            449.9,
+            700.1,
+            360.0,
+            830.0,
+            -5.0,
+            f32::NAN,
+            f32::INFINITY,
+            -f32::INFINITY,
+        ];
+        let mut out = [1.0f32; 8];
+        let (view, light) = directions()[10];
+        m.eval_spectrum_cos_f32(view, light, &queries, &mut out)
+            .unwrap();
+        assert_eq!(out, [0.0; 8]);
+        // The extra query is ignored, the output past the common prefix untouched.
+        let mut short = [7.0f32; 1];
+        m.eval_spectrum_cos_f32(view, light, &[450.0, 500.0], &mut short)
+            .unwrap();
+        assert!(short[0] > 0.5);
+        // Below the horizon: zero at every wavelength.
+        let down = Vec3::new(0.3, 0.1, -0.9).normalize();
+        m.eval_spectrum_cos_f32(down, light, &narrow, &mut out)
+            .unwrap();
+        assert_eq!(&out[..3], &[0.0; 3]);
+    }
+
+    #[test]
+    fn rgb_files_have_no_spectra() {
+        let m = parse(Fields::valid(true).bytes()).unwrap();
+        assert!(m.spectra().is_none());
+        let (view, light) = directions()[0];
+        let mut out = [3.0f32];
+        let message = m
+            .eval_spectrum_cos_f32(view, light, &[500.0], &mut out)
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("RGB measurement") && message.contains("synthetic.bsdf"));
+        assert_eq!(out, [3.0]);
+    }
+
+    /// Everything RGB (eval, the Brdf trait, the training target) sees the sRGB projection.
+    #[test]
+    fn rgb_evaluation_is_the_srgb_projection() {
+        let projection = SrgbProjection::new(&WAVELENGTHS.map(f64::from)).unwrap();
+        let rgb = projection.project(&SPECTRUM);
+        // A saturated spectrum: the projection has a clearly coloured, positive value.
+        assert!(
+            rgb.iter().all(|&c| c > 0.05) && (rgb[0] - rgb[1]).abs() > 0.02,
+            "{rgb:?}"
+        );
+        let m = valid(false);
+        let source = TrainingSource::Rgl(Box::new(valid(false)));
+        assert_eq!(source.kind(), "rgl-spectral-measurement");
+        let target = rgl_target(&m, RglFold::AsMeasured);
+        for (view, light) in directions() {
+            if view.z <= 0.0 || light.z <= 0.0 {
+                continue;
+            }
+            let cosine_weighted = m.eval_cos_f32(view, light);
+            for c in 0..3 {
+                assert!((cosine_weighted[c] as f64 - rgb[c]).abs() <= 1e-6 * rgb[c]);
+            }
+            let angles = nbrdf_core::coords::to_rusinkiewicz(view.into(), light.into());
+            let f = target(&angles).unwrap();
+            let (_, l) = nbrdf_core::coords::from_rusinkiewicz(&angles);
+            let cos = l.as_vec3().z as f64;
+            for c in 0..3 {
+                assert!(
+                    (f[c] * cos - rgb[c]).abs() <= 1e-5 * rgb[c],
+                    "{f:?} vs {rgb:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn inconsistent_or_bad_wavelengths_are_refused_naming_the_field() {
+        let five = spectral_fields(true, &WAVELENGTHS, &SPECTRUM);
+        // The spectra's wavelength axis against the wavelengths field.
+        let fewer = five.set(
+            "wavelengths",
+            DType::Float32,
+            vec![4],
+            f32_bytes(&WAVELENGTHS[..4]),
+        );
+        refused(
+            fewer.bytes(),
+            &["\"spectra\"", "4 (wavelengths)", "[1, 4, 5, 8, 8]"],
+        );
+        for (wavelengths, needles) in [
+            (
+                vec![360.0, 550.0, 450.0, 700.0, 830.0],
+                vec!["\"wavelengths\"", "strictly increasing"],
+            ),
+            (
+                vec![360.0, 450.0, 450.0, 700.0, 830.0],
+                vec!["\"wavelengths\"", "strictly increasing"],
+            ),
+            (
+                vec![360.0, 450.0, f32::NAN, 700.0, 830.0],
+                vec!["\"wavelengths\"", "finite"],
+            ),
+            (
+                vec![360.0, 450.0, 550.0, f32::INFINITY, 830.0],
+                vec!["\"wavelengths\"", "finite"],
+            ),
+            (
+                vec![0.36, 0.45, 0.55, 0.7, 0.83],
+                vec!["\"wavelengths\"", "nanometres"],
+            ),
+        ] {
+            let fields = spectral_fields(true, &wavelengths, &SPECTRUM);
+            refused(fields.bytes(), &needles);
+        }
+        let one = spectral_fields(true, &[550.0], &[0.5]);
+        refused(one.bytes(), &["\"wavelengths\"", "at least 2"]);
+        // Wavelengths without spectra; wavelengths of the wrong type or rank.
+        let no_spectra = spectral_fields(true, &WAVELENGTHS, &SPECTRUM).without("spectra");
+        refused(no_spectra.bytes(), &["\"spectra\"", "missing"]);
+        let as_f64: Vec<u8> = WAVELENGTHS
+            .iter()
+            .flat_map(|v| (*v as f64).to_le_bytes())
+            .collect();
+        let typed = spectral_fields(true, &WAVELENGTHS, &SPECTRUM).set(
+            "wavelengths",
+            DType::Float64,
+            vec![5],
+            as_f64,
+        );
+        refused(typed.bytes(), &["\"wavelengths\"", "dtype"]);
+        let rank = spectral_fields(true, &WAVELENGTHS, &SPECTRUM).set(
+            "wavelengths",
+            DType::Float32,
+            vec![5, 1],
+            f32_bytes(&WAVELENGTHS),
+        );
+        refused(rank.bytes(), &["\"wavelengths\"", "dimensions"]);
+        // Non-finite spectra are refused like non-finite RGB.
+        let mut spectrum = SPECTRUM;
+        spectrum[2] = f32::NAN;
+        refused(
+            spectral_fields(true, &WAVELENGTHS, &spectrum).bytes(),
+            &["\"spectra\"", "finite"],
+        );
+        // Neither rgb nor wavelengths: not a measurement.
+        refused(
+            Fields::valid(true).without("rgb").bytes(),
+            &["\"rgb\"", "not an RGL measurement"],
+        );
+    }
+
+    /// Spectra whose projection (not their samples) leaves the float32 range are refused: red
+    /// weighs the samples other than 450 nm by about 1.12 in all.
+    #[test]
+    fn huge_spectra_are_refused() {
+        let spectrum = [3.2e38, 0.0, 3.2e38, 3.2e38, 3.2e38];
+        assert!(parse(spectral_fields(false, &WAVELENGTHS, &[3.2e38; 5]).bytes()).is_ok());
+        refused(
+            spectral_fields(false, &WAVELENGTHS, &spectrum).bytes(),
+            &["\"spectra\"", "float32"],
+        );
+    }
 }

@@ -58,6 +58,10 @@ struct Input {
     jacobian: u8,
     fills: [Fill; 5],
     patches: Vec<Patch>,
+    /// A spectral file: these wavelengths (`Angles` spread over 360-830 nm, or raw) and a
+    /// `spectra` table with `n_wavelengths` channels (which may disagree with them) in place
+    /// of `rgb`.
+    spectral: Option<(Angles, u8)>,
     /// Leave one field out (by index into the field list), or none.
     drop_field: Option<u8>,
     directions: Vec<[f32; 6]>,
@@ -105,12 +109,22 @@ fn build(input: &Input) -> Vec<u8> {
     let theta = angles(&input.theta, n_theta, FRAC_PI_2);
     let phi = angles(&input.phi, n_phi, 2.0 * PI);
     let res = side(input.rgb_res);
+    let wavelengths = input.spectral.as_ref().map(|(kind, n)| {
+        let values = angles(kind, side(*n), 470.0);
+        let shift = if matches!(kind, Angles::Raw(_)) { 0.0 } else { 360.0 };
+        values.iter().map(|l| l + shift).collect::<Vec<f32>>()
+    });
+    let channels = match (&input.spectral, &wavelengths) {
+        (Some((Angles::Raw(_), n)), _) => side(*n),
+        (_, Some(w)) => w.len(),
+        _ => 3,
+    };
     let shapes: [Vec<usize>; 5] = [
         vec![side(input.ndf[0]), side(input.ndf[1])],
         vec![side(input.sigma[0]), side(input.sigma[1])],
         vec![phi.len(), theta.len(), side(input.vndf[0]), side(input.vndf[1])],
         vec![phi.len(), theta.len(), res, res],
-        vec![phi.len(), theta.len(), 3, res, res],
+        vec![phi.len(), theta.len(), channels, res, res],
     ];
     let mut tables: Vec<Vec<f32>> = shapes
         .iter()
@@ -124,7 +138,8 @@ fn build(input: &Input) -> Vec<u8> {
             table[k] = patch.value;
         }
     }
-    let names = ["ndf", "sigma", "vndf", "luminance", "rgb"];
+    let values = if wavelengths.is_some() { "spectra" } else { "rgb" };
+    let names = ["ndf", "sigma", "vndf", "luminance", values];
     let mut fields: Vec<(&str, DType, Vec<usize>, Vec<u8>)> = vec![
         ("description", DType::UInt8, vec![4], b"fuzz".to_vec()),
         ("theta_i", DType::Float32, vec![theta.len()], f32_bytes(&theta)),
@@ -133,6 +148,9 @@ fn build(input: &Input) -> Vec<u8> {
     ];
     for ((name, shape), values) in names.iter().zip(shapes).zip(&tables) {
         fields.push((name, DType::Float32, shape, f32_bytes(values)));
+    }
+    if let Some(w) = &wavelengths {
+        fields.push(("wavelengths", DType::Float32, vec![w.len()], f32_bytes(w)));
     }
     if let Some(k) = input.drop_field {
         let k = usize::from(k);

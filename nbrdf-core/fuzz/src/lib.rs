@@ -216,5 +216,33 @@ pub fn check_rgl_measurement(
             raw.iter().all(|x| x.is_finite()),
             "eval_cos_f32(light {light}, view {view}) = {raw:?}"
         );
+        check_spectral(measurement, view, light);
+    }
+}
+
+/// A spectral measurement evaluated per wavelength: finite everywhere, and zero at wavelengths
+/// outside the measured range or not finite.
+fn check_spectral(measurement: &nbrdf_core::rgl::RglMeasurement, view: Vec3, light: Vec3) {
+    let Some(spectra) = measurement.spectra() else {
+        return;
+    };
+    let measured = spectra.wavelengths();
+    let (first, last) = (measured[0], measured[measured.len() - 1]);
+    let outside = [first - 1.0, last + 1.0, f32::NAN, f32::INFINITY, -f32::INFINITY];
+    let inside = [first, last, 0.5 * (first + last), measured[measured.len() / 2]];
+    let queries: Vec<f32> = outside.iter().chain(&inside).copied().collect();
+    let mut out = vec![f32::NAN; queries.len()];
+    measurement
+        .eval_spectrum_cos_f32(view, light, &queries, &mut out)
+        .expect("a spectral measurement evaluates per wavelength");
+    assert!(
+        out.iter().all(|x| x.is_finite()),
+        "eval_spectrum_cos_f32(light {light}, view {view}, {queries:?}) = {out:?}"
+    );
+    for (q, v) in queries.iter().zip(&out) {
+        assert!(
+            (first..=last).contains(q) || *v == 0.0,
+            "wavelength {q} outside {first}..{last} gave {v}"
+        );
     }
 }

@@ -11,6 +11,7 @@
 use super::warp::SliceWeights;
 use super::RglMeasurement;
 use crate::brdf::{par_eval_pairs, Brdf, Directions, RgbMut};
+use crate::error::{NbrdfError, Result};
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -137,16 +138,22 @@ fn normalize(v: Vec3) -> Vec3 {
     v * (1.0 / squared.sqrt())
 }
 
+/// Where a direction pair reads the reflectance tables: the position in their sample space, the
+/// incident angles they are interpolated in, and the Jacobian factor (files with the flag).
+struct Lookup {
+    sample: [f32; 2],
+    phi_i: f32,
+    theta_i: f32,
+    scale: Option<f32>,
+}
+
 impl RglMeasurement {
-    /// What Mitsuba's `measured` BSDF returns from `eval(ctx, si, wo)` with `si.wi = view` and
-    /// `wo = light` in an RGB variant: `f_r cos(theta_light)`, zero unless both directions are
-    /// above the horizon. Directions must be unit vectors (as Mitsuba assumes). Values can be
-    /// slightly negative where the RGB fit of the spectral measurement is out of gamut, as in
-    /// Mitsuba.
-    pub fn eval_cos_f32(&self, view: Vec3, light: Vec3) -> [f32; 3] {
+    /// The directions' [`Lookup`], `None` where Mitsuba's `measured` returns zero (a direction
+    /// at or below the horizon, or no half vector).
+    fn lookup(&self, view: Vec3, light: Vec3) -> Option<Lookup> {
         let (mut wi, mut wo) = (view, light);
         if !(wi.z > 0.0 && wo.z > 0.0) {
-            return [0.0; 3];
+            return None;
         }
         if self.reduction >= 2 {
             let sy = wi.y;
@@ -160,7 +167,7 @@ impl RglMeasurement {
         // Grazing directions on opposite sides: the half vector's squared length underflows and
         // normalising it gives NaN (in Mitsuba too); there is no reflection to measure there.
         if !m.is_finite() {
-            return [0.0; 3];
+            return None;
         }
         let theta_i = elevation(wi);
         let phi_i = atan2(wi.y, wi.x);
@@ -176,18 +183,72 @@ impl RglMeasurement {
 
         let params = [phi_i, theta_i];
         let (sample, _) = self.vndf.invert(u_m, &self.vndf.weights(&params));
+        let scale = self.jacobian.then(|| {
+            let none = self.ndf.weights(&[]);
+            self.ndf.eval(u_m, &none) / (4.0 * self.sigma.eval(u_wi, &none))
+        });
+        Some(Lookup {
+            sample,
+            phi_i,
+            theta_i,
+            scale,
+        })
+    }
 
+    /// What Mitsuba's `measured` BSDF returns from `eval(ctx, si, wo)` with `si.wi = view` and
+    /// `wo = light` in an RGB variant: `f_r cos(theta_light)`, zero unless both directions are
+    /// above the horizon. Directions must be unit vectors (as Mitsuba assumes). Values can be
+    /// slightly negative where the RGB fit of the spectral measurement is out of gamut, as in
+    /// Mitsuba. For a spectral file, the sRGB projection of its spectrum (Mitsuba's RGB variants
+    /// refuse those files).
+    pub fn eval_cos_f32(&self, view: Vec3, light: Vec3) -> [f32; 3] {
+        let Some(at) = self.lookup(view, light) else {
+            return [0.0; 3];
+        };
         let mut rgb = [0.0f32; 3];
         for (channel, value) in rgb.iter_mut().enumerate() {
-            let weights: SliceWeights = self.rgb.weights(&[phi_i, theta_i, channel as f32]);
-            *value = self.rgb.eval(sample, &weights);
+            let weights: SliceWeights = self.rgb.weights(&[at.phi_i, at.theta_i, channel as f32]);
+            *value = self.rgb.eval(at.sample, &weights);
         }
-        if self.jacobian {
-            let none = self.ndf.weights(&[]);
-            let scale = self.ndf.eval(u_m, &none) / (4.0 * self.sigma.eval(u_wi, &none));
+        if let Some(scale) = at.scale {
             rgb.iter_mut().for_each(|v| *v *= scale);
         }
         rgb
+    }
+
+    /// What Mitsuba's `measured` BSDF returns in a spectral variant, `f_r cos(theta_light)`, at
+    /// each of `wavelengths` (nm), written to `out` (the common prefix of the two slices).
+    /// Wavelengths that are not finite or lie outside the measured range give 0: Mitsuba
+    /// extends the first and last spectra there (its interpolation clamps), which only matters
+    /// for files measured over less than the 360-830 nm it samples (docs/design.md section 9).
+    /// An RGB file has no spectra: an error, and `out` is left untouched.
+    pub fn eval_spectrum_cos_f32(
+        &self,
+        view: Vec3,
+        light: Vec3,
+        wavelengths: &[f32],
+        out: &mut [f32],
+    ) -> Result<()> {
+        let Some(spectra) = &self.spectra else {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "{}: an RGB measurement has no spectra (a spectral file has a \"wavelengths\" field)",
+                self.path.display()
+            )));
+        };
+        let measured = spectra.wavelengths();
+        let (first, last) = (measured[0], measured[measured.len() - 1]);
+        let at = self.lookup(view, light);
+        for (value, &wavelength) in out.iter_mut().zip(wavelengths) {
+            *value = match &at {
+                Some(at) if (first..=last).contains(&wavelength) => {
+                    let weights = spectra.table.weights(&[at.phi_i, at.theta_i, wavelength]);
+                    let v = spectra.table.eval(at.sample, &weights);
+                    at.scale.map_or(v, |scale| v * scale)
+                }
+                _ => 0.0,
+            };
+        }
+        Ok(())
     }
 
     /// `f_r(view, light)` (not cosine weighted) in linear RGB: Mitsuba's `eval` divided by

@@ -1,19 +1,24 @@
 //! RGL material database measurements (`.bsdf`, Dupuy & Jakob 2018, "An Adaptive
 //! Parameterization for Efficient Material Acquisition and Rendering"), read and evaluated as
-//! Mitsuba 3's `measured` BSDF does in an RGB variant.
+//! Mitsuba 3's `measured` BSDF does.
 //!
 //! * [`tensor`] – the tensor file container (`TensorFile`).
 //! * [`warp`]   – the `Marginal2D` interpolant and inverse warp the tables are read through.
-//! * [`eval`]   – the BSDF evaluation (`measured.cpp`'s `eval`).
+//! * [`eval`]   – the BSDF evaluation (`measured.cpp`'s `eval`), in RGB and per wavelength.
 //!
-//! Only the RGB files (`*_rgb.bsdf`, a field `rgb`) can be evaluated: Mitsuba's RGB variants
-//! refuse the spectral ones (`*_spec.bsdf`, fields `spectra` and `wavelengths`) too.
+//! Two kinds of files: RGB (`*_rgb.bsdf`, a field `rgb` of three channels), evaluated as in
+//! Mitsuba's RGB variants, and spectral (`*_spec.bsdf`, fields `wavelengths` in nm and `spectra`
+//! with one channel per wavelength), evaluated per wavelength as in its spectral variants and,
+//! for everything that works in RGB (training, `Brdf`), through their linear sRGB projection
+//! under D65 ([`crate::spectrum`], docs/design.md section 9). As in `measured.cpp`, a file with
+//! a `wavelengths` field is spectral.
 
 pub mod eval;
 pub mod tensor;
 pub mod warp;
 
 use crate::error::{NbrdfError, Result};
+use crate::spectrum::SrgbProjection;
 use std::path::{Path, PathBuf};
 use tensor::TensorFile;
 use warp::Marginal2D;
@@ -41,8 +46,11 @@ pub struct RglMeasurement {
     /// The visible normal distribution per incident direction, the adaptive parameterisation
     /// the reflectance tables are stored in.
     vndf: Marginal2D,
-    /// Reflectance per incident direction and channel, over the VNDF's sample space.
+    /// Linear sRGB reflectance per incident direction and channel, over the VNDF's sample
+    /// space: the file's `rgb`, or the sRGB projection of its `spectra`.
     rgb: Marginal2D,
+    /// A spectral file's reflectance per wavelength.
+    spectra: Option<Spectra>,
     /// Whether the stored values are divided by the parameterisation's Jacobian (then multiplied
     /// by `D(m) / (4 sigma(wi))` at evaluation).
     jacobian: bool,
@@ -50,6 +58,21 @@ pub struct RglMeasurement {
     /// Anisotropic files measured over a half (2) or a quarter (4) of the azimuths: the
     /// directions are mirrored into the measured range.
     reduction: i32,
+}
+
+/// A spectral measurement's tables: reflectance per incident direction and wavelength.
+#[derive(Clone, Debug)]
+pub struct Spectra {
+    /// Strictly increasing, in nm.
+    wavelengths: Vec<f32>,
+    /// Over the VNDF's sample space, with the parameters `(phi_i, theta_i, wavelength)`.
+    table: Marginal2D,
+}
+
+impl Spectra {
+    pub fn wavelengths(&self) -> &[f32] {
+        &self.wavelengths
+    }
 }
 
 /// Why the evaluation could leave the float32 range it is computed in (Mitsuba's RGB variants
@@ -83,17 +106,26 @@ fn float32_range_problem(rgb: &[f32], jacobian: Option<(&[f32], &[f32])>) -> Opt
     })
 }
 
-/// Refuses a file without RGB data, naming a spectral measurement as such.
-fn check_is_rgb(file: &TensorFile) -> Result<()> {
-    if file.has_field("rgb") {
-        return Ok(());
+/// The wavelengths of a spectral file (`None` for an RGB one), checked to be usable: at least
+/// two, strictly increasing, overlapping the visible range. A file with neither `rgb` nor
+/// `wavelengths` is not a measurement.
+fn read_wavelengths(file: &TensorFile) -> Result<Option<(Vec<f32>, SrgbProjection)>> {
+    if !file.has_field("wavelengths") {
+        if file.has_field("rgb") {
+            return Ok(None);
+        }
+        return Err(file.error(
+            "rgb",
+            "missing, and no \"wavelengths\" either (not an RGL measurement?)".into(),
+        ));
     }
-    let message = if file.has_field("wavelengths") {
-        "this is a spectral measurement (*_spec.bsdf); only the RGB files (*_rgb.bsdf) can be evaluated, as in Mitsuba's RGB variants"
-    } else {
-        "missing (not an RGL measurement?)"
-    };
-    Err(file.error("rgb", message.into()))
+    let (_, wavelengths) = file.f32_array("wavelengths", 1)?;
+    let as_f64: Vec<f64> = wavelengths.iter().map(|&l| f64::from(l)).collect();
+    let projection = SrgbProjection::new(&as_f64).map_err(|e| match e {
+        NbrdfError::InvalidArgument(message) => file.error("wavelengths", message),
+        other => other,
+    })?;
+    Ok(Some((wavelengths, projection)))
 }
 
 /// `theta_i` and `phi_i`, each non-empty and strictly increasing.
@@ -120,19 +152,30 @@ struct RawFields {
     sigma: (Vec<usize>, Vec<f32>),
     vndf: (Vec<usize>, Vec<f32>),
     luminance_shape: Vec<usize>,
+    /// `rgb`, or `spectra` for a spectral file: `[phi_i, theta_i, channel, n, n]`.
     rgb: (Vec<usize>, Vec<f32>),
     jacobian: (Vec<usize>, Vec<u8>),
+    /// What the third axis of `rgb` is: the channels 0, 1, 2, or the file's wavelengths.
+    channels: Vec<f32>,
+    /// `"rgb"` or `"spectra"`, for errors.
+    values_name: &'static str,
 }
 
 impl RawFields {
-    fn read(file: &TensorFile) -> Result<Self> {
+    fn read(file: &TensorFile, wavelengths: Option<&[f32]>) -> Result<Self> {
+        let (values_name, channels) = match wavelengths {
+            Some(w) => ("spectra", w.to_vec()),
+            None => ("rgb", vec![0.0, 1.0, 2.0]),
+        };
         Ok(RawFields {
             ndf: file.f32_array("ndf", 2)?,
             sigma: file.f32_array("sigma", 2)?,
             vndf: file.f32_array("vndf", 4)?,
             luminance_shape: file.f32_array("luminance", 4)?.0,
-            rgb: file.f32_array("rgb", 5)?,
+            rgb: file.f32_array(values_name, 5)?,
             jacobian: file.u8_array("jacobian", 1)?,
+            channels,
+            values_name,
         })
     }
 
@@ -166,17 +209,25 @@ impl RawFields {
             format!("[{n_phi} (phi_i), {n_theta} (theta_i), >= 2, >= 2]"),
         )?;
         let (res_y, res_x) = (rgb[3], rgb[4]);
+        let n_channels = self.channels.len();
+        let channels = match self.values_name {
+            "rgb" => "3".to_string(),
+            _ => format!("{n_channels} (wavelengths)"),
+        };
         expect(
-            "rgb",
+            self.values_name,
             rgb,
-            rgb[..3] == [n_phi, n_theta, 3] && res_y == res_x && res_x >= 2,
-            format!("[{n_phi} (phi_i), {n_theta} (theta_i), 3, n, n] with n >= 2"),
+            rgb[..3] == [n_phi, n_theta, n_channels] && res_y == res_x && res_x >= 2,
+            format!("[{n_phi} (phi_i), {n_theta} (theta_i), {channels}, n, n] with n >= 2"),
         )?;
         expect(
             "luminance",
             &self.luminance_shape,
             self.luminance_shape[..] == [n_phi, n_theta, res_y, res_x],
-            format!("[{n_phi}, {n_theta}, {res_y}, {res_x}] (as phi_i, theta_i and rgb)"),
+            format!(
+                "[{n_phi}, {n_theta}, {res_y}, {res_x}] (as phi_i, theta_i and {})",
+                self.values_name
+            ),
         )?;
         let jacobian = &self.jacobian.0;
         expect("jacobian", jacobian, jacobian[..] == [1], "[1]".into())
@@ -213,13 +264,46 @@ impl RawFields {
         }
         if let Some(problem) = float32_range_problem(&self.rgb.1, jacobian.then_some((ndf, sigma)))
         {
-            return fail("rgb", problem);
+            return fail(self.values_name, problem);
         }
         Ok(jacobian)
     }
 
-    /// The `ndf`, `sigma`, `vndf` and `rgb` interpolants, with the arguments measured.cpp
-    /// constructs its Marginal2D tables with.
+    /// The sRGB projection of a spectral file's `spectra` (see [`crate::spectrum`]): shape
+    /// `[phi_i, theta_i, 3, n, n]` and values, checked to stay within float32 once evaluated.
+    fn projected(
+        &self,
+        file: &TensorFile,
+        projection: &SrgbProjection,
+        jacobian: bool,
+    ) -> Result<(Vec<usize>, Vec<f32>)> {
+        let (shape, spectra) = (&self.rgb.0, &self.rgb.1);
+        let (n_channels, cells) = (shape[2], shape[3] * shape[4]);
+        let mut rgb = Vec::with_capacity(spectra.len() / n_channels * 3);
+        let mut samples = vec![0.0f32; n_channels];
+        for block in spectra.chunks_exact(n_channels * cells) {
+            let start = rgb.len();
+            rgb.resize(start + 3 * cells, 0.0);
+            for cell in 0..cells {
+                for (k, sample) in samples.iter_mut().enumerate() {
+                    *sample = block[k * cells + cell];
+                }
+                for (c, value) in projection.project(&samples).into_iter().enumerate() {
+                    rgb[start + c * cells + cell] = value as f32;
+                }
+            }
+        }
+        let scale = jacobian.then_some((self.ndf.1.as_slice(), self.sigma.1.as_slice()));
+        if let Some(problem) = float32_range_problem(&rgb, scale) {
+            return Err(file.error("spectra", format!("projected to sRGB: {problem}")));
+        }
+        let mut rgb_shape = shape.clone();
+        rgb_shape[2] = 3;
+        Ok((rgb_shape, rgb))
+    }
+
+    /// The `ndf`, `sigma`, `vndf` and `rgb` (or `spectra`) interpolants, with the arguments
+    /// measured.cpp constructs its Marginal2D tables with.
     fn tables(self, file: &TensorFile, phi_i: &[f32], theta_i: &[f32]) -> Result<[Marginal2D; 4]> {
         let structure = |name: &str, e: NbrdfError| match e {
             NbrdfError::InvalidArgument(message) => file.error(name, message),
@@ -228,7 +312,6 @@ impl RawFields {
         let (ndf_shape, ndf) = self.ndf;
         let (sigma_shape, sigma) = self.sigma;
         let (vndf_shape, vndf) = self.vndf;
-        let (rgb_shape, rgb) = self.rgb;
         let angles = vec![phi_i.to_vec(), theta_i.to_vec()];
         let ndf = Marginal2D::new(&ndf, ndf_shape[1], ndf_shape[0], vec![], false, false)
             .map_err(|e| structure("ndf", e))?;
@@ -236,11 +319,18 @@ impl RawFields {
             .map_err(|e| structure("sigma", e))?;
         let vndf = Marginal2D::new(&vndf, vndf_shape[3], vndf_shape[2], angles, true, true)
             .map_err(|e| structure("vndf", e))?;
-        let rgb_params = vec![phi_i.to_vec(), theta_i.to_vec(), vec![0.0, 1.0, 2.0]];
-        let rgb = Marginal2D::new(&rgb, rgb_shape[4], rgb_shape[3], rgb_params, false, false)
-            .map_err(|e| structure("rgb", e))?;
+        let (shape, values) = &self.rgb;
+        let rgb = reflectance_table(values, shape, [phi_i, theta_i, &self.channels])
+            .map_err(|e| structure(self.values_name, e))?;
         Ok([ndf, sigma, vndf, rgb])
     }
+}
+
+/// The reflectance interpolant over the VNDF's sample space, `shape` `[phi_i, theta_i,
+/// channels, n, n]`, interpolated in the incident angles and the channel (RGB or wavelength).
+fn reflectance_table(values: &[f32], shape: &[usize], params: [&[f32]; 3]) -> Result<Marginal2D> {
+    let params = params.iter().map(|p| p.to_vec()).collect();
+    Marginal2D::new(values, shape[4], shape[3], params, false, false)
 }
 
 impl RglMeasurement {
@@ -254,13 +344,17 @@ impl RglMeasurement {
     /// `measured` plugin reads (presence, dtype, shape, finite values) and the preconditions of
     /// its interpolants that Mitsuba leaves unchecked (sorted angles, positive normalisations).
     pub fn from_tensor_file(file: &TensorFile) -> Result<RglMeasurement> {
-        check_is_rgb(file)?;
+        let spectral = read_wavelengths(file)?;
         let (_, description) = file.u8_array("description", 1)?;
         let description = String::from_utf8_lossy(&description).into_owned();
         let (theta_i, phi_i) = read_angles(file)?;
-        let fields = RawFields::read(file)?;
+        let fields = RawFields::read(file, spectral.as_ref().map(|(w, _)| w.as_slice()))?;
         fields.check_shapes(file, phi_i.len(), theta_i.len())?;
         let jacobian = fields.check_values(file)?;
+        let projected = match &spectral {
+            Some((_, projection)) => Some(fields.projected(file, projection, jacobian)?),
+            None => None,
+        };
         let isotropic = phi_i.len() <= 2;
         let reduction = if isotropic {
             ISOTROPIC_REDUCTION
@@ -268,7 +362,17 @@ impl RglMeasurement {
             let span = phi_i[phi_i.len() - 1] - phi_i[0];
             (2.0 * std::f32::consts::PI / span).round_ties_even() as i32
         };
-        let [ndf, sigma, vndf, rgb] = fields.tables(file, &phi_i, &theta_i)?;
+        let [ndf, sigma, vndf, values] = fields.tables(file, &phi_i, &theta_i)?;
+        let (rgb, spectra) = match (spectral, projected) {
+            (Some((wavelengths, _)), Some((shape, rgb))) => {
+                let channels: &[f32] = &[0.0, 1.0, 2.0];
+                let rgb = reflectance_table(&rgb, &shape, [&phi_i, &theta_i, channels])
+                    .map_err(|e| file.error("spectra", e.to_string()))?;
+                let table = values;
+                (rgb, Some(Spectra { wavelengths, table }))
+            }
+            _ => (values, None),
+        };
         Ok(RglMeasurement {
             path: file.path().to_path_buf(),
             description,
@@ -278,6 +382,7 @@ impl RglMeasurement {
             sigma,
             vndf,
             rgb,
+            spectra,
             jacobian,
             isotropic,
             reduction,
@@ -291,6 +396,11 @@ impl RglMeasurement {
     /// The file's description of the material (e.g. "White A4 paper (160 gsm)").
     pub fn description(&self) -> &str {
         &self.description
+    }
+
+    /// The spectral tables of a spectral file (`*_spec.bsdf`), `None` for an RGB one.
+    pub fn spectra(&self) -> Option<&Spectra> {
+        self.spectra.as_ref()
     }
 
     pub fn is_isotropic(&self) -> bool {

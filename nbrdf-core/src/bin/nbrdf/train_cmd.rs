@@ -70,7 +70,8 @@ impl From<RglFoldArg> for RglFold {
 pub struct TrainArgs {
     /// What to learn: a MERL-format table or an RGL .bsdf measurement (told apart by content).
     /// A measurement is learnt as Mitsuba's `measured` plugin evaluates it, at the trainer's
-    /// sample directions.
+    /// sample directions; a spectral one (*_spec.bsdf) through its linear sRGB projection under
+    /// D65 (an RGB network).
     #[arg(value_name = "TABLE.binary|MEASUREMENT.bsdf")]
     pub table: PathBuf,
     /// Where to write the network; defaults to TABLE's name with .nbrdf.json in the current
