@@ -260,12 +260,20 @@ impl LobeQuadrature {
     /// Mean relative variance `R - 1` over the views of sampling with any strategy (its
     /// [`SamplingStrategy::pdf_f64`]): how `nbrdf fit-phong` scores the tabulated sampler
     /// against the lobes on the same quadrature.
+    ///
+    /// The views run in parallel but their moments are added in view order: a parallel sum
+    /// would group the additions by how the work was split, which changes the last digits with
+    /// the thread count.
     pub fn strategy_relative_variance(&self, strategy: &SamplingStrategy) -> f64 {
-        let moments = self.views.par_iter().map(|q| {
-            q.terms
-                .relative_second_moment(|i| strategy.pdf_f64(q.view, q.lights[i]))
-        });
-        moments.sum::<f64>() / self.views.len() as f64 - 1.0
+        let moments: Vec<f64> = self
+            .views
+            .par_iter()
+            .map(|q| {
+                q.terms
+                    .relative_second_moment(|i| strategy.pdf_f64(q.view, q.lights[i]))
+            })
+            .collect();
+        moments.iter().sum::<f64>() / self.views.len() as f64 - 1.0
     }
 
     fn mean_second_moment(&self, exponent: f64, weight: f64) -> f64 {
@@ -662,6 +670,56 @@ pub(crate) mod tests {
             let cos_h = a.theta_h.cos().max(0.0);
             let f = kd / PI + ks * (n + 2.0) / (2.0 * PI) * cos_h.powf(n);
             Some([f; 3])
+        }
+    }
+
+    /// `nbrdf fit-phong` promises the same file for any thread count: the strategy score is
+    /// bitwise the in-order mean over the views, whatever the pool (rayon's own parallel sum
+    /// grouped the additions by the split and changed the 15th digit).
+    #[test]
+    fn strategy_variance_does_not_depend_on_the_thread_count() {
+        let config = LobeFitConfig {
+            view_thetas: (0..48).map(|k| 0.02 + 0.032 * k as f64).collect(),
+            s_bins: 24,
+            phi_bins: 12,
+            ..LobeFitConfig::default()
+        };
+        let quadrature = LobeQuadrature::new(&blinn_phong(0.3, 0.6, 80.0), &config).unwrap();
+        for strategy in [
+            SamplingStrategy::Cosine,
+            SamplingStrategy::Phong {
+                exponent: 30.0,
+                specular_weight: 0.4,
+            },
+            SamplingStrategy::Phong {
+                exponent: 300.0,
+                specular_weight: 0.9,
+            },
+        ] {
+            same_for_any_pool(&quadrature, &strategy);
+        }
+    }
+
+    fn same_for_any_pool(quadrature: &LobeQuadrature, strategy: &SamplingStrategy) {
+        let in_order: f64 = quadrature
+            .views
+            .iter()
+            .map(|q| {
+                q.terms
+                    .relative_second_moment(|i| strategy.pdf_f64(q.view, q.lights[i]))
+            })
+            .sum::<f64>()
+            / quadrature.views.len() as f64
+            - 1.0;
+        for threads in [1, 2, 3, 4, 9] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for _ in 0..3 {
+                let got = pool.install(|| quadrature.strategy_relative_variance(strategy));
+                assert_eq!(got.to_bits(), in_order.to_bits(), "{threads} threads");
+            }
         }
     }
 

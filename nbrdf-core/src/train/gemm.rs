@@ -177,9 +177,11 @@ fn block<M: MulAdd, const MR: usize, const NB: usize>(
             Post::None => {}
             Post::Relu => acc_r.iter_mut().flatten().for_each(|v| *v = v.max(0.0)),
             Post::MaskPositive(m) => {
-                let m_row = &m[at..at + NB * VEC];
-                for (v, &m) in acc_r.iter_mut().flatten().zip(m_row) {
-                    *v = if m > 0.0 { *v } else { 0.0 };
+                for (nb, acc_v) in acc_r.iter_mut().enumerate() {
+                    let m_v = &m[at + nb * VEC..at + (nb + 1) * VEC];
+                    for q in 0..VEC {
+                        acc_v[q] = keep_where_positive(acc_v[q], m_v[q]);
+                    }
                 }
             }
         }
@@ -188,6 +190,16 @@ fn block<M: MulAdd, const MR: usize, const NB: usize>(
             c_row[nb * VEC..(nb + 1) * VEC].copy_from_slice(acc_v);
         }
     }
+}
+
+/// `v` where `m > 0`, else `+0.0`: the same values as `if m > 0.0 { v } else { 0.0 }`, but
+/// through a bit mask. Which relu units are active is random, so the branch the select compiled
+/// to was mispredicted about half the time and cost a third of the gradient kernel (perf, Zen 3);
+/// the mask vectorises.
+#[inline(always)]
+fn keep_where_positive(v: f32, m: f32) -> f32 {
+    let keep = 0u32.wrapping_sub(u32::from(m > 0.0));
+    f32::from_bits(v.to_bits() & keep)
 }
 
 #[cfg(test)]
@@ -229,6 +241,29 @@ mod tests {
                 assert!(
                     (c[i * cols + j] - expect.max(0.0)).abs() < 1e-5,
                     "({i}, {j})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_mask_is_the_select_bit_for_bit() {
+        let values = [
+            1.5f32,
+            -2.0,
+            0.0,
+            -0.0,
+            f32::MIN_POSITIVE,
+            f32::INFINITY,
+            f32::NAN,
+        ];
+        for &v in &values {
+            for &m in &[1.0f32, 0.0, -0.0, -1.0, f32::MIN_POSITIVE, f32::NAN] {
+                let select = if m > 0.0 { v } else { 0.0 };
+                assert_eq!(
+                    keep_where_positive(v, m).to_bits(),
+                    select.to_bits(),
+                    "{v} {m}"
                 );
             }
         }

@@ -247,6 +247,8 @@ unsafe fn read_config(config: *const NbrdfTrainConfig) -> FfiResult<(TrainConfig
         min_epochs: c.min_epochs,
         lr_decays: c.lr_decays,
         lr_decay_factor: c.lr_decay_factor,
+        // Not in the C struct (its layout stays): the defaults' schedule.
+        lr_schedule: defaults.lr_schedule,
         target_loss: c.target_loss,
         seed: c.seed,
         anisotropic,

@@ -7,7 +7,7 @@ use nbrdf_core::ops::train_network::{train_network, TrainRequest};
 use nbrdf_core::source::RglFold;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
-use nbrdf_core::train::{Anisotropy, EpochStats, TrainConfig};
+use nbrdf_core::train::{Anisotropy, EpochStats, LrSchedule, TrainConfig};
 use nbrdf_core::Result;
 use std::path::PathBuf;
 
@@ -45,6 +45,23 @@ impl From<AnisotropyArg> for Anisotropy {
             AnisotropyArg::Auto => Anisotropy::Auto,
             AnisotropyArg::On => Anisotropy::On,
             AnisotropyArg::Off => Anisotropy::Off,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum LrScheduleArg {
+    /// The learning rate as given throughout (with drops on plateaus, --lr-decays).
+    Constant,
+    /// A one-epoch warm-up, then a half cosine down to 1 % of the rate at --epochs.
+    Cosine,
+}
+
+impl From<LrScheduleArg> for LrSchedule {
+    fn from(s: LrScheduleArg) -> Self {
+        match s {
+            LrScheduleArg::Constant => LrSchedule::Constant,
+            LrScheduleArg::Cosine => LrSchedule::COSINE,
         }
     }
 }
@@ -133,6 +150,10 @@ pub struct TrainArgs {
     /// Factor of each learning-rate drop, in (0, 1) [default: 0.2].
     #[arg(long)]
     pub lr_decay_factor: Option<f32>,
+    /// How the learning rate moves within the run [default: the defaults' schedule; constant
+    /// with --fixed-budget].
+    #[arg(long, value_enum)]
+    pub lr_schedule: Option<LrScheduleArg>,
     /// Stop (after --min-epochs) once the validation loss, the mean |ln(1 + f cos)| error, is at
     /// most this: simple materials get there in tens of epochs [default: 2e-4; 0 (off) with
     /// --fixed-budget].
@@ -179,6 +200,7 @@ pub fn train_config(args: &TrainArgs) -> TrainConfig {
         min_improvement: args.min_improvement.unwrap_or(base.min_improvement),
         lr_decays: args.lr_decays.unwrap_or(base.lr_decays),
         lr_decay_factor: args.lr_decay_factor.unwrap_or(base.lr_decay_factor),
+        lr_schedule: args.lr_schedule.map_or(base.lr_schedule, Into::into),
         target_loss: args.target_loss.unwrap_or(base.target_loss),
         seed: args.seed,
         ..base
