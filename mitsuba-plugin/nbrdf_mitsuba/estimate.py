@@ -187,8 +187,10 @@ def load_images(paths: list[Path], scene) -> list:
             raise EstimateError(f"image {i} {path}: {int(bad.any(axis=2).sum())} pixels are NaN or infinite "
                                 f"(the first at x={x}, y={y})")
         if (array < 0).any():
-            raise EstimateError(f"image {i} {path}: {int((array < 0).any(axis=2).sum())} pixels are negative "
-                                "(expected linear radiance)")
+            # Renders of measured BSDFs can hold slightly negative values: radiance is never negative.
+            print(f"warning: image {i} {path}: {int((array < 0).any(axis=2).sum())} pixels are negative, "
+                  "taken as 0", file=sys.stderr)
+            array = np.maximum(array, 0.0)
         images.append(mi.TensorXf(array))
     return images
 
