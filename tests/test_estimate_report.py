@@ -19,3 +19,16 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     before = stored.stat().st_mtime_ns
     assert main(argv) == 0
     assert stored.stat().st_mtime_ns == before  # resumed, not re-estimated
+
+
+def test_merl_truths_are_unseen_by_the_prior():
+    """A MERL truth from the autoencoder's training split would flatter the prior: the
+    report's tables must come from its test split."""
+    import json
+
+    from nbrdf_tools.estimate_report import MERL
+    from nbrdf_tools.paths import REPO
+
+    split = json.loads((REPO / "nbrdf-core" / "data" / "models" / "autoencoder.json").read_text())["split"]
+    assert set(MERL) <= set(split["test"])
+    assert not set(MERL) & (set(split["train"]) | set(split.get("validation", [])))

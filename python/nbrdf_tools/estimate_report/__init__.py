@@ -32,7 +32,8 @@ from nbrdf_tools.paths import REPO, default_cli, default_out, shared_dir
 
 MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
 RGL = ("paper_white", "cc_iris_purple_gem", "cc_ibiza_sunset", "colodur_napoli_4f")
-MERL = ("gold-metallic-paint", "blue-acrylic")
+#: From the autoencoder's test split (its JSON's "split"): the prior never saw these materials.
+MERL = ("green-metallic-paint", "red-specular-plastic")
 #: A Mitsuba BSDF as ground truth (the "any Mitsuba BSDF" case, and the --quick one).
 MITSUBA_TRUTH = {"type": "roughplastic", "alpha": 0.15,
                  "diffuse_reflectance": {"type": "rgb", "value": [0.6, 0.2, 0.1]}}
