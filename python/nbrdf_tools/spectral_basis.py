@@ -49,12 +49,18 @@ def _cie_tables():
     its XYZ -> linear sRGB matrix."""
     import mitsuba as mi
 
-    if mi.variant() is None:
-        mi.set_variant("scalar_rgb")
-    nodes = np.linspace(360.0, 830.0, 95)
-    cmf = np.array([list(mi.cie1931_xyz(float(w))) for w in nodes], np.float64)
-    d65 = np.array([mi.cie_d65(float(w)) for w in nodes], np.float64)
-    to_srgb = np.array([list(mi.xyz_to_srgb(mi.Color3f(*e))) for e in np.eye(3)]).T
+    # Read in scalar_rgb whatever the caller's variant (a JIT variant's arrays do not take NumPy
+    # scalars), then give the caller its variant back.
+    previous = mi.variant()
+    mi.set_variant("scalar_rgb")
+    try:
+        nodes = np.linspace(360.0, 830.0, 95)
+        cmf = np.array([list(mi.cie1931_xyz(float(w))) for w in nodes], np.float64)
+        d65 = np.array([mi.cie_d65(float(w)) for w in nodes], np.float64)
+        to_srgb = np.array([list(mi.xyz_to_srgb(mi.Color3f(*map(float, e)))) for e in np.eye(3)]).T
+    finally:
+        if previous is not None:
+            mi.set_variant(previous)
     return nodes, cmf, d65, to_srgb
 
 
