@@ -166,3 +166,23 @@ def network_file(tmp_path_factory) -> Path:
         assert import_keras.main([str(h5), "-o", str(target), "-q"]) == 0
         return target
     return write_network(out / "synthetic.nbrdf.json")
+
+
+@pytest.fixture
+def restore_variant():
+    """Gives the test's caller its Mitsuba variant back (tests here switch between variants)."""
+    previous = mi.variant()
+    yield
+    if previous:
+        mi.set_variant(previous)
+
+
+def use_variant(variant: str) -> None:
+    """Sets ``variant``, skipping (with the reason) where this Mitsuba or its libLLVM lacks it."""
+    if variant not in mi.variants():
+        pytest.skip(f"the installed Mitsuba has no {variant} variant")
+    if variant.startswith("llvm"):
+        problem = nbrdf_mitsuba.llvm.problem()
+        if problem:
+            pytest.skip(f"llvm variant unavailable: {problem}")
+    mi.set_variant(variant)

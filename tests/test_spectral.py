@@ -12,6 +12,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from conftest import use_variant
 from nbrdf_testing import random_pairs, write_merl, write_network
 
 PHONG = {"sampling": "phong", "exponent": 40.0, "specular_weight": 0.6}
@@ -25,24 +26,6 @@ DENSITY = ("pdf", "eval_pdf.pdf", "sample.wo", "sample.pdf")
 def files(tmp_path_factory) -> dict:
     folder = tmp_path_factory.mktemp("spectral")
     return {"nbrdf": write_network(folder / "n.nbrdf.json"), "merl": write_merl(folder / "m.binary")}
-
-
-@pytest.fixture
-def restore_variant():
-    previous = mi.variant()
-    yield
-    if previous:
-        mi.set_variant(previous)
-
-
-def _use(variant: str) -> None:
-    if variant not in mi.variants():
-        pytest.skip(f"the installed Mitsuba has no {variant} variant")
-    if variant.startswith("llvm"):
-        problem = nbrdf_mitsuba.llvm.problem()
-        if problem:
-            pytest.skip(f"llvm variant unavailable: {problem}")
-    mi.set_variant(variant)
 
 
 def _queries(n: int = N, seed: int = 5):
@@ -113,7 +96,7 @@ def _rgb_variant(variant: str) -> str:
                                      "llvm_ad_spectral_polarized"])
 def test_spectral_value_is_the_uplift_of_the_rgb_value(variant, plugin, backend, files, restore_variant):
     """Polarized: the depolarizer times that value ([0, 0], zeros elsewhere)."""
-    _use(variant)
+    use_variant(variant)
     _skip_scalar_jit(variant, backend)
     queries = _queries()
     got = _calls(mi.load_dict(_scene(plugin, files, backend)), *queries)
@@ -147,7 +130,7 @@ BAD = [float("nan"), float("inf"), float("-inf"), 0.0, -500.0, 359.0, 831.0, 1e3
 def test_bad_wavelengths_give_zero(variant, plugin, backend, files, restore_variant):
     """Non-finite or outside [MI_CIE_MIN, MI_CIE_MAX]: 0, never NaN; good wavelengths beside them
     in the same spectrum keep their values, and the density is untouched."""
-    _use(variant)
+    use_variant(variant)
     _skip_scalar_jit(variant, backend)
     view, light, u, good = _queries(len(BAD), seed=9)
     wavelengths = good.copy()
@@ -167,7 +150,7 @@ def test_traced_fetch_is_mitsubas(restore_variant):
     """The per-lane coefficient lookup of JIT variants against ``mi.srgb_model_fetch`` (Mitsuba's
     scalar function), on colours that reach every branch: grey, black, one or two zero
     components, ties for the largest, values above 1 (clamped), the 0.5 maximum of the uplift."""
-    _use("llvm_ad_spectral")
+    use_variant("llvm_ad_spectral")
     from nbrdf_mitsuba import jit
 
     rng = np.random.default_rng(3)
@@ -213,7 +196,7 @@ def test_chi2_in_a_spectral_variant(plugin, sampling, backend, files, restore_va
     """Mitsuba's chi^2 test of sample() against pdf() in llvm_ad_spectral."""
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
-    _use("llvm_ad_spectral")
+    use_variant("llvm_ad_spectral")
     params = {"type": plugin, "filename": str(files[plugin]), "backend": backend, "sampling": sampling}
     if sampling == "phong":
         params.update(exponent=60.0, specular_weight=0.7)
@@ -235,7 +218,7 @@ def test_veach_renders_follow_the_rgb_render(plugin, files, restore_variant):
     from test_variants import LUMINANCE  # written out from Mitsuba's definition there
 
     for variant in ("llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral", "llvm_ad_spectral_polarized"):
-        _use(variant)
+        use_variant(variant)
     bsdf = {"type": plugin, "filename": str(files[plugin])}
     images = {v: render_variant(v, bsdf, (24, 16), 4, seed=0)[0]
               for v in ("llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral", "llvm_ad_spectral_polarized")}

@@ -10,6 +10,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from conftest import use_variant
 from nbrdf_testing import random_pairs, write_merl, write_network
 
 SPECTRAL = ["scalar_spectral", "scalar_spectral_polarized", "llvm_ad_spectral", "llvm_ad_spectral_polarized"]
@@ -27,24 +28,6 @@ N = 64
 def files(tmp_path_factory) -> dict:
     folder = tmp_path_factory.mktemp("variants")
     return {"nbrdf": write_network(folder / "n.nbrdf.json"), "merl": write_merl(folder / "m.binary")}
-
-
-@pytest.fixture
-def restore_variant():
-    previous = mi.variant()
-    yield
-    if previous:
-        mi.set_variant(previous)
-
-
-def _use(variant: str) -> None:
-    if variant not in mi.variants():
-        pytest.skip(f"the installed Mitsuba has no {variant} variant")
-    if variant.startswith("llvm"):
-        problem = nbrdf_mitsuba.llvm.problem()
-        if problem:
-            pytest.skip(f"llvm variant unavailable: {problem}")
-    mi.set_variant(variant)
 
 
 def test_rgb_variant_loads(files, restore_variant):
@@ -89,7 +72,7 @@ def _calls(bsdf, view, light, u) -> dict:
 def test_values_follow_the_rgb_variant(variant, plugin, backend, files, restore_variant):
     """Monochrome: the luminance of the RGB value; polarized: the depolarizer, i.e. the
     (unpolarized) value at [0, 0] and zero elsewhere; pdfs and sampled directions unchanged."""
-    _use(variant)
+    use_variant(variant)
     if backend == "jit" and variant.startswith("scalar"):
         pytest.skip("the jit backend needs a JIT variant")
     scene = {"type": plugin, "filename": str(files[plugin]), "backend": backend, **PHONG}
@@ -120,7 +103,7 @@ def test_values_follow_the_rgb_variant(variant, plugin, backend, files, restore_
 @pytest.mark.parametrize("variant", OTHER + SPECTRAL)
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
 def test_tiny_render_has_no_nan(variant, plugin, files, restore_variant):
-    _use(variant)
+    use_variant(variant)
     scene = mi.load_dict({
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 3},
