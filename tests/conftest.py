@@ -19,7 +19,9 @@ import subprocess
 from pathlib import Path
 
 import nbrdf_mitsuba  # noqa: F401  (first: points Dr.Jit at a usable libLLVM)
+import drjit as dr
 import mitsuba as mi
+import numpy as np
 import pytest
 
 import nbrdf_testing
@@ -186,3 +188,30 @@ def use_variant(variant: str) -> None:
         if problem:
             pytest.skip(f"llvm variant unavailable: {problem}")
     mi.set_variant(variant)
+
+
+def bsdf_calls(bsdf, view, light, u, wavelengths=None) -> dict:
+    """eval, pdf, eval_pdf and sample of ``bsdf`` at the columns of ``view``/``light``/``u`` (and
+    ``wavelengths``: 4 per column, read in spectral variants only), as float64 NumPy arrays whose
+    last axis runs over the columns (scalar variants: one call per column)."""
+    ctx = mi.BSDFContext()
+    if wavelengths is None:
+        wavelengths = np.full((4, view.shape[1]), 550.0)
+
+    def one(v, l, s, w):
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.wi = mi.Vector3f(*v)
+        if mi.is_spectral:
+            si.wavelengths = mi.UnpolarizedSpectrum(*w)
+        wo = mi.Vector3f(*l)
+        value, pdf = bsdf.eval_pdf(ctx, si, wo)
+        bs, weight = bsdf.sample(ctx, si, mi.Float(s[0]), mi.Point2f(s[1], s[2]))
+        return {"eval": bsdf.eval(ctx, si, wo), "pdf": bsdf.pdf(ctx, si, wo), "eval_pdf.value": value,
+                "eval_pdf.pdf": pdf, "sample.wo": bs.wo, "sample.pdf": bs.pdf, "sample.weight": weight}
+
+    columns = (view, light, u, wavelengths)
+    if dr.is_jit_v(mi.Float):
+        out = one(*([mi.Float(r) for r in a] for a in columns))
+        return {k: np.asarray(v.numpy(), np.float64) for k, v in out.items()}
+    rows = [one(*(list(map(float, a[:, i])) for a in columns)) for i in range(view.shape[1])]
+    return {k: np.stack([np.asarray(r[k], np.float64) for r in rows], axis=-1) for k in rows[0]}

@@ -12,7 +12,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from conftest import use_variant
+from conftest import bsdf_calls, use_variant
 from nbrdf_testing import random_pairs, write_merl, write_network
 
 PHONG = {"sampling": "phong", "exponent": 40.0, "specular_weight": 0.6}
@@ -35,30 +35,6 @@ def _queries(n: int = N, seed: int = 5):
     u = rng.random((3, n))
     wavelengths = rng.uniform(CIE_MIN, CIE_MAX, (4, n))
     return [a.astype(np.float32) for a in (view, light, u, wavelengths)]
-
-
-def _calls(bsdf, view, light, u, wavelengths) -> dict:
-    """eval, pdf, eval_pdf and sample at the columns (wavelengths: 4 per column; ignored in RGB
-    variants), as float64 arrays whose last axis runs over the columns."""
-    ctx = mi.BSDFContext()
-
-    def one(v, l, s, w):
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        si.wi = mi.Vector3f(*v)
-        if mi.is_spectral:
-            si.wavelengths = mi.UnpolarizedSpectrum(*w)
-        wo = mi.Vector3f(*l)
-        value, pdf = bsdf.eval_pdf(ctx, si, wo)
-        bs, weight = bsdf.sample(ctx, si, mi.Float(s[0]), mi.Point2f(s[1], s[2]))
-        return {"eval": bsdf.eval(ctx, si, wo), "pdf": bsdf.pdf(ctx, si, wo), "eval_pdf.value": value,
-                "eval_pdf.pdf": pdf, "sample.wo": bs.wo, "sample.pdf": bs.pdf, "sample.weight": weight}
-
-    if dr.is_jit_v(mi.Float):
-        out = one(*([mi.Float(r) for r in a] for a in (view, light, u, wavelengths)))
-        return {k: np.asarray(v.numpy(), np.float64) for k, v in out.items()}
-    n = view.shape[1]
-    rows = [one(*(list(map(float, a[:, i])) for a in (view, light, u, wavelengths))) for i in range(n)]
-    return {k: np.stack([np.asarray(r[k], np.float64) for r in rows], axis=-1) for k in rows[0]}
 
 
 def sigmoid_polynomial(coeff: np.ndarray, wavelengths: np.ndarray) -> np.ndarray:
@@ -99,9 +75,9 @@ def test_spectral_value_is_the_uplift_of_the_rgb_value(variant, plugin, backend,
     use_variant(variant)
     _skip_scalar_jit(variant, backend)
     queries = _queries()
-    got = _calls(mi.load_dict(_scene(plugin, files, backend)), *queries)
+    got = bsdf_calls(mi.load_dict(_scene(plugin, files, backend)), *queries)
     mi.set_variant(_rgb_variant(variant))
-    rgb = _calls(mi.load_dict(_scene(plugin, files, backend)), *queries)
+    rgb = bsdf_calls(mi.load_dict(_scene(plugin, files, backend)), *queries)
     assert max(np.max(rgb[key]) for key in VALUES) > 1.0  # values above 1: the unbounded case matters
     for key in DENSITY:
         np.testing.assert_array_equal(got[key], rgb[key], err_msg=key)
@@ -136,7 +112,7 @@ def test_bad_wavelengths_give_zero(variant, plugin, backend, files, restore_vari
     wavelengths = good.copy()
     wavelengths[1] = BAD  # one bad wavelength per column, three good ones
     bsdf = mi.load_dict(_scene(plugin, files, backend))
-    got, reference = _calls(bsdf, view, light, u, wavelengths), _calls(bsdf, view, light, u, good)
+    got, reference = bsdf_calls(bsdf, view, light, u, wavelengths), bsdf_calls(bsdf, view, light, u, good)
     for key in VALUES:
         assert np.all(np.isfinite(got[key])), key
         assert np.all(got[key][1] == 0.0), key

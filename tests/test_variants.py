@@ -10,7 +10,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from conftest import use_variant
+from conftest import bsdf_calls, use_variant
 from nbrdf_testing import random_pairs, write_merl, write_network
 
 SPECTRAL = ["scalar_spectral", "scalar_spectral_polarized", "llvm_ad_spectral", "llvm_ad_spectral_polarized"]
@@ -43,29 +43,6 @@ def _queries():
     return view.astype(np.float32), light.astype(np.float32), u.astype(np.float32)
 
 
-def _calls(bsdf, view, light, u) -> dict:
-    """eval, pdf, eval_pdf and sample of ``bsdf`` at the columns of view/light/u, as NumPy arrays
-    whose last axis runs over the columns (scalar variants: one call per column)."""
-    import drjit as dr
-
-    ctx = mi.BSDFContext()
-
-    def one(v, l, s):
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        si.wi = mi.Vector3f(*v)
-        wo = mi.Vector3f(*l)
-        value, pdf = bsdf.eval_pdf(ctx, si, wo)
-        bs, weight = bsdf.sample(ctx, si, mi.Float(s[0]), mi.Point2f(s[1], s[2]))
-        return {"eval": bsdf.eval(ctx, si, wo), "pdf": bsdf.pdf(ctx, si, wo), "eval_pdf.value": value,
-                "eval_pdf.pdf": pdf, "sample.wo": bs.wo, "sample.pdf": bs.pdf, "sample.weight": weight}
-
-    if dr.is_jit_v(mi.Float):
-        out = one([mi.Float(r) for r in view], [mi.Float(r) for r in light], [mi.Float(r) for r in u])
-        return {k: np.asarray(v.numpy(), np.float64) for k, v in out.items()}
-    rows = [one(*(map(float, a[:, i]) for a in (view, light, u))) for i in range(N)]
-    return {k: np.stack([np.asarray(r[k], np.float64) for r in rows], axis=-1) for k in rows[0]}
-
-
 @pytest.mark.parametrize("backend", ["rust", "jit"])
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
 @pytest.mark.parametrize("variant", OTHER)
@@ -77,9 +54,9 @@ def test_values_follow_the_rgb_variant(variant, plugin, backend, files, restore_
         pytest.skip("the jit backend needs a JIT variant")
     scene = {"type": plugin, "filename": str(files[plugin]), "backend": backend, **PHONG}
     view, light, u = _queries()
-    got = _calls(mi.load_dict(scene), view, light, u)
+    got = bsdf_calls(mi.load_dict(scene), view, light, u)
     mi.set_variant("scalar_rgb" if variant.startswith("scalar") else "llvm_ad_rgb")
-    rgb = _calls(mi.load_dict(scene), view, light, u)
+    rgb = bsdf_calls(mi.load_dict(scene), view, light, u)
     assert np.max(rgb["eval"]) > 0 and np.max(rgb["sample.weight"]) > 0  # something to compare
 
     for key, value in got.items():
