@@ -204,5 +204,12 @@ def test_bench_many_quick_json(llvm, tmp_path):
         for key in ("load_s", "first_render_s", "later_render_s", "later_render_cpu_s", "rss_per_material"):
             assert np.isfinite(row[key]) and row[key] >= 0, (row, key)
         assert row["mean"] > 0
+        # The kernel cache starts empty, so the first render compiles, inside its own wall time.
+        assert 0 < row["first_compile_s"] <= row["first_render_s"], row
+        assert 0 < row["first_codegen_s"] <= row["first_render_s"], row
+        assert 0 <= row["first_main_thread_cpu_s"] <= row["first_render_cpu_s"] + 1e-3, row
+    for row in rows:
+        one = next(r for r in rows if r["count"] == 1 and r["mode"] == row["mode"])
+        assert row["first_cpu_vs_one_network"] == pytest.approx(row["first_render_cpu_s"] / one["first_render_cpu_s"])
     auto = [r for r in rows if r["mode"] == "auto"]
     assert all(r["kernel"] == "literal" and r["weights_bytes"] == 4 * 675 for r in auto)

@@ -22,6 +22,12 @@ networks trained briefly (``nbrdf synth`` + ``nbrdf train``) from a few SGD fits
 than sources are made distinct by shifting the output biases (a tint): every sphere has its own
 weights, so none is compiled or cached as another's.
 
+Where the first render's time goes: ``first_compile_s`` (LLVM compiling the kernels, from Dr.Jit's
+kernel history), ``first_codegen_s`` (Dr.Jit writing their IR) and ``first_main_thread_cpu_s``
+(the rendering thread's CPU seconds: tracing, code generation, compilation and its share of
+running the kernels); ``later_codegen_s`` is the code generation of one later render (Mitsuba
+retraces the scene every render and Dr.Jit regenerates the IR to find the cached kernel).
+
 Memory per material: ``weights_bytes`` (the float32 parameters), ``sampler_bytes`` (the
 tabulated sampler's arrays, where it samples so) and ``rss_per_material``: the growth of the
 process's resident memory while the scene loads, divided by N (Python objects, Dr.Jit variables
@@ -183,16 +189,35 @@ def run_one(mode: str, files: list[Path], width: int, spp: int, renders: int, sa
         dr.sync_thread()
         return image
 
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # drop the loading's kernels
+    main_thread = time.thread_time()
     image, first_wall, first_cpu = _timed(lambda: render(0))
+    first_main_cpu = time.thread_time() - main_thread
+    first_kernels = _kernel_times(dr.kernel_history())
     later = [_timed(lambda s=seed: render(s))[1:] for seed in range(1, renders + 1)]
+    later_kernels = _kernel_times(dr.kernel_history())
+    dr.set_flag(dr.JitFlag.KernelHistory, False)
     figures = {"mode": mode, "count": len(files), "load_s": load_wall, "load_cpu_s": load_cpu,
                "first_render_s": first_wall, "first_render_cpu_s": first_cpu,
+               "first_main_thread_cpu_s": first_main_cpu, "first_codegen_s": first_kernels["codegen"],
+               "first_compile_s": first_kernels["backend"],
+               "later_codegen_s": later_kernels["codegen"] / max(renders, 1),
                "later_render_s": statistics.median(w for w, _ in later),
                "later_render_cpu_s": statistics.median(c for _, c in later),
                "rss_per_material": rss_per_material, "mean": float(np.mean(np.array(image)))}
     if mode != "roughconductor":
         figures.update(_material_memory(scene))
     return figures
+
+
+def _kernel_times(history: list) -> dict:
+    """Seconds that Dr.Jit spent generating IR (``codegen``) and that LLVM spent compiling it
+    (``backend``: 0 for kernels found in the cache) over the launches in ``history``. Both run
+    on the rendering thread, so on an idle machine they are CPU seconds of the first render;
+    the rest of it is tracing (Python, Mitsuba) and running the kernels."""
+    return {key: 1e-3 * sum(entry.get(f"{key}_time", 0.0) for entry in history)
+            for key in ("codegen", "backend")}
 
 
 def _material_memory(scene) -> dict:
@@ -261,18 +286,21 @@ def summarise(runs: list[dict]) -> list[dict]:
         one = [r for r in rows if r["count"] == 1 and r["mode"] == row["mode"]]
         if one:
             row["first_vs_one_network"] = row["first_render_s"] / one[0]["first_render_s"]
+            # The figure to compare on a loaded machine, where wall time is mostly waiting.
+            row["first_cpu_vs_one_network"] = row["first_render_cpu_s"] / one[0]["first_render_cpu_s"]
     return rows
 
 
 def print_table(rows: list[dict]) -> None:
-    print(f"\n{'N':>4} {'mode':<15}{'load s':>14}{'ms/mat':>8}{'first s':>15}{'later s':>15}"
-          f"{'later/best':>11}{'first/1':>9}{'RSS/mat':>9}")
+    print(f"\n{'N':>4} {'mode':<15}{'load s':>14}{'ms/mat':>8}{'first s':>15}{'compile':>8}{'later s':>15}"
+          f"{'later/best':>11}{'first/1':>9}{'(CPU)':>7}{'RSS/mat':>9}")
     for r in rows:
         print(f"{r['count']:>4} {r['mode']:<15}{r['load_s']:>7.2f} ({r['load_cpu_s']:>4.2f})"
               f"{r['load_per_material_ms']:>8.1f}"
-              f"{r['first_render_s']:>7.2f} ({r['first_render_cpu_s']:>5.2f}){r['later_render_s']:>7.3f} "
-              f"({r['later_render_cpu_s']:>5.3f})"
+              f"{r['first_render_s']:>7.2f} ({r['first_render_cpu_s']:>5.2f}){r['first_compile_s']:>8.2f}"
+              f"{r['later_render_s']:>7.3f} ({r['later_render_cpu_s']:>5.3f})"
               f"{r.get('later_vs_fastest_mode', float('nan')):>11.2f}{r.get('first_vs_one_network', float('nan')):>9.2f}"
+              f"{r.get('first_cpu_vs_one_network', float('nan')):>7.2f}"
               f"{r['rss_per_material'] / 1e3:>7.0f}kB")
 
 
