@@ -287,7 +287,7 @@ mod tests {
                     for j in 0..cols {
                         let mut expect = 0.0f32;
                         for k in 0..depth {
-                            expect = a[i * depth + k] * b[k * cols + j] + expect;
+                            expect += a[i * depth + k] * b[k * cols + j];
                         }
                         assert_eq!(c[i * cols + j].to_bits(), expect.to_bits(), "{rows}x{cols}");
                     }
