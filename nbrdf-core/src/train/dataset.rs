@@ -67,7 +67,7 @@ impl FromStr for AngularSampling {
 pub type TargetFn<'a> = dyn Fn(&RusinkiewiczAngles) -> Option<[f64; 3]> + Sync + 'a;
 
 /// One training sample, 40 bytes, so that a shuffled gather touches one or two cache lines.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C)]
 pub struct Sample {
     /// Network input [`crate::coords::network_input_for`] of the `f32` directions.
@@ -86,6 +86,20 @@ pub struct DataSet {
     pub candidates: u64,
     pub below_horizon: u64,
     pub invalid: u64,
+}
+
+/// `out = [samples[i] for i in order]`, in parallel (the result does not depend on the threads).
+/// A tight loop of independent loads keeps many cache misses in flight at once.
+pub fn gather(samples: &[Sample], order: &[u32], out: &mut Vec<Sample>) {
+    const PIECE: usize = 1 << 14;
+    out.resize(order.len(), Sample::default());
+    out.par_chunks_mut(PIECE)
+        .zip(order.par_chunks(PIECE))
+        .for_each(|(out, order)| {
+            for (o, &i) in out.iter_mut().zip(order) {
+                *o = samples[i as usize];
+            }
+        });
 }
 
 /// Why a candidate was not kept.

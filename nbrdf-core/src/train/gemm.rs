@@ -3,8 +3,8 @@
 //! Every product of the forward and backward passes has the form
 //! `C[i][j] = init + sum_k A(i, k) B[k][j]` with `B` and `C` row-major and `A` read through
 //! arbitrary strides (so `A` or its transpose can be used without copying). Rows of `C` are
-//! computed in blocks of 4, columns in blocks of up to 24 (3 vectors of 8): 12 accumulators stay
-//! in registers while each step of `k` loads one row of `B` and broadcasts 4 elements of `A`.
+//! computed in blocks of up to 4, columns in blocks of up to 24 (3 vectors of 8): 12 accumulators
+//! stay in registers while each step of `k` loads one row of `B` and broadcasts 4 elements of `A`.
 //! The sum over `k` runs in order, so results do not depend on how rows are grouped.
 
 use crate::fastmath::MulAdd;
@@ -69,11 +69,13 @@ pub fn gemm<M: MulAdd>(
 }
 
 /// All rows for the column block starting at `j0` of `NB` vectors; returns the block width.
-/// Rows go in blocks of 12 / `NB` (12 accumulators of the 16 vector registers), the rest in
-/// blocks of 4, 2 and 1, so that every block has enough independent accumulators to hide the
-/// latency of the multiply-adds.
+/// A block holds at most 8, 6 or 4 rows (8 to 12 accumulators of the 16 vector registers), and the
+/// rows are split into blocks of near-equal height (21 rows: 7 + 7 + 7, or 4 + 4 + 4 + 3 + 3 + 3)
+/// rather than full blocks and a remainder: a block of one or two rows has too few independent
+/// accumulators to hide the latency of the multiply-adds, and with the 64-deep sums of the weight
+/// gradients such a remainder cost as much as a full block.
 #[inline(always)]
-#[allow(clippy::too_many_arguments, clippy::int_plus_one)] // `i0 + 1 <= rows` is the macro's `i0 + MR <= rows`
+#[allow(clippy::too_many_arguments)]
 fn block_rows<M: MulAdd, const NB: usize>(
     rows: usize,
     depth: usize,
@@ -86,23 +88,31 @@ fn block_rows<M: MulAdd, const NB: usize>(
     post: Post<'_>,
     j0: usize,
 ) -> usize {
+    let tallest = match NB {
+        1 => 8,
+        2 => 6,
+        _ => 4,
+    };
     let mut i0 = 0;
-    macro_rules! blocks_of {
-        ($mr:literal) => {
-            while i0 + $mr <= rows {
-                block::<M, $mr, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post);
-                i0 += $mr;
-            }
-        };
+    while i0 < rows {
+        let left = rows - i0;
+        let height = left.div_ceil(left.div_ceil(tallest));
+        // `height <= tallest`, so the last arm is the tallest block.
+        macro_rules! run {
+            ($($mr:literal)* ; $last:literal) => {
+                match height {
+                    $($mr => block::<M, $mr, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post),)*
+                    _ => block::<M, $last, NB>(i0, j0, depth, a, b, ldb, c, ldc, init, post),
+                }
+            };
+        }
+        match NB {
+            1 => run!(1 2 3 4 5 6 7; 8),
+            2 => run!(1 2 3 4 5; 6),
+            _ => run!(1 2 3; 4),
+        }
+        i0 += height;
     }
-    match NB {
-        1 => blocks_of!(8),
-        2 => blocks_of!(6),
-        _ => {}
-    }
-    blocks_of!(4);
-    blocks_of!(2);
-    blocks_of!(1);
     NB * VEC
 }
 
@@ -242,6 +252,46 @@ mod tests {
                     (c[i * cols + j] - expect.max(0.0)).abs() < 1e-5,
                     "({i}, {j})"
                 );
+            }
+        }
+    }
+
+    /// Every block height of every column width: bit for bit the naive sum over `k` in order
+    /// (the blocking must not change a single rounding).
+    #[test]
+    fn every_row_split_is_the_in_order_sum() {
+        let depth = 9;
+        for cols in [8, 16, 24, 40] {
+            for rows in 1..=26 {
+                let a: Vec<f32> = (0..rows * depth).map(|v| (v as f32 * 0.71).sin()).collect();
+                let b: Vec<f32> = (0..depth * cols).map(|v| (v as f32 * 0.23).cos()).collect();
+                let mut c = vec![f32::NAN; rows * cols];
+                let view = Strided {
+                    data: &a,
+                    row_stride: depth,
+                    col_stride: 1,
+                };
+                gemm::<Unfused>(
+                    rows,
+                    cols,
+                    depth,
+                    view,
+                    &b,
+                    cols,
+                    &mut c,
+                    cols,
+                    Init::Zero,
+                    Post::None,
+                );
+                for i in 0..rows {
+                    for j in 0..cols {
+                        let mut expect = 0.0f32;
+                        for k in 0..depth {
+                            expect += a[i * depth + k] * b[k * cols + j];
+                        }
+                        assert_eq!(c[i * cols + j].to_bits(), expect.to_bits(), "{rows}x{cols}");
+                    }
+                }
             }
         }
     }
