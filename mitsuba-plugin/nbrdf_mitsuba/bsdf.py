@@ -498,6 +498,8 @@ class _NativeBSDFMixin:
         else:
             value = jit.srgb_projection(coefficients, matrix) * scale
             value = mi.luminance(value) if mi.is_monochromatic else value
+        # A Spectrum before dr.all: on a flat Float (mono) it would reduce over the lanes.
+        value = mi.UnpolarizedSpectrum(value)
         value = mi.UnpolarizedSpectrum(dr.select(active & dr.all(dr.isfinite(value)), value, 0.0))
         return mi.depolarizer(value) if mi.is_polarized else value
 
