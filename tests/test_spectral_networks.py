@@ -84,7 +84,7 @@ def spectral_oracle(layers, view, light, wavelengths) -> np.ndarray:
 
 
 def srgb_matrix_oracle(count: int = COUNT, step: float = 0.01) -> np.ndarray:
-    """(3, count): ``XYZ_TO_SRGB int xyz(l) D65(l) B_k(l) dl / int y`` by the trapezoid rule on a
+    """(3, count): ``XYZ_TO_SRGB int xyz(l) D65(l) B_k(l) dl * MI_CIE_Y_NORMALIZATION`` by the trapezoid rule on a
     ``step`` nm grid, from Mitsuba's tables (``cie1931_xyz``, ``cie_d65`` and ``xyz_to_srgb``
     in scalar_rgb, read at their 5 nm nodes and interpolated linearly as Mitsuba does)."""
     previous = mi.variant()
@@ -98,8 +98,8 @@ def srgb_matrix_oracle(count: int = COUNT, step: float = 0.01) -> np.ndarray:
         mi.set_variant(previous)
     grid = np.linspace(MIN_NM, MAX_NM, int(round((MAX_NM - MIN_NM) / step)) + 1)
     weight = np.stack([np.interp(grid, nodes, cmf[:, c]) for c in range(3)], 1) * np.interp(grid, nodes, d65)[:, None]
-    y_integral = np.trapezoid(np.interp(grid, nodes, cmf[:, 1]), grid)
-    xyz = np.trapezoid(weight[:, :, None] * basis_oracle(grid, count)[:, None, :], grid, axis=0) / y_integral
+    # Mitsuba's MI_CIE_Y_NORMALIZATION (1 / the y table's integral as Mitsuba states it).
+    xyz = np.trapezoid(weight[:, :, None] * basis_oracle(grid, count)[:, None, :], grid, axis=0) / 106.7502593994140625
     return to_srgb @ xyz
 
 
@@ -114,6 +114,19 @@ def _library_has_spectral_networks() -> bool:
 needs_library = pytest.mark.skipif(not _library_has_spectral_networks(),
                                    reason="libnbrdf_ffi has no spectral networks yet (nbrdf_material_eval_spectral "
                                           "missing: merge issue31-specnet-core)")
+
+
+def _trainer_has_spectral_networks() -> bool:
+    try:
+        from nbrdf_mitsuba import _train_native
+    except ImportError:
+        return False
+    return hasattr(_train_native.lib, "nbrdf_train_spectral_from_arrays")
+
+
+needs_trainer = pytest.mark.skipif(not _trainer_has_spectral_networks(),
+                                   reason="libnbrdf_train cannot train spectral networks yet "
+                                          "(nbrdf_train_spectral_from_arrays missing, issue31-specnet-core)")
 
 
 @pytest.fixture(scope="module")
@@ -256,7 +269,7 @@ def test_the_librarys_srgb_matrix_is_the_cie_projection(spectral_file, restore_v
     a constant spectrum of 1 (all coefficients 1) is D65's white, (1, 1, 1) in linear sRGB."""
     from nbrdf_mitsuba import _native
 
-    matrix = np.asarray(_native.Material(spectral_file).spectral_srgb(), np.float64).reshape(3, COUNT)
+    matrix = np.asarray(_native.Material(spectral_file).spectral_srgb_matrix(), np.float64).reshape(3, COUNT)
     oracle = srgb_matrix_oracle()
     np.testing.assert_allclose(matrix, oracle, atol=2e-4 * np.abs(oracle).max())
     np.testing.assert_allclose(oracle.sum(axis=1), 1.0, atol=2e-3)
@@ -346,6 +359,7 @@ def test_chi2_in_a_spectral_variant(backend, spectral_file, restore_variant):
 
 
 @needs_library
+@needs_trainer
 def test_distill_in_a_spectral_variant_writes_a_version_3_network(tmp_path, capsys, restore_variant):
     """A tiny budget: the file is version 3 with 16 coefficients, loads, and renders gold-like
     colours (red above blue) in llvm_ad_rgb."""
@@ -403,6 +417,7 @@ def test_distill_evaluates_the_source_at_each_wavelength(restore_variant):
 
 
 @needs_library
+@needs_trainer
 def test_spectral_report_quick(tmp_path, restore_variant):
     """``python -m nbrdf_tools.spectral_report --quick`` on one material: the page opens with its
     command, states the weights, has a row per network, and the figure is written."""

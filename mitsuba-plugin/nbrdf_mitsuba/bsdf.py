@@ -767,11 +767,11 @@ class NbrdfMixin(_NativeBSDFMixin):
             _assign(self._traced.flat, self._traced.good)
 
     def _spectral_output(self):
-        count = getattr(self._native, "spectral_count", 0)  # TODO(merge specnet-core): plain attribute
+        count = self._native.spectral_count
         if not count:
             return None
         min_nm, max_nm = self._native.spectral_range_nm
-        return count, min_nm, max_nm, self._native.spectral_srgb()
+        return count, min_nm, max_nm, self._native.spectral_srgb_matrix()
 
     def _traced_width_problem(self) -> str | None:
         width = self._native.hidden_width
