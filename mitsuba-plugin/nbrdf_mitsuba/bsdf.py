@@ -166,14 +166,25 @@ def _to_color(rgb: np.ndarray):
     return mi.Color3f(float(rgb[0, 0]), float(rgb[1, 0]), float(rgb[2, 0]))
 
 
+def _wavelength_rows(wavelengths) -> list:
+    return [wavelengths[j] for j in range(len(wavelengths))]
+
+
+def _to_wavelengths(values: np.ndarray):
+    """A spectral variant's ``mi.UnpolarizedSpectrum`` of planar (wavelengths, n) values."""
+    if _is_jit():
+        return mi.UnpolarizedSpectrum(values)
+    return mi.UnpolarizedSpectrum(*map(float, values[:, 0]))
+
+
 def _to_spectrum(color, si):
     """The variant's ``mi.Spectrum`` of an RGB value (``mi.Color3f``) at ``si.wavelengths``.
 
     Monochrome variants take its luminance, as Mitsuba converts RGB data there (``mi.luminance``,
     Rec. 709 weights). Spectral variants uplift it per evaluation (each direction has its own
     colour) as Mitsuba uplifts unbounded RGB data (:func:`jit.spectrum_from_rgb`); sample and pdf
-    never see the wavelengths, so there is one density. A material with spectral output (not
-    built yet) would evaluate its own spectrum here instead. Polarized variants get the
+    never see the wavelengths, so there is one density. A spectral network evaluates its own
+    spectrum instead (``_spectral_spectrum``, ``_native_spectrum``). Polarized variants get the
     depolarizer's Mueller matrix times the value, as Mitsuba's own non-polarizing BSDFs
     (``diffuse``, ``roughplastic``) return: a depolarizer needs no rotation between the BSDF's
     and Mitsuba's Stokes frames.
@@ -272,6 +283,7 @@ class _NativeBSDFMixin:
         if problem:
             raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [NBRDF_ERROR_FORMAT]')
         self._path = path
+        self._spectral = self._spectral_output()
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
         if getattr(self._native, "anisotropic", False):
             # An anisotropic network reads phi_h in the shading frame (x: si.sh_frame.s, the
@@ -326,6 +338,11 @@ class _NativeBSDFMixin:
         return backend
 
     def _traced_width_problem(self) -> str | None:
+        return None
+
+    def _spectral_output(self):
+        """``(count, min_nm, max_nm, M)`` of a spectral network (file format version 3; ``M`` the
+        library's 3 x count sRGB projection), None for RGB networks and tables."""
         return None
 
     # -- configuration ------------------------------------------------------------------------
@@ -439,6 +456,8 @@ class _NativeBSDFMixin:
 
     def _jit_eval(self, si, wo, active):
         f = self._traced.eval(si.wi, wo)
+        if self._spectral is not None:
+            return self._spectral_spectrum(f, jit.cos_theta(wo), _both_above(active, si.wi, wo), si)
         return _to_spectrum(dr.select(_both_above(active, si.wi, wo), f * jit.cos_theta(wo), 0.0), si)
 
     def _jit_pdf(self, si, wo, active):
@@ -458,11 +477,48 @@ class _NativeBSDFMixin:
         bs.eta = 1.0
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
         bs.sampled_component = mi.UInt32(0)
-        f_cos = self._traced.eval(si.wi, light) * jit.cos_theta(light)
+        f = self._traced.eval(si.wi, light)
+        if self._spectral is not None:
+            return bs, self._spectral_spectrum(f, jit.cos_theta(light) / dr.select(active, pdf, 1.0), active, si)
+        f_cos = f * jit.cos_theta(light)
         weight = f_cos / dr.select(active, pdf, 1.0)
         # As sampling/mod.rs sample_weight: 0 where a tiny pdf would overflow the quotient.
         weight = dr.select(active & dr.all(dr.isfinite(weight)), weight, 0.0)
         return bs, _to_spectrum(weight, si)
+
+    def _spectral_spectrum(self, coefficients, scale, active, si):
+        """A spectral network's value (its B-spline coefficients) times ``scale`` as the
+        variant's spectrum, 0 where not ``active`` or not finite: per wavelength in spectral
+        variants (no uplift: the network is spectral), the sRGB projection ``M c`` in RGB
+        variants and its luminance in monochrome ones (as ``_to_spectrum`` does for RGB
+        values); polarized variants get the depolarizer times the value."""
+        _, min_nm, max_nm, matrix = self._spectral
+        if mi.is_spectral:
+            value = jit.spectral_value(coefficients, si.wavelengths, min_nm, max_nm) * scale
+        else:
+            value = jit.srgb_projection(coefficients, matrix) * scale
+            value = mi.luminance(value) if mi.is_monochromatic else value
+        # A Spectrum before dr.all: on a flat Float (mono) it would reduce over the lanes.
+        value = mi.UnpolarizedSpectrum(value)
+        value = mi.UnpolarizedSpectrum(dr.select(active & dr.all(dr.isfinite(value)), value, 0.0))
+        return mi.depolarizer(value) if mi.is_polarized else value
+
+    def _native_spectrum(self, view, light, active, si, weight=None, pdf=None):
+        """The library's ``f_r cos`` at planar directions (or a sample's ``weight`` with its
+        ``pdf``) as the variant's spectrum, 0 where not ``active``. A spectral network in a
+        spectral variant is evaluated at the lane's wavelengths (``eval_spectral``) and divided
+        by ``pdf`` (0 where the quotient is not finite, as ``sampling/mod.rs`` sample_weight);
+        anything else is the library's RGB value."""
+        if self._spectral is None or not mi.is_spectral:
+            value = _to_color(self._native.eval(view, light) if weight is None else weight)
+            return _to_spectrum(dr.select(active, value, 0.0), si)
+        values = self._native.eval_spectral(view, light, _planar(_wavelength_rows(si.wavelengths), view.shape[1]))
+        if pdf is not None:
+            with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+                values = np.where(pdf > 0, values / np.where(pdf > 0, pdf, 1.0), 0.0)
+            values = np.where(np.all(np.isfinite(values), axis=0), values, 0.0).astype(np.float32)
+        value = mi.UnpolarizedSpectrum(dr.select(active, _to_wavelengths(values), 0.0))
+        return mi.depolarizer(value) if mi.is_polarized else value
 
     def _traced_path(self, *values) -> bool:
         """Whether this call goes through the traced code: the jit backend, or the rust backend
@@ -500,8 +556,7 @@ class _NativeBSDFMixin:
         if not self._enabled(ctx, si.wi, wo):
             return _zero_spectrum(_width(si.wi, wo) if _is_jit() else 1)
         view, light = _directions(si.wi, wo)
-        value = _to_color(self._native.eval(view, light))
-        return _to_spectrum(dr.select(_both_above(active, si.wi, wo), value, 0.0), si)
+        return self._native_spectrum(view, light, _both_above(active, si.wi, wo), si)
 
     def pdf(self, ctx, si, wo, active=True):
         if self._traced_path(si.wi, wo):
@@ -520,10 +575,9 @@ class _NativeBSDFMixin:
             n = _width(si.wi, wo) if _is_jit() else 1
             return _zero_spectrum(n), dr.zeros(mi.Float, n)
         view, light = _directions(si.wi, wo)
-        value = _to_color(self._native.eval(view, light))
         pdf = _to_float(self._sampler.pdf(view, light))
         active = _both_above(active, si.wi, wo)
-        return _to_spectrum(dr.select(active, value, 0.0), si), dr.select(active, pdf, 0.0)
+        return self._native_spectrum(view, light, active, si), dr.select(active, pdf, 0.0)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         if self._traced_path(si.wi, sample1, sample2):
@@ -543,7 +597,9 @@ class _NativeBSDFMixin:
         bs.sampled_component = mi.UInt32(0)
         active = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (bs.pdf > 0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
-        return bs, _to_spectrum(dr.select(active, _to_color(weight), 0.0), si)
+        # The library's weight is RGB; a spectral network in a spectral variant is evaluated
+        # again at the sampled direction and the lane's wavelengths.
+        return bs, self._native_spectrum(view, light, active, si, weight, pdf)
 
     @staticmethod
     def _enabled(ctx, *values) -> bool:
@@ -710,6 +766,13 @@ class NbrdfMixin(_NativeBSDFMixin):
         if not np.array_equal(np.asarray(dr.detach(self._traced.flat).numpy()).reshape(-1), self._traced.good):
             _assign(self._traced.flat, self._traced.good)
 
+    def _spectral_output(self):
+        count = self._native.spectral_count
+        if not count:
+            return None
+        min_nm, max_nm = self._native.spectral_range_nm
+        return count, min_nm, max_nm, self._native.spectral_srgb_matrix()
+
     def _traced_width_problem(self) -> str | None:
         width = self._native.hidden_width
         if width <= JIT_MAX_HIDDEN_WIDTH:
@@ -745,6 +808,9 @@ class NbrdfMixin(_NativeBSDFMixin):
         net = self._native
         lines = [f'name = "{net.name}"', f"hidden_width = {net.hidden_width}",
                  f"parameter_count = {net.parameter_count}", f"anisotropic = {str(net.anisotropic).lower()}"]
+        if self._spectral is not None:
+            count, min_nm, max_nm, _ = self._spectral
+            lines.append(f"spectral = cubic B-spline, {count} coefficients over {min_nm:g}-{max_nm:g} nm")
         if self._backend == "jit":
             lines.append(f"jit_weights = {self._traced.mode}")
             if self._traced.mode == "auto":

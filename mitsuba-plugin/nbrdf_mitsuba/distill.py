@@ -15,6 +15,10 @@ exactly as ``nbrdf train`` does (same sampling, loss, validation split and early
   a scene with it renders); ``--reciprocal`` also evaluates the swapped pairs and learns
   ``(f(v, l) + f(l, v)) / 2``, dropping pairs with a cosine below 0.01 (as ``nbrdf train
   --rgl-fold reciprocal-mean`` does for RGL measurements).
+* Spectra (``--variant llvm_ad_spectral`` or another ``*_spectral`` one): the BSDF is evaluated at
+  :data:`WAVELENGTHS` (``si.wavelengths``, 4 per lane) and the trainer learns a spectral network
+  (file format version 3, ``nbrdf_train_spectral_from_arrays``: 16 B-spline coefficients over
+  360-830 nm, fitted per pair to the piecewise-linear spectrum through the samples).
 * A BSDF returning NaN or infinity is an error (its first bad direction is named); slightly
   negative values are clamped to 0 by the trainer.
 * Anisotropy (``--anisotropy auto|on|off``, as ``nbrdf train``): an anisotropic network also
@@ -60,8 +64,9 @@ def pick_variant(requested: str | None = None) -> str:
     if requested:
         if requested not in available:
             raise DistillError(f"Mitsuba variant '{requested}' is not available (these are: {', '.join(available)})")
-        if not requested.endswith("_rgb"):
-            raise DistillError(f"variant '{requested}': the network learns RGB, use an *_rgb variant")
+        if not requested.endswith(("_rgb", "_spectral")):
+            raise DistillError(f"variant '{requested}': the network learns RGB (an *_rgb variant) or spectra "
+                               "(an *_spectral one, e.g. llvm_ad_spectral)")
         return requested
     if "llvm_ad_rgb" in available and _llvm.problem() is None:
         return "llvm_ad_rgb"
@@ -118,31 +123,64 @@ def load_bsdf(source: Path, bsdf_id: str | None = None):
 # -- evaluation ----------------------------------------------------------------------------------
 
 
-def eval_cos(bsdf, view: np.ndarray, light: np.ndarray) -> np.ndarray:
-    """Planar (3, n) float64 ``bsdf.eval`` (``f_r cos(theta_light)``) at planar (3, n) ``view``
-    (``si.wi``) and ``light`` (``wo``) in the local frame, in the current variant."""
-    ctx = mi.BSDFContext()
-    n = view.shape[1]
-    out = np.empty((3, n))
-    if dr.is_jit_v(mi.Float):
-        for start in range(0, n, CHUNK):
-            stop = min(start + CHUNK, n)
-            si = dr.zeros(mi.SurfaceInteraction3f, stop - start)
-            si.sh_frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
-            si.n = mi.Normal3f(0, 0, 1)
-            si.uv = mi.Point2f(0.5, 0.5)
-            si.wi = mi.Vector3f(np.ascontiguousarray(view[:, start:stop], dtype=np.float32))
-            value = bsdf.eval(ctx, si, mi.Vector3f(np.ascontiguousarray(light[:, start:stop], dtype=np.float32)))
-            out[:, start:stop] = np.asarray(value.numpy(), dtype=np.float64).reshape(3, -1)
-        return out
-    si = dr.zeros(mi.SurfaceInteraction3f)
+#: The wavelengths (nm) a BSDF is evaluated at in spectral variants: every 10 nm over 360-830, 48
+#: of them (12 evaluations of Mitsuba's 4 wavelengths per lane). The network's target is the
+#: B-spline fit of the piecewise-linear spectrum through these samples; its 16 coefficients span
+#: 36 nm each. Measured on roughconductor (alpha 0.2) Au and Cu at 2000 pairs against their spectra
+#: sampled every 1 nm, linear interpolation between samples every 5 / 10 / 20 / 40 nm is off by
+#: 0.03-0.04 / 0.09-0.12 / 0.3-0.4 / 0.8-1.1 % (mean relative RMS; worst pair 0.15 % at 10 nm),
+#: against the 0.5 % the 16-coefficient basis itself leaves on these conductors
+#: (docs/results/spectral-basis.md): 10 nm adds little to it at a quarter of 5 nm's cost.
+WAVELENGTHS = np.arange(360.0, 830.0 + 1e-9, 10.0)
+
+
+def _interaction(n: int | None, view):
+    """A surface interaction in the local frame (``si.sh_frame`` the identity) viewed from
+    ``view``: n lanes of planar (3, n) directions in JIT variants, one (3,) direction else."""
+    si = dr.zeros(mi.SurfaceInteraction3f, n) if n is not None else dr.zeros(mi.SurfaceInteraction3f)
     si.sh_frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
     si.n = mi.Normal3f(0, 0, 1)
     si.uv = mi.Point2f(0.5, 0.5)
-    for i in range(n):
-        si.wi = mi.Vector3f(*map(float, view[:, i]))
-        out[:, i] = np.asarray(bsdf.eval(ctx, si, mi.Vector3f(*map(float, light[:, i]))), dtype=np.float64)
-    return out
+    si.wi = mi.Vector3f(np.ascontiguousarray(view, dtype=np.float32)) if n is not None else mi.Vector3f(*map(float, view))
+    return si
+
+
+def _wavelength_groups(wavelengths) -> list:
+    """Mitsuba's 4 wavelengths per lane, in groups covering ``wavelengths`` (the last group padded
+    with its last wavelength); ``[None]`` in RGB variants."""
+    if not mi.is_spectral:
+        return [None]
+    w = np.asarray(WAVELENGTHS if wavelengths is None else wavelengths, dtype=np.float64)
+    w = np.concatenate([w, np.full(-len(w) % 4, w[-1])])
+    return [tuple(map(float, w[k:k + 4])) for k in range(0, len(w), 4)]
+
+
+def eval_cos(bsdf, view: np.ndarray, light: np.ndarray, wavelengths=None) -> np.ndarray:
+    """Planar float64 ``bsdf.eval`` (``f_r cos(theta_light)``) at planar (3, n) ``view`` (``si.wi``)
+    and ``light`` (``wo``) in the local frame, in the current variant: (3, n) RGB, or in spectral
+    variants (m, n), the value at wavelength j of pair i at ``[j, i]`` (``wavelengths``, default
+    :data:`WAVELENGTHS`, m of them, set through ``si.wavelengths`` 4 at a time)."""
+    ctx = mi.BSDFContext()
+    n = view.shape[1]
+    groups = _wavelength_groups(wavelengths)
+    channels = 3 if groups == [None] else len(WAVELENGTHS if wavelengths is None else wavelengths)
+    out = np.empty((4 * len(groups) if groups != [None] else 3, n))
+    jit = dr.is_jit_v(mi.Float)
+    for start in range(0, n, CHUNK if jit else 1):
+        stop = min(start + (CHUNK if jit else 1), n)
+        si = _interaction(stop - start, view[:, start:stop]) if jit else _interaction(None, view[:, start])
+        wo = mi.Vector3f(np.ascontiguousarray(light[:, start:stop], dtype=np.float32)) if jit else (
+            mi.Vector3f(*map(float, light[:, start])))
+        for g, group in enumerate(groups):
+            if group is not None:
+                si.wavelengths = mi.UnpolarizedSpectrum(*group)
+                if jit:  # kernel parameters, not literals: one kernel for every group
+                    dr.make_opaque(si.wavelengths)
+            value = bsdf.eval(ctx, si, wo)
+            rows = slice(4 * g, 4 * g + 4) if group is not None else slice(0, 3)
+            out[rows, start:stop] = (np.asarray(value.numpy(), dtype=np.float64).reshape(-1, stop - start) if jit
+                                     else np.asarray(value, dtype=np.float64).reshape(-1, 1))
+    return out[:channels]
 
 
 def check_finite(values: np.ndarray, view: np.ndarray, light: np.ndarray, what: str) -> None:
@@ -279,9 +317,18 @@ def distill(args) -> dict:
         "evaluation_seconds": round(evaluation_seconds, 3),
         "anisotropy": anisotropy,
     }
+    train = native.train_from_arrays
+    if mi.is_spectral and not hasattr(native, "train_spectral_from_arrays"):
+        raise DistillError(f"variant '{variant}': this libnbrdf_train cannot train spectral networks "
+                           "(nbrdf_train_spectral_from_arrays is missing); use an *_rgb variant")
+    if mi.is_spectral:
+        details["wavelengths_nm"] = [float(w) for w in WAVELENGTHS]
+
+        def train(config, view, light, values, *rest, **options):
+            return native.train_spectral_from_arrays(config, view, light, WAVELENGTHS, values, *rest, **options)
     progress = _progress(args.quiet, config.max_epochs)
     try:
-        text = native.train_from_arrays(
+        text = train(
             config, view, light, values, n_validation, name=args.name or network_name(output),
             source=f"Mitsuba BSDF {args.source}", details=details, swapped_eval_cos=swapped,
             fold="reciprocal-mean" if args.reciprocal else "as-measured", on_epoch=progress.update)
@@ -298,7 +345,7 @@ def distill(args) -> dict:
         "output": output, "pairs": view.shape[1], "validation": n_validation, "variant": variant,
         "evaluation_seconds": evaluation_seconds, "seconds": time.perf_counter() - start,
         "epochs": provenance["epochs"], "loss": provenance["best_validation_loss"],
-        "anisotropic": anisotropic,
+        "anisotropic": anisotropic, "spectral": bool(mi.is_spectral),
     }
 
 
@@ -335,8 +382,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="the network file to write, e.g. OUT.nbrdf.json")
     p.add_argument("--name", help="name stored in the network (default: the output's file name without extensions)")
     p.add_argument("--bsdf", metavar="ID", help="the id of the BSDF to distil when SOURCE holds several")
-    p.add_argument("--variant", help="Mitsuba variant, an *_rgb one (default: llvm_ad_rgb when available, else "
-                                     "scalar_rgb, which is much slower)")
+    p.add_argument("--variant", help="Mitsuba variant: an *_rgb one (an RGB network; default: llvm_ad_rgb when "
+                                     "available, else scalar_rgb, which is much slower) or an *_spectral one (a "
+                                     "spectral network, file format version 3: 16 B-spline coefficients over "
+                                     "360-830 nm, learnt from the BSDF evaluated every 10 nm), e.g. llvm_ad_spectral")
     p.add_argument("--reciprocal", action="store_true",
                    help="learn (f(view, light) + f(light, view)) / 2 instead of the BSDF as it evaluates")
     p.add_argument("--anisotropy", default="auto", choices=ANISOTROPY,
@@ -370,7 +419,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # delivered once the running Mitsuba or trainer call returns
         print("error: interrupted; no network written", file=sys.stderr)
         return 130
-    kind = "anisotropic" if summary["anisotropic"] else "isotropic"
+    kind = ("anisotropic" if summary["anisotropic"] else "isotropic") + (", spectral" if summary["spectral"] else "")
     print(f"wrote {summary['output']} ({kind}): {summary['pairs'] - summary['validation']} samples "
           f"(+{summary['validation']} validation) evaluated by Mitsuba ({summary['variant']}) in "
           f"{summary['evaluation_seconds']:.1f} s; {summary['epochs']} epochs, best validation loss "

@@ -250,8 +250,9 @@ class TracedNetwork:
             return "literal" if live_networks() <= AUTO_LITERAL_MAX else "parameters"
         return "literal" if self.mode == "literal" else "parameters"
 
-    def eval_input(self, x: list) -> mi.Color3f:
-        """The network on an input list (``None`` entries are zeros): ``f_r``, clamped at 0."""
+    def eval_input(self, x: list):
+        """The network on an input list (``None`` entries are zeros): ``f_r``, clamped at 0 (RGB,
+        or a spectral network's ``count`` coefficients as a list)."""
         h = x
         kernel = self.kernel()
         if kernel not in self._kernels:  # "auto" makes its literals when it first needs them
@@ -271,14 +272,17 @@ class TracedNetwork:
                         acc = dr.fma(h_i, W[i][o], acc)
                 out.append(acc)
             h = [None if v is None else relu(v) for v in out] if k < last else out
-        rgb = [relu(expm1(clamp_exp_argument(v))) for v in h]
-        return mi.Color3f(rgb[0], rgb[1], rgb[2])
+        out = [relu(expm1(clamp_exp_argument(v))) for v in h]
+        # A spectral network's outputs are its B-spline coefficients (spectral_value reads them).
+        return out if len(out) != 3 else mi.Color3f(out[0], out[1], out[2])
 
-    def eval(self, view: mi.Vector3f, light: mi.Vector3f) -> mi.Color3f:
+    def eval(self, view: mi.Vector3f, light: mi.Vector3f):
         """``f_r(light, view)``, zero at or below the horizon and for zero or non-finite
-        directions (``network/kernel.rs`` ``eval_chunks``)."""
+        directions (``network/kernel.rs`` ``eval_chunks``): a ``mi.Color3f``, or a spectral
+        network's list of coefficients."""
         f = self.eval_input(network_input(view, light, self.anisotropic))
-        return dr.select(_both_valid_above(view, light), f, 0.0)
+        ok = _both_valid_above(view, light)
+        return [dr.select(ok, c, 0.0) for c in f] if isinstance(f, list) else dr.select(ok, f, 0.0)
 
 
 def _both_valid_above(view, light):
@@ -803,3 +807,64 @@ def spectrum_from_rgb(rgb, wavelengths):
     valid = dr.isfinite(wavelengths) & (wavelengths >= mi.MI_CIE_MIN) & (wavelengths <= mi.MI_CIE_MAX)
     # dr.select returns a plain Array4f, which mi.depolarizer would misread: keep Mitsuba's type.
     return mi.UnpolarizedSpectrum(dr.select(valid, value, 0.0))
+
+
+# --------------------------------------------------------------------------------------------
+# Output stage of spectral networks (file format version 3): a clamped uniform cubic B-spline
+
+
+def bspline_weights(wavelengths, count: int, min_nm: float, max_nm: float) -> list:
+    """The ``count`` clamped uniform cubic B-spline basis functions over ``[min_nm, max_nm]``
+    (``count - 3`` equal intervals) at ``wavelengths`` (any Dr.Jit or Mitsuba array type, e.g.
+    the 4 wavelengths of a spectral lane): a list of ``count`` values of that type, at most 4 of
+    them non-zero, summing to 1 inside the range; all 0 outside it and at non-finite
+    wavelengths.
+
+    Twin of the Rust basis of spectral networks (docs/design.md, "Twins"). De Boor's triangular
+    scheme (Piegl and Tiller's BasisFuns) on the interval ``j`` of each lane, in units of the
+    knot spacing; the knots are ``clip(k - 3, 0, count - 3)``, so the clamped ends need no
+    special case and no denominator is ever 0."""
+    intervals = count - 3
+    x = (wavelengths - min_nm) * (intervals / (max_nm - min_nm))
+    valid = dr.isfinite(wavelengths) & (wavelengths >= min_nm) & (wavelengths <= max_nm)
+    x = dr.select(valid, x, 0.0)
+    j = dr.minimum(dr.floor(x), intervals - 1.0)
+
+    def knot(d):  # t[j + 3 + d] in units of the spacing
+        return dr.clip(j + d, 0.0, float(intervals))
+
+    n = [dr.select(valid, 1.0, 0.0)]
+    for r in range(1, 4):
+        left = [None] + [x - knot(1 - s) for s in range(1, r + 1)]
+        right = [None] + [knot(s) - x for s in range(1, r + 1)]
+        saved = 0.0
+        for k in range(r):
+            temp = n[k] / (right[k + 1] + left[r - k])
+            n[k] = saved + right[k + 1] * temp
+            saved = left[r - k] * temp
+        n.append(saved)
+    # n[r] belongs to coefficient j + r: spread the 4 values over the count slots.
+    return [dr.select(j == k, n[0], 0.0) + dr.select(j == k - 1, n[1], 0.0)
+            + dr.select(j == k - 2, n[2], 0.0) + dr.select(j == k - 3, n[3], 0.0) for k in range(count)]
+
+
+def spectral_value(coefficients: list, wavelengths, min_nm: float, max_nm: float):
+    """``sum_k c_k B_k(lambda)`` at ``wavelengths`` (:func:`bspline_weights`): a spectral
+    network's value per wavelength, 0 outside ``[min_nm, max_nm]`` and at non-finite ones."""
+    weights = bspline_weights(wavelengths, len(coefficients), min_nm, max_nm)
+    value = weights[0] * coefficients[0]
+    for w, c in zip(weights[1:], coefficients[1:]):
+        value = dr.fma(w, c, value)
+    return value
+
+
+def srgb_projection(coefficients: list, matrix) -> mi.Color3f:
+    """``M c``: linear sRGB of a spectral network's value, ``matrix`` the library's 3 x count
+    projection (``nbrdf_material_spectral_srgb``; one formula, in Rust, folded into literals)."""
+    rows = []
+    for row in np.asarray(matrix, dtype=np.float64).reshape(3, len(coefficients)):
+        acc = coefficients[0] * float(row[0])
+        for m, c in zip(row[1:], coefficients[1:]):
+            acc = dr.fma(c, float(m), acc)
+        rows.append(acc)
+    return mi.Color3f(rows[0], rows[1], rows[2])

@@ -23,6 +23,7 @@ pub mod rgl;
 pub mod rng;
 pub mod sampling;
 pub mod source;
+pub mod spectral_basis;
 pub mod spectrum;
 
 #[cfg(feature = "train")]

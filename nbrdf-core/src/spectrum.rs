@@ -264,7 +264,7 @@ const XYZ_TO_SRGB: [[f64; 3]; 3] = [
 
 /// `x(l) D65(l)` for the three colour matching functions at wavelength `l` (nm), each table read
 /// with linear interpolation as `cie1931_xyz` and `cie_d65` do; zero outside the observer's range.
-fn weighted_cmf(l: f64) -> [f64; 3] {
+pub(crate) fn weighted_cmf(l: f64) -> [f64; 3] {
     if !(CIE_MIN..=CIE_MAX).contains(&l) {
         return [0.0; 3];
     }
@@ -278,6 +278,17 @@ fn weighted_cmf(l: f64) -> [f64; 3] {
     [0, 1, 2].map(|c| lerp(&CIE_1931[c]) * d65)
 }
 
+/// The 5 nm grid of the tables, where `weighted_cmf` changes formula.
+pub(crate) fn cie_grid() -> impl Iterator<Item = f64> {
+    (0..CIE_SAMPLES).map(|i| CIE_MIN + i as f64 * CIE_STEP)
+}
+
+/// Linear sRGB of the integral `int x(l) D65(l) s(l) dl` of some reflectance `s` (the sums of
+/// `weighted_cmf` times `s` a quadrature made): normalised so that a unit spectrum is white.
+pub(crate) fn srgb_of_weighted_integral(xyz: [f64; 3]) -> [f64; 3] {
+    XYZ_TO_SRGB.map(|row| Y_NORMALIZATION * (0..3).map(|j| row[j] * xyz[j]).sum::<f64>())
+}
+
 /// The linear map from the samples of a reflectance spectrum to its linear sRGB value under D65
 /// (see the module documentation): one RGB weight per sample wavelength.
 #[derive(Clone, Debug, PartialEq)]
@@ -289,29 +300,7 @@ impl SrgbProjection {
     /// The projection of spectra sampled at `wavelengths` (nm): at least two, finite, strictly
     /// increasing, and overlapping the observer's 360-830 nm (else nothing would be seen).
     pub fn new(wavelengths: &[f64]) -> Result<SrgbProjection> {
-        let invalid = |what: String| Err(NbrdfError::InvalidArgument(what));
-        if wavelengths.len() < 2 {
-            return invalid(format!(
-                "{} wavelength(s); a spectrum needs at least 2",
-                wavelengths.len()
-            ));
-        }
-        if let Some(l) = wavelengths.iter().find(|l| !l.is_finite()) {
-            return invalid(format!("wavelength {l} is not finite"));
-        }
-        if let Some(w) = wavelengths.windows(2).find(|w| w[0] >= w[1]) {
-            return invalid(format!(
-                "wavelengths are not strictly increasing ({} then {})",
-                w[0], w[1]
-            ));
-        }
-        let (first, last) = (wavelengths[0], wavelengths[wavelengths.len() - 1]);
-        if last <= CIE_MIN || first >= CIE_MAX {
-            return invalid(format!(
-                "wavelengths {first}-{last} nm do not overlap the visible range \
-                 {CIE_MIN}-{CIE_MAX} nm (not in nanometres?)"
-            ));
-        }
+        check_wavelengths(wavelengths, CIE_MIN, CIE_MAX)?;
         Ok(SrgbProjection {
             weights: projection_weights(wavelengths),
         })
@@ -335,13 +324,41 @@ impl SrgbProjection {
     }
 }
 
+/// Checks sample wavelengths (nm): at least two, finite, strictly increasing, and overlapping
+/// `[lo, hi]` (else nothing of the spectrum would be seen).
+pub(crate) fn check_wavelengths(wavelengths: &[f64], lo: f64, hi: f64) -> Result<()> {
+    let invalid = |what: String| Err(NbrdfError::InvalidArgument(what));
+    if wavelengths.len() < 2 {
+        return invalid(format!(
+            "{} wavelength(s); a spectrum needs at least 2",
+            wavelengths.len()
+        ));
+    }
+    if let Some(l) = wavelengths.iter().find(|l| !l.is_finite()) {
+        return invalid(format!("wavelength {l} is not finite"));
+    }
+    if let Some(w) = wavelengths.windows(2).find(|w| w[0] >= w[1]) {
+        return invalid(format!(
+            "wavelengths are not strictly increasing ({} then {})",
+            w[0], w[1]
+        ));
+    }
+    let (first, last) = (wavelengths[0], wavelengths[wavelengths.len() - 1]);
+    if last <= lo || first >= hi {
+        return invalid(format!(
+            "wavelengths {first}-{last} nm do not overlap the visible range \
+             {lo}-{hi} nm (not in nanometres?)"
+        ));
+    }
+    Ok(())
+}
+
 /// The interval ends where the integrand changes formula: the 5 nm grid and the sample
 /// wavelengths, within both ranges.
 fn breakpoints(wavelengths: &[f64]) -> Vec<f64> {
     let lo = wavelengths[0].max(CIE_MIN);
     let hi = wavelengths[wavelengths.len() - 1].min(CIE_MAX);
-    let grid = (0..CIE_SAMPLES).map(|i| CIE_MIN + i as f64 * CIE_STEP);
-    let mut points: Vec<f64> = grid
+    let mut points: Vec<f64> = cie_grid()
         .chain(wavelengths.iter().copied())
         .filter(|l| (lo..=hi).contains(l))
         .chain([lo, hi])
@@ -374,11 +391,7 @@ fn projection_weights(wavelengths: &[f64]) -> Vec<[f64; 3]> {
             }
         }
     }
-    xyz.iter()
-        .map(|v| {
-            XYZ_TO_SRGB.map(|row| Y_NORMALIZATION * (0..3).map(|j| row[j] * v[j]).sum::<f64>())
-        })
-        .collect()
+    xyz.into_iter().map(srgb_of_weighted_integral).collect()
 }
 
 #[cfg(test)]

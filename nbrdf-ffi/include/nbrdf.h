@@ -101,7 +101,8 @@ typedef struct NbrdfMaterialInfo {
   // Number of a network's weights and biases (675 for width 21); 0 for a table.
   uint32_t parameter_count;
   // Inputs and outputs of a network's three dense layers (`y = x W + b`, `W` row-major
-  // inputs x outputs): `6 -> hidden -> hidden -> 3`; zeros for a table.
+  // inputs x outputs): `6 -> hidden -> hidden -> 3`, or `-> spectral_count` for a spectral
+  // network; zeros for a table.
   uint32_t layer_inputs[3];
   uint32_t layer_outputs[3];
   // The network's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
@@ -116,6 +117,12 @@ typedef struct NbrdfMaterialInfo {
   // `nbrdf fit-phong` for the lowest measured variance), an `NbrdfSamplingKind` value
   // (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table).
   int32_t default_sampling;
+  // The number of spectral coefficients a spectral network (file format version 3) outputs,
+  // `f_r(lambda) = sum_k c_k B_k(lambda)` with the clamped uniform cubic B-spline basis over
+  // `spectral_range_nm` (`nbrdf_material_eval_spectral`); 0 for RGB networks and tables.
+  uint32_t spectral_count;
+  // The wavelength range of the spectral basis in nm; (0, 0) when not spectral.
+  float spectral_range_nm[2];
 } NbrdfMaterialInfo;
 
 // Shape of a sampler (`nbrdf_sampler_info`). For `NBRDF_SAMPLING_TABULATED`, the per-band
@@ -169,7 +176,8 @@ int32_t nbrdf_material_info(const struct NbrdfMaterial *material,
 // direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 // `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A
 // network is evaluated without its hidden units that cannot fire (the same values); a table
-// by trilinear lookup.
+// by trilinear lookup. A spectral network gives the linear sRGB projection of its spectrum
+// under D65 (`nbrdf_material_spectral_srgb`).
 //
 // # Safety
 // `material` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
@@ -236,6 +244,35 @@ int32_t nbrdf_material_active_units(const struct NbrdfMaterial *material,
                                     size_t count,
                                     uint8_t *out_active,
                                     size_t active_len);
+
+// Evaluates a spectral network's `f_r(view, light, lambda) * cos(theta_light)` for `n`
+// direction pairs (`view`, `light` planar `3 n` floats) and `m` wavelengths (nm) per pair:
+// wavelength `j` of pair `i` at `wavelengths[j n + i]`, its value written to `out[j n + i]`.
+// Zero when either direction is at or below the horizon and at wavelengths outside
+// `NbrdfMaterialInfo::spectral_range_nm` or not finite. `NBRDF_ERROR_INVALID_ARGUMENT` for an
+// RGB network or a table.
+//
+// # Safety
+// `material` is a live handle; `view` and `light` hold `3 n` floats, `wavelengths` and `out`
+// `m n` floats, and `out` overlaps no input.
+int32_t nbrdf_material_eval_spectral(const struct NbrdfMaterial *material,
+                                     const float *view,
+                                     const float *light,
+                                     const float *wavelengths,
+                                     size_t n,
+                                     size_t m,
+                                     float *out);
+
+// Writes a spectral network's 3 x count matrix `M` (row-major, `len` = `3 spectral_count`
+// floats): the linear sRGB value under D65 of each basis function, so that the RGB value of
+// coefficients `c` is `M c` (what `nbrdf_material_eval` computes). `NBRDF_ERROR_INVALID_ARGUMENT`
+// for an RGB network, a table or a wrong `len`.
+//
+// # Safety
+// `material` is a live handle; `out` points to `len` writable floats.
+int32_t nbrdf_material_spectral_srgb(const struct NbrdfMaterial *material,
+                                     float *out,
+                                     size_t len);
 
 // Creates a sampler from `params` and stores a new handle in `*out` (NULL on failure): checks
 // the kind and its parameters (`NBRDF_ERROR_INVALID_ARGUMENT` with a message), and for

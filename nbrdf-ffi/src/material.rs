@@ -81,7 +81,8 @@ pub struct NbrdfMaterialInfo {
     /// Number of a network's weights and biases (675 for width 21); 0 for a table.
     pub parameter_count: u32,
     /// Inputs and outputs of a network's three dense layers (`y = x W + b`, `W` row-major
-    /// inputs x outputs): `6 -> hidden -> hidden -> 3`; zeros for a table.
+    /// inputs x outputs): `6 -> hidden -> hidden -> 3`, or `-> spectral_count` for a spectral
+    /// network; zeros for a table.
     pub layer_inputs: [u32; 3],
     pub layer_outputs: [u32; 3],
     /// The network's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
@@ -96,6 +97,12 @@ pub struct NbrdfMaterialInfo {
     /// `nbrdf fit-phong` for the lowest measured variance), an `NbrdfSamplingKind` value
     /// (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table).
     pub default_sampling: i32,
+    /// The number of spectral coefficients a spectral network (file format version 3) outputs,
+    /// `f_r(lambda) = sum_k c_k B_k(lambda)` with the clamped uniform cubic B-spline basis over
+    /// `spectral_range_nm` (`nbrdf_material_eval_spectral`); 0 for RGB networks and tables.
+    pub spectral_count: u32,
+    /// The wavelength range of the spectral basis in nm; (0, 0) when not spectral.
+    pub spectral_range_nm: [f32; 2],
 }
 
 /// `default_sampling` of a material whose file names no default.
@@ -176,6 +183,8 @@ impl NbrdfMaterial {
             name: self.name.as_ptr(),
             stored_sampling: NbrdfSamplerParams::cosine(),
             default_sampling: NO_DEFAULT_SAMPLING,
+            spectral_count: 0,
+            spectral_range_nm: [0.0; 2],
         };
         if let Source::Network(loaded) = &self.source {
             let network = &loaded.network;
@@ -186,6 +195,11 @@ impl NbrdfMaterial {
             info.layer_inputs = network.layers.each_ref().map(|l| to_u32(l.inputs));
             info.layer_outputs = network.layers.each_ref().map(|l| to_u32(l.outputs));
             info.stored_sampling = stored_sampling(network);
+            if let Some(spectral) = &network.spectral {
+                let basis = spectral.basis();
+                info.spectral_count = to_u32(basis.count);
+                info.spectral_range_nm = [basis.min_nm as f32, basis.max_nm as f32];
+            }
             info.default_sampling = network
                 .sampling
                 .as_ref()
@@ -285,7 +299,8 @@ pub unsafe extern "C" fn nbrdf_material_info(
 /// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 /// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A
 /// network is evaluated without its hidden units that cannot fire (the same values); a table
-/// by trilinear lookup.
+/// by trilinear lookup. A spectral network gives the linear sRGB projection of its spectrum
+/// under D65 (`nbrdf_material_spectral_srgb`).
 ///
 /// # Safety
 /// `material` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
@@ -467,11 +482,110 @@ pub unsafe extern "C" fn nbrdf_material_active_units(
         // SAFETY: non-null and aligned (checked), `count` readable floats by contract; the
         // count is that of a loaded network, so it fits in isize.
         let params = unsafe { input(params, count) };
-        let mut network = Nbrdf::from_flat("parameters", hidden, params)?;
-        network.anisotropic = loaded.network.anisotropic;
+        let network = loaded.network.with_parameters(params)?;
         // SAFETY: non-null, `active_len` writable bytes by contract.
         let active = unsafe { std::slice::from_raw_parts_mut(out_active, active_len) };
         write_flags(&network.active_units(), active);
+        Ok(())
+    })
+}
+
+/// The spectral network of a material, or an error for an RGB network or a table.
+fn spectral_network(material: &NbrdfMaterial) -> FfiResult<&LoadedNetwork> {
+    let loaded = material.loaded_network()?;
+    if loaded.network.spectral.is_none() {
+        return Err(Failure::invalid(
+            "the material is an RGB network, not a spectral one (file format version 3)",
+        ));
+    }
+    Ok(loaded)
+}
+
+/// Evaluates a spectral network's `f_r(view, light, lambda) * cos(theta_light)` for `n`
+/// direction pairs (`view`, `light` planar `3 n` floats) and `m` wavelengths (nm) per pair:
+/// wavelength `j` of pair `i` at `wavelengths[j n + i]`, its value written to `out[j n + i]`.
+/// Zero when either direction is at or below the horizon and at wavelengths outside
+/// `NbrdfMaterialInfo::spectral_range_nm` or not finite. `NBRDF_ERROR_INVALID_ARGUMENT` for an
+/// RGB network or a table.
+///
+/// # Safety
+/// `material` is a live handle; `view` and `light` hold `3 n` floats, `wavelengths` and `out`
+/// `m n` floats, and `out` overlaps no input.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_eval_spectral(
+    material: *const NbrdfMaterial,
+    view: *const f32,
+    light: *const f32,
+    wavelengths: *const f32,
+    n: usize,
+    m: usize,
+    out: *mut f32,
+) -> i32 {
+    guard("nbrdf_material_eval_spectral", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        let loaded = spectral_network(material)?;
+        check_pointer(view, "view")?;
+        check_pointer(light, "light")?;
+        check_pointer(wavelengths, "wavelengths")?;
+        check_pointer(out, "out")?;
+        let len = array_len(n, 3)?;
+        let values = array_len(n, m)?;
+        if values == 0 {
+            return Ok(());
+        }
+        // SAFETY: checked above; sizes and aliasing are the caller's contract.
+        let (view, light, wavelengths, out) = unsafe {
+            (
+                input(view, len),
+                input(light, len),
+                input(wavelengths, values),
+                output(out, values),
+            )
+        };
+        loaded.proved().renderer.eval_spectral_cos_batch(
+            directions(view),
+            directions(light),
+            wavelengths,
+            out,
+        )?;
+        Ok(())
+    })
+}
+
+/// Writes a spectral network's 3 x count matrix `M` (row-major, `len` = `3 spectral_count`
+/// floats): the linear sRGB value under D65 of each basis function, so that the RGB value of
+/// coefficients `c` is `M c` (what `nbrdf_material_eval` computes). `NBRDF_ERROR_INVALID_ARGUMENT`
+/// for an RGB network, a table or a wrong `len`.
+///
+/// # Safety
+/// `material` is a live handle; `out` points to `len` writable floats.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_spectral_srgb(
+    material: *const NbrdfMaterial,
+    out: *mut f32,
+    len: usize,
+) -> i32 {
+    guard("nbrdf_material_spectral_srgb", || {
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        let loaded = spectral_network(material)?;
+        check_pointer(out, "out")?;
+        let Some(spectral) = &loaded.network.spectral else {
+            return Ok(()); // checked by `spectral_network`
+        };
+        let matrix = spectral.srgb_matrix();
+        exact_len(
+            "out",
+            len,
+            matrix.len(),
+            "3 NbrdfMaterialInfo::spectral_count",
+        )?;
+        // SAFETY: non-null and aligned (checked), `len` writable floats by contract.
+        let out = unsafe { output(out, len) };
+        for (o, &v) in out.iter_mut().zip(&matrix) {
+            *o = v as f32;
+        }
         Ok(())
     })
 }

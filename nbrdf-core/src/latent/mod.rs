@@ -16,15 +16,23 @@ use serde::Serialize;
 use std::path::Path;
 
 /// The latent models (autoencoders, predictors, the pretrained ones) are learnt from isotropic
-/// networks: an anisotropic network's first layer reads the half vector's azimuth, so its
-/// weights mean something else and its code (or a relearnt isotropic stand-in) would be silently
-/// wrong. Every latent operation refuses one with this error.
+/// RGB networks: an anisotropic network's first layer reads the half vector's azimuth, and a
+/// spectral network's last layer has another meaning (and count), so their weights mean
+/// something else and their code (or a relearnt stand-in) would be silently wrong. Every latent
+/// operation refuses one with this error.
 pub fn require_isotropic(net: &Nbrdf) -> Result<()> {
     anisotropy_problem(net).map_or(Ok(()), |m| Err(NbrdfError::InvalidArgument(m)))
 }
 
-/// [`require_isotropic`]'s message, when `net` is anisotropic.
+/// [`require_isotropic`]'s message, when `net` is anisotropic or spectral.
 pub fn anisotropy_problem(net: &Nbrdf) -> Option<String> {
+    if net.spectral.is_some() {
+        return Some(format!(
+            "network '{}' is a spectral network: the autoencoder and the predictors take RGB \
+             networks only; train one with --output rgb",
+            net.name
+        ));
+    }
     net.anisotropic.then(|| {
         format!(
             "network '{}' is anisotropic: the autoencoder and the predictors take isotropic networks \

@@ -1,16 +1,21 @@
 //! The versioned `*.nbrdf.json` file format of a network: reading with the checks that make a
 //! bad file an error naming the file and the problem, writing, and in-memory validation.
 
-use super::{empty_object, Layer, Nbrdf, SamplingParams, INPUTS, OUTPUTS};
+use super::{empty_object, Layer, Nbrdf, SamplingParams, Spectral, INPUTS, OUTPUTS};
 use crate::error::{NbrdfError, Result};
+use crate::spectral_basis::SpectralBasis;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub const FORMAT_NAME: &str = "nbrdf";
 /// The newest version this build reads and writes. Version 2 adds `anisotropic` (default false);
 /// an isotropic network is still written as version 1, which every reader understands and which
-/// loads and evaluates as before (docs/design.md section 4).
-pub const FORMAT_VERSION: u32 = 2;
+/// loads and evaluates as before (docs/design.md section 4). Version 3 adds `spectral`: the
+/// outputs are the coefficients of a spectral basis (docs/formats.md), written only for
+/// spectral networks.
+pub const FORMAT_VERSION: u32 = 3;
+/// The version of anisotropic RGB networks.
+pub const FORMAT_VERSION_ANISOTROPIC: u32 = 2;
 /// The version of files without version-2 features.
 pub const FORMAT_VERSION_ISOTROPIC: u32 = 1;
 
@@ -48,6 +53,8 @@ struct FileIn {
     #[serde(default)]
     anisotropic: bool,
     #[serde(default)]
+    spectral: Option<SpectralBasis>,
+    #[serde(default)]
     sampling: Option<SamplingParams>,
     #[serde(default)]
     provenance: serde_json::Value,
@@ -62,6 +69,9 @@ struct FileOut<'a> {
     /// Written (as true) only by version 2.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     anisotropic: bool,
+    /// Written only by version 3.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    spectral: Option<&'a SpectralBasis>,
     #[serde(skip_serializing_if = "Option::is_none")]
     sampling: &'a Option<SamplingParams>,
     provenance: &'a serde_json::Value,
@@ -94,8 +104,9 @@ fn check_header(root: &serde_json::Value) -> std::result::Result<u32, String> {
     }
 }
 
-/// The first structural problem of a layer stack (counts, dimensions, lengths), if any.
-pub(super) fn shape_problem(layers: &[Layer]) -> Option<String> {
+/// The first structural problem of a layer stack (counts, dimensions, lengths) whose last layer
+/// must have `outputs` outputs (3, RGB, or a spectral network's count), if any.
+pub(super) fn shape_problem(layers: &[Layer], outputs: usize) -> Option<String> {
     if layers.len() != 3 {
         return Some(format!("expected 3 layers, found {}", layers.len()));
     }
@@ -105,9 +116,14 @@ pub(super) fn shape_problem(layers: &[Layer]) -> Option<String> {
             layers[0].inputs
         ));
     }
-    if layers[2].outputs != OUTPUTS {
+    if layers[2].outputs != outputs {
+        let what = if outputs == OUTPUTS {
+            "RGB"
+        } else {
+            "the spectral count"
+        };
         return Some(format!(
-            "layer 3 has {} outputs, expected {OUTPUTS} (RGB)",
+            "layer 3 has {} outputs, expected {outputs} ({what})",
             layers[2].outputs
         ));
     }
@@ -212,7 +228,9 @@ impl Nbrdf {
                     .to_string(),
             ));
         }
-        if let Some(message) = shape_problem(&file.layers) {
+        let spectral = spectral_of(version, file.spectral).map_err(fail)?;
+        let outputs = spectral.as_ref().map_or(OUTPUTS, Spectral::count);
+        if let Some(message) = shape_problem(&file.layers, outputs) {
             return Err(fail(message));
         }
         if let Some(message) = file.sampling.as_ref().and_then(SamplingParams::problem) {
@@ -229,6 +247,7 @@ impl Nbrdf {
             name: file.name,
             layers,
             anisotropic: file.anisotropic,
+            spectral,
             sampling: file.sampling,
             provenance: if file.provenance.is_null() {
                 empty_object()
@@ -245,14 +264,17 @@ impl Nbrdf {
     pub fn to_json_string(&self) -> String {
         let out = FileOut {
             format: FORMAT_NAME,
-            version: if self.anisotropic {
+            version: if self.spectral.is_some() {
                 FORMAT_VERSION
+            } else if self.anisotropic {
+                FORMAT_VERSION_ANISOTROPIC
             } else {
                 FORMAT_VERSION_ISOTROPIC
             },
             name: &self.name,
             layers: &self.layers,
             anisotropic: self.anisotropic,
+            spectral: self.spectral.as_ref().map(Spectral::basis),
             sampling: &self.sampling,
             provenance: &self.provenance,
         };
@@ -268,7 +290,7 @@ impl Nbrdf {
     /// Checks an in-memory network (shapes, finite values, sampling parameters), e.g. after
     /// training or decoding; files are checked by [`Nbrdf::load`] already.
     pub fn validate(&self) -> Result<()> {
-        let problem = shape_problem(&self.layers)
+        let problem = shape_problem(&self.layers, self.output_count())
             .or_else(|| value_problem(&self.layers))
             .or_else(|| self.sampling.as_ref().and_then(SamplingParams::problem))
             .or_else(|| anisotropy_problem(self.anisotropic, self.sampling.as_ref()));
@@ -279,6 +301,26 @@ impl Nbrdf {
             ))),
             None => Ok(()),
         }
+    }
+}
+
+/// The spectral output of a file: version 3 and only version 3 has one, and it must be usable.
+fn spectral_of(
+    version: u32,
+    basis: Option<SpectralBasis>,
+) -> std::result::Result<Option<Spectral>, String> {
+    match (version, basis) {
+        (3, None) => {
+            Err("missing field \"spectral\" (version 3 is the format of spectral networks)".into())
+        }
+        (3, Some(basis)) => Spectral::new(basis).map(Some).map_err(|e| match e {
+            NbrdfError::InvalidArgument(message) => message,
+            other => other.to_string(),
+        }),
+        (_, Some(_)) => {
+            Err("\"spectral\" needs format version 3 (older versions are RGB networks)".into())
+        }
+        (_, None) => Ok(None),
     }
 }
 

@@ -12,6 +12,7 @@ use crate::coords::network_input_components_for;
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
 use crate::fastmath::Fused;
 use crate::fastmath::{expm1_with, relu, MulAdd, Unfused};
+use crate::spectral_basis::MAX_COUNT;
 use rayon::prelude::*;
 
 /// Lanes per structure-of-arrays chunk: 8 AVX registers per accumulator row, enough to hide the
@@ -30,30 +31,48 @@ impl Nbrdf {
     /// as the batched kernel (float32, fused multiply-adds where the CPU has them, the same exp
     /// approximation; the output is `max(expm1(min(z, 80)), 0)`, always finite). A network whose layer shapes
     /// were broken through the public fields evaluates to 0 rather than panicking.
+    /// A spectral network gives the sRGB projection of its spectrum ([`super::Spectral::project`]).
     pub fn eval_input(&self, x: [f32; 6]) -> [f32; 3] {
-        if shape_problem(&self.layers).is_some() {
-            return [0.0; 3];
+        let Some(spectral) = &self.spectral else {
+            let mut rgb = [0.0; 3];
+            self.eval_outputs(x, &mut rgb);
+            return rgb;
+        };
+        let mut coefficients = [0.0f32; MAX_COUNT];
+        let coefficients = &mut coefficients[..spectral.count()];
+        self.eval_outputs(x, coefficients);
+        spectral.project(coefficients)
+    }
+
+    /// The raw outputs on one input vector (RGB, or a spectral network's coefficients), with the
+    /// arithmetic of [`Nbrdf::eval_input`]; all 0 when `out` is not as long as the outputs.
+    pub fn eval_outputs(&self, x: [f32; 6], out: &mut [f32]) {
+        if shape_problem(&self.layers, self.output_count()).is_some()
+            || out.len() != self.layers[2].outputs
+        {
+            out.fill(0.0);
+            return;
         }
         let widest = self.layers[0].outputs.max(self.layers[1].outputs);
         if widest <= MAX_STACK_HIDDEN {
             let mut h1 = [0.0f32; MAX_STACK_HIDDEN];
             let mut h2 = [0.0f32; MAX_STACK_HIDDEN];
-            self.eval_input_with(&x, &mut h1, &mut h2)
+            self.eval_input_with(&x, &mut h1, &mut h2, out)
         } else {
             let mut h1 = vec![0.0f32; widest];
             let mut h2 = vec![0.0f32; widest];
-            self.eval_input_with(&x, &mut h1, &mut h2)
+            self.eval_input_with(&x, &mut h1, &mut h2, out)
         }
     }
 
-    fn eval_input_with(&self, x: &[f32; 6], h1: &mut [f32], h2: &mut [f32]) -> [f32; 3] {
+    fn eval_input_with(&self, x: &[f32; 6], h1: &mut [f32], h2: &mut [f32], out: &mut [f32]) {
         #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
         if has_avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above), which is all that
             // `eval_input_avx2` requires; it has no other preconditions.
-            return unsafe { eval_input_avx2(&self.layers, x, h1, h2) };
+            return unsafe { eval_input_avx2(&self.layers, x, h1, h2, out) };
         }
-        eval_input_generic::<Unfused>(&self.layers, x, h1, h2)
+        eval_input_generic::<Unfused>(&self.layers, x, h1, h2, out)
     }
 
     /// `f_r * cos(theta_l)` for a batch, vectorised and threaded. Lanes with either direction at
@@ -65,6 +84,9 @@ impl Nbrdf {
         light: Directions<'_>,
         out: RgbMut<'_>,
     ) {
+        if let Some(spectral) = &self.spectral {
+            return self.eval_spectral_rgb(spectral, view, light, out);
+        }
         let n = common_len(&[view.min_len(), light.min_len(), out.min_len()]);
         let (r, g, b) = (&mut out.r[..n], &mut out.g[..n], &mut out.b[..n]);
         let Some(packed) = Packed::new(self) else {
@@ -75,7 +97,7 @@ impl Nbrdf {
         };
         let (view, light) = (view.slice(0, n), light.slice(0, n));
         if n <= TASK_LANES {
-            eval_task(&packed, view, light, [r, g, b]);
+            eval_task(&packed, view, light, &mut RgbSink::new([r, g, b]));
             return;
         }
         r.par_chunks_mut(TASK_LANES)
@@ -88,7 +110,42 @@ impl Nbrdf {
                     &packed,
                     view.slice(start, end),
                     light.slice(start, end),
-                    [r, g, b],
+                    &mut RgbSink::new([r, g, b]),
+                );
+            });
+    }
+
+    /// The raw outputs times `cos(theta_l)` for a batch, pair-major (`out[i * outputs + k]`,
+    /// `outputs` the last layer's width: a spectral network's coefficients), with the kernel of
+    /// [`Nbrdf::eval_cos_batch_impl`]; 0 where it gives 0. Evaluates the common prefix of the
+    /// directions and `out.len() / outputs` pairs.
+    pub fn eval_outputs_cos_batch(
+        &self,
+        view: Directions<'_>,
+        light: Directions<'_>,
+        out: &mut [f32],
+    ) {
+        let outputs = self.layers[2].outputs.max(1);
+        let n = common_len(&[view.min_len(), light.min_len(), out.len() / outputs]);
+        let out = &mut out[..n * outputs];
+        let Some(packed) = Packed::new(self) else {
+            out.fill(0.0);
+            return;
+        };
+        out.par_chunks_mut(TASK_LANES * outputs)
+            .enumerate()
+            .for_each(|(k, chunk)| {
+                let start = k * TASK_LANES;
+                let end = start + chunk.len() / outputs;
+                let mut sink = RowsSink {
+                    out: chunk,
+                    outputs,
+                };
+                eval_task(
+                    &packed,
+                    view.slice(start, end),
+                    light.slice(start, end),
+                    &mut sink,
                 );
             });
     }
@@ -102,7 +159,8 @@ pub(super) fn eval_input_generic<M: MulAdd>(
     x: &[f32; 6],
     h1: &mut [f32],
     h2: &mut [f32],
-) -> [f32; 3] {
+    out: &mut [f32],
+) {
     let [l1, l2, l3] = layers;
     let h1 = &mut h1[..l1.outputs];
     let h2 = &mut h2[..l2.outputs];
@@ -110,9 +168,8 @@ pub(super) fn eval_input_generic<M: MulAdd>(
     h1.iter_mut().for_each(|v| *v = relu(*v));
     l2.affine_into::<M>(h1, h2);
     h2.iter_mut().for_each(|v| *v = relu(*v));
-    let mut z = [0.0f32; 3];
-    l3.affine_into::<M>(h2, &mut z);
-    z.map(|z| relu(expm1_with::<M>(z)))
+    l3.affine_into::<M>(h2, out);
+    out.iter_mut().for_each(|z| *z = relu(expm1_with::<M>(*z)));
 }
 
 /// [`eval_input_generic`] compiled with AVX2 and FMA: the loops over outputs vectorise 8 wide.
@@ -123,8 +180,9 @@ unsafe fn eval_input_avx2(
     x: &[f32; 6],
     h1: &mut [f32],
     h2: &mut [f32],
-) -> [f32; 3] {
-    eval_input_generic::<Fused>(layers, x, h1, h2)
+    out: &mut [f32],
+) {
+    eval_input_generic::<Fused>(layers, x, h1, h2, out)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -165,7 +223,7 @@ fn used_inputs(anisotropic: bool) -> &'static [usize] {
 
 impl Packed {
     pub(super) fn new(net: &Nbrdf) -> Option<Self> {
-        if shape_problem(&net.layers).is_some() {
+        if shape_problem(&net.layers, net.output_count()).is_some() {
             return None;
         }
         let [l1, l2, l3] = &net.layers;
@@ -199,7 +257,12 @@ fn has_avx2_fma() -> bool {
 }
 
 /// One rayon task: picks the kernel for this CPU.
-fn eval_task(packed: &Packed, view: Directions<'_>, light: Directions<'_>, out: [&mut [f32]; 3]) {
+fn eval_task<S: OutputSink>(
+    packed: &Packed,
+    view: Directions<'_>,
+    light: Directions<'_>,
+    out: &mut S,
+) {
     #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
     if has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above), which is all that
@@ -207,28 +270,28 @@ fn eval_task(packed: &Packed, view: Directions<'_>, light: Directions<'_>, out: 
         unsafe { eval_task_avx2(packed, view, light, out) };
         return;
     }
-    eval_task_generic::<Unfused>(packed, view, light, out);
+    eval_task_generic::<Unfused, S>(packed, view, light, out);
 }
 
 /// The generic kernel compiled with AVX2 and FMA enabled (everything below is inlined into it).
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn eval_task_avx2(
+unsafe fn eval_task_avx2<S: OutputSink>(
     packed: &Packed,
     view: Directions<'_>,
     light: Directions<'_>,
-    out: [&mut [f32]; 3],
+    out: &mut S,
 ) {
-    eval_task_generic::<Fused>(packed, view, light, out);
+    eval_task_generic::<Fused, S>(packed, view, light, out);
 }
 
 /// Scratch for the hidden activations, on the stack for the usual widths.
 #[inline(always)]
-pub(super) fn eval_task_generic<M: MulAdd>(
+pub(super) fn eval_task_generic<M: MulAdd, S: OutputSink>(
     packed: &Packed,
     view: Directions<'_>,
     light: Directions<'_>,
-    out: [&mut [f32]; 3],
+    out: &mut S,
 ) {
     if packed.hidden1.max(packed.hidden2) <= MAX_STACK_HIDDEN {
         let mut h1 = [[0.0f32; LANES]; MAX_STACK_HIDDEN];
@@ -237,39 +300,37 @@ pub(super) fn eval_task_generic<M: MulAdd>(
         // The input layout is a compile-time constant of each kernel copy, so that the lane
         // loop of `build_inputs` has no branch on it.
         if packed.anisotropic {
-            eval_chunks::<M, true>(packed, view, light, out, h1, h2);
+            eval_chunks::<M, true, S>(packed, view, light, out, h1, h2);
         } else {
-            eval_chunks::<M, false>(packed, view, light, out, h1, h2);
+            eval_chunks::<M, false, S>(packed, view, light, out, h1, h2);
         }
     } else {
         let mut h1 = vec![[0.0f32; LANES]; packed.hidden1];
         let mut h2 = vec![[0.0f32; LANES]; packed.hidden2];
         if packed.anisotropic {
-            eval_chunks::<M, true>(packed, view, light, out, &mut h1, &mut h2);
+            eval_chunks::<M, true, S>(packed, view, light, out, &mut h1, &mut h2);
         } else {
-            eval_chunks::<M, false>(packed, view, light, out, &mut h1, &mut h2);
+            eval_chunks::<M, false, S>(packed, view, light, out, &mut h1, &mut h2);
         }
     }
 }
 
 #[inline(always)]
-fn eval_chunks<M: MulAdd, const ANISO: bool>(
+fn eval_chunks<M: MulAdd, const ANISO: bool, S: OutputSink>(
     packed: &Packed,
     view: Directions<'_>,
     light: Directions<'_>,
-    out: [&mut [f32]; 3],
+    out: &mut S,
     h1: &mut [Row],
     h2: &mut [Row],
 ) {
     let n = view.len();
     let sources = [light.x, light.y, light.z, view.x, view.y, view.z];
-    let [r, g, b] = out;
     // Per-task buffers, reused by every chunk.
     let mut padded = [[0.0f32; LANES]; 6];
     let mut x = [[0.0f32; LANES]; 6];
     let inputs = used_inputs(ANISO).len();
     let mut cos = [0.0f32; LANES];
-    let mut rgb = [[0.0f32; LANES]; 3];
     let mut start = 0;
     while start < n {
         let m = LANES.min(n - start);
@@ -289,16 +350,7 @@ fn eval_chunks<M: MulAdd, const ANISO: bool>(
         }
         dense_relu_chunk::<M>(&packed.w1, &packed.b1, &x[..inputs], h1);
         dense_relu_chunk::<M>(&packed.w2, &packed.b2, h1, h2);
-        let direct =
-            [&mut *r, &mut *g, &mut *b].map(|c| <&mut Row>::try_from(&mut c[start..end]).ok());
-        if let [Some(r), Some(g), Some(b)] = direct {
-            output_chunk::<M>(&packed.w3, &packed.b3, h2, &cos, [r, g, b]);
-        } else {
-            output_chunk::<M>(&packed.w3, &packed.b3, h2, &cos, rgb.each_mut());
-            for (dst, row) in [&mut *r, &mut *g, &mut *b].into_iter().zip(&rgb) {
-                dst[start..end].copy_from_slice(&row[..m]);
-            }
-        }
+        out.put::<M>(packed, h2, &cos, start, end);
         start = end;
     }
 }
@@ -394,6 +446,68 @@ fn affine_chunk<M: MulAdd>(w_row: &[f32], bias: f32, x: &[Row]) -> Row {
         }
     }
     acc
+}
+
+/// Where a chunk's last layer goes: the RGB kernel's three planar rows, or the pair-major rows
+/// of any number of outputs (a spectral network's coefficients). A type parameter of the
+/// kernel, so that the RGB copy compiles to the same code as before it existed.
+pub(super) trait OutputSink {
+    /// Last layer, output activation and cosine factor for the pairs `start..end` of the task.
+    fn put<M: MulAdd>(&mut self, packed: &Packed, h2: &[Row], cos: &Row, start: usize, end: usize);
+}
+
+/// Planar RGB rows, written in place for full chunks.
+pub(super) struct RgbSink<'a> {
+    out: [&'a mut [f32]; 3],
+    scratch: [Row; 3],
+}
+
+impl<'a> RgbSink<'a> {
+    pub(super) fn new(out: [&'a mut [f32]; 3]) -> Self {
+        RgbSink {
+            out,
+            scratch: [[0.0; LANES]; 3],
+        }
+    }
+}
+
+impl OutputSink for RgbSink<'_> {
+    #[inline(always)]
+    fn put<M: MulAdd>(&mut self, packed: &Packed, h2: &[Row], cos: &Row, start: usize, end: usize) {
+        let [r, g, b] = &mut self.out;
+        let direct =
+            [&mut **r, &mut **g, &mut **b].map(|c| <&mut Row>::try_from(&mut c[start..end]).ok());
+        if let [Some(r), Some(g), Some(b)] = direct {
+            output_chunk::<M>(&packed.w3, &packed.b3, h2, cos, [r, g, b]);
+        } else {
+            output_chunk::<M>(&packed.w3, &packed.b3, h2, cos, self.scratch.each_mut());
+            for (dst, row) in [&mut **r, &mut **g, &mut **b]
+                .into_iter()
+                .zip(&self.scratch)
+            {
+                dst[start..end].copy_from_slice(&row[..end - start]);
+            }
+        }
+    }
+}
+
+/// Pair-major rows of `outputs` values (`out[i * outputs + k]`).
+struct RowsSink<'a> {
+    out: &'a mut [f32],
+    outputs: usize,
+}
+
+impl OutputSink for RowsSink<'_> {
+    #[inline(always)]
+    fn put<M: MulAdd>(&mut self, packed: &Packed, h2: &[Row], cos: &Row, start: usize, end: usize) {
+        let rows = packed.w3.chunks_exact(h2.len()).zip(&packed.b3);
+        for (k, (w_row, &bias)) in rows.enumerate() {
+            let acc = affine_chunk::<M>(w_row, bias, h2);
+            for (j, i) in (start..end).enumerate() {
+                self.out[i * self.outputs + k] = relu(expm1_with::<M>(acc[j])) * cos[j];
+            }
+        }
+    }
 }
 
 /// Last layer, output activation and cosine factor.

@@ -8,17 +8,23 @@
 //! * `format.rs`: the versioned `*.nbrdf.json` file format, reading, writing and validation;
 //! * `kernel.rs`: the batched, vectorised and threaded evaluation, the renderer's hot loop;
 //! * `pruning.rs`: the hidden units no pair of directions above the horizon can activate, and
-//!   the narrower network without them that renderers evaluate.
+//!   the narrower network without them that renderers evaluate;
+//! * `spectral.rs`: spectral networks (format version 3), whose outputs are the coefficients of
+//!   a [`crate::spectral_basis::SpectralBasis`]: evaluation per wavelength and their RGB value.
 
 mod format;
 mod kernel;
 mod pruning;
+mod spectral;
 #[cfg(test)]
 mod tests;
 
-pub use format::{FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_ISOTROPIC};
+pub use format::{
+    FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_ANISOTROPIC, FORMAT_VERSION_ISOTROPIC,
+};
 pub use kernel::LANES;
 pub use pruning::{active_units, ActiveUnits};
+pub use spectral::Spectral;
 
 use crate::brdf::{Brdf, Directions, RgbMut};
 use crate::coords::network_input_for;
@@ -31,6 +37,8 @@ use glam::{DVec3, Vec3};
 use serde::{Deserialize, Deserializer, Serialize};
 
 pub const INPUTS: usize = 6;
+/// Outputs of an RGB network; a spectral network has its basis' count
+/// ([`Nbrdf::output_count`]).
 pub const OUTPUTS: usize = 3;
 pub const DEFAULT_HIDDEN: usize = 21;
 
@@ -251,6 +259,9 @@ pub struct Nbrdf {
     /// ([`crate::coords::network_input_for`]): an anisotropic network, file format version 2.
     /// Isotropic networks (the paper's, every version-1 file) see `phi_h = 0`.
     pub anisotropic: bool,
+    /// The spectral basis whose coefficients the network outputs (file format version 3), or
+    /// `None` for an RGB network.
+    pub spectral: Option<Spectral>,
     pub sampling: Option<SamplingParams>,
     pub provenance: serde_json::Value,
 }
@@ -329,6 +340,7 @@ impl Nbrdf {
             name: name.to_string(),
             layers,
             anisotropic: false,
+            spectral: None,
             sampling: None,
             provenance: empty_object(),
         };
@@ -353,12 +365,36 @@ impl Nbrdf {
             name: name.to_string(),
             layers: paper_init(hidden.max(1), seed),
             anisotropic: false,
+            spectral: None,
             sampling: None,
             provenance: serde_json::json!({
                 "initialisation": INITIALISATION,
                 "seed": seed,
             }),
         }
+    }
+
+    /// The same network (shape, anisotropy, spectral basis, sampling) with the parameters
+    /// `params`, `W1, b1, W2, b2, W3, b3` as [`Nbrdf::to_flat`] gives them.
+    pub fn with_parameters(&self, params: &[f32]) -> Result<Self> {
+        if params.len() != self.parameter_count() {
+            return Err(NbrdfError::InvalidArgument(format!(
+                "expected {} parameters, got {}",
+                self.parameter_count(),
+                params.len()
+            )));
+        }
+        let mut net = self.clone();
+        let mut rest = params;
+        for layer in &mut net.layers {
+            let (weights, tail) = rest.split_at(layer.weights.len());
+            let (bias, tail) = tail.split_at(layer.bias.len());
+            layer.weights.copy_from_slice(weights);
+            layer.bias.copy_from_slice(bias);
+            rest = tail;
+        }
+        net.validate()?;
+        Ok(net)
     }
 
     /// Width of the two hidden layers.

@@ -251,7 +251,8 @@ fn fire_at(
     };
     let x = network_input_from_angles_for(true, &angles);
     let [h1, h2] = hidden;
-    super::kernel::eval_input_generic::<Unfused>(layers, &x, h1, h2);
+    // Only the hidden activations matter here: no output is computed.
+    super::kernel::eval_input_generic::<Unfused>(layers, &x, h1, h2, &mut []);
 }
 
 /// The hidden units of a `6 -> h1 -> h2 -> 3` network that some pair of directions above the
@@ -264,7 +265,8 @@ pub fn active_units(layers: &[Layer; 3], anisotropic: bool) -> ActiveUnits {
         hidden1: vec![true; widths[0]],
         hidden2: vec![true; widths[1]],
     };
-    if super::format::shape_problem(layers).is_some()
+    // The proof is about hidden units: it holds for any number of outputs (RGB or spectral).
+    if super::format::shape_problem(layers, layers[2].outputs).is_some()
         || super::format::value_problem(layers).is_some()
         || float32_may_overflow(layers, anisotropic)
     {

@@ -1,7 +1,9 @@
 //! The network's tests: the scalar and batched paths against an independent float64 reference,
 //! the file format's round trip and error messages.
 
-use super::kernel::{eval_input_generic, eval_task_generic, Packed, MAX_STACK_HIDDEN, TASK_LANES};
+use super::kernel::{
+    eval_input_generic, eval_task_generic, Packed, RgbSink, MAX_STACK_HIDDEN, TASK_LANES,
+};
 use super::*;
 use crate::coords::network_input;
 use crate::fastmath::Unfused;
@@ -313,11 +315,11 @@ fn portable_kernels_match_reference() {
             let (g, b) = rest.split_at_mut(n);
             [r, g, b]
         };
-        eval_task_generic::<Unfused>(
+        eval_task_generic::<Unfused, _>(
             &packed,
             Directions::from_planar(view).unwrap(),
             Directions::from_planar(light).unwrap(),
-            [&mut *r, &mut *g, &mut *b],
+            &mut RgbSink::new([&mut *r, &mut *g, &mut *b]),
         );
         let widest = hidden.max(1);
         let (mut h1, mut h2) = (vec![0.0; widest], vec![0.0; widest]);
@@ -340,7 +342,8 @@ fn portable_kernels_match_reference() {
             }
             let x = network_input_for(anisotropic, *v, *l);
             if x.iter().all(|c| c.is_finite()) {
-                let single = eval_input_generic::<Unfused>(&net.layers, &x, &mut h1, &mut h2);
+                let mut single = [0.0f32; 3];
+                eval_input_generic::<Unfused>(&net.layers, &x, &mut h1, &mut h2, &mut single);
                 let want = reference_f64(&net, x);
                 for (c, got) in single.into_iter().enumerate() {
                     tally.check(got, &want, c, &context);
@@ -594,7 +597,7 @@ fn malformed_files_are_rejected_with_the_file_name() {
         ("missing field \"format\"", |v| {
             v.as_object_mut().unwrap().remove("format");
         }),
-        ("unsupported version 3", |v| v["version"] = 3.into()),
+        ("unsupported version 4", |v| v["version"] = 4.into()),
         ("needs format version 2", |v| v["anisotropic"] = true.into()),
         ("invalid type: string \"yes\", expected a boolean", |v| {
             v["version"] = 2.into();

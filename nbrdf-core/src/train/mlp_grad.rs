@@ -754,6 +754,7 @@ mod tests {
             name: "t".into(),
             layers: layers.clone(),
             anisotropic: false,
+            spectral: None,
             sampling: None,
             provenance: serde_json::Value::Null,
         };

@@ -339,6 +339,7 @@ pub fn train_on_sets(
         name: name.to_string(),
         layers: trainer.weights.layout.unpad(&best.2),
         anisotropic: config.anisotropic,
+        spectral: None,
         sampling: None,
         provenance: serde_json::Value::Null,
     };
