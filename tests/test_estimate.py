@@ -203,3 +203,24 @@ def test_common_initialisation_is_the_trainers_seed_0_start():
     weights = np.concatenate([flat[:126], flat[147:588], flat[609:672]])
     np.testing.assert_array_equal(weights, expected[: weights.size])
     assert not flat[126:147].any() and not flat[588:609].any() and not flat[672:].any()
+
+
+def test_snapshots_of_a_long_run_are_the_shorter_runs(setup, tmp_path):
+    """The convergence study's premise: for a one-phase model, the parameters ``on_step`` sees
+    after 2 steps of a 4-step run are those a 2-step run writes (same seeds, same steps)."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    seen = []
+
+    def argv(out, steps):
+        return E.parser().parse_args([str(scene), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
+                                      "--model", "roughplastic", "--steps", str(steps), "--spp", "2", "--threads",
+                                      "1", "-q"])
+
+    E.estimate(argv(tmp_path / "long.json", 4), lambda kind, done, theta: seen.append((kind, done, theta.copy())))
+    assert [(kind, done) for kind, done, _ in seen] == [("analytic", k) for k in (1, 2, 3, 4)]
+    E.estimate(argv(tmp_path / "short.json", 2))
+    short = json.loads((tmp_path / "short.json").read_text())
+    assert E.Analytic("roughplastic").result(seen[1][2]) == short
+    assert E.Analytic("roughplastic").result(seen[3][2]) == json.loads((tmp_path / "long.json").read_text())
