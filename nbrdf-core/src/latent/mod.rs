@@ -80,3 +80,14 @@ fn write_json<T: Serialize>(value: &T, path: &Path) -> Result<()> {
     std::fs::write(path, text)
         .map_err(|e| NbrdfError::InvalidArgument(format!("{}: {e}", path.display())))
 }
+
+#[cfg(test)]
+mod spectral_refusal_tests {
+    // Here, not in network/: the rendering layer must not refer to the training layer.
+    #[test]
+    fn latent_models_refuse_spectral_networks() {
+        let net = crate::network::spectral::tests::spectral_net(6, 1);
+        let message = super::require_isotropic(&net).unwrap_err().to_string();
+        assert!(message.contains("spectral"), "{message}");
+    }
+}

@@ -15,7 +15,7 @@
 mod format;
 mod kernel;
 mod pruning;
-mod spectral;
+pub(crate) mod spectral;
 #[cfg(test)]
 mod tests;
 

@@ -136,4 +136,4 @@ impl Nbrdf {
 
 #[cfg(test)]
 #[path = "spectral_tests.rs"]
-mod tests;
+pub(crate) mod tests;
