@@ -19,7 +19,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from conftest import use_variant
+from conftest import bsdf_calls, use_variant
 from nbrdf_testing import random_pairs
 from nbrdf_tools import network
 
@@ -140,27 +140,6 @@ def _queries(n: int, seed: int):
     rng = np.random.default_rng(seed + 1)
     return [a.astype(np.float32) for a in (view, light, rng.random((3, n)), rng.uniform(MIN_NM, MAX_NM, (4, n)))]
 
-
-def _calls(bsdf, view, light, u, wavelengths) -> dict:
-    """eval, eval_pdf, pdf and sample per column (float64, last axis the columns)."""
-    ctx = mi.BSDFContext()
-
-    def one(v, l, s, w):
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        si.wi = mi.Vector3f(*v)
-        if mi.is_spectral:
-            si.wavelengths = mi.UnpolarizedSpectrum(*w)
-        wo = mi.Vector3f(*l)
-        value, pdf = bsdf.eval_pdf(ctx, si, wo)
-        bs, weight = bsdf.sample(ctx, si, mi.Float(s[0]), mi.Point2f(s[1], s[2]))
-        return {"eval": bsdf.eval(ctx, si, wo), "pdf": bsdf.pdf(ctx, si, wo), "eval_pdf.value": value,
-                "eval_pdf.pdf": pdf, "sample.wo": bs.wo, "sample.pdf": bs.pdf, "sample.weight": weight}
-
-    if dr.is_jit_v(mi.Float):
-        out = one(*([mi.Float(r) for r in a] for a in (view, light, u, wavelengths)))
-        return {k: np.asarray(v.numpy(), np.float64) for k, v in out.items()}
-    rows = [one(*(list(map(float, a[:, i])) for a in (view, light, u, wavelengths))) for i in range(view.shape[1])]
-    return {k: np.stack([np.asarray(r[k], np.float64) for r in rows], axis=-1) for k in rows[0]}
 
 
 def _scene(path, backend):
@@ -285,7 +264,7 @@ def test_spectral_variants_evaluate_the_spectrum(variant, backend, spectral_file
     _skip_scalar_jit(variant, backend)
     layers = network.read_layers(spectral_file)
     view, light, u, wavelengths = _queries(32, 31)
-    got = _calls(mi.load_dict(_scene(spectral_file, backend)), view, light, u, wavelengths)
+    got = bsdf_calls(mi.load_dict(_scene(spectral_file, backend)), view, light, u, wavelengths)
     polarized = "polarized" in variant
     expected = spectral_oracle(layers, view.astype(np.float64), light.astype(np.float64), wavelengths)
     for key in ("eval", "eval_pdf.value"):
@@ -297,7 +276,7 @@ def test_spectral_variants_evaluate_the_spectrum(variant, backend, spectral_file
     assert np.count_nonzero(pdf) > 16
     _close(_unpolarized(got["sample.weight"], polarized), sampled, 1e-4, "sample.weight")
     mi.set_variant("scalar_rgb" if variant.startswith("scalar") else "llvm_ad_rgb")
-    rgb = _calls(mi.load_dict(_scene(spectral_file, backend)), view, light, u, wavelengths)
+    rgb = bsdf_calls(mi.load_dict(_scene(spectral_file, backend)), view, light, u, wavelengths)
     for key in ("pdf", "eval_pdf.pdf", "sample.wo", "sample.pdf"):
         np.testing.assert_array_equal(got[key], rgb[key], err_msg=key)
 
@@ -311,7 +290,7 @@ def test_rgb_and_mono_variants_render_the_projection(variant, backend, spectral_
     _skip_scalar_jit(variant, backend)
     layers = network.read_layers(spectral_file)
     view, light, u, wavelengths = _queries(32, 41)
-    got = _calls(mi.load_dict(_scene(spectral_file, backend)), view, light, u, wavelengths)
+    got = bsdf_calls(mi.load_dict(_scene(spectral_file, backend)), view, light, u, wavelengths)
     rgb = srgb_matrix_oracle() @ coefficient_oracle(layers, view.astype(np.float64), light.astype(np.float64))
     expected = LUMINANCE @ rgb if "mono" in variant else rgb
     for key in ("eval", "eval_pdf.value"):
@@ -332,7 +311,7 @@ def test_bad_wavelengths_give_zero(variant, backend, spectral_file, restore_vari
     bad = good.copy()
     bad[2] = BAD
     bsdf = mi.load_dict(_scene(spectral_file, backend))
-    got, reference = _calls(bsdf, view, light, u, bad), _calls(bsdf, view, light, u, good)
+    got, reference = bsdf_calls(bsdf, view, light, u, bad), bsdf_calls(bsdf, view, light, u, good)
     for key in ("eval", "eval_pdf.value", "sample.weight"):
         assert np.all(np.isfinite(got[key])), key
         assert np.all(got[key][2] == 0.0), key
@@ -380,7 +359,7 @@ def test_distill_in_a_spectral_variant_writes_a_version_3_network(tmp_path, caps
     mi.set_variant("llvm_ad_rgb")
     view, light = random_pairs(64, 3)
     light[:, :32] = view[:, :32] * np.array([[-1.0], [-1.0], [1.0]])
-    rgb = _calls(mi.load_dict({"type": "nbrdf", "filename": str(out)}), *(a.astype(np.float32) for a in (
+    rgb = bsdf_calls(mi.load_dict({"type": "nbrdf", "filename": str(out)}), *(a.astype(np.float32) for a in (
         view, light, np.full((3, 64), 0.5), np.full((4, 64), 500.0))))["eval"]
     assert np.all(np.isfinite(rgb)) and rgb[0].sum() > rgb[2].sum() > 0
 
