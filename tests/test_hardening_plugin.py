@@ -482,7 +482,7 @@ def test_tables_are_checked_in_float32(tmp_path):
     stored = np.full((3, 90 * 90 * 180), 1.0)
     stored[1, 1234] = 1e300
     message = _load_error("merl", write_merl(tmp_path / "huge.binary", stored))
-    assert "overflows float32" in message and "1e+300" in message
+    assert "beyond the float32 range" in message and "1e300" in message
     message = _load_error("merl", write_merl(tmp_path / "empty.binary", np.full((3, 90 * 90 * 180), -1.0)))
     assert "no valid cell" in message
 

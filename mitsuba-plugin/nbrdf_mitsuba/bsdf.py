@@ -278,8 +278,6 @@ class _NativeBSDFMixin:
         if self._native.kind != self.MATERIAL_KIND:
             problem = _format_problem(path, self.PLUGIN) or (
                 f"the library read it as a {self._native.kind} material, not a {self.MATERIAL_KIND} one")
-        elif self.PLUGIN == "merl":
-            problem = _merl_values_problem(path)
         if problem:
             raise RuntimeError(f'{self._type_name()}: cannot load "{path}": {problem} [NBRDF_ERROR_FORMAT]')
         self._path = path
@@ -943,35 +941,11 @@ def _format_problem(path: str, plugin: str) -> str | None:
         return ("this is a JSON file (an *.nbrdf.json network?); the merl BSDF reads MERL .binary "
                 'tables (use the nbrdf BSDF for networks: "type": "nbrdf")')
     if plugin == "merl" and is_merl:
-        return _merl_values_problem(path)
+        return None  # the library names the bad size or value (nbrdf-core merl/io.rs)
     if plugin == "merl":
         # The library reads a file without a table's header as a network, and would say why
         # it is not one.
         return "not a MERL table (a .binary table starts with the resolutions 90, 90, 180 as int32)"
-    return None
-
-
-def _merl_values_problem(path: str) -> str | None:
-    """Values the renderer cannot use although float64 can hold them: beyond float32 once
-    scaled (they would render inf/NaN), or no valid (non-negative) cell at all."""
-    try:
-        stored = np.fromfile(path, dtype="<f8", offset=12)
-    except (OSError, ValueError):
-        return None  # the library reports size and read errors
-    if stored.size != 3 * 90 * 90 * 180:
-        return None
-    stored = stored.reshape(3, -1)
-    finite = np.isfinite(stored)
-    if not finite.all():
-        return None  # the library names the value
-    scaled = stored * np.asarray(jit.MERL_SCALE)[:, None]
-    too_big = np.abs(scaled) > np.finfo(np.float32).max
-    if too_big.any():
-        channel, cell = np.argwhere(too_big)[0]
-        return (f"value {stored[channel, cell]:g} (channel {channel}, cell {cell}) overflows float32, "
-                f"the precision the table is rendered in ({int(too_big.sum())} such values)")
-    if not np.any(np.all(stored >= 0, axis=0)):
-        return "no valid cell: every cell has a negative (unmeasured) value"
     return None
 
 
