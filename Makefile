@@ -34,8 +34,12 @@ $(LIB): FORCE
 	$(CARGO) build --release -p nbrdf-train-ffi
 	$(CARGO) build --release -p nbrdf-core --features cli --bin nbrdf
 
-# The plugin package, bundling the libraries just built (no second cargo build).
-$(VENV)/.plugin-installed: $(VENV)/.deps-installed $(LIB) $(PLUGIN_SOURCES)
+# The trainer library and the CLI come out of $(LIB)'s recipe; naming them lets a change to
+# either alone (the CLI's sources, say) reinstall the plugin that bundles them.
+$(TRAIN_LIB) $(CLI): $(LIB) ;
+
+# The plugin package, bundling the libraries and the CLI just built (no second cargo build).
+$(VENV)/.plugin-installed: $(VENV)/.deps-installed $(LIB) $(TRAIN_LIB) $(CLI) $(PLUGIN_SOURCES)
 	NBRDF_LIBRARY=$(abspath $(LIB)) NBRDF_TRAIN_LIBRARY=$(abspath $(TRAIN_LIB)) $(PY) -m pip install -q --no-deps --no-build-isolation --force-reinstall ./mitsuba-plugin
 	touch $@
 
