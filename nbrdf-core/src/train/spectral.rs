@@ -356,5 +356,4 @@ pub fn train_spectral_arrays(
 }
 
 #[cfg(test)]
-#[path = "spectral_tests.rs"]
 mod tests;
