@@ -281,8 +281,14 @@ pub const INITIALISATION: &str =
 /// `U(-0.05, 0.05)` drawn in file order from the seed's [`Stream::Init`] stream, biases 0. The
 /// one initialisation of the crate: `nbrdf train` starts from it, so a seed names the weights.
 pub fn paper_init(hidden: usize, seed: u64) -> [Layer; 3] {
+    paper_init_with_outputs(hidden, OUTPUTS, seed)
+}
+
+/// [`paper_init`] of a `6 -> hidden -> hidden -> outputs` network (a spectral network's
+/// coefficient count); the same draws in the same order, so 3 outputs are [`paper_init`].
+pub fn paper_init_with_outputs(hidden: usize, outputs: usize, seed: u64) -> [Layer; 3] {
     let mut rng = SplitMix64::new(seed, Stream::Init, 0);
-    let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, OUTPUTS)];
+    let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, outputs)];
     dims.map(|(inputs, outputs)| Layer {
         inputs,
         outputs,

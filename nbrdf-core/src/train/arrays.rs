@@ -111,50 +111,82 @@ impl SampledArrays<'_> {
             samples: Vec::with_capacity(range.len()),
             ..DataSet::default()
         };
+        let mut f_cos = [0.0f64; 3];
         for i in range {
             set.candidates += 1;
-            let (view, light) = (self.view[i], self.light[i]);
-            let a = self.eval_cos[i];
-            let b = self.swapped_eval_cos.map(|s| s[i]);
-            if let Some(bad) = a.iter().chain(b.iter().flatten()).find(|c| !c.is_finite()) {
-                return Err(NbrdfError::InvalidArgument(format!(
-                    "the value at pair {i} (view {view}, light {light}) is {bad}: the source \
-                     returned a value that is not a finite number"
-                )));
-            }
-            if !(view.is_finite() && light.is_finite()) {
-                return Err(NbrdfError::InvalidArgument(format!(
-                    "pair {i} has a direction that is not finite (view {view}, light {light})"
-                )));
-            }
-            if view.z <= 0.0 || light.z <= 0.0 {
-                set.below_horizon += 1;
-                continue;
-            }
-            let (view, light) = (unit(view), unit(light));
-            let (cos_view, cos_light) = (f64::from(view.z), f64::from(light.z));
-            let f_cos: [f64; 3] = match fold {
-                RglFold::AsMeasured => a.map(f64::from),
-                RglFold::ReciprocalMean => {
-                    if cos_view < GRAZING_COS || cos_light < GRAZING_COS {
-                        set.invalid += 1;
-                        continue;
-                    }
-                    let b = b.expect("checked: the reciprocal mean has swapped values");
-                    std::array::from_fn(|c| {
-                        0.5 * (f64::from(a[c]) + f64::from(b[c]) * cos_light / cos_view)
-                    })
+            let (a, b) = (&self.eval_cos[i], self.swapped_eval_cos.map(|s| &s[i][..]));
+            let pair = (self.view[i], self.light[i]);
+            match fold_pair(i, pair, fold, a, b, &mut f_cos)? {
+                Folded::BelowHorizon => set.below_horizon += 1,
+                Folded::Grazing => set.invalid += 1,
+                Folded::Kept(view, light) => {
+                    set.samples
+                        .push(dataset::sample(anisotropic, view, light, f_cos))
                 }
-            };
-            set.samples.push(dataset::sample(
-                anisotropic,
-                view,
-                light,
-                f_cos.map(|c| c.max(0.0)),
-            ));
+            }
         }
         Ok(set)
     }
+}
+
+/// What a pair of [`fold_pair`] became.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Folded {
+    BelowHorizon,
+    /// A cosine below [`GRAZING_COS`] under the reciprocal mean.
+    Grazing,
+    /// Kept, with its unit directions.
+    Kept(Vec3, Vec3),
+}
+
+/// The target values `f_cos` (one per channel or wavelength, `>= 0`) of pair `i` from its values
+/// `a` and swapped values `b`, folded as `fold` says; an error naming the pair for a value or a
+/// direction that is not finite. `f_cos` is written only for a kept pair.
+pub(crate) fn fold_pair(
+    i: usize,
+    (view, light): (Vec3, Vec3),
+    fold: RglFold,
+    a: &[f32],
+    b: Option<&[f32]>,
+    f_cos: &mut [f64],
+) -> Result<Folded> {
+    if let Some(bad) = a
+        .iter()
+        .chain(b.iter().copied().flatten())
+        .find(|c| !c.is_finite())
+    {
+        return Err(NbrdfError::InvalidArgument(format!(
+            "the value at pair {i} (view {view}, light {light}) is {bad}: the source \
+             returned a value that is not a finite number"
+        )));
+    }
+    if !(view.is_finite() && light.is_finite()) {
+        return Err(NbrdfError::InvalidArgument(format!(
+            "pair {i} has a direction that is not finite (view {view}, light {light})"
+        )));
+    }
+    if view.z <= 0.0 || light.z <= 0.0 {
+        return Ok(Folded::BelowHorizon);
+    }
+    let (view, light) = (unit(view), unit(light));
+    let (cos_view, cos_light) = (f64::from(view.z), f64::from(light.z));
+    match fold {
+        RglFold::AsMeasured => {
+            for (f, &a) in f_cos.iter_mut().zip(a) {
+                *f = f64::from(a).max(0.0);
+            }
+        }
+        RglFold::ReciprocalMean => {
+            if cos_view < GRAZING_COS || cos_light < GRAZING_COS {
+                return Ok(Folded::Grazing);
+            }
+            let b = b.expect("checked: the reciprocal mean has swapped values");
+            for ((f, &a), &b) in f_cos.iter_mut().zip(a).zip(b) {
+                *f = (0.5 * (f64::from(a) + f64::from(b) * cos_light / cos_view)).max(0.0);
+            }
+        }
+    }
+    Ok(Folded::Kept(view, light))
 }
 
 /// `d` normalised, unless it is a unit vector already: the trainer's own directions are kept

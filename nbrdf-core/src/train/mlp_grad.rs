@@ -1,7 +1,10 @@
 //! Batched forward and backward passes of the NBRDF network for training.
 //!
 //! The network is `y = exp(W3 relu(W2 relu(W1 x + b1) + b2) + b3) - 1` (docs/design.md section 4),
-//! trained on `|ln(1 + f_true cos) - ln(1 + y cos)|` averaged over samples and channels.
+//! trained on `|ln(1 + f_true cos) - ln(1 + y cos)|` averaged over samples and channels. The
+//! output count is the sample type's ([`TrainingSample::OUTPUTS`]): 3 for RGB networks, a
+//! spectral network's coefficient count ([`super::spectral`]); the 3-output path keeps its
+//! specialised transposes, so RGB training is bit for bit what it was.
 //!
 //! Work is done on chunks of [`LANES`] samples, sample-major (`[lane][feature]`), with the
 //! hidden width padded to a multiple of 8 by zero weights so that every product is a
@@ -23,15 +26,53 @@ use crate::network::{Layer, INPUTS, OUTPUTS};
 pub const LANES: usize = 64;
 /// Padded width of the input rows (6 used).
 const XW: usize = VEC;
-/// Padded width of the output rows (3 used).
-const YW: usize = VEC;
 
-/// Offsets of the padded parameters `W1 [6][hp], b1 [hp], W2 [hp][hp], b2 [hp], W3 [hp][8],
-/// b3 [8]` in one flat vector (the order of docs/design.md section 7).
+/// A sample the kernels train on: the network input, one log-space target per output and the
+/// light's cosine. RGB samples ([`Sample`]) and spectral ones ([`super::spectral`]) differ only
+/// in their number of targets.
+pub trait TrainingSample: Copy + Default + Send + Sync {
+    /// Targets per sample, the network's outputs.
+    const OUTPUTS: usize;
+    fn input(&self) -> &[f32; INPUTS];
+    /// `ln(1 + c_k cos_light)` per output, [`TrainingSample::OUTPUTS`] of them.
+    fn log_targets(&self) -> &[f32];
+    fn cos_light(&self) -> f32;
+    /// `out = [samples[i] for i in order]`, the epoch's shuffled copy.
+    fn gather(samples: &[Self], order: &[u32], out: &mut Vec<Self>);
+}
+
+impl TrainingSample for Sample {
+    const OUTPUTS: usize = OUTPUTS;
+
+    #[inline(always)]
+    fn input(&self) -> &[f32; INPUTS] {
+        &self.x
+    }
+
+    #[inline(always)]
+    fn log_targets(&self) -> &[f32] {
+        &self.log_target
+    }
+
+    #[inline(always)]
+    fn cos_light(&self) -> f32 {
+        self.cos_light
+    }
+
+    fn gather(samples: &[Self], order: &[u32], out: &mut Vec<Self>) {
+        super::dataset::gather(samples, order, out)
+    }
+}
+
+/// Offsets of the padded parameters `W1 [6][hp], b1 [hp], W2 [hp][hp], b2 [hp], W3 [hp][yw],
+/// b3 [yw]` in one flat vector (the order of docs/design.md section 7).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Layout {
     pub hidden: usize,
     pub hp: usize,
+    /// The network's outputs and their padded width (8 for RGB's 3).
+    pub outputs: usize,
+    pub yw: usize,
     pub w1: usize,
     pub b1: usize,
     pub w2: usize,
@@ -42,28 +83,38 @@ pub struct Layout {
 }
 
 impl Layout {
+    /// The layout of an RGB network (3 outputs).
     pub fn new(hidden: usize) -> Self {
+        Self::with_outputs(hidden, OUTPUTS)
+    }
+
+    /// The layout of a network with `outputs` outputs.
+    pub fn with_outputs(hidden: usize, outputs: usize) -> Self {
         let hp = hidden.div_ceil(VEC) * VEC;
+        let yw = outputs.div_ceil(VEC) * VEC;
         let w1 = 0;
         let b1 = w1 + INPUTS * hp;
         let w2 = b1 + hp;
         let b2 = w2 + hp * hp;
         let w3 = b2 + hp;
-        let b3 = w3 + hp * YW;
+        let b3 = w3 + hp * yw;
         Layout {
             hidden,
             hp,
+            outputs,
+            yw,
             w1,
             b1,
             w2,
             b2,
             w3,
             b3,
-            len: b3 + YW,
+            len: b3 + yw,
         }
     }
 
-    /// Padded parameters of three layers `6 -> hidden -> hidden -> 3` (shapes checked by caller).
+    /// Padded parameters of three layers `6 -> hidden -> hidden -> outputs` (shapes checked by
+    /// the caller).
     pub fn pad(&self, layers: &[Layer; 3]) -> Vec<f32> {
         let mut p = vec![0.0; self.len];
         let spec = self.blocks();
@@ -83,7 +134,7 @@ impl Layout {
         let dims = [
             (INPUTS, self.hidden),
             (self.hidden, self.hidden),
-            (self.hidden, OUTPUTS),
+            (self.hidden, self.outputs),
         ];
         let spec = self.blocks();
         std::array::from_fn(|k| {
@@ -107,7 +158,7 @@ impl Layout {
         [
             (self.w1, self.b1, self.hp),
             (self.w2, self.b2, self.hp),
-            (self.w3, self.b3, YW),
+            (self.w3, self.b3, self.yw),
         ]
     }
 }
@@ -119,19 +170,19 @@ pub struct Weights {
     pub p: Vec<f32>,
     /// `W2^T`, `[hp][hp]`.
     w2t: Vec<f32>,
-    /// `W3^T`, `[8][hp]`.
+    /// `W3^T`, `[yw][hp]`.
     w3t: Vec<f32>,
 }
 
 impl Weights {
     pub fn new(layout: Layout, p: Vec<f32>) -> Self {
         assert_eq!(p.len(), layout.len);
-        let hp = layout.hp;
+        let (hp, yw) = (layout.hp, layout.yw);
         let mut w = Weights {
             layout,
             p,
             w2t: vec![0.0; hp * hp],
-            w3t: vec![0.0; YW * hp],
+            w3t: vec![0.0; yw * hp],
         };
         w.refresh_transposes();
         w
@@ -145,8 +196,8 @@ impl Weights {
             for j in 0..hp {
                 self.w2t[j * hp + i] = self.p[l.w2 + i * hp + j];
             }
-            for k in 0..YW {
-                self.w3t[k * hp + i] = self.p[l.w3 + i * YW + k];
+            for k in 0..l.yw {
+                self.w3t[k * hp + i] = self.p[l.w3 + i * l.yw + k];
             }
         }
     }
@@ -154,6 +205,9 @@ impl Weights {
 
 /// Per-chunk working memory, allocated once and reused for every batch.
 pub struct ChunkScratch {
+    /// The layout's `outputs` and `yw`.
+    outputs: usize,
+    yw: usize,
     x: Vec<f32>,
     /// `ln(1 + f cos)`, `[channel][lane]`.
     target: Vec<f32>,
@@ -174,10 +228,13 @@ pub struct ChunkScratch {
 impl ChunkScratch {
     pub fn new(layout: &Layout) -> Self {
         let h = LANES * layout.hp;
-        let v = LANES * VEC;
+        let v = LANES * layout.yw;
+        let channels = layout.outputs * LANES;
         ChunkScratch {
-            x: vec![0.0; v],
-            target: vec![0.0; OUTPUTS * LANES],
+            outputs: layout.outputs,
+            yw: layout.yw,
+            x: vec![0.0; LANES * XW],
+            target: vec![0.0; channels],
             cos: vec![0.0; LANES],
             a1: vec![0.0; h],
             a2: vec![0.0; h],
@@ -185,15 +242,15 @@ impl ChunkScratch {
             g3: vec![0.0; v],
             g2: vec![0.0; h],
             g1: vec![0.0; h],
-            z_out: vec![0.0; OUTPUTS * LANES],
-            g_out: vec![0.0; OUTPUTS * LANES],
-            err: vec![0.0; OUTPUTS * LANES],
+            z_out: vec![0.0; channels],
+            g_out: vec![0.0; channels],
+            err: vec![0.0; channels],
         }
     }
 
     /// Loads the samples `indices` of `samples` (at most [`LANES`]); unused lanes get zero
     /// inputs and a zero cosine, which makes their loss and gradient exactly 0.
-    pub fn load_indexed(&mut self, samples: &[Sample], indices: &[u32]) {
+    pub fn load_indexed<S: TrainingSample>(&mut self, samples: &[S], indices: &[u32]) {
         debug_assert!(indices.len() <= LANES);
         for lane in 0..LANES {
             let s = indices.get(lane).map(|&i| &samples[i as usize]);
@@ -202,26 +259,27 @@ impl ChunkScratch {
     }
 
     /// Loads consecutive samples (at most [`LANES`]).
-    pub fn load_slice(&mut self, samples: &[Sample]) {
+    pub fn load_slice<S: TrainingSample>(&mut self, samples: &[S]) {
         debug_assert!(samples.len() <= LANES);
         for lane in 0..LANES {
             self.load_lane(lane, samples.get(lane));
         }
     }
 
-    fn load_lane(&mut self, lane: usize, sample: Option<&Sample>) {
+    fn load_lane<S: TrainingSample>(&mut self, lane: usize, sample: Option<&S>) {
+        debug_assert_eq!(S::OUTPUTS, self.outputs);
         let x = &mut self.x[lane * XW..(lane + 1) * XW];
         x.fill(0.0);
         match sample {
             Some(s) => {
-                x[..INPUTS].copy_from_slice(&s.x);
-                for (k, &t) in s.log_target.iter().enumerate() {
+                x[..INPUTS].copy_from_slice(s.input());
+                for (k, &t) in s.log_targets().iter().enumerate() {
                     self.target[k * LANES + lane] = t;
                 }
-                self.cos[lane] = s.cos_light;
+                self.cos[lane] = s.cos_light();
             }
             None => {
-                for k in 0..OUTPUTS {
+                for k in 0..self.outputs {
                     self.target[k * LANES + lane] = 0.0;
                 }
                 self.cos[lane] = 0.0;
@@ -249,14 +307,15 @@ impl ChunkScratch {
     /// Output pre-activation `z` (so `f = expm1(z)`) of `lane`, channel `k`, after a forward pass.
     #[inline]
     pub fn output_pre_activation(&self, lane: usize, k: usize) -> f32 {
-        self.z3[lane * YW + k]
+        self.z3[lane * self.yw + k]
     }
 
-    /// Sets `d loss / d z` of `lane`, channel `k` (`k < 3`) for [`Kernel::backward_raw`].
+    /// Sets `d loss / d z` of `lane`, channel `k` (below the output count) for
+    /// [`Kernel::backward_raw`].
     #[inline]
     pub fn set_output_gradient(&mut self, lane: usize, k: usize, g: f32) {
-        debug_assert!(k < OUTPUTS);
-        self.g3[lane * YW + k] = g;
+        debug_assert!(k < self.outputs);
+        self.g3[lane * self.yw + k] = g;
     }
 }
 
@@ -370,7 +429,7 @@ fn loss_impl<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) -> f64 {
 #[inline(always)]
 fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
     let l = &w.layout;
-    let (h, hp, p) = (l.hidden, l.hp, &w.p[..]);
+    let (h, hp, yw, p) = (l.hidden, l.hp, l.yw, &w.p[..]);
     let x = Strided {
         data: &s.x,
         row_stride: XW,
@@ -412,16 +471,16 @@ fn forward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch) {
         row_stride: hp,
         col_stride: 1,
     };
-    let b3 = Init::Row(&p[l.b3..l.b3 + YW]);
+    let b3 = Init::Row(&p[l.b3..l.b3 + yw]);
     gemm::<M>(
         LANES,
-        YW,
+        yw,
         h,
         a2,
         &p[l.w3..],
-        YW,
+        yw,
         &mut s.z3,
-        YW,
+        yw,
         b3,
         Post::None,
     );
@@ -443,16 +502,8 @@ fn loss_and_output_gradient(
     clamp_output: bool,
     with_gradient: bool,
 ) -> f64 {
-    // Channel-major copies of the 3 used output columns, so that the transcendental work runs
-    // on full vectors of lanes instead of 3-of-8-used rows.
-    {
-        let (z0, rest) = s.z_out.split_at_mut(LANES);
-        let (z1, z2) = rest.split_at_mut(LANES);
-        for (((row, z0), z1), z2) in s.z3.chunks_exact(YW).zip(z0).zip(z1).zip(z2) {
-            (*z0, *z1, *z2) = (row[0], row[1], row[2]);
-        }
-    }
-    for k in 0..OUTPUTS {
+    outputs_to_channel_major(s);
+    for k in 0..s.outputs {
         let range = k * LANES..(k + 1) * LANES;
         let (z, t, c) = (
             &s.z_out[range.clone()],
@@ -477,11 +528,7 @@ fn loss_and_output_gradient(
         }
     }
     if with_gradient {
-        let (g0, rest) = s.g_out.split_at(LANES);
-        let (g1, g2) = rest.split_at(LANES);
-        for (((row, g0), g1), g2) in s.g3.chunks_exact_mut(YW).zip(g0).zip(g1).zip(g2) {
-            (row[0], row[1], row[2]) = (*g0, *g1, *g2);
-        }
+        gradients_to_lane_major(s);
     }
     let mut sums = [0.0f32; VEC];
     for group in s.err.chunks_exact(VEC) {
@@ -492,34 +539,71 @@ fn loss_and_output_gradient(
     sums.iter().map(|&v| v as f64).sum()
 }
 
+/// Channel-major copies of the used output columns, so that the transcendental work runs on
+/// full vectors of lanes instead of 3-of-8-used rows; RGB's 3 columns have their own loop.
+#[inline(always)]
+fn outputs_to_channel_major(s: &mut ChunkScratch) {
+    if s.outputs == OUTPUTS {
+        let (z0, rest) = s.z_out.split_at_mut(LANES);
+        let (z1, z2) = rest.split_at_mut(LANES);
+        for (((row, z0), z1), z2) in s.z3.chunks_exact(s.yw).zip(z0).zip(z1).zip(z2) {
+            (*z0, *z1, *z2) = (row[0], row[1], row[2]);
+        }
+        return;
+    }
+    for (lane, row) in s.z3.chunks_exact(s.yw).enumerate() {
+        for (k, &z) in row[..s.outputs].iter().enumerate() {
+            s.z_out[k * LANES + lane] = z;
+        }
+    }
+}
+
+/// The output gradients back into the lane-major rows of `g3` (padding columns stay 0).
+#[inline(always)]
+fn gradients_to_lane_major(s: &mut ChunkScratch) {
+    if s.outputs == OUTPUTS {
+        let (g0, rest) = s.g_out.split_at(LANES);
+        let (g1, g2) = rest.split_at(LANES);
+        for (((row, g0), g1), g2) in s.g3.chunks_exact_mut(s.yw).zip(g0).zip(g1).zip(g2) {
+            (row[0], row[1], row[2]) = (*g0, *g1, *g2);
+        }
+        return;
+    }
+    for (lane, row) in s.g3.chunks_exact_mut(s.yw).enumerate() {
+        for (k, g) in row[..s.outputs].iter_mut().enumerate() {
+            *g = s.g_out[k * LANES + lane];
+        }
+    }
+}
+
 #[inline(always)]
 fn backward<M: MulAdd>(w: &Weights, s: &mut ChunkScratch, grad: &mut [f32]) {
     let l = &w.layout;
-    let (h, hp) = (l.hidden, l.hp);
+    let (h, hp, yw) = (l.hidden, l.hp, l.yw);
     let (zero, none) = (Init::Zero, Post::None);
 
     // Output layer.
     gemm::<M>(
         h,
-        YW,
+        yw,
         LANES,
         transposed(&s.a2, hp),
         &s.g3,
-        YW,
+        yw,
         &mut grad[l.w3..],
-        YW,
+        yw,
         zero,
         none,
     );
-    column_sums(LANES, YW, &s.g3, YW, &mut grad[l.b3..]);
+    column_sums(LANES, yw, &s.g3, yw, &mut grad[l.b3..]);
     let g3 = Strided {
         data: &s.g3,
-        row_stride: YW,
+        row_stride: yw,
         col_stride: 1,
     };
     let active2 = Post::MaskPositive(&s.a2);
     gemm::<M>(
-        LANES, hp, OUTPUTS, g3, &w.w3t, hp, &mut s.g2, hp, zero, active2,
+        LANES, hp, l.outputs, g3, &w.w3t, hp, &mut s.g2, hp, zero, active2,
     );
 
     // Second hidden layer.
@@ -570,25 +654,35 @@ fn transposed(m: &[f32], ld: usize) -> Strided<'_> {
     }
 }
 
-/// Network outputs `f_r` (clamped at 0, as evaluated) of the loaded chunk, `[lane][channel]`.
-/// For diagnostics and tests: the portable kernel copy, no dispatch.
-pub fn outputs(w: &Weights, s: &mut ChunkScratch) -> [[f32; OUTPUTS]; LANES] {
+/// Network outputs `f_r` (clamped at 0, as evaluated) of the loaded chunk, `[lane][channel]`,
+/// `outputs` channels a lane. For diagnostics and tests: the portable kernel copy, no dispatch.
+pub fn outputs(w: &Weights, s: &mut ChunkScratch) -> Vec<Vec<f32>> {
     forward::<Unfused>(w, s);
-    std::array::from_fn(|lane| {
-        std::array::from_fn(|k| fastmath::fast_expm1(s.z3[lane * YW + k]).max(0.0))
-    })
+    (0..LANES)
+        .map(|lane| {
+            let row = &s.z3[lane * s.yw..lane * s.yw + s.outputs];
+            row.iter()
+                .map(|&z| fastmath::fast_expm1(z).max(0.0))
+                .collect()
+        })
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::adam::AdamConfig;
+    use super::super::spectral::SpectralSample;
     use super::super::Trainer;
     use super::*;
     use crate::rng::{SplitMix64, Stream};
 
     fn random_layers(hidden: usize, seed: u64) -> [Layer; 3] {
+        random_layers_with(hidden, OUTPUTS, seed)
+    }
+
+    fn random_layers_with(hidden: usize, outputs: usize, seed: u64) -> [Layer; 3] {
         let mut rng = SplitMix64::new(seed, Stream::Init, 0);
-        let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, OUTPUTS)];
+        let dims = [(INPUTS, hidden), (hidden, hidden), (hidden, outputs)];
         dims.map(|(inputs, outputs)| Layer {
             inputs,
             outputs,
@@ -620,8 +714,21 @@ mod tests {
             .collect()
     }
 
+    /// Spectral samples: the same inputs and cosines, 16 random targets each.
+    fn random_spectral_samples(n: usize, seed: u64) -> Vec<SpectralSample> {
+        let mut rng = SplitMix64::new(seed, Stream::ValidationSamples, 0);
+        random_samples(n, seed)
+            .into_iter()
+            .map(|s| SpectralSample {
+                x: s.x,
+                log_target: std::array::from_fn(|_| 2.0 * rng.next_f64() as f32),
+                cos_light: s.cos_light,
+            })
+            .collect()
+    }
+
     /// The mean loss in float64, straight from the definition.
-    fn reference_loss(layers: &[Layer; 3], samples: &[Sample]) -> f64 {
+    fn reference_loss<S: TrainingSample>(layers: &[Layer; 3], samples: &[S]) -> f64 {
         let dense = |layer: &Layer, x: &[f64], relu: bool| -> Vec<f64> {
             (0..layer.outputs)
                 .map(|o| {
@@ -639,32 +746,37 @@ mod tests {
         };
         let mut sum = 0.0;
         for s in samples {
-            let x: Vec<f64> = s.x.iter().map(|&v| v as f64).collect();
+            let x: Vec<f64> = s.input().iter().map(|&v| v as f64).collect();
             let a1 = dense(&layers[0], &x, true);
             let a2 = dense(&layers[1], &a1, true);
             let z3 = dense(&layers[2], &a2, false);
-            for (z, &t) in z3.iter().zip(&s.log_target) {
+            assert_eq!(z3.len(), s.log_targets().len());
+            for (z, &t) in z3.iter().zip(s.log_targets()) {
                 let y = z.exp() - 1.0;
-                sum += ((y * s.cos_light as f64).ln_1p() - t as f64).abs();
+                sum += ((y * s.cos_light() as f64).ln_1p() - t as f64).abs();
             }
         }
-        sum / (OUTPUTS * samples.len()) as f64
+        sum / (S::OUTPUTS * samples.len()) as f64
     }
 
     fn check_gradient(kernel: Kernel) {
+        check_gradient_of(kernel, &random_samples(100, 12));
+    }
+
+    fn check_gradient_of<S: TrainingSample>(kernel: Kernel, samples: &[S]) {
         let hidden = 5;
-        let layers = random_layers(hidden, 11);
-        let samples = random_samples(100, 12);
+        let layers = random_layers_with(hidden, S::OUTPUTS, 11);
         let indices: Vec<u32> = (0..samples.len() as u32).collect();
         let mut trainer =
-            Trainer::from_layers(&layers, 128, AdamConfig::default()).with_kernel(kernel);
-        let loss_sum = trainer.compute_gradient(&samples, &indices);
-        let reference = reference_loss(&layers, &samples);
+            Trainer::<S>::from_layers(&layers, 128, AdamConfig::default()).with_kernel(kernel);
+        let loss_sum = trainer.compute_gradient(samples, &indices);
+        let reference = reference_loss(&layers, samples);
+        let count = (S::OUTPUTS * samples.len()) as f64;
         assert!(
-            (loss_sum / 300.0 - reference).abs() < 1e-5 * reference.max(1.0),
+            (loss_sum / count - reference).abs() < 1e-5 * reference.max(1.0),
             "{loss_sum} vs {reference}"
         );
-        let layout = Layout::new(hidden);
+        let layout = Layout::with_outputs(hidden, S::OUTPUTS);
         let analytic = layout.unpad(trainer.gradient());
         let h = 1e-3;
         let mut worst: f64 = 0.0;
@@ -678,7 +790,7 @@ mod tests {
                     } else {
                         l[k].bias[idx - n_w] += delta
                     }
-                    reference_loss(&l, &samples)
+                    reference_loss(&l, samples)
                 };
                 let numeric = (nudge(h) - nudge(-h)) / (2.0 * h as f64);
                 let a = if idx < n_w {
@@ -704,6 +816,14 @@ mod tests {
     #[test]
     fn gradient_matches_central_differences_detected_kernel() {
         check_gradient(Kernel::detect());
+    }
+
+    /// 16 outputs (two padded output blocks): the general transposes and widths.
+    #[test]
+    fn spectral_gradient_matches_central_differences() {
+        let samples = random_spectral_samples(40, 13);
+        check_gradient_of(Kernel::Portable, &samples);
+        check_gradient_of(Kernel::detect(), &samples);
     }
 
     #[test]

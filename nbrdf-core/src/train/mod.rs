@@ -15,18 +15,19 @@ pub mod dataset;
 pub mod gemm;
 pub mod lr_schedule;
 pub mod mlp_grad;
+pub mod spectral;
 /// Kept under `train` for existing callers: the RNG and fast math are crate-wide modules now.
 pub use crate::{fastmath, rng};
 
 use crate::coords::RusinkiewiczAngles;
 use crate::error::{NbrdfError, Result};
 use crate::merl::MerlTable;
-use crate::network::{paper_init, Layer, Nbrdf, OUTPUTS};
+use crate::network::{paper_init_with_outputs, Layer, Nbrdf, Spectral};
 use crate::rng::{SplitMix64, Stream};
 use adam::{Adam, AdamConfig};
 use dataset::{AngularSampling, DataSet, Sample, TargetFn};
 pub use lr_schedule::LrSchedule;
-use mlp_grad::{ChunkScratch, Kernel, Layout, Weights, LANES};
+use mlp_grad::{ChunkScratch, Kernel, Layout, TrainingSample, Weights, LANES};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -270,13 +271,39 @@ pub fn train_on_sets(
     start: Instant,
     on_epoch: &mut dyn FnMut(&EpochStats),
 ) -> Result<TrainOutcome> {
-    config.validate()?;
-    if train_set.samples.is_empty() || validation.samples.is_empty() {
-        return Err(NbrdfError::InvalidArgument(
-            "training needs at least one training and one validation sample".into(),
-        ));
-    }
-    let mut trainer = Trainer::new(config.hidden, config.batch, config.adam, config.seed);
+    let sets = SampleSets {
+        train: &train_set.samples,
+        validation: &validation.samples,
+        dropped_below_horizon: train_set.below_horizon,
+        dropped_invalid: train_set.invalid,
+    };
+    train_on_samples(&sets, config, name, None, start, on_epoch)
+}
+
+/// Training and validation samples of any kind ([`TrainingSample`]) and what was dropped while
+/// making them (for the report).
+#[derive(Clone, Copy, Debug)]
+pub struct SampleSets<'a, S> {
+    pub train: &'a [S],
+    pub validation: &'a [S],
+    pub dropped_below_horizon: u64,
+    pub dropped_invalid: u64,
+}
+
+/// [`train_on_sets`] for samples of any output count: an RGB network (`spectral` `None`, 3
+/// targets a sample) or a spectral one, whose basis has as many coefficients as a sample has
+/// targets.
+pub fn train_on_samples<S: TrainingSample>(
+    sets: &SampleSets<'_, S>,
+    config: &TrainConfig,
+    name: &str,
+    spectral: Option<Spectral>,
+    start: Instant,
+    on_epoch: &mut dyn FnMut(&EpochStats),
+) -> Result<TrainOutcome> {
+    check_sets(sets, config, spectral.as_ref())?;
+    let (train_samples, validation_samples) = (sets.train, sets.validation);
+    let mut trainer = Trainer::<S>::new(config.hidden, config.batch, config.adam, config.seed);
     let mut order: Vec<u32> = Vec::new();
     let mut best = (f64::INFINITY, 0usize, trainer.weights.p.clone());
     let mut schedule = Schedule::new(config);
@@ -287,13 +314,13 @@ pub fn train_on_sets(
         // 17 % of the CPU time as system time); inside it, it is a work-stealing join.
         let (train_loss, validation_loss) = rayon::scope(|_| {
             let train_loss = trainer.scheduled_epoch(
-                &train_set.samples,
+                train_samples,
                 &mut order,
                 config.seed,
                 epoch as u64,
                 (config.lr_schedule, config.max_epochs),
             );
-            (train_loss, trainer.validation_loss(&validation.samples))
+            (train_loss, trainer.validation_loss(validation_samples))
         });
         if !(train_loss.is_finite() && validation_loss.is_finite()) {
             // Cannot happen with bounded gradients; fail loudly rather than save garbage.
@@ -329,21 +356,44 @@ pub fn train_on_sets(
         best_validation_loss: best.0,
         stopped_early: history.len() < config.max_epochs,
         seconds: start.elapsed().as_secs_f64(),
-        train_samples: train_set.samples.len(),
-        validation_samples: validation.samples.len(),
-        dropped_below_horizon: train_set.below_horizon,
-        dropped_invalid: train_set.invalid,
+        train_samples: train_samples.len(),
+        validation_samples: validation_samples.len(),
+        dropped_below_horizon: sets.dropped_below_horizon,
+        dropped_invalid: sets.dropped_invalid,
         history,
     };
     let network = Nbrdf {
         name: name.to_string(),
         layers: trainer.weights.layout.unpad(&best.2),
         anisotropic: config.anisotropic,
-        spectral: None,
+        spectral,
         sampling: None,
         provenance: serde_json::Value::Null,
     };
     Ok(TrainOutcome { network, report })
+}
+
+/// The settings and sets of [`train_on_samples`] are usable: samples in both sets, with as many
+/// targets as the network has outputs.
+fn check_sets<S: TrainingSample>(
+    sets: &SampleSets<'_, S>,
+    config: &TrainConfig,
+    spectral: Option<&Spectral>,
+) -> Result<()> {
+    config.validate()?;
+    if sets.train.is_empty() || sets.validation.is_empty() {
+        return Err(NbrdfError::InvalidArgument(
+            "training needs at least one training and one validation sample".into(),
+        ));
+    }
+    let outputs = spectral.map_or(crate::network::OUTPUTS, Spectral::count);
+    if outputs != S::OUTPUTS {
+        return Err(NbrdfError::InvalidArgument(format!(
+            "samples with {} targets cannot train a network with {outputs} outputs",
+            S::OUTPUTS
+        )));
+    }
+    Ok(())
 }
 
 /// What [`train_on_sets`] does after an epoch.
@@ -442,8 +492,9 @@ pub fn provenance(config: &TrainConfig, report: &TrainReport, source: &str) -> s
     })
 }
 
-/// The optimisation state: weights, Adam moments and per-chunk working memory.
-pub struct Trainer {
+/// The optimisation state: weights, Adam moments and per-chunk working memory, for samples of
+/// type `S` (RGB [`Sample`]s by default; the output count is theirs).
+pub struct Trainer<S: TrainingSample = Sample> {
     kernel: Kernel,
     pub weights: Weights,
     adam: Adam,
@@ -454,19 +505,24 @@ pub struct Trainer {
     chunk_grads: Vec<f32>,
     chunk_losses: Vec<f64>,
     grad: Vec<f32>,
-    /// The samples of an epoch in its shuffled order ([`dataset::gather`]).
-    shuffled: Vec<Sample>,
+    /// The samples of an epoch in its shuffled order ([`TrainingSample::gather`]).
+    shuffled: Vec<S>,
 }
 
-impl Trainer {
-    /// Starts from [`crate::network::paper_init`].
+impl<S: TrainingSample> Trainer<S> {
+    /// Starts from [`crate::network::paper_init`] (of `S::OUTPUTS` outputs).
     pub fn new(hidden: usize, batch: usize, adam: AdamConfig, seed: u64) -> Self {
-        Self::from_layers(&paper_init(hidden, seed), batch, adam)
+        Self::from_layers(
+            &paper_init_with_outputs(hidden, S::OUTPUTS, seed),
+            batch,
+            adam,
+        )
     }
 
-    /// Starts from given weights (shapes `6 -> h -> h -> 3`, checked by the caller).
+    /// Starts from given weights (shapes `6 -> h -> h -> S::OUTPUTS`, checked by the caller).
     pub fn from_layers(layers: &[Layer; 3], batch: usize, adam: AdamConfig) -> Self {
-        let layout = Layout::new(layers[0].outputs);
+        debug_assert_eq!(layers[2].outputs, S::OUTPUTS);
+        let layout = Layout::with_outputs(layers[0].outputs, S::OUTPUTS);
         let p = layout.pad(layers);
         let chunks = batch.div_ceil(LANES);
         let len = layout.len;
@@ -492,23 +548,23 @@ impl Trainer {
 
     /// Gradient of the mean loss over the samples `indices` (at most one batch) into
     /// [`Trainer::gradient`]; returns the loss sum.
-    pub fn compute_gradient(&mut self, samples: &[Sample], indices: &[u32]) -> f64 {
+    pub fn compute_gradient(&mut self, samples: &[S], indices: &[u32]) -> f64 {
         let mut batch = std::mem::take(&mut self.shuffled);
-        dataset::gather(samples, indices, &mut batch);
+        S::gather(samples, indices, &mut batch);
         let loss = self.compute_gradient_of(&batch);
         self.shuffled = batch;
         loss
     }
 
     /// [`Trainer::compute_gradient`] of the samples `batch` (at most one batch), in order.
-    fn compute_gradient_of(&mut self, batch: &[Sample]) -> f64 {
+    fn compute_gradient_of(&mut self, batch: &[S]) -> f64 {
         assert!(
             batch.len() <= self.batch,
             "more samples than the batch size"
         );
         let chunks = batch.len().div_ceil(LANES);
         let len = self.weights.layout.len;
-        let scale = 1.0 / (OUTPUTS * batch.len().max(1)) as f32;
+        let scale = 1.0 / (S::OUTPUTS * batch.len().max(1)) as f32;
         let (kernel, weights) = (self.kernel, &self.weights);
         self.scratches[..chunks]
             .par_iter_mut()
@@ -543,7 +599,7 @@ impl Trainer {
     }
 
     /// One Adam step on the samples `indices`; returns the loss sum before the step.
-    pub fn step(&mut self, samples: &[Sample], indices: &[u32]) -> f64 {
+    pub fn step(&mut self, samples: &[S], indices: &[u32]) -> f64 {
         let loss = self.compute_gradient(samples, indices);
         self.apply_gradient();
         loss
@@ -557,13 +613,7 @@ impl Trainer {
     }
 
     /// One pass over `samples` in the order of epoch `epoch`; returns the mean training loss.
-    pub fn epoch(
-        &mut self,
-        samples: &[Sample],
-        order: &mut Vec<u32>,
-        seed: u64,
-        epoch: u64,
-    ) -> f64 {
+    pub fn epoch(&mut self, samples: &[S], order: &mut Vec<u32>, seed: u64, epoch: u64) -> f64 {
         self.scheduled_epoch(samples, order, seed, epoch, (LrSchedule::Constant, 1))
     }
 
@@ -571,7 +621,7 @@ impl Trainer {
     /// of a run of `max_epochs`; the learning rate itself is left as it was.
     pub fn scheduled_epoch(
         &mut self,
-        samples: &[Sample],
+        samples: &[S],
         order: &mut Vec<u32>,
         seed: u64,
         epoch: u64,
@@ -583,7 +633,7 @@ impl Trainer {
         // Batches then read consecutive samples: gathered through the order inside the
         // gradient kernel, each sample was a cache miss the kernel's work could not hide.
         let mut shuffled = std::mem::take(&mut self.shuffled);
-        dataset::gather(samples, order, &mut shuffled);
+        S::gather(samples, order, &mut shuffled);
         let base = self.learning_rate;
         let batches = order.len().div_ceil(self.batch).max(1) as f64;
         let mut sum = 0.0;
@@ -595,11 +645,11 @@ impl Trainer {
         }
         self.shuffled = shuffled;
         self.learning_rate = base;
-        sum / (OUTPUTS * samples.len().max(1)) as f64
+        sum / (S::OUTPUTS * samples.len().max(1)) as f64
     }
 
     /// Mean loss of the network as evaluated (output clamped at 0) over `samples`.
-    pub fn validation_loss(&self, samples: &[Sample]) -> f64 {
+    pub fn validation_loss(&self, samples: &[S]) -> f64 {
         let (kernel, weights) = (self.kernel, &self.weights);
         let sums: Vec<f64> = samples
             .par_chunks(LANES)
@@ -611,7 +661,7 @@ impl Trainer {
                 },
             )
             .collect();
-        sums.iter().sum::<f64>() / (OUTPUTS * samples.len().max(1)) as f64
+        sums.iter().sum::<f64>() / (S::OUTPUTS * samples.len().max(1)) as f64
     }
 
     /// The current weights as network layers.
