@@ -1,12 +1,14 @@
 //! Distillation: a network learnt from reflectance that a caller sampled at the trainer's own
-//! directions ([`crate::train::arrays`]); `python -m nbrdf_mitsuba.distill` evaluates a
-//! Mitsuba 3 BSDF there and calls this through the C ABI of `nbrdf-ffi/train`.
+//! directions ([`crate::train::arrays`], or spectra at wavelengths of its choice:
+//! [`crate::train::spectral`]); `python -m nbrdf_mitsuba.distill` evaluates a Mitsuba 3 BSDF
+//! there and calls this through the C ABI of `nbrdf-ffi/train`.
 
 use super::with_threads;
 use crate::error::{NbrdfError, Result};
 use crate::network::Nbrdf;
 use crate::source::RglFold;
 use crate::train::arrays::{self, SampledArrays};
+use crate::train::spectral::{self, SampledSpectra};
 use crate::train::{self, EpochStats, TrainConfig, TrainReport};
 use glam::Vec3;
 
@@ -24,10 +26,26 @@ pub fn sample_counts(config: &TrainConfig) -> Result<(usize, usize)> {
     Ok((config.samples, config.validation_samples()))
 }
 
+/// The values to distil: RGB (an RGB network) or spectra (a spectral network, format version 3).
+#[derive(Clone, Copy, Debug)]
+pub enum DistillArrays<'a> {
+    Rgb(SampledArrays<'a>),
+    Spectral(SampledSpectra<'a>),
+}
+
+impl DistillArrays<'_> {
+    fn pairs_and_validation(&self) -> (usize, usize) {
+        match self {
+            DistillArrays::Rgb(a) => (a.view.len(), a.validation),
+            DistillArrays::Spectral(a) => (a.view.len(), a.validation),
+        }
+    }
+}
+
 /// What to distil.
 #[derive(Clone, Debug)]
 pub struct DistillRequest<'a> {
-    pub arrays: SampledArrays<'a>,
+    pub arrays: DistillArrays<'a>,
     pub fold: RglFold,
     /// Stored in the network.
     pub name: String,
@@ -47,9 +65,9 @@ pub fn distill(
     request: &DistillRequest<'_>,
     on_epoch: &mut (dyn FnMut(&EpochStats) + Send),
 ) -> Result<(Nbrdf, TrainReport)> {
-    let n = request.arrays.view.len();
+    let (n, validation) = request.arrays.pairs_and_validation();
     let config = TrainConfig {
-        samples: n.saturating_sub(request.arrays.validation).max(1),
+        samples: n.saturating_sub(validation).max(1),
         ..request.config.clone()
     };
     super::limits::check_train(&config)?;
@@ -58,14 +76,12 @@ pub fn distill(
             "the network name is empty".into(),
         ));
     }
-    let outcome = with_threads(request.threads, || {
-        arrays::train_arrays(
-            &request.arrays,
-            request.fold,
-            &config,
-            &request.name,
-            on_epoch,
-        )
+    let (fold, name) = (request.fold, &request.name);
+    let outcome = with_threads(request.threads, || match &request.arrays {
+        DistillArrays::Rgb(a) => arrays::train_arrays(a, fold, &config, name, on_epoch),
+        DistillArrays::Spectral(a) => {
+            spectral::train_spectral_arrays(a, fold, &config, name, on_epoch)
+        }
     })?
     .map_err(super::about_data(&request.source))?;
     let mut network = outcome.network;
@@ -73,6 +89,12 @@ pub fn distill(
     if let Some(p) = network.provenance.as_object_mut() {
         p.insert("source_kind".into(), "distilled".into());
         p.insert("reciprocity".into(), request.fold.as_str().into());
+        if let DistillArrays::Spectral(a) = &request.arrays {
+            p.insert(
+                "spectral_target".into(),
+                spectral::provenance_entry(a.wavelengths),
+            );
+        }
         if let Some(details) = &request.source_details {
             p.insert("distilled_from".into(), details.clone());
         }

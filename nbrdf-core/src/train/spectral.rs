@@ -147,8 +147,7 @@ pub trait SpectralSource: Sync {
     fn has_swapped(&self) -> bool;
 }
 
-/// Spectral reflectance sampled at view/light pairs; the last `validation` pairs are the
-/// validation set.
+/// Spectral reflectance sampled at view/light pairs.
 #[derive(Clone, Copy, Debug)]
 pub struct SampledSpectra<'a> {
     pub view: &'a [Vec3],
@@ -159,6 +158,8 @@ pub struct SampledSpectra<'a> {
     pub eval_cos: &'a [f32],
     /// The same with view and light swapped, needed by [`RglFold::ReciprocalMean`] only.
     pub swapped_eval_cos: Option<&'a [f32]>,
+    /// The last `validation` pairs are the validation set.
+    pub validation: usize,
 }
 
 impl SampledSpectra<'_> {
@@ -216,6 +217,17 @@ impl SpectralSource for SampledSpectra<'_> {
     fn has_swapped(&self) -> bool {
         self.swapped_eval_cos.is_some()
     }
+}
+
+/// The provenance entry `"spectral_target"` of a network trained on spectra sampled at
+/// `wavelengths`.
+pub fn provenance_entry(wavelengths: &[f32]) -> serde_json::Value {
+    serde_json::json!({
+        "target": "least-squares coefficients of the piecewise-linear spectrum, clamped at 0",
+        "wavelengths": wavelengths.len(),
+        "min_nm": wavelengths.first().copied().map(f64::from),
+        "max_nm": wavelengths.last().copied().map(f64::from),
+    })
 }
 
 /// Spectral samples of a range of pairs and what was dropped.
@@ -334,14 +346,13 @@ pub fn train_spectral(
 /// [`train_spectral`] on arrays, after checking their lengths.
 pub fn train_spectral_arrays(
     arrays: &SampledSpectra<'_>,
-    validation: usize,
     fold: RglFold,
     config: &TrainConfig,
     name: &str,
     on_epoch: &mut dyn FnMut(&EpochStats),
 ) -> Result<TrainOutcome> {
     arrays.check()?;
-    train_spectral(arrays, validation, fold, config, name, on_epoch)
+    train_spectral(arrays, arrays.validation, fold, config, name, on_epoch)
 }
 
 #[cfg(test)]

@@ -42,6 +42,7 @@ impl Owned {
             wavelengths: &self.wavelengths,
             eval_cos: &self.eval_cos,
             swapped_eval_cos: swapped.then_some(&self.swapped[..]),
+            validation: self.validation,
         }
     }
 }
@@ -127,7 +128,6 @@ fn a_short_spectral_run_fits_the_spectrum_as_well_as_an_rgb_run_fits_rgb() {
     let owned = sampled(&config, spectral_phong);
     let outcome = train_spectral_arrays(
         &owned.arrays(false),
-        owned.validation,
         RglFold::AsMeasured,
         &config,
         "s",
@@ -205,8 +205,10 @@ fn bad_spectral_arrays_are_errors_naming_the_problem() {
     let owned = sampled(&config, spectral_phong);
     let train = |owned: &Owned, swapped: bool, fold: RglFold, validation: usize| {
         train_spectral_arrays(
-            &owned.arrays(swapped),
-            validation,
+            &SampledSpectra {
+                validation,
+                ..owned.arrays(swapped)
+            },
             fold,
             &TrainConfig {
                 max_epochs: 1,

@@ -190,6 +190,41 @@ int32_t nbrdf_train_from_arrays(const struct NbrdfTrainConfig *config,
                                 void *user,
                                 char **out_json);
 
+// `nbrdf_train_from_arrays` for spectral values: trains a spectral network (file format
+// version 3: 16 cubic B-spline coefficients over 360-830 nm) and stores its JSON text in
+// `*out_json` (free it with `nbrdf_train_string_free`).
+//
+// * `wavelengths`: `m` wavelengths in nm, finite, strictly increasing and overlapping
+//   360-830 nm; anything else is `NBRDF_TRAIN_ERROR_INVALID_ARGUMENT` naming the problem.
+// * `eval_cos`: `m n` floats, `eval_cos[j n + i]` = `f_r(view_i, light_i, wavelength_j)
+//   cos(theta_light)` (Mitsuba's `BSDF.eval` in a spectral variant); `swapped_eval_cos` the
+//   same with view and light swapped, read only by `NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN`.
+//   Negative values are clamped to 0; a value that is not finite is an error.
+// * The training target of a pair is the least-squares fit of the piecewise-linear spectrum
+//   through its values, negative coefficients clamped to 0; the loss is the RGB one per
+//   coefficient.
+// * Everything else as `nbrdf_train_from_arrays`.
+//
+// # Safety
+// Pointers are null where allowed above, or valid for the sizes above; strings are
+// NUL-terminated; `out_json` points to writable storage for one pointer.
+int32_t nbrdf_train_spectral_from_arrays(const struct NbrdfTrainConfig *config,
+                                         int32_t fold,
+                                         const float *view,
+                                         const float *light,
+                                         const float *wavelengths,
+                                         size_t m,
+                                         const float *eval_cos,
+                                         const float *swapped_eval_cos,
+                                         size_t n,
+                                         size_t n_validation,
+                                         const char *name,
+                                         const char *source,
+                                         const char *details_json,
+                                         NbrdfEpochCallback on_epoch,
+                                         void *user,
+                                         char **out_json);
+
 // Frees a string returned by this library; null is accepted and ignored.
 //
 // # Safety

@@ -18,11 +18,12 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 
 use glam::Vec3;
-use nbrdf_core::ops::distill::{self, DistillRequest};
+use nbrdf_core::ops::distill::{self, DistillArrays, DistillRequest};
 use nbrdf_core::source::RglFold;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::arrays::SampledArrays;
 use nbrdf_core::train::dataset::AngularSampling;
+use nbrdf_core::train::spectral::SampledSpectra;
 use nbrdf_core::train::{EpochStats, TrainConfig};
 use nbrdf_ffi_common::{array_len, check_pointer, input, Failure, FailureKind, FfiResult, Status};
 use std::ffi::{c_char, c_void, CStr, CString};
@@ -548,13 +549,13 @@ pub unsafe extern "C" fn nbrdf_train_from_arrays(
         // SAFETY: forwarded contract.
         let source_details = unsafe { read_details(details_json)? };
         let request = DistillRequest {
-            arrays: SampledArrays {
+            arrays: DistillArrays::Rgb(SampledArrays {
                 view: &arrays.view,
                 light: &arrays.light,
                 eval_cos: &arrays.eval_cos,
                 swapped_eval_cos: arrays.swapped_eval_cos.as_deref(),
                 validation: n_validation,
-            },
+            }),
             fold,
             name,
             source,
@@ -562,17 +563,173 @@ pub unsafe extern "C" fn nbrdf_train_from_arrays(
             config,
             threads,
         };
-        let callback = on_epoch.map(|function| Callback { function, user });
-        let (network, _) = distill::distill(&request, &mut move |e: &EpochStats| {
-            if let Some(callback) = &callback {
-                callback.call(e);
-            }
-        })?;
-        let text = CString::new(network.to_json_string())
-            .map_err(|_| Failure::invalid("the network's JSON holds a NUL byte"))?;
         // SAFETY: writable by contract.
-        unsafe { out_json.write(text.into_raw()) };
-        Ok(())
+        unsafe { distil_into(&request, on_epoch, user, out_json) }
+    })
+}
+
+/// Distils `request`, calling `on_epoch` with `user`, and stores the network's JSON text in
+/// `*out_json`.
+///
+/// # Safety
+/// `out_json` points to writable storage for one pointer.
+unsafe fn distil_into(
+    request: &DistillRequest<'_>,
+    on_epoch: NbrdfEpochCallback,
+    user: *mut c_void,
+    out_json: *mut *mut c_char,
+) -> FfiResult<()> {
+    let callback = on_epoch.map(|function| Callback { function, user });
+    let (network, _) = distill::distill(request, &mut move |e: &EpochStats| {
+        if let Some(callback) = &callback {
+            callback.call(e);
+        }
+    })?;
+    let text = CString::new(network.to_json_string())
+        .map_err(|_| Failure::invalid("the network's JSON holds a NUL byte"))?;
+    // SAFETY: writable by contract.
+    unsafe { out_json.write(text.into_raw()) };
+    Ok(())
+}
+
+/// The spectral arrays of `nbrdf_train_spectral_from_arrays`, copied out of the caller's buffers.
+struct OwnedSpectra {
+    view: Vec<Vec3>,
+    light: Vec<Vec3>,
+    wavelengths: Vec<f32>,
+    eval_cos: Vec<f32>,
+    swapped_eval_cos: Option<Vec<f32>>,
+}
+
+/// Reads `[view, light]` (planar `3 n` floats), `wavelengths` (`m`) and `[eval_cos,
+/// swapped_eval_cos]` (`m n` floats each, the swapped values only for the reciprocal mean).
+///
+/// # Safety
+/// Each pointer is null or valid for its size above (the swapped values under
+/// `RglFold::ReciprocalMean` only).
+unsafe fn read_spectra(
+    fold: RglFold,
+    [view, light]: [*const f32; 2],
+    (wavelengths, m): (*const f32, usize),
+    [eval_cos, swapped_eval_cos]: [*const f32; 2],
+    n: usize,
+) -> FfiResult<OwnedSpectra> {
+    let len = array_len(n, 3)?;
+    let values = array_len(n, m)?;
+    array_len(m, 1)?;
+    for (ptr, argument) in [
+        (view, "view"),
+        (light, "light"),
+        (wavelengths, "wavelengths"),
+        (eval_cos, "eval_cos"),
+    ] {
+        check_pointer(ptr, argument)?;
+    }
+    if m == 0 {
+        return Err(Failure::invalid(
+            "m = 0 wavelengths: a spectrum needs at least 2",
+        ));
+    }
+    let swapped_eval_cos = match fold {
+        RglFold::ReciprocalMean => {
+            check_pointer(swapped_eval_cos, "swapped_eval_cos")?;
+            // SAFETY: checked; `m n` floats by contract.
+            Some(unsafe { input(swapped_eval_cos, values) }.to_vec())
+        }
+        RglFold::AsMeasured => None,
+    };
+    // SAFETY: checked; the sizes above by contract.
+    unsafe {
+        Ok(OwnedSpectra {
+            view: planar_vectors(input(view, len)),
+            light: planar_vectors(input(light, len)),
+            wavelengths: input(wavelengths, m).to_vec(),
+            eval_cos: input(eval_cos, values).to_vec(),
+            swapped_eval_cos,
+        })
+    }
+}
+
+/// `nbrdf_train_from_arrays` for spectral values: trains a spectral network (file format
+/// version 3: 16 cubic B-spline coefficients over 360-830 nm) and stores its JSON text in
+/// `*out_json` (free it with `nbrdf_train_string_free`).
+///
+/// * `wavelengths`: `m` wavelengths in nm, finite, strictly increasing and overlapping
+///   360-830 nm; anything else is `NBRDF_TRAIN_ERROR_INVALID_ARGUMENT` naming the problem.
+/// * `eval_cos`: `m n` floats, `eval_cos[j n + i]` = `f_r(view_i, light_i, wavelength_j)
+///   cos(theta_light)` (Mitsuba's `BSDF.eval` in a spectral variant); `swapped_eval_cos` the
+///   same with view and light swapped, read only by `NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN`.
+///   Negative values are clamped to 0; a value that is not finite is an error.
+/// * The training target of a pair is the least-squares fit of the piecewise-linear spectrum
+///   through its values, negative coefficients clamped to 0; the loss is the RGB one per
+///   coefficient.
+/// * Everything else as `nbrdf_train_from_arrays`.
+///
+/// # Safety
+/// Pointers are null where allowed above, or valid for the sizes above; strings are
+/// NUL-terminated; `out_json` points to writable storage for one pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_train_spectral_from_arrays(
+    config: *const NbrdfTrainConfig,
+    fold: i32,
+    view: *const f32,
+    light: *const f32,
+    wavelengths: *const f32,
+    m: usize,
+    eval_cos: *const f32,
+    swapped_eval_cos: *const f32,
+    n: usize,
+    n_validation: usize,
+    name: *const c_char,
+    source: *const c_char,
+    details_json: *const c_char,
+    on_epoch: NbrdfEpochCallback,
+    user: *mut c_void,
+    out_json: *mut *mut c_char,
+) -> i32 {
+    guard("nbrdf_train_spectral_from_arrays", || {
+        check_pointer(out_json, "out_json")?;
+        // SAFETY: writable by contract; null until a network is made.
+        unsafe { out_json.write(std::ptr::null_mut()) };
+        // SAFETY: forwarded contract.
+        let (config, threads) = unsafe { read_config(config)? };
+        let fold = read_fold(fold)?;
+        // SAFETY: forwarded contract.
+        let spectra = unsafe {
+            read_spectra(
+                fold,
+                [view, light],
+                (wavelengths, m),
+                [eval_cos, swapped_eval_cos],
+                n,
+            )?
+        };
+        // SAFETY: forwarded contract.
+        let (name, source, source_details) = unsafe {
+            (
+                read_str(name, "name")?,
+                read_str(source, "source")?,
+                read_details(details_json)?,
+            )
+        };
+        let request = DistillRequest {
+            arrays: DistillArrays::Spectral(SampledSpectra {
+                view: &spectra.view,
+                light: &spectra.light,
+                wavelengths: &spectra.wavelengths,
+                eval_cos: &spectra.eval_cos,
+                swapped_eval_cos: spectra.swapped_eval_cos.as_deref(),
+                validation: n_validation,
+            }),
+            fold,
+            name,
+            source,
+            source_details,
+            config,
+            threads,
+        };
+        // SAFETY: writable by contract.
+        unsafe { distil_into(&request, on_epoch, user, out_json) }
     })
 }
 

@@ -27,6 +27,7 @@ fn header_declares_the_contract() {
             "int32_t nbrdf_train_config_default(",
             "int32_t nbrdf_train_directions(",
             "int32_t nbrdf_train_from_arrays(",
+            "int32_t nbrdf_train_spectral_from_arrays(",
             "void nbrdf_train_string_free(",
         ],
     );
