@@ -103,32 +103,6 @@ def srgb_matrix_oracle(count: int = COUNT, step: float = 0.01) -> np.ndarray:
     return to_srgb @ xyz
 
 
-def _library_has_spectral_networks() -> bool:
-    from nbrdf_mitsuba import _native
-
-    return hasattr(_native.lib, "nbrdf_material_eval_spectral")
-
-
-#: The tests through the library need its version-3 support (branch issue31-specnet-core); they run
-#: as soon as the library exports nbrdf_material_eval_spectral.
-needs_library = pytest.mark.skipif(not _library_has_spectral_networks(),
-                                   reason="libnbrdf_ffi has no spectral networks yet (nbrdf_material_eval_spectral "
-                                          "missing: merge issue31-specnet-core)")
-
-
-def _trainer_has_spectral_networks() -> bool:
-    try:
-        from nbrdf_mitsuba import _train_native
-    except ImportError:
-        return False
-    return hasattr(_train_native.lib, "nbrdf_train_spectral_from_arrays")
-
-
-needs_trainer = pytest.mark.skipif(not _trainer_has_spectral_networks(),
-                                   reason="libnbrdf_train cannot train spectral networks yet "
-                                          "(nbrdf_train_spectral_from_arrays missing, issue31-specnet-core)")
-
-
 @pytest.fixture(scope="module")
 def spectral_file(tmp_path_factory) -> Path:
     return write_spectral_network(tmp_path_factory.mktemp("specnet") / "s.nbrdf.json")
@@ -218,7 +192,6 @@ def _close(got, expected, rtol, what):
     assert worst <= rtol, f"{what}: worst relative error {worst:.2e}"
 
 
-@needs_library
 def test_twin_matches_the_c_abi(spectral_file, restore_variant):
     """The Dr.Jit path (the network from nbrdf_material_network, jit.spectral_value) against
     nbrdf_material_eval_spectral on random pairs and wavelengths, bad wavelengths included."""
@@ -242,7 +215,6 @@ def test_twin_matches_the_c_abi(spectral_file, restore_variant):
            "C ABI vs float64 oracle")
 
 
-@needs_library
 def test_the_librarys_srgb_matrix_is_the_cie_projection(spectral_file, restore_variant):
     """nbrdf_material_spectral_srgb against the projection integrated here from Mitsuba's tables;
     a constant spectrum of 1 (all coefficients 1) is D65's white, (1, 1, 1) in linear sRGB."""
@@ -254,7 +226,6 @@ def test_the_librarys_srgb_matrix_is_the_cie_projection(spectral_file, restore_v
     np.testing.assert_allclose(oracle.sum(axis=1), 1.0, atol=2e-3)
 
 
-@needs_library
 @pytest.mark.parametrize("backend", ["rust", "jit"])
 @pytest.mark.parametrize("variant", ["scalar_spectral", "llvm_ad_spectral", "llvm_ad_spectral_polarized"])
 def test_spectral_variants_evaluate_the_spectrum(variant, backend, spectral_file, restore_variant):
@@ -281,7 +252,6 @@ def test_spectral_variants_evaluate_the_spectrum(variant, backend, spectral_file
         np.testing.assert_array_equal(got[key], rgb[key], err_msg=key)
 
 
-@needs_library
 @pytest.mark.parametrize("backend", ["rust", "jit"])
 @pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_rgb", "scalar_mono", "llvm_ad_mono"])
 def test_rgb_and_mono_variants_render_the_projection(variant, backend, spectral_file, restore_variant):
@@ -299,7 +269,6 @@ def test_rgb_and_mono_variants_render_the_projection(variant, backend, spectral_
     assert np.all(np.isfinite(got["sample.weight"])) and np.max(got["sample.weight"]) > 0
 
 
-@needs_library
 @pytest.mark.parametrize("backend", ["rust", "jit"])
 @pytest.mark.parametrize("variant", ["scalar_spectral", "llvm_ad_spectral"])
 def test_bad_wavelengths_give_zero(variant, backend, spectral_file, restore_variant):
@@ -319,7 +288,6 @@ def test_bad_wavelengths_give_zero(variant, backend, spectral_file, restore_vari
         assert np.max(reference[key][2]) > 0, key
 
 
-@needs_library
 @pytest.mark.parametrize("backend", ["rust", "jit"])
 def test_chi2_in_a_spectral_variant(backend, spectral_file, restore_variant):
     """Mitsuba's chi^2 test of sample() against pdf() in llvm_ad_spectral."""
@@ -337,8 +305,6 @@ def test_chi2_in_a_spectral_variant(backend, spectral_file, restore_variant):
             f"{backend} at theta_i = {theta}: {chi2.messages}")
 
 
-@needs_library
-@needs_trainer
 def test_distill_in_a_spectral_variant_writes_a_version_3_network(tmp_path, capsys, restore_variant):
     """A tiny budget: the file is version 3 with 16 coefficients, loads, and renders gold-like
     colours (red above blue) in llvm_ad_rgb."""
@@ -395,8 +361,6 @@ def test_distill_evaluates_the_source_at_each_wavelength(restore_variant):
     assert values["scalar_spectral"][5].sum() > 1.5 * values["scalar_spectral"][1].sum() > 0
 
 
-@needs_library
-@needs_trainer
 def test_spectral_report_quick(tmp_path, restore_variant):
     """``python -m nbrdf_tools.spectral_report --quick`` on one material: the page opens with its
     command, states the weights, has a row per network, and the figure is written."""
@@ -411,3 +375,35 @@ def test_spectral_report_quick(tmp_path, restore_variant):
     assert "961 (6-21-21-16)" in text and "675 (6-21-21-3): 1.42x" in text
     assert text.count("| Cu | `llvm_ad_") == 4
     assert figure.stat().st_size > 10_000
+
+
+def test_train_spectral_from_arrays_learns_a_spectral_lambertian(tmp_path):
+    """The Python entry point on a closed form: a spectral Lambertian (albedo rising from 0.1 at
+    360 nm to 0.7 at 830 nm, sampled every 20 nm) gives a version-3 network whose per-wavelength
+    values, through the C ABI, are within 15 % of albedo / pi cos; bad shapes and wavelengths are
+    refused, the latter by the library naming the problem."""
+    from nbrdf_mitsuba import _native, _train_native as native
+
+    config = native.default_config()
+    config.samples, config.max_epochs, config.hidden, config.batch, config.threads = 3000, 30, 8, 128, 1
+    view, light, n_validation = native.sample_directions(config)
+    wavelengths = np.arange(360.0, 831.0, 20.0)
+    albedo = lambda nm: 0.1 + 0.6 * (nm - 360.0) / 470.0  # noqa: E731
+    values = albedo(wavelengths)[:, None] / np.pi * light[2][None, :]
+    text = native.train_spectral_from_arrays(config, view, light, wavelengths, values, n_validation,
+                                             name="lambert", source="closed form")
+    document = json.loads(text)
+    assert document["version"] == 3 and document["layers"][-1]["outputs"] == COUNT
+    file = tmp_path / "lambert.nbrdf.json"
+    file.write_text(text)
+    v, lt = random_pairs(50, 4, min_cos=0.05)
+    probe = np.array([410.0, 555.0, 705.0])
+    got = _native.Material(file).eval_spectral(v, lt, np.repeat(probe, 50).reshape(3, 50))
+    want = albedo(probe)[:, None] / np.pi * lt[2][None, :]
+    np.testing.assert_allclose(got, want, rtol=0.15)
+    with pytest.raises(ValueError, match="wavelength-major"):
+        native.train_spectral_from_arrays(config, view, light, wavelengths, values.T, n_validation,
+                                          name="x", source="x")
+    with pytest.raises(native.TrainError, match="strictly increasing"):
+        native.train_spectral_from_arrays(config, view, light, wavelengths[::-1], values, n_validation,
+                                          name="x", source="x")

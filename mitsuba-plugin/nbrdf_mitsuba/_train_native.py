@@ -117,17 +117,57 @@ def train_from_arrays(config, view: np.ndarray, light: np.ndarray, eval_cos: np.
         if swapped_array.shape != (3, n):
             raise ValueError(f"expected planar (3, {n}) swapped values, got shape {swapped_array.shape}")
         swapped = ffi.from_buffer("float[]", swapped_array)
+    text = _call_for_json(lambda callback, out: lib.nbrdf_train_from_arrays(
+        config, FOLDS[fold], *(ffi.from_buffer("float[]", a) for a in arrays), swapped, n, n_validation,
+        name.encode(), source.encode(), _details_text(details), callback, ffi.NULL, out), on_epoch)
+    return text
+
+
+def train_spectral_from_arrays(config, view: np.ndarray, light: np.ndarray, wavelengths, eval_cos: np.ndarray,
+                               n_validation: int, name: str, source: str, details: dict | None = None,
+                               swapped_eval_cos: np.ndarray | None = None, fold: str = "as-measured",
+                               on_epoch=None) -> str:
+    """The JSON text of a spectral network (file format version 3) trained on planar (3, n)
+    ``view`` and ``light`` and (m, n) ``eval_cos`` at the m ``wavelengths`` (nm): row j holds
+    the values at wavelength j (see ``nbrdf_train_spectral_from_arrays`` in nbrdf_train.h)."""
+    directions = [np.ascontiguousarray(a, dtype=np.float32) for a in (view, light)]
+    n = directions[0].shape[1] if directions[0].ndim == 2 else -1
+    if any(a.shape != (3, n) for a in directions):
+        raise ValueError(f"expected planar (3, n) directions, got shapes {[a.shape for a in directions]}")
+    lambdas = np.ascontiguousarray(np.asarray(wavelengths, dtype=np.float32).reshape(-1))
+    m = len(lambdas)
+    values = np.ascontiguousarray(eval_cos, dtype=np.float32)
+    if values.shape != (m, n):
+        raise ValueError(f"expected ({m}, {n}) values (wavelength-major), got shape {values.shape}")
+    swapped = ffi.NULL
+    if swapped_eval_cos is not None:
+        swapped_array = np.ascontiguousarray(swapped_eval_cos, dtype=np.float32)
+        if swapped_array.shape != (m, n):
+            raise ValueError(f"expected ({m}, {n}) swapped values, got shape {swapped_array.shape}")
+        swapped = ffi.from_buffer("float[]", swapped_array)
+    # cffi refuses a zero-length buffer; the library refuses m = 0 itself, naming it.
+    lambdas_ptr = ffi.from_buffer("float[]", lambdas) if m else ffi.new("float[1]")
+    values_ptr = ffi.from_buffer("float[]", values) if values.size else ffi.new("float[1]")
+    return _call_for_json(lambda callback, out: lib.nbrdf_train_spectral_from_arrays(
+        config, FOLDS[fold], *(ffi.from_buffer("float[]", a) for a in directions), lambdas_ptr, m, values_ptr,
+        swapped, n, n_validation, name.encode(), source.encode(), _details_text(details), callback, ffi.NULL, out),
+        on_epoch)
+
+
+def _details_text(details: dict | None):
+    return json.dumps(details).encode() if details is not None else ffi.NULL
+
+
+def _call_for_json(call, on_epoch) -> str:
+    """Runs ``call(callback, out)`` (a trainer entry point writing a string to ``*out``) with
+    ``on_epoch(stats)`` as the epoch callback; returns the string, freed in the library."""
     callback = ffi.NULL
     if on_epoch is not None:
         @ffi.callback("void(void *, const NbrdfEpochStats *)")
         def callback(_user, stats):
             on_epoch(stats)
     out = ffi.new("char **")
-    details_text = json.dumps(details).encode() if details is not None else ffi.NULL
-    status = lib.nbrdf_train_from_arrays(
-        config, FOLDS[fold], *(ffi.from_buffer("float[]", a) for a in arrays), swapped, n, n_validation,
-        name.encode(), source.encode(), details_text, callback, ffi.NULL, out)
-    check(status)
+    check(call(callback, out))
     try:
         return ffi.string(out[0]).decode()
     finally:

@@ -318,9 +318,6 @@ def distill(args) -> dict:
         "anisotropy": anisotropy,
     }
     train = native.train_from_arrays
-    if mi.is_spectral and not hasattr(native, "train_spectral_from_arrays"):
-        raise DistillError(f"variant '{variant}': this libnbrdf_train cannot train spectral networks "
-                           "(nbrdf_train_spectral_from_arrays is missing); use an *_rgb variant")
     if mi.is_spectral:
         details["wavelengths_nm"] = [float(w) for w in WAVELENGTHS]
 
