@@ -162,7 +162,10 @@ def train_rgb_from_measurement(source: Path, output: Path, extra: list[str]) -> 
         raise SystemExit(f"spectral_report: {' '.join(command)} failed: {result.stderr.strip()}")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - children.ru_utime) + (after.ru_stime - children.ru_stime)
-    return {**_document_summary(output), "seconds": time.perf_counter() - start, "cpu_seconds": cpu,
+    summary = _document_summary(output)
+    if summary["version"] == 3:
+        raise SystemExit(f"spectral_report: {' '.join(command)} wrote a spectral network, not an RGB one")
+    return {**summary, "seconds": time.perf_counter() - start, "cpu_seconds": cpu,
             "how": " ".join(["nbrdf train", *kind])}
 
 
@@ -243,18 +246,25 @@ def sphere_scene(bsdf: dict, size: int) -> dict:
     }
 
 
+#: The source rendered again at another seed: its error against the source is the Monte Carlo
+#: noise floor of the image metrics.
+NOISE = "source-seed1"
+
+
 def render_spheres(bsdfs: dict, size: int, spp: int, variant: str, folder: Path, key: str) -> dict:
     """Renders each BSDF's sphere in ``variant`` (after a 1-spp render that compiles the kernels),
-    writes ``folder/KEY-VARIANT-NAME.exr``; returns name -> [path, wall seconds, CPU seconds]."""
+    and the source's again at seed 1 (:data:`NOISE`); writes ``folder/KEY-VARIANT-NAME.exr``;
+    returns name -> [path, wall seconds, CPU seconds]."""
     mi.set_variant(variant)
     out = {}
     for name, spec in bsdfs.items():
         scene = mi.load_dict(sphere_scene(spec, size))
         warm_up(scene)
-        cpu = time.process_time()
-        image, seconds = timed_render(scene, spp)
-        path = write_exr(folder / f"{key}-{variant}-{name}.exr", image)
-        out[name] = [str(path), seconds, time.process_time() - cpu]
+        for label, seed in ((name, 0), *(((NOISE, 1),) if name == "source" else ())):
+            cpu = time.process_time()
+            image, seconds = timed_render(scene, spp, seed=seed)
+            path = write_exr(folder / f"{key}-{variant}-{label}.exr", image)
+            out[label] = [str(path), seconds, time.process_time() - cpu]
     return out
 
 
@@ -279,7 +289,8 @@ def measure(source: Source, args, steps: Steps) -> dict:
         renders[variant] = steps.run(
             f"{source.key}-{variant}-images",
             lambda: render_spheres(bsdfs, args.size, args.spp, variant, args.work, source.key),  # noqa: B023
-            tuple(args.work / f"{source.key}-{variant}-{name}.exr" for name in bsdfs))
+            tuple(args.work / f"{source.key}-{variant}-{name}.exr"
+                  for name in [*bsdfs, *([NOISE] if "source" in bsdfs else [])]))
         images[variant] = {name: read_exr(Path(found[0])) for name, found in renders[variant].items()}
     interpolation = None
     if not source.rgl:
@@ -370,6 +381,15 @@ def _introduction(args, results: list[dict], figure_path: Path, out: Path) -> li
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, shared with other jobs (load average "
         f"{os.getloadavg()[0]:.1f} at the end; times indicative).", "",
         f"![spheres and per-wavelength errors]({os.path.relpath(figure_path, out.parent)})", "",
+        "Reading the tables: the per-wavelength log error compares the BSDFs themselves, without noise. The "
+        "networks' sphere images are noisier than the source's (they sample their cosine lobe), so SSIM and the "
+        "tone-mapped RMSE mostly measure that noise (compare the noise floor) and come out alike for both "
+        "networks; HDR-FLIP separates them. Mitsuba's `roughconductor` is not the same material in both variants: "
+        "in RGB variants its Fresnel term takes the index of refraction converted to RGB, not the sRGB projection "
+        "of its spectral reflectance. A spectral network (whose RGB value is that projection) is therefore held in "
+        "`llvm_ad_rgb` to a reference it did not learn, as the RGB network (uplifted) is in `llvm_ad_spectral`: "
+        "each network is measured against its own source in its own variant, and against the other variant's "
+        "for what a user switching variants sees.", "",
     ]
     return lines
 
@@ -398,16 +418,22 @@ def _image_table(args, results: list[dict]) -> list[str]:
              f"{args.size} x {args.size} pixels, {args.spp} spp, a directional light (D65) and a dim constant "
              "environment; errors against the source rendered in the same variant at the same seed "
              "(`nbrdf_tools.metrics`: RMSE of the tone-mapped images, SSIM, HDR-FLIP, relative RMSE of the linear "
-             "images); render seconds after a 1-spp render that compiles the kernels (wall / CPU).", "",
-             "| source | variant | network | RMSE (tone-mapped) | SSIM | HDR-FLIP | relative RMSE | render s |",
-             "|---|---|---|---:|---:|---:|---:|---:|"]
+             "images); render seconds after a 1-spp render that compiles the kernels (wall / CPU). The networks "
+             "sample their cosine lobe (distill stores no sampling lobe), the source its own distribution, so "
+             "their noise differs: *noise floor* is the source against itself rendered at another seed "
+             "(HDR-FLIP / SSIM), the part of each error that is Monte Carlo noise.", "",
+             "| source | variant | network | RMSE (tone-mapped) | SSIM | HDR-FLIP | relative RMSE | noise floor | "
+             "render s |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|"]
     for r in results:
         for variant in VARIANTS:
             for name, label in (("spectral", "spectral"), ("rgb", "RGB")):
                 e = r["image_errors"][variant].get(name)
                 _, wall, cpu = r["renders"][variant][name]
+                noise = r["image_errors"][variant].get(NOISE)
                 cells = ([f"{e['rmse_tonemapped']:.4f}", f"{e['ssim']:.4f}", f"{e['flip_hdr']:.4f}",
-                          f"{e['relative_rmse']:.4f}"] if e else ["-"] * 4)
+                          f"{e['relative_rmse']:.4f}", f"{noise['flip_hdr']:.4f} / {noise['ssim']:.4f}"]
+                         if e else ["-"] * 5)
                 lines.append(f"| {r['source'].label} | `{variant}` | {label} | " + " | ".join(cells)
                              + f" | {wall:.2f} / {cpu:.2f} |")
     return lines
@@ -485,7 +511,9 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
 
 def settings_of(args) -> dict:
     """What a step's result depends on (a record made with other settings is not reused)."""
-    return {name: getattr(args, name) for name in ("alpha", "samples", "epochs", "size", "spp", "pairs", "quick")}
+    # "record": the layout of the records; raised when a step's result gains a field.
+    return {"record": 2, **{name: getattr(args, name)
+                            for name in ("alpha", "samples", "epochs", "size", "spp", "pairs", "quick")}}
 
 
 def main(argv: list[str] | None = None) -> int:
