@@ -454,7 +454,7 @@ mod train_from_source {
     use super::*;
     use nbrdf_core::coords::{to_rusinkiewicz, RusinkiewiczAngles};
     use nbrdf_core::merl::PhiFold;
-    use nbrdf_core::ops::train_network::{train_network, TrainRequest};
+    use nbrdf_core::ops::train_network::{train_network, NetworkKind, TrainRequest};
     use nbrdf_core::source::{rgl_target, RglFold, TrainingSource, GRAZING_COS};
     use nbrdf_core::train::{Anisotropy, TrainConfig};
     use nbrdf_core::Nbrdf;
@@ -485,6 +485,7 @@ mod train_from_source {
                 ..TrainConfig::fixed_budget()
             },
             anisotropy: Anisotropy::Auto,
+            network_kind: NetworkKind::Auto,
             scale_samples: false,
             threads: None,
         };
@@ -580,6 +581,7 @@ mod train_from_source {
                     ..TrainConfig::fixed_budget()
                 },
                 anisotropy,
+                network_kind: NetworkKind::Auto,
                 scale_samples: true,
                 threads: None,
             };

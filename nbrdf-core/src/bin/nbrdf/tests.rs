@@ -3,6 +3,7 @@
 use super::train_cmd::SamplingArg;
 use super::*;
 use clap::CommandFactory;
+use nbrdf_core::ops::train_network::NetworkKind;
 use nbrdf_core::train::Anisotropy;
 
 #[test]
@@ -103,6 +104,24 @@ fn train_and_fit_phong_arguments_parse() {
         assert_eq!(Anisotropy::from(a.anisotropy), want);
     }
     assert!(Cli::try_parse_from(["nbrdf", "train", "t", "--anisotropy", "maybe"]).is_err());
+    assert_eq!(
+        NetworkKind::from(args.output_kind),
+        NetworkKind::Auto,
+        "a spectral source makes a spectral network unless told otherwise"
+    );
+    for (flag, want) in [
+        ("rgb", NetworkKind::Rgb),
+        ("spectral", NetworkKind::Spectral),
+    ] {
+        let Ok(Cli {
+            command: Command::Train(a),
+        }) = Cli::try_parse_from(["nbrdf", "train", "t.bsdf", "--output-kind", flag])
+        else {
+            panic!("train --output-kind {flag} must parse")
+        };
+        assert_eq!(NetworkKind::from(a.output_kind), want);
+    }
+    assert!(Cli::try_parse_from(["nbrdf", "train", "t", "--output-kind", "xyz"]).is_err());
     let config = train_cmd::train_config(&args);
     assert_eq!(
         (

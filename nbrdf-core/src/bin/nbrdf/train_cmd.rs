@@ -3,7 +3,7 @@
 use super::{count_in, emit, progress, PhiFoldArg};
 use clap::{Args, ValueEnum};
 use nbrdf_core::ops::limits::{MAX_BATCH, MAX_EPOCHS, MAX_HIDDEN, MAX_SAMPLES};
-use nbrdf_core::ops::train_network::{train_network, TrainRequest};
+use nbrdf_core::ops::train_network::{train_network, NetworkKind, TrainRequest};
 use nbrdf_core::source::RglFold;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::AngularSampling;
@@ -50,6 +50,27 @@ impl From<AnisotropyArg> for Anisotropy {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+pub enum OutputKindArg {
+    /// Spectral for a spectral measurement (*_spec.bsdf), RGB otherwise.
+    Auto,
+    /// An RGB network; of a spectral measurement, its linear sRGB projection under D65.
+    Rgb,
+    /// A spectral network (format version 3: 16 B-spline coefficients over 360-830 nm); only
+    /// from a spectral measurement.
+    Spectral,
+}
+
+impl From<OutputKindArg> for NetworkKind {
+    fn from(k: OutputKindArg) -> Self {
+        match k {
+            OutputKindArg::Auto => NetworkKind::Auto,
+            OutputKindArg::Rgb => NetworkKind::Rgb,
+            OutputKindArg::Spectral => NetworkKind::Spectral,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 pub enum LrScheduleArg {
     /// The learning rate as given throughout (with drops on plateaus, --lr-decays).
     Constant,
@@ -87,8 +108,8 @@ impl From<RglFoldArg> for RglFold {
 pub struct TrainArgs {
     /// What to learn: a MERL-format table or an RGL .bsdf measurement (told apart by content).
     /// A measurement is learnt as Mitsuba's `measured` plugin evaluates it, at the trainer's
-    /// sample directions; a spectral one (*_spec.bsdf) through its linear sRGB projection under
-    /// D65 (an RGB network).
+    /// sample directions; a spectral one (*_spec.bsdf) at its own wavelengths (a spectral
+    /// network; --output-kind rgb learns its linear sRGB projection under D65 instead).
     #[arg(value_name = "TABLE.binary|MEASUREMENT.bsdf")]
     pub table: PathBuf,
     /// Where to write the network; defaults to TABLE's name with .nbrdf.json in the current
@@ -115,6 +136,10 @@ pub struct TrainArgs {
     /// measurements give anisotropic networks; MERL tables are isotropic).
     #[arg(long, value_enum, default_value_t = AnisotropyArg::Auto)]
     pub anisotropy: AnisotropyArg,
+    /// RGB or spectral network: auto makes a spectral one (format version 3) of a spectral
+    /// measurement, an RGB one otherwise; spectral of an RGB source is an error.
+    #[arg(long, value_enum, default_value_t = OutputKindArg::Auto)]
+    pub output_kind: OutputKindArg,
     /// Maximum number of epochs (at most 1e6) [default: 300; 100 with --fixed-budget].
     #[arg(long, value_parser = count_in::<1, MAX_EPOCHS>)]
     pub epochs: Option<usize>,
@@ -219,6 +244,7 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         name: args.name.clone(),
         config,
         anisotropy: args.anisotropy.into(),
+        network_kind: args.output_kind.into(),
         scale_samples: args.samples.is_none(),
         threads: args.threads,
     };
