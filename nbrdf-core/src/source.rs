@@ -12,9 +12,10 @@
 //!   The reciprocal mean's swapped term carries `cos_light / cos_view`, which grows without bound
 //!   at grazing views; samples with either cosine below [`GRAZING_COS`] are dropped there.
 //! * Out-of-gamut RGB values (slightly negative) are clamped to 0, as the `Brdf` impl does.
-//! * A spectral measurement (`*_spec.bsdf`) is learnt through its linear sRGB projection under
-//!   D65 (`RglMeasurement::eval` of such a file; docs/design.md section 9): the network is an
-//!   RGB network, as for an RGB file.
+//! * A spectral measurement (`*_spec.bsdf`) gives a spectral network by default, learnt from its
+//!   spectra (`crate::ops::train_network`, `crate::train::spectral`); [`rgl_target`] of such a
+//!   file is its linear sRGB projection under D65 (`RglMeasurement::eval`; docs/design.md
+//!   section 9), what an RGB network of it (`--output-kind rgb`) learns.
 
 use crate::coords::{from_rusinkiewicz, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
@@ -89,8 +90,7 @@ impl TrainingSource {
         }
     }
 
-    /// `"merl-table"`, `"rgl-measurement"` or `"rgl-spectral-measurement"` (learnt through its
-    /// sRGB projection), for provenance.
+    /// `"merl-table"`, `"rgl-measurement"` or `"rgl-spectral-measurement"`, for provenance.
     pub fn kind(&self) -> &'static str {
         match self {
             TrainingSource::Table { .. } => "merl-table",
