@@ -224,3 +224,52 @@ def test_snapshots_of_a_long_run_are_the_shorter_runs(setup, tmp_path):
     short = json.loads((tmp_path / "short.json").read_text())
     assert E.Analytic("roughplastic").result(seen[1][2]) == short
     assert E.Analytic("roughplastic").result(seen[3][2]) == json.loads((tmp_path / "long.json").read_text())
+
+
+def test_prior_schedule_holds_out_a_view_only_where_it_can():
+    from nbrdf_mitsuba.estimate import FALLBACK_STRENGTH, PRIOR_STRENGTHS, schedule
+
+    plan = schedule(100, 3, None)
+    assert (plan["code"], plan["weights"], plan["strengths"], plan["candidate"]) == (40, 60, PRIOR_STRENGTHS, 30)
+    assert schedule(100, 1, None)["strengths"] == (FALLBACK_STRENGTH,)  # nothing to hold out
+    assert schedule(1, 3, None)["strengths"] == (FALLBACK_STRENGTH,)  # no weight step to judge
+    fixed = schedule(100, 3, 0.5)
+    assert fixed["strengths"] == (0.5,) and fixed["candidate"] == 0
+
+
+def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+    """The code and the candidates see the training views but the last; the last alone judges
+    them, the lowest held-out loss wins, the refit uses every view, and a seed repeats it."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    rendered, judged = [], []
+    render_all, held_out_loss = E.Estimator.render_all, E.Estimator.held_out_loss
+
+    def spy_render(self, step, spp=None):
+        rendered.append(tuple(self.views))
+        return render_all(self, step, spp)
+
+    def spy_judge(self, weights, view):
+        judged.append(view)
+        return held_out_loss(self, weights, view)
+
+    monkeypatch.setattr(E.Estimator, "render_all", spy_render)
+    monkeypatch.setattr(E.Estimator, "held_out_loss", spy_judge)
+    outs = [tmp_path / f"prior{k}.nbrdf.json" for k in range(2)]
+    for out in outs:
+        rendered.clear()
+        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    provenance = json.loads(outs[0].read_text())["provenance"]
+    losses = {float(k): v for k, v in provenance["held_out_losses"].items()}
+    assert sorted(losses) == sorted(E.PRIOR_STRENGTHS) and all(math.isfinite(v) for v in losses.values())
+    # The first step from the decoded weights is the same for every strength (no pull there yet):
+    # two candidate steps make them differ; ties would go to the first, the tightest.
+    assert len(set(losses.values())) > 1, losses
+    assert provenance["prior_weight"] == min(E.PRIOR_STRENGTHS, key=losses.get)
+    assert judged == [1] * 6  # the last training view, once per candidate and run
+    # Screening (49 starts), code (2 steps), candidates (3 x 2 steps) on view 0; the refit on both.
+    assert rendered == [(0,)] * (49 + 2 + 6) + [(0, 1)] * 4, rendered
+    first, second = (json.loads(out.read_text()) for out in outs)
+    assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
+        second["provenance"]["held_out_losses"]

@@ -19,6 +19,12 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     before = stored.stat().st_mtime_ns
     assert main(argv) == 0
     assert stored.stat().st_mtime_ns == before  # resumed, not re-estimated
+    assert "| mitsuba-roughplastic | nbrdf |" in out.read_text() and "prior strength" in out.read_text()
+    # --stored-only estimates nothing: a model never run is listed as missing.
+    assert main(["--quick", "--work", str(work), "--models", "nbrdf,principled", "--out", str(out),
+                 "--stored-only"]) == 0
+    assert "Not run (missing from this table): mitsuba-roughplastic principled" in out.read_text()
+    assert not (work / "mitsuba-roughplastic" / "principled.result.json").exists()
 
 
 def test_merl_truths_are_unseen_by_the_prior():

@@ -11,8 +11,10 @@ images, and measures each estimate on a novel view under a novel light (tone-map
 HDR-FLIP of :mod:`nbrdf_tools.metrics`) and in BRDF space against the truth (the mean log error
 of :func:`nbrdf_tools.compare_materials.log_error`, uniform directions). Each (material, model)
 is stored in ``WORK/MATERIAL/MODEL.result.json`` as it finishes; a rerun skips those done
-(resumable). Writes the Markdown table per material and model, the seconds of each estimate and
-a figure (truth and every estimate at the novel view).
+(resumable; ``--stored-only`` tabulates the stored results alone and lists the cases not run).
+Writes the Markdown table per material and model, the seconds of each estimate, the prior's
+strength each ``nbrdf`` estimate chose by its held-out training view, and a figure (truth and
+every estimate at the novel view).
 """
 
 from __future__ import annotations
@@ -41,7 +43,9 @@ MITSUBA_TRUTH = {"type": "roughplastic", "alpha": 0.15,
 VIEWS = ["0, 0, 4", "3, 1, 2.5", "-2.5, 2, 2.5", "0.5, -1.5, 3.6"]
 LIGHTS = [("3, 3, 4", 40.0), ("-4, 2, 1", 25.0)]
 NOVEL_VIEW, NOVEL_LIGHT = "-3, -0.5, 2.8", ("1, 4, 2", 40.0)
-FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "spp": 8, "steps": 30}
+#: 100 steps: principled's novel-view error on colodur_napoli_4f still fell from 60 to 80 steps
+#: and had flattened by 100 (docs/results/estimation.md, convergence).
+FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "spp": 8, "steps": 100}
 QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "spp": 2, "steps": 3}
 
 
@@ -239,6 +243,22 @@ def table(results: list[dict], models: list[str]) -> list[str]:
     return lines
 
 
+def chosen_strengths(results: list[dict], work: Path) -> list[str]:
+    """Per ``nbrdf`` estimate: the prior strength its held-out training view chose, and the
+    held-out losses of the candidates (from the network file's provenance)."""
+    lines = []
+    for r in results:
+        path = work / r["material"] / "nbrdf.nbrdf.json"
+        if r["model"] != "nbrdf" or not path.is_file():
+            continue
+        provenance = json.loads(path.read_text()).get("provenance", {})
+        losses = provenance.get("held_out_losses") or {}
+        text = ", ".join(f"{k}: {v:.4g}" for k, v in losses.items())
+        lines.append(f"* {r['material']}: prior strength {provenance.get('prior_weight')}"
+                     + (f" (held-out view loss {text})" if text else ""))
+    return lines
+
+
 def summary(results: list[dict]) -> list[str]:
     """Per material: the model with the lowest novel-view RMSE, and nbrdf's over the best analytic's."""
     lines, ratios = [], []
@@ -271,6 +291,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
     p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
+    p.add_argument("--stored-only", action="store_true",
+                   help="estimate nothing: tabulate the results stored in WORK, list the cases missing")
     return p
 
 
@@ -293,10 +315,13 @@ def main(argv: list[str] | None = None) -> int:
     work = args.work
     work.mkdir(parents=True, exist_ok=True)
     chosen = materials(work, args.quick, args.materials.split(",") if args.materials else None)
-    results = []
+    results, missing = [], []
     for name, material in chosen.items():
         prepare(name, material, settings, work)
         for model in models:
+            if args.stored_only and not (work / name / f"{model}.result.json").is_file():
+                missing.append(f"{name} {model}")
+                continue
             result = run_case(name, material, model, settings, work)
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
@@ -315,6 +340,9 @@ def main(argv: list[str] | None = None) -> int:
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
              *table(results, models), "", *summary(results), "",
+             *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
+             "The prior's strength (the weight phase's pull toward the decoded weights), chosen per estimate "
+             "by its last training view, held out:", "", *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
              "estimate of a run includes compiling Mitsuba's kernels for the network (cached afterwards). Novel "
