@@ -182,7 +182,22 @@ def make_networks(source: Source, args, steps: Steps) -> tuple[dict, dict]:
     else:
         make_rgb = lambda: distil(source.path, paths["rgb"], RGB, extra)  # noqa: E731
     runs["rgb"] = steps.run(f"{source.key}-rgb-network", make_rgb, (paths["rgb"],))
+    for kind, path in paths.items():
+        runs[kind]["sampling"] = steps.run(f"{source.key}-{kind}-sampling", lambda: fit_sampling(path),  # noqa: B023
+                                           (path,))
     return paths, runs
+
+
+def fit_sampling(network: Path) -> dict:
+    """``nbrdf fit-phong NETWORK`` (in place), as the library converter does, so that the network
+    renders with its own lowest-variance sampling instead of distill's cosine lobe; a spectral
+    network is fitted on its sRGB projection (one density for every wavelength)."""
+    start = time.perf_counter()
+    result = subprocess.run([str(default_cli()), "fit-phong", str(network)], capture_output=True, text=True)
+    if result.returncode != 0:
+        raise SystemExit(f"spectral_report: nbrdf fit-phong {network} failed: {result.stderr.strip()}")
+    sampling = json.loads(network.read_text(encoding="utf-8"))["sampling"]
+    return {"default": sampling.get("default"), "seconds": time.perf_counter() - start}
 
 
 def pairs(count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -287,7 +302,7 @@ def measure(source: Source, args, steps: Steps) -> dict:
         bsdfs = {**({"source": source.spec if variant == SPECTRAL else source.rgb_spec}), **nets}
         bsdfs = {name: spec for name, spec in bsdfs.items() if spec is not None}
         renders[variant] = steps.run(
-            f"{source.key}-{variant}-images",
+            f"{source.key}-{variant}-images-fitted-sampling",
             lambda: render_spheres(bsdfs, args.size, args.spp, variant, args.work, source.key),  # noqa: B023
             tuple(args.work / f"{source.key}-{variant}-{name}.exr"
                   for name in [*bsdfs, *([NOISE] if "source" in bsdfs else [])]))
@@ -382,9 +397,9 @@ def _introduction(args, results: list[dict], figure_path: Path, out: Path) -> li
         f"{os.getloadavg()[0]:.1f} at the end; times indicative).", "",
         f"![spheres and per-wavelength errors]({os.path.relpath(figure_path, out.parent)})", "",
         "Reading the tables: the per-wavelength log error compares the BSDFs themselves, without noise. The "
-        "networks' sphere images are noisier than the source's (they sample their cosine lobe), so SSIM and the "
-        "tone-mapped RMSE mostly measure that noise (compare the noise floor) and come out alike for both "
-        "networks; HDR-FLIP separates them. Mitsuba's `roughconductor` is not the same material in both variants: "
+        "sphere images hold Monte Carlo noise on both sides (the networks sample with their fitted lobes or "
+        "tables, the source with its own distribution): compare each error with the noise floor. "
+        "Mitsuba's `roughconductor` is not the same material in both variants: "
         "in RGB variants its Fresnel term takes the index of refraction converted to RGB, not the sRGB projection "
         "of its spectral reflectance. A spectral network (whose RGB value is that projection) is therefore held in "
         "`llvm_ad_rgb` to a reference it did not learn, as the RGB network (uplifted) is in `llvm_ad_spectral`: "
@@ -413,13 +428,20 @@ def _log_error_table(args, results: list[dict]) -> list[str]:
     return lines
 
 
+def _sampling_summary(results: list[dict]) -> str:
+    chosen = [f"{r['source'].label} {LABELS[kind]}: {run['sampling']['default']}"
+              for r in results for kind, run in r["runs"].items() if "sampling" in run]
+    return ", ".join(chosen) or "none fitted"
+
+
 def _image_table(args, results: list[dict]) -> list[str]:
     lines = ["", "## Sphere images", "",
              f"{args.size} x {args.size} pixels, {args.spp} spp, a directional light (D65) and a dim constant "
              "environment; errors against the source rendered in the same variant at the same seed "
              "(`nbrdf_tools.metrics`: RMSE of the tone-mapped images, SSIM, HDR-FLIP, relative RMSE of the linear "
-             "images); render seconds after a 1-spp render that compiles the kernels (wall / CPU). The networks "
-             "sample their cosine lobe (distill stores no sampling lobe), the source its own distribution, so "
+             "images); render seconds after a 1-spp render that compiles the kernels (wall / CPU). Each network "
+             "samples with what `nbrdf fit-phong` stored for it (lowest variance: "
+             f"{_sampling_summary(results)}), the source its own distribution, so "
              "their noise differs: *noise floor* is the source against itself rendered at another seed "
              "(HDR-FLIP / SSIM), the part of each error that is Monte Carlo noise.", "",
              "| source | variant | network | RMSE (tone-mapped) | SSIM | HDR-FLIP | relative RMSE | noise floor | "
