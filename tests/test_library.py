@@ -80,6 +80,15 @@ def counting_cli(folder: Path) -> tuple[Path, Path]:
     return wrapper, log
 
 
+def slow_cli(folder: Path, seconds: float = 1.5) -> Path:
+    """A wrapper of the nbrdf CLI that waits before each fit-phong (every material runs one), so
+    that a run interrupted after its first material still has the others in flight."""
+    wrapper = folder / "nbrdf-slow"
+    wrapper.write_text(f'#!/bin/sh\n[ "$1" = fit-phong ] && sleep {seconds}\nexec "{CLI.resolve()}" "$@"\n')
+    wrapper.chmod(0o755)
+    return wrapper
+
+
 @pytest.fixture(scope="module")
 def sources_dir(tmp_path_factory) -> Path:
     if not CLI.is_file():
@@ -332,7 +341,10 @@ def test_interrupted_run_resumes_to_the_same_index(converted, sources_dir, tmp_p
     after the next, then a rerun: the numbers of the uninterrupted run, no temporary file."""
     reference = rows_by_name(converted[0])
     out = tmp_path / "lib"
-    argv = [sys.executable, "-m", "nbrdf_tools.library", sources_dir, "-o", out, *FAST, "--no-progress"]
+    # The slow CLI: with the real one the last materials finished within tenths of a second of the
+    # first (warm kernels, tiny budgets), and a Ctrl-C could land after the run had ended.
+    argv = [sys.executable, "-m", "nbrdf_tools.library", sources_dir, "-o", out, *FAST, "--no-progress",
+            "--cli", slow_cli(tmp_path)]
 
     def start():
         return subprocess.Popen([str(a) for a in argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -346,8 +358,6 @@ def test_interrupted_run_resumes_to_the_same_index(converted, sources_dir, tmp_p
             if len(done) >= count:
                 return
             assert proc.poll() is None, proc.communicate()
-            # Short: with warm kernels the last materials finish within tenths of a second of
-            # the first, and the Ctrl-C must land before the run ends.
             time.sleep(0.02)
         raise AssertionError("no material finished in time")
 
