@@ -88,13 +88,18 @@ pub struct DataSet {
     pub invalid: u64,
 }
 
-/// `out = [samples[i] for i in order]`, in parallel (the result does not depend on the threads).
-/// A tight loop of independent loads keeps many cache misses in flight at once.
-pub fn gather(samples: &[Sample], order: &[u32], out: &mut Vec<Sample>) {
-    const PIECE: usize = 1 << 14;
-    out.resize(order.len(), Sample::default());
-    out.par_chunks_mut(PIECE)
-        .zip(order.par_chunks(PIECE))
+/// `out = [samples[i] for i in order]`, in parallel pieces of `piece` samples (the result does
+/// not depend on the threads or the piece). A tight loop of independent loads keeps many cache
+/// misses in flight at once.
+pub fn gather<T: Copy + Default + Send + Sync>(
+    samples: &[T],
+    order: &[u32],
+    out: &mut Vec<T>,
+    piece: usize,
+) {
+    out.resize(order.len(), T::default());
+    out.par_chunks_mut(piece)
+        .zip(order.par_chunks(piece))
         .for_each(|(out, order)| {
             for (o, &i) in out.iter_mut().zip(order) {
                 *o = samples[i as usize];

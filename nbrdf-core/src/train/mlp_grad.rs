@@ -60,7 +60,7 @@ impl TrainingSample for Sample {
     }
 
     fn gather(samples: &[Self], order: &[u32], out: &mut Vec<Self>) {
-        super::dataset::gather(samples, order, out)
+        super::dataset::gather(samples, order, out, 1 << 14)
     }
 }
 

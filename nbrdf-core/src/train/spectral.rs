@@ -69,15 +69,8 @@ impl TrainingSample for SpectralSample {
     }
 
     fn gather(samples: &[Self], order: &[u32], out: &mut Vec<Self>) {
-        const PIECE: usize = 1 << 12;
-        out.resize(order.len(), Self::default());
-        out.par_chunks_mut(PIECE)
-            .zip(order.par_chunks(PIECE))
-            .for_each(|(out, order)| {
-                for (o, &i) in out.iter_mut().zip(order) {
-                    *o = samples[i as usize];
-                }
-            });
+        // Pieces of about the RGB samples' bytes: a spectral sample is about 4x larger.
+        super::dataset::gather(samples, order, out, 1 << 12)
     }
 }
 
