@@ -44,6 +44,16 @@ impl RglFold {
             RglFold::ReciprocalMean => "reciprocal-mean",
         }
     }
+
+    /// Whether a pair with these cosines is trained on: the reciprocal mean's swapped term
+    /// carries `cos_light / cos_view`, so it leaves out pairs with either cosine below
+    /// [`GRAZING_COS`]; the measurement as measured keeps every pair above the horizon.
+    pub fn trains_on(self, cos_view: f64, cos_light: f64) -> bool {
+        match self {
+            RglFold::AsMeasured => true,
+            RglFold::ReciprocalMean => cos_view >= GRAZING_COS && cos_light >= GRAZING_COS,
+        }
+    }
 }
 
 /// A training source read from a file.
@@ -130,7 +140,7 @@ pub fn rgl_target(
         let f = match fold {
             RglFold::AsMeasured => f,
             RglFold::ReciprocalMean => {
-                if (v.z as f64) < GRAZING_COS || (l.z as f64) < GRAZING_COS {
+                if !fold.trains_on(v.z as f64, l.z as f64) {
                     return None;
                 }
                 let g = measurement.eval(l, v);

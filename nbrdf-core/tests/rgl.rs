@@ -916,6 +916,53 @@ mod spectral {
         }
     }
 
+    /// A spectral network trained on the reciprocal mean gets all the pairs it asked for: the
+    /// pairs left out at grazing angles are replaced, as the RGB trainer replaces them.
+    #[test]
+    fn the_spectral_reciprocal_mean_trains_on_the_full_sample_count() {
+        use nbrdf_core::merl::PhiFold;
+        use nbrdf_core::ops::train_network::{train_network, NetworkKind, TrainRequest};
+        use nbrdf_core::train::dataset::AngularSampling;
+        use nbrdf_core::train::{Anisotropy, TrainConfig};
+        let dir = std::env::temp_dir().join(format!("nbrdf-spectral-mean-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("synthetic_spec.bsdf");
+        std::fs::write(
+            &path,
+            spectral_fields(false, &WAVELENGTHS, &SPECTRUM).bytes(),
+        )
+        .unwrap();
+        for (fold, sampling) in [
+            (RglFold::ReciprocalMean, AngularSampling::Uniform),
+            (RglFold::ReciprocalMean, AngularSampling::Adaptive),
+            (RglFold::AsMeasured, AngularSampling::Uniform),
+        ] {
+            let request = TrainRequest {
+                source: path.clone(),
+                phi_fold: PhiFold::default(),
+                rgl_fold: fold,
+                output: Some(dir.join(format!("{}.nbrdf.json", fold.as_str()))),
+                name: None,
+                config: TrainConfig {
+                    samples: 4000,
+                    max_epochs: 1,
+                    batch: 64,
+                    sampling,
+                    ..TrainConfig::fixed_budget()
+                },
+                anisotropy: Anisotropy::Auto,
+                network_kind: NetworkKind::Spectral,
+                scale_samples: false,
+                threads: None,
+            };
+            let report = train_network(&request, &mut |_| {}).unwrap().report;
+            let counts = (report.train_samples, report.validation_samples);
+            assert_eq!(counts, (4000, 400), "{fold:?} {sampling}");
+            assert_eq!(report.dropped_invalid, 0, "{fold:?} {sampling}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn inconsistent_or_bad_wavelengths_are_refused_naming_the_field() {
         let five = spectral_fields(true, &WAVELENGTHS, &SPECTRUM);

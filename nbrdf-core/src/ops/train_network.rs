@@ -7,7 +7,7 @@ use crate::error::{NbrdfError, Result};
 use crate::merl::PhiFold;
 use crate::rgl::RglMeasurement;
 use crate::source::{rgl_target, RglFold, TrainingSource};
-use crate::train::arrays::sample_directions;
+use crate::train::arrays::sample_directions_for;
 use crate::train::spectral::{self, SpectralSource};
 use crate::train::{self, Anisotropy, EpochStats, TrainConfig, TrainOutcome, TrainReport};
 use glam::Vec3;
@@ -186,7 +186,7 @@ pub fn train_network(
 }
 
 /// A spectral measurement evaluated at the trainer's own directions (those of
-/// [`sample_directions`]: training pairs, then validation pairs) and the file's wavelengths, as
+/// [`sample_directions_for`]: training pairs, then validation pairs) and the file's wavelengths, as
 /// Mitsuba's `measured` evaluates it in a spectral variant.
 struct RglSpectra<'a> {
     measurement: &'a RglMeasurement,
@@ -222,9 +222,8 @@ impl SpectralSource for RglSpectra<'_> {
     }
 }
 
-/// A spectral network of a spectral measurement. Unlike the RGB path, which redraws until
-/// `config.samples` pairs are kept, pairs the reciprocal mean drops at grazing angles are not
-/// replaced (about 2 % of uniform pairs; fewer of adaptive ones).
+/// A spectral network of a spectral measurement, on `config.samples` pairs: as in the RGB path,
+/// pairs the reciprocal mean leaves out at grazing angles are replaced by the next candidates.
 fn train_rgl_spectra(
     measurement: &RglMeasurement,
     fold: RglFold,
@@ -236,7 +235,7 @@ fn train_rgl_spectra(
         .spectra()
         .map(|s| s.wavelengths())
         .ok_or_else(|| NbrdfError::InvalidArgument("the measurement has no spectra".into()))?;
-    let (pairs, validation) = sample_directions(config)?;
+    let (pairs, validation) = sample_directions_for(config, fold)?;
     let source = RglSpectra {
         measurement,
         wavelengths,

@@ -10,7 +10,7 @@
 //!   BSDF renders. [`RglFold::ReciprocalMean`] also needs the swapped values `eval(wi = light,
 //!   wo = view) = f(light, view) cos_view` and learns `(f(v, l) + f(l, v)) / 2 cos_light =
 //!   (a + b cos_light / cos_view) / 2`; that ratio grows without bound at grazing views, so pairs
-//!   with either cosine below [`GRAZING_COS`] are dropped, as for RGL measurements.
+//!   with either cosine below [`GRAZING_COS`](crate::source::GRAZING_COS) are dropped, as for RGL measurements.
 //! * Out-of-gamut values (slightly negative) are clamped to 0. A value that is not finite is an
 //!   error naming the pair: a BSDF returning NaN is broken, and dropping its samples would hide it.
 //! * Pairs at or below the horizon (either `z <= 0`) are dropped, as the trainer drops them.
@@ -19,7 +19,7 @@ use super::dataset::{self, DataSet};
 use super::{train_on_sets, EpochStats, TrainConfig, TrainOutcome};
 use crate::error::{NbrdfError, Result};
 use crate::rng::Stream;
-use crate::source::{RglFold, GRAZING_COS};
+use crate::source::RglFold;
 use glam::Vec3;
 use std::time::Instant;
 
@@ -28,22 +28,31 @@ use std::time::Instant;
 /// `(view, light)` in the local frame (z up), above the horizon. These are the directions
 /// [`super::train`] draws for a target valid everywhere, from the same random streams.
 pub fn sample_directions(config: &TrainConfig) -> Result<(Vec<(Vec3, Vec3)>, usize)> {
+    sample_directions_for(config, RglFold::AsMeasured)
+}
+
+/// [`sample_directions`] for a target folded as `fold` says: pairs the fold leaves out
+/// ([`RglFold::trains_on`]) are replaced by the next candidates, as [`super::train`] replaces
+/// them for an RGL measurement, so that `config.samples` pairs are trained on.
+pub fn sample_directions_for(
+    config: &TrainConfig,
+    fold: RglFold,
+) -> Result<(Vec<(Vec3, Vec3)>, usize)> {
     config.validate()?;
     let validation = config.validation_samples();
-    let mut pairs = dataset::draw_directions(
-        config.sampling,
-        config.anisotropic,
-        config.samples,
-        config.seed,
-        Stream::TrainSamples,
-    );
-    pairs.extend(dataset::draw_directions(
-        config.sampling,
-        config.anisotropic,
-        validation,
-        config.seed,
-        Stream::ValidationSamples,
-    ));
+    let keep = |v: Vec3, l: Vec3| fold.trains_on(f64::from(v.z), f64::from(l.z));
+    let draw = |count, stream| {
+        dataset::draw_directions_where(
+            config.sampling,
+            config.anisotropic,
+            count,
+            config.seed,
+            stream,
+            keep,
+        )
+    };
+    let mut pairs = draw(config.samples, Stream::TrainSamples);
+    pairs.extend(draw(validation, Stream::ValidationSamples));
     Ok((pairs, validation))
 }
 
@@ -133,7 +142,7 @@ impl SampledArrays<'_> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Folded {
     BelowHorizon,
-    /// A cosine below [`GRAZING_COS`] under the reciprocal mean.
+    /// A cosine below [`GRAZING_COS`](crate::source::GRAZING_COS) under the reciprocal mean.
     Grazing,
     /// Kept, with its unit directions.
     Kept(Vec3, Vec3),
@@ -177,7 +186,7 @@ pub(crate) fn fold_pair(
             }
         }
         RglFold::ReciprocalMean => {
-            if cos_view < GRAZING_COS || cos_light < GRAZING_COS {
+            if !fold.trains_on(cos_view, cos_light) {
                 return Ok(Folded::Grazing);
             }
             let b = b.expect("checked: the reciprocal mean has swapped values");
@@ -228,6 +237,7 @@ mod tests {
     use super::*;
     use crate::coords::RusinkiewiczAngles;
     use crate::phong_fit::PhongParams;
+    use crate::source::GRAZING_COS;
     use crate::train::adam::AdamConfig;
     use crate::train::dataset::AngularSampling;
     use crate::train::Trainer;
@@ -314,6 +324,39 @@ mod tests {
                 } else {
                     assert!(off_plane > 1000, "{sampling} {anisotropic} {off_plane}");
                 }
+            }
+        }
+    }
+
+    /// The reciprocal mean's directions replace the grazing pairs it leaves out, so that the
+    /// spectral trainer gets `config.samples` pairs, those the RGB trainer keeps for a target
+    /// that is `None` at grazing angles (as `source::rgl_target` is).
+    #[test]
+    fn reciprocal_mean_directions_replace_grazing_pairs_as_the_trainer_does() {
+        for sampling in [AngularSampling::Adaptive, AngularSampling::Uniform] {
+            let config = TrainConfig {
+                sampling,
+                samples: 3000,
+                ..small_config()
+            };
+            let (pairs, validation) =
+                sample_directions_for(&config, RglFold::ReciprocalMean).unwrap();
+            assert_eq!((pairs.len(), validation), (3300, 300));
+            let grazing =
+                |v: Vec3, l: Vec3| (v.z as f64) < GRAZING_COS || (l.z as f64) < GRAZING_COS;
+            assert!(pairs.iter().all(|&(v, l)| !grazing(v, l)));
+            let (all, _) = sample_directions(&config).unwrap();
+            assert!(all.iter().any(|&(v, l)| grazing(v, l)), "{sampling}");
+            let target = |a: &RusinkiewiczAngles| {
+                let (v, l) = crate::coords::from_rusinkiewicz(a);
+                (!grazing(v.as_vec3(), l.as_vec3())).then_some([0.0; 3])
+            };
+            let (train, valid) = crate::train::draw_sets(&target, &config).unwrap();
+            let drawn: Vec<_> = train.samples.iter().chain(&valid.samples).collect();
+            assert_eq!(drawn.len(), pairs.len());
+            for (&(v, l), s) in pairs.iter().zip(&drawn) {
+                assert_eq!(crate::coords::network_input_for(false, v, l), s.x);
+                assert_eq!(l.z, s.cos_light);
             }
         }
     }

@@ -293,12 +293,29 @@ pub fn draw_directions(
     seed: u64,
     stream: Stream,
 ) -> Vec<(Vec3, Vec3)> {
+    draw_directions_where(sampling, anisotropic, count, seed, stream, |_, _| true)
+}
+
+/// [`draw_directions`] for a target valid only where `keep(view, light)`: the pairs [`draw`]
+/// keeps for a target that is `None` exactly where `keep` is false (e.g. the RGL reciprocal
+/// mean at grazing angles), so that dropped pairs are replaced by the next candidates.
+/// `keep` must hold for a good share of the hemisphere (the caller's to ensure).
+pub fn draw_directions_where(
+    sampling: AngularSampling,
+    anisotropic: bool,
+    count: usize,
+    seed: u64,
+    stream: Stream,
+    keep: impl Fn(Vec3, Vec3) -> bool,
+) -> Vec<(Vec3, Vec3)> {
     let mut pairs = Vec::with_capacity(count);
     let mut k = 0u64;
     while pairs.len() < count {
         let u = candidate_uniforms(seed, stream, k);
         if let Some((v, l, _)) = candidate_directions(sampling, anisotropic, u) {
-            pairs.push((v, l));
+            if keep(v, l) {
+                pairs.push((v, l));
+            }
         }
         k += 1;
     }
