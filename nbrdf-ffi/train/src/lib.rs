@@ -535,37 +535,77 @@ pub unsafe extern "C" fn nbrdf_train_from_arrays(
     out_json: *mut *mut c_char,
 ) -> i32 {
     guard("nbrdf_train_from_arrays", || {
-        check_pointer(out_json, "out_json")?;
-        // SAFETY: writable by contract; null until a network is made.
-        unsafe { out_json.write(std::ptr::null_mut()) };
         // SAFETY: forwarded contract.
-        let (config, threads) = unsafe { read_config(config)? };
-        let fold = read_fold(fold)?;
+        let common = unsafe { read_common(out_json, config, fold, [name, source, details_json])? };
         // SAFETY: forwarded contract.
-        let arrays = unsafe { read_arrays(fold, [view, light, eval_cos, swapped_eval_cos], n)? };
-        // SAFETY: forwarded contract.
-        let name = unsafe { read_str(name, "name")? };
-        let source = unsafe { read_str(source, "source")? };
-        // SAFETY: forwarded contract.
-        let source_details = unsafe { read_details(details_json)? };
-        let request = DistillRequest {
-            arrays: DistillArrays::Rgb(SampledArrays {
-                view: &arrays.view,
-                light: &arrays.light,
-                eval_cos: &arrays.eval_cos,
-                swapped_eval_cos: arrays.swapped_eval_cos.as_deref(),
-                validation: n_validation,
-            }),
-            fold,
-            name,
-            source,
-            source_details,
-            config,
-            threads,
-        };
+        let arrays =
+            unsafe { read_arrays(common.fold, [view, light, eval_cos, swapped_eval_cos], n)? };
+        let request = common.request(DistillArrays::Rgb(SampledArrays {
+            view: &arrays.view,
+            light: &arrays.light,
+            eval_cos: &arrays.eval_cos,
+            swapped_eval_cos: arrays.swapped_eval_cos.as_deref(),
+            validation: n_validation,
+        }));
         // SAFETY: writable by contract.
         unsafe { distil_into(&request, on_epoch, user, out_json) }
     })
+}
+
+/// What both `*_from_arrays` functions read besides their arrays.
+struct Common {
+    config: TrainConfig,
+    threads: Option<usize>,
+    fold: RglFold,
+    name: String,
+    source: String,
+    source_details: Option<serde_json::Value>,
+}
+
+impl Common {
+    fn request<'a>(self, arrays: DistillArrays<'a>) -> DistillRequest<'a> {
+        DistillRequest {
+            arrays,
+            fold: self.fold,
+            name: self.name,
+            source: self.source,
+            source_details: self.source_details,
+            config: self.config,
+            threads: self.threads,
+        }
+    }
+}
+
+/// Clears `*out_json` (null until a network is made) and reads the settings, the fold and the
+/// strings `[name, source, details_json]` of a `*_from_arrays` call.
+///
+/// # Safety
+/// As the `*_from_arrays` functions' contract: `out_json` points to writable storage for one
+/// pointer, `config` to an `NbrdfTrainConfig`, the strings are NUL-terminated (`details_json`
+/// may be null).
+unsafe fn read_common(
+    out_json: *mut *mut c_char,
+    config: *const NbrdfTrainConfig,
+    fold: i32,
+    [name, source, details_json]: [*const c_char; 3],
+) -> FfiResult<Common> {
+    check_pointer(out_json, "out_json")?;
+    // SAFETY: writable by contract.
+    unsafe { out_json.write(std::ptr::null_mut()) };
+    // SAFETY: forwarded contract.
+    let (config, threads) = unsafe { read_config(config)? };
+    let fold = read_fold(fold)?;
+    // SAFETY: forwarded contract.
+    unsafe {
+        Ok(Common {
+            config,
+            threads,
+            fold,
+            name: read_str(name, "name")?,
+            source: read_str(source, "source")?,
+            source_details: read_details(details_json)?,
+        })
+    }
 }
 
 /// Distils `request`, calling `on_epoch` with `user`, and stores the network's JSON text in
@@ -688,46 +728,26 @@ pub unsafe extern "C" fn nbrdf_train_spectral_from_arrays(
     out_json: *mut *mut c_char,
 ) -> i32 {
     guard("nbrdf_train_spectral_from_arrays", || {
-        check_pointer(out_json, "out_json")?;
-        // SAFETY: writable by contract; null until a network is made.
-        unsafe { out_json.write(std::ptr::null_mut()) };
         // SAFETY: forwarded contract.
-        let (config, threads) = unsafe { read_config(config)? };
-        let fold = read_fold(fold)?;
+        let common = unsafe { read_common(out_json, config, fold, [name, source, details_json])? };
         // SAFETY: forwarded contract.
         let spectra = unsafe {
             read_spectra(
-                fold,
+                common.fold,
                 [view, light],
                 (wavelengths, m),
                 [eval_cos, swapped_eval_cos],
                 n,
             )?
         };
-        // SAFETY: forwarded contract.
-        let (name, source, source_details) = unsafe {
-            (
-                read_str(name, "name")?,
-                read_str(source, "source")?,
-                read_details(details_json)?,
-            )
-        };
-        let request = DistillRequest {
-            arrays: DistillArrays::Spectral(SampledSpectra {
-                view: &spectra.view,
-                light: &spectra.light,
-                wavelengths: &spectra.wavelengths,
-                eval_cos: &spectra.eval_cos,
-                swapped_eval_cos: spectra.swapped_eval_cos.as_deref(),
-                validation: n_validation,
-            }),
-            fold,
-            name,
-            source,
-            source_details,
-            config,
-            threads,
-        };
+        let request = common.request(DistillArrays::Spectral(SampledSpectra {
+            view: &spectra.view,
+            light: &spectra.light,
+            wavelengths: &spectra.wavelengths,
+            eval_cos: &spectra.eval_cos,
+            swapped_eval_cos: spectra.swapped_eval_cos.as_deref(),
+            validation: n_validation,
+        }));
         // SAFETY: writable by contract.
         unsafe { distil_into(&request, on_epoch, user, out_json) }
     })

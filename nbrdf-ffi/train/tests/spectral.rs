@@ -9,33 +9,8 @@ use std::ffi::{c_char, CStr};
 use std::path::Path;
 use std::ptr::{null, null_mut};
 
-const OK: i32 = NbrdfTrainStatus::NBRDF_TRAIN_OK as i32;
-const NULL: i32 = NbrdfTrainStatus::NBRDF_TRAIN_ERROR_NULL_POINTER as i32;
-const INVALID: i32 = NbrdfTrainStatus::NBRDF_TRAIN_ERROR_INVALID_ARGUMENT as i32;
-
-fn last_error() -> String {
-    // SAFETY: the library returns a valid NUL-terminated string.
-    unsafe { CStr::from_ptr(nbrdf_train_last_error()) }
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn small_config() -> NbrdfTrainConfig {
-    let mut config = std::mem::MaybeUninit::<NbrdfTrainConfig>::uninit();
-    // SAFETY: a writable config.
-    assert_eq!(
-        unsafe { nbrdf_train_config_default(config.as_mut_ptr()) },
-        OK
-    );
-    // SAFETY: initialised by the call above.
-    let mut config = unsafe { config.assume_init() };
-    config.samples = 2000;
-    config.max_epochs = 3;
-    config.hidden = 8;
-    config.batch = 128;
-    config.threads = 1;
-    config
-}
+mod common;
+use common::{directions, last_error, small_config, INVALID, NULL, OK};
 
 /// A Lambertian whose albedo rises linearly from 0.1 at 360 nm to 0.7 at 830 nm.
 fn albedo(lambda: f32) -> f32 {
@@ -53,16 +28,7 @@ struct Spectra {
 }
 
 fn spectra(config: &NbrdfTrainConfig) -> Spectra {
-    let (mut n_train, mut n_validation) = (0, 0);
-    // SAFETY: valid pointers.
-    let status = unsafe { nbrdf_train_sample_counts(config, &mut n_train, &mut n_validation) };
-    assert_eq!(status, OK, "{}", last_error());
-    let n = n_train + n_validation;
-    let (mut view, mut light) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
-    // SAFETY: 3 n floats each.
-    let status =
-        unsafe { nbrdf_train_directions(config, n, view.as_mut_ptr(), light.as_mut_ptr()) };
-    assert_eq!(status, OK, "{}", last_error());
+    let (view, light, n, n_validation) = directions(config);
     let wavelengths: Vec<f32> = (0..48).map(|j| 360.0 + 10.0 * j as f32).collect();
     let values = wavelengths
         .iter()
