@@ -5,43 +5,14 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
-use nbrdf_core::rng::SplitMix64;
 use nbrdf_core::sampling::{pdf_batch, sample_batch, SamplingStrategy};
-use nbrdf_core::{Brdf, Directions, DirectionsMut, Nbrdf, RgbMut};
+use nbrdf_core::{Brdf, Directions, DirectionsMut, RgbMut};
 
 const BATCH: usize = 1 << 20;
 const SCALAR_BATCH: usize = 1 << 14;
 
-/// Planar `[x.., y.., z..]` directions, uniform on the upper hemisphere.
-fn hemisphere_directions(n: usize, seed: u64) -> Vec<f32> {
-    let mut rng = SplitMix64::from_state(seed);
-    let mut planar = vec![0.0f32; 3 * n];
-    for i in 0..n {
-        let z = rng.next_f64();
-        let r = (1.0 - z * z).sqrt();
-        let phi = std::f64::consts::TAU * rng.next_f64();
-        planar[i] = (r * phi.cos()) as f32;
-        planar[n + i] = (r * phi.sin()) as f32;
-        planar[2 * n + i] = z as f32;
-    }
-    planar
-}
-
-fn uniforms(n: usize, seed: u64) -> Vec<f32> {
-    let mut rng = SplitMix64::from_state(seed);
-    (0..3 * n).map(|_| rng.next_f32()).collect()
-}
-
-/// A network with trained-like magnitudes (the paper's init gives outputs near 0, which would
-/// not exercise the exp range); the cost does not depend on the values otherwise.
-fn bench_network() -> Nbrdf {
-    let mut net = Nbrdf::random("bench", 21, 1);
-    for layer in net.layers.iter_mut() {
-        let scale = 30.0 / (layer.inputs as f32).sqrt();
-        layer.weights.iter_mut().for_each(|w| *w *= scale);
-    }
-    net
-}
+mod workload;
+use workload::{bench_network, hemisphere_directions, uniforms};
 
 fn dirs(planar: &[f32]) -> Directions<'_> {
     Directions::from_planar(planar).expect("planar buffer")
@@ -55,7 +26,7 @@ fn single_thread_pool() -> rayon::ThreadPool {
 }
 
 fn network_eval(c: &mut Criterion) {
-    let net = bench_network();
+    let net = bench_network(false);
     let view = hemisphere_directions(BATCH, 1);
     let light = hemisphere_directions(BATCH, 2);
     let mut out = vec![0.0f32; 3 * BATCH];
@@ -104,7 +75,7 @@ fn network_eval(c: &mut Criterion) {
 }
 
 fn blinn_phong_sampling(c: &mut Criterion) {
-    let net = bench_network();
+    let net = bench_network(false);
     let strategy = SamplingStrategy::Phong {
         exponent: 210.0,
         specular_weight: 0.31,

@@ -7,41 +7,17 @@
 //! direction pairs and prints one line: `wall_s cpu_s evaluations_per_cpu_s checksum`. The CPU
 //! seconds are this process's user + system time over the timed loop (`/proc/self/stat`, 10 ms
 //! ticks), `nan` where that file cannot be read. The network is the throughput bench's
-//! (trained-like magnitudes), the same in every build.
+//! (`benches/workload`), the same in every build.
 
-use nbrdf_core::rng::SplitMix64;
-use nbrdf_core::{Brdf, Directions, Nbrdf, RgbMut};
+use nbrdf_core::{Brdf, Directions, RgbMut};
 use std::process::ExitCode;
 use std::time::Instant;
 
 const BATCH: usize = 1 << 20;
 
-/// Planar `[x.., y.., z..]` directions, uniform on the upper hemisphere.
-fn hemisphere_directions(n: usize, seed: u64) -> Vec<f32> {
-    let mut rng = SplitMix64::from_state(seed);
-    let mut planar = vec![0.0f32; 3 * n];
-    for i in 0..n {
-        let z = rng.next_f64();
-        let r = (1.0 - z * z).sqrt();
-        let phi = std::f64::consts::TAU * rng.next_f64();
-        planar[i] = (r * phi.cos()) as f32;
-        planar[n + i] = (r * phi.sin()) as f32;
-        planar[2 * n + i] = z as f32;
-    }
-    planar
-}
-
-/// As benches/throughput.rs: the paper's init gives outputs near 0, which would not exercise
-/// the exp range.
-fn bench_network(anisotropic: bool) -> Nbrdf {
-    let mut net = Nbrdf::random("bench", 21, 1);
-    for layer in net.layers.iter_mut() {
-        let scale = 30.0 / (layer.inputs as f32).sqrt();
-        layer.weights.iter_mut().for_each(|w| *w *= scale);
-    }
-    net.anisotropic = anisotropic;
-    net
-}
+#[path = "../benches/workload/mod.rs"]
+mod workload;
+use workload::{bench_network, hemisphere_directions};
 
 /// User + system seconds of this process so far.
 fn cpu_seconds() -> f64 {
