@@ -399,6 +399,27 @@ def test_interrupted_run_resumes_to_the_same_index(converted, sources_dir, tmp_p
 # Dask distributed
 
 
+@needs_cli
+def test_an_interrupt_just_after_a_row_is_stored_keeps_it_in_the_index(converted, sources_dir, tmp_path,
+                                                                       monkeypatch):
+    """The Ctrl-C that lands between storing a material and counting it: the index still says
+    what the folder holds (in the full suite's timing this left a stored row listed as pending)."""
+    stored = store.Store.put
+
+    def put_then_interrupt(self, result):
+        row = stored(self, result)
+        raise KeyboardInterrupt(row["name"])
+
+    monkeypatch.setattr(store.Store, "put", put_then_interrupt)
+    out = tmp_path / "lib"
+    code = library_main.main([str(sources_dir), "-o", str(out), *FAST, "--no-progress", "--only", "white"])
+    assert code == library_main.EXIT_INTERRUPTED
+    rows = rows_by_name(out)
+    assert rows["white"]["status"] == "ok"
+    assert rows["white"].get("metrics") == rows_by_name(converted[0])["white"].get("metrics")
+    assert {rows[name]["status"] for name in GOOD if name != "white"} == {"pending"}
+
+
 def _same_numbers(out: Path, reference_out: Path, names) -> None:
     rows, reference = rows_by_name(out), rows_by_name(reference_out)
     for name in names:

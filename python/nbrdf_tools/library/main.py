@@ -186,6 +186,11 @@ def main(argv: list[str] | None = None) -> int:
                     bar.done(row)
     except KeyboardInterrupt:
         interrupted = True
+        # A Ctrl-C can land after a row was stored and before it was counted here: the index
+        # says what the folder holds.
+        for source, _, key in jobs:
+            if rows[source.name]["status"] == "pending" and (stored := library.done(source.name, key)):
+                rows[source.name] = stored
     finally:
         bar.close()
     ordered = [rows[name] for name in sorted(rows)]
