@@ -9,28 +9,123 @@
 //! to separate multiplies and adds in the portable copy (where `f32::mul_add` would be a slow
 //! library call).
 
-/// `a * b + c`, fused or not.
+/// `a * b + c`, fused or not, on one value or on eight.
 pub trait MulAdd {
+    /// Eight `f32` lanes: an AVX register in the fused copy on x86-64, an array elsewhere.
+    type V8: Copy;
     fn mul_add(a: f32, b: f32, c: f32) -> f32;
+    fn splat8(a: f32) -> Self::V8;
+    /// # Safety
+    /// `p` must point to 8 readable `f32`.
+    unsafe fn load8(p: *const f32) -> Self::V8;
+    /// `a * b + c` per lane, each lane exactly [`MulAdd::mul_add`].
+    fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8;
+    fn to_array8(v: Self::V8) -> [f32; 8];
 }
 
 /// Fused multiply-add, for code compiled with the `fma` target feature (one rounding, one
-/// instruction).
+/// instruction). Only code compiled for and dispatched to AVX2 and FMA uses it: its eight-lane
+/// operations are AVX2 instructions on x86-64.
 pub struct Fused;
 /// Separate multiply and add, for any target.
 pub struct Unfused;
 
 impl MulAdd for Fused {
+    #[cfg(target_arch = "x86_64")]
+    type V8 = core::arch::x86_64::__m256;
+    #[cfg(not(target_arch = "x86_64"))]
+    type V8 = [f32; 8];
+
     #[inline(always)]
     fn mul_add(a: f32, b: f32, c: f32) -> f32 {
         a.mul_add(b, c)
     }
+
+    #[inline(always)]
+    fn splat8(a: f32) -> Self::V8 {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Fused` runs only where AVX2 was detected (see the type's documentation).
+        unsafe {
+            core::arch::x86_64::_mm256_set1_ps(a)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        [a; 8]
+    }
+
+    #[inline(always)]
+    unsafe fn load8(p: *const f32) -> Self::V8 {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: the caller's 8 readable floats; AVX2 as in `splat8`.
+        unsafe {
+            core::arch::x86_64::_mm256_loadu_ps(p)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        // SAFETY: the caller's 8 readable floats.
+        unsafe {
+            p.cast::<[f32; 8]>().read_unaligned()
+        }
+    }
+
+    #[inline(always)]
+    fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8 {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: FMA as in `splat8`.
+        unsafe {
+            core::arch::x86_64::_mm256_fmadd_ps(a, b, c)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let mut out = c;
+            for q in 0..8 {
+                out[q] = a[q].mul_add(b[q], c[q]);
+            }
+            out
+        }
+    }
+
+    #[inline(always)]
+    fn to_array8(v: Self::V8) -> [f32; 8] {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `__m256` and `[f32; 8]` have the same size, any bits are valid for both.
+        unsafe {
+            std::mem::transmute::<Self::V8, [f32; 8]>(v)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        v
+    }
 }
 
 impl MulAdd for Unfused {
+    type V8 = [f32; 8];
+
     #[inline(always)]
     fn mul_add(a: f32, b: f32, c: f32) -> f32 {
         a * b + c
+    }
+
+    #[inline(always)]
+    fn splat8(a: f32) -> Self::V8 {
+        [a; 8]
+    }
+
+    #[inline(always)]
+    unsafe fn load8(p: *const f32) -> Self::V8 {
+        // SAFETY: the caller's 8 readable floats.
+        unsafe { p.cast::<[f32; 8]>().read_unaligned() }
+    }
+
+    #[inline(always)]
+    fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8 {
+        let mut out = c;
+        for q in 0..8 {
+            out[q] = a[q] * b[q] + c[q];
+        }
+        out
+    }
+
+    #[inline(always)]
+    fn to_array8(v: Self::V8) -> [f32; 8] {
+        v
     }
 }
 
