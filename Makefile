@@ -81,7 +81,7 @@ demo: setup
 test: setup test-rust test-python
 
 test-rust:
-	$(CARGO) test --workspace --release --all-features
+	$(CARGO) test --workspace --profile test-release --all-features
 
 test-python: setup
 	$(PY) -m pytest tests -q
