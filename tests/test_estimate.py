@@ -231,18 +231,18 @@ def test_prior_schedule_holds_out_a_view_only_where_it_can():
 
     plan = schedule(100, 3, None)
     assert (plan["code"], plan["weights"], plan["strengths"], plan["candidate"]) == (40, 60, PRIOR_STRENGTHS, 30)
+    assert plan["common"] == 70  # a decoded candidate's code and weight steps
     assert schedule(100, 1, None)["strengths"] == (FALLBACK_STRENGTH,)  # nothing to hold out
     assert schedule(1, 3, None)["strengths"] == (FALLBACK_STRENGTH,)  # no weight step to judge
+    assert schedule(100, 1, None)["common"] == 0 and schedule(1, 3, None)["common"] == 0
     fixed = schedule(100, 3, 0.5)
-    assert fixed["strengths"] == (0.5,) and fixed["candidate"] == 0
+    assert fixed["strengths"] == (0.5,) and fixed["candidate"] == 0 and fixed["common"] == 0
 
 
-def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The code and the candidates see the training views but the last; the last alone judges
-    them, the lowest held-out loss wins, the refit uses every view, and a seed repeats it."""
-    from nbrdf_mitsuba import estimate as E
-
-    scene, images = setup
+def spy_on_views(monkeypatch, estimate_module, judge=None):
+    """Records the views each render_all call renders and the views held_out_loss judges;
+    ``judge(call_index, loss)`` may replace the held-out losses."""
+    E = estimate_module
     rendered, judged = [], []
     render_all, held_out_loss = E.Estimator.render_all, E.Estimator.held_out_loss
 
@@ -252,24 +252,62 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
 
     def spy_judge(self, weights, view):
         judged.append(view)
-        return held_out_loss(self, weights, view)
+        loss = held_out_loss(self, weights, view)
+        return loss if judge is None else judge(len(judged) - 1, loss)
 
     monkeypatch.setattr(E.Estimator, "render_all", spy_render)
     monkeypatch.setattr(E.Estimator, "held_out_loss", spy_judge)
+    return rendered, judged
+
+
+def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+    """The code and the candidates (three strengths from the decoded start, the common start)
+    see the training views but the last; the last alone judges them, the lowest held-out loss
+    wins, the refit uses every view, and a seed repeats it."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    rendered, judged = spy_on_views(monkeypatch, E)
     outs = [tmp_path / f"prior{k}.nbrdf.json" for k in range(2)]
     for out in outs:
         rendered.clear()
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
-    losses = {float(k): v for k, v in provenance["held_out_losses"].items()}
-    assert sorted(losses) == sorted(E.PRIOR_STRENGTHS) and all(math.isfinite(v) for v in losses.values())
+    losses = provenance["held_out_losses"]
+    assert set(losses) == {str(s) for s in E.PRIOR_STRENGTHS} | {E.COMMON_START}
+    assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
     assert len(set(losses.values())) > 1, losses
-    assert provenance["prior_weight"] == min(E.PRIOR_STRENGTHS, key=losses.get)
-    assert judged == [1] * 6  # the last training view, once per candidate and run
-    # Screening (49 starts), code (2 steps), candidates (3 x 2 steps) on view 0; the refit on both.
-    assert rendered == [(0,)] * (49 + 2 + 6) + [(0, 1)] * 4, rendered
+    best = min(losses, key=losses.get)
+    if best == E.COMMON_START:
+        assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
+    else:
+        assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
+    assert judged == [1] * 8  # the last training view, once per candidate and run
+    # Screening (49 starts), code (2 steps), candidates (3 x 2 steps from the decoded start, 4
+    # from the common one) on view 0; the refit on both (6 steps from the common start, else 4).
+    refit = 6 if best == E.COMMON_START else 4
+    assert rendered == [(0,)] * (49 + 2 + 6 + 4) + [(0, 1)] * refit, rendered
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
+
+
+def test_where_the_held_out_view_prefers_the_common_start_the_prior_is_no_prior(setup, tmp_path, monkeypatch):
+    """The common start's candidate judged best (its held-out loss made the lowest): the written
+    network is the nbrdf-no-prior estimate's, weight for weight (same start, steps and seeds)."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    # Judged in order: the three decoded strengths, then the common start.
+    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 3 else loss)
+    prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    provenance = json.loads(prior.read_text())["provenance"]
+    assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
+    assert provenance["held_out_losses"][E.COMMON_START] == -1.0 and len(provenance["code"]) == 32
+    assert rendered[-6:] == [(0, 1)] * 6
+    assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
+               "--threads", "1") == 0
+    assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]

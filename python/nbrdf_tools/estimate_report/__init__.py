@@ -244,8 +244,9 @@ def table(results: list[dict], models: list[str]) -> list[str]:
 
 
 def chosen_strengths(results: list[dict], work: Path) -> list[str]:
-    """Per ``nbrdf`` estimate: the prior strength its held-out training view chose, and the
-    held-out losses of the candidates (from the network file's provenance)."""
+    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (a prior strength
+    from the decoded start, or the common start without the prior), and the held-out losses of
+    the candidates (from the network file's provenance)."""
     lines = []
     for r in results:
         path = work / r["material"] / "nbrdf.nbrdf.json"
@@ -254,8 +255,9 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         provenance = json.loads(path.read_text()).get("provenance", {})
         losses = provenance.get("held_out_losses") or {}
         text = ", ".join(f"{k}: {v:.4g}" for k, v in losses.items())
-        lines.append(f"* {r['material']}: prior strength {provenance.get('prior_weight')}"
-                     + (f" (held-out view loss {text})" if text else ""))
+        chosen = ("the common start, no prior (the result is the no-prior estimate)"
+                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}")
+        lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else ""))
     return lines
 
 
@@ -341,8 +343,10 @@ def main(argv: list[str] | None = None) -> int:
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
              *table(results, models), "", *summary(results), "",
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
-             "The prior's strength (the weight phase's pull toward the decoded weights), chosen per estimate "
-             "by its last training view, held out:", "", *chosen_strengths(results, work), "",
+             "The `nbrdf` estimates' start and prior strength (the weight phase's pull toward the decoded "
+             "weights; candidates 0.1, 0.001 and 0 from the decoded code, and `common`: the common "
+             "initialisation without the prior), chosen per estimate by its last training view, held out:", "",
+             *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
              "estimate of a run includes compiling Mitsuba's kernels for the network (cached afterwards). Novel "
