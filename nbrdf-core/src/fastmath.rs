@@ -14,18 +14,24 @@ pub trait MulAdd {
     /// Eight `f32` lanes: an AVX register in the fused copy on x86-64, an array elsewhere.
     type V8: Copy;
     fn mul_add(a: f32, b: f32, c: f32) -> f32;
-    fn splat8(a: f32) -> Self::V8;
     /// # Safety
-    /// `p` must point to 8 readable `f32`.
+    /// For [`Fused`] on x86-64 the CPU has AVX2 and FMA (its eight-lane operations are those
+    /// instructions).
+    unsafe fn splat8(a: f32) -> Self::V8;
+    /// # Safety
+    /// `p` must point to 8 readable `f32`; the CPU as for [`MulAdd::splat8`].
     unsafe fn load8(p: *const f32) -> Self::V8;
     /// `a * b + c` per lane, each lane exactly [`MulAdd::mul_add`].
-    fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8;
+    ///
+    /// # Safety
+    /// The CPU as for [`MulAdd::splat8`].
+    unsafe fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8;
     fn to_array8(v: Self::V8) -> [f32; 8];
 }
 
 /// Fused multiply-add, for code compiled with the `fma` target feature (one rounding, one
-/// instruction). Only code compiled for and dispatched to AVX2 and FMA uses it: its eight-lane
-/// operations are AVX2 instructions on x86-64.
+/// instruction). Its eight-lane operations are AVX2 and FMA instructions on x86-64, so they are
+/// `unsafe`: only code compiled for and dispatched to AVX2 and FMA calls them.
 pub struct Fused;
 /// Separate multiply and add, for any target.
 pub struct Unfused;
@@ -42,9 +48,9 @@ impl MulAdd for Fused {
     }
 
     #[inline(always)]
-    fn splat8(a: f32) -> Self::V8 {
+    unsafe fn splat8(a: f32) -> Self::V8 {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `Fused` runs only where AVX2 was detected (see the type's documentation).
+        // SAFETY: AVX2, by the caller's contract.
         unsafe {
             core::arch::x86_64::_mm256_set1_ps(a)
         }
@@ -55,7 +61,7 @@ impl MulAdd for Fused {
     #[inline(always)]
     unsafe fn load8(p: *const f32) -> Self::V8 {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller's 8 readable floats; AVX2 as in `splat8`.
+        // SAFETY: the caller's 8 readable floats; AVX2 by the caller's contract.
         unsafe {
             core::arch::x86_64::_mm256_loadu_ps(p)
         }
@@ -67,9 +73,9 @@ impl MulAdd for Fused {
     }
 
     #[inline(always)]
-    fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8 {
+    unsafe fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8 {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: FMA as in `splat8`.
+        // SAFETY: FMA, by the caller's contract.
         unsafe {
             core::arch::x86_64::_mm256_fmadd_ps(a, b, c)
         }
@@ -104,7 +110,7 @@ impl MulAdd for Unfused {
     }
 
     #[inline(always)]
-    fn splat8(a: f32) -> Self::V8 {
+    unsafe fn splat8(a: f32) -> Self::V8 {
         [a; 8]
     }
 
@@ -115,7 +121,7 @@ impl MulAdd for Unfused {
     }
 
     #[inline(always)]
-    fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8 {
+    unsafe fn mul_add8(a: Self::V8, b: Self::V8, c: Self::V8) -> Self::V8 {
         let mut out = c;
         for q in 0..8 {
             out[q] = a[q] * b[q] + c[q];

@@ -41,6 +41,9 @@ pub enum Post<'a> {
 
 /// `C[i][j] = post(init + sum_{k < depth} A(i, k) B[k][j])` for `i < rows` and `j < cols`, where
 /// `cols` is a multiple of [`VEC`], `B` has row stride `ldb` and `C` row stride `ldc`.
+/// With `M = Fused` it runs AVX2 and FMA instructions: only the kernels compiled for and
+/// dispatched to those features call it so (`mlp_grad`'s `*_avx2`), which is why this module is
+/// private to the crate.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn gemm<M: MulAdd>(
@@ -198,7 +201,9 @@ fn accumulate<M: MulAdd, const MR: usize, const NB: usize>(
     init: Init<'_>,
 ) -> [[M::V8; NB]; MR] {
     // (Plain loops, not `std::array::from_fn`: its closure was left as a call inside the loop.)
-    let mut start = [M::splat8(0.0); NB];
+    // SAFETY: here and at every `M::` eight-lane operation below, the CPU features of `Fused`
+    // hold: `gemm` is called with it only from code dispatched to them.
+    let mut start = [unsafe { M::splat8(0.0) }; NB];
     if let Init::Row(row) = init {
         let row = &row[j0..j0 + NB * VEC];
         for (nb, v) in start.iter_mut().enumerate() {
@@ -214,7 +219,8 @@ fn accumulate<M: MulAdd, const MR: usize, const NB: usize>(
     assert!((i0 + MR - 1) * a.row_stride + (depth - 1) * a.col_stride < a.data.len());
     assert!((depth - 1) * ldb + j0 + NB * VEC <= b.len());
     for k in 0..depth {
-        let mut b_k = [M::splat8(0.0); NB];
+        // SAFETY: the CPU, as above.
+        let mut b_k = [unsafe { M::splat8(0.0) }; NB];
         for (nb, v) in b_k.iter_mut().enumerate() {
             // SAFETY: `k < depth` and `nb < NB`: inside the second bound asserted above.
             *v = unsafe { M::load8(b.as_ptr().add(k * ldb + j0 + nb * VEC)) };
@@ -225,9 +231,11 @@ fn accumulate<M: MulAdd, const MR: usize, const NB: usize>(
                 *a.data
                     .get_unchecked((i0 + r) * a.row_stride + k * a.col_stride)
             };
-            let a_ik = M::splat8(a_ik);
+            // SAFETY: the CPU, as above.
+            let a_ik = unsafe { M::splat8(a_ik) };
             for (acc_v, &b_v) in acc_r.iter_mut().zip(&b_k) {
-                *acc_v = M::mul_add8(a_ik, b_v, *acc_v);
+                // SAFETY: the CPU, as above.
+                *acc_v = unsafe { M::mul_add8(a_ik, b_v, *acc_v) };
             }
         }
     }

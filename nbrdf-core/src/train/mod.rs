@@ -12,7 +12,7 @@
 pub mod adam;
 pub mod arrays;
 pub mod dataset;
-pub mod gemm;
+pub(crate) mod gemm;
 pub mod lr_schedule;
 pub mod mlp_grad;
 pub mod spectral;
