@@ -136,13 +136,13 @@ pub fn rgl_target(
     move |angles| {
         let (view, light) = from_rusinkiewicz(angles);
         let (v, l) = (view.as_vec3(), light.as_vec3());
+        if !fold.trains_on(v.z as f64, l.z as f64) {
+            return None;
+        }
         let f = measurement.eval(v, l);
         let f = match fold {
             RglFold::AsMeasured => f,
             RglFold::ReciprocalMean => {
-                if !fold.trains_on(v.z as f64, l.z as f64) {
-                    return None;
-                }
                 let g = measurement.eval(l, v);
                 std::array::from_fn(|c| 0.5 * (f[c] + g[c]))
             }

@@ -179,6 +179,9 @@ pub(crate) fn fold_pair(
     }
     let (view, light) = (unit(view), unit(light));
     let (cos_view, cos_light) = (f64::from(view.z), f64::from(light.z));
+    if !fold.trains_on(cos_view, cos_light) {
+        return Ok(Folded::Grazing);
+    }
     match fold {
         RglFold::AsMeasured => {
             for (f, &a) in f_cos.iter_mut().zip(a) {
@@ -186,9 +189,6 @@ pub(crate) fn fold_pair(
             }
         }
         RglFold::ReciprocalMean => {
-            if !fold.trains_on(cos_view, cos_light) {
-                return Ok(Folded::Grazing);
-            }
             let b = b.expect("checked: the reciprocal mean has swapped values");
             for ((f, &a), &b) in f_cos.iter_mut().zip(a).zip(b) {
                 *f = (0.5 * (f64::from(a) + f64::from(b) * cos_light / cos_view)).max(0.0);
