@@ -151,6 +151,28 @@ def test_a_non_reciprocal_bsdf_is_learnt_in_its_own_order_or_as_the_mean(llvm_va
     assert json.loads(out.read_text())["provenance"]["reciprocity"] == "reciprocal-mean"
 
 
+@pytest.mark.parametrize("variant", ["llvm_ad_rgb", "llvm_ad_spectral"])
+def test_a_reciprocal_distillation_trains_on_every_requested_pair(llvm_variant, variant, tmp_path, capsys):
+    """--reciprocal leaves out pairs with a cosine below 0.01; the trainer must hand out others in
+    their place, not let them be dropped: uniform sampling puts about 2 % of its pairs there, so a
+    count short of --samples, or any pair dropped as invalid, shows a drop."""
+    if variant not in mi.variants():
+        pytest.skip(f"this Mitsuba build has no {variant} variant")
+    source = tmp_path / "roughplastic.json"
+    source.write_text(json.dumps(ROUGHPLASTIC))
+    out = tmp_path / "reciprocal.nbrdf.json"
+    try:
+        status, err = run_main(capsys, source, "-o", out, "--variant", variant, "--reciprocal", "--sampling",
+                               "uniform", "--samples", "2000", "--epochs", "1", "--threads", "1", "--seed", "1", "-q")
+    finally:
+        mi.set_variant("llvm_ad_rgb")
+    assert status == 0, err
+    provenance = json.loads(out.read_text())["provenance"]
+    assert provenance["reciprocity"] == "reciprocal-mean" and provenance["sampling"] == "uniform"
+    assert (provenance["samples"], provenance["validation_samples"]) == (2000, 200), provenance
+    assert provenance["dropped_invalid"] == 0 and provenance["dropped_below_horizon"] == 0, provenance
+
+
 # -- errors: one line on stderr, exit status 1, no traceback -------------------------------------
 
 

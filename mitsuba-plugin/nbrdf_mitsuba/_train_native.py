@@ -90,14 +90,17 @@ def for_anisotropy(config, anisotropic: bool, scale_samples: bool) -> None:
     check(lib.nbrdf_train_config_for_anisotropy(config, int(anisotropic), int(scale_samples)))
 
 
-def sample_directions(config) -> tuple[np.ndarray, np.ndarray, int]:
+def sample_directions(config, fold: str = "as-measured") -> tuple[np.ndarray, np.ndarray, int]:
     """The trainer's planar (3, n) float32 ``view`` and ``light`` directions for ``config``
-    (training pairs first) and how many of the last are for validation."""
+    (training pairs first) and how many of the last are for validation. ``fold`` is the one the
+    values will train with (a :data:`FOLDS` name): for ``reciprocal-mean`` the pairs it would
+    leave out (a cosine below 0.01) are replaced by the next candidates, so all of them train."""
     n_train, n_validation = ffi.new("size_t *"), ffi.new("size_t *")
     check(lib.nbrdf_train_sample_counts(config, n_train, n_validation))
     n = n_train[0] + n_validation[0]
     view, light = np.zeros((3, n), np.float32), np.zeros((3, n), np.float32)
-    check(lib.nbrdf_train_directions(config, n, ffi.from_buffer("float[]", view, require_writable=True),
+    check(lib.nbrdf_train_directions(config, FOLDS[fold], n,
+                                     ffi.from_buffer("float[]", view, require_writable=True),
                                      ffi.from_buffer("float[]", light, require_writable=True)))
     return view, light, int(n_validation[0])
 

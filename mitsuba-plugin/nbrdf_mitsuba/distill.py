@@ -13,8 +13,10 @@ exactly as ``nbrdf train`` does (same sampling, loss, validation split and early
   near the horizon.
 * Reciprocity: by default the network learns ``f(view, light)`` as the BSDF evaluates it (what
   a scene with it renders); ``--reciprocal`` also evaluates the swapped pairs and learns
-  ``(f(v, l) + f(l, v)) / 2``, dropping pairs with a cosine below 0.01 (as ``nbrdf train
-  --rgl-fold reciprocal-mean`` does for RGL measurements).
+  ``(f(v, l) + f(l, v)) / 2``; the swapped term carries ``cos_light / cos_view``, so the trainer
+  hands out no pair with a cosine below 0.01 and draws the next candidates in their place: the
+  network trains on ``--samples`` pairs, as ``nbrdf train --rgl-fold reciprocal-mean`` does for RGL
+  measurements.
 * Spectra (``--variant llvm_ad_spectral`` or another ``*_spectral`` one): the BSDF is evaluated at
   :data:`WAVELENGTHS` (``si.wavelengths``, 4 per lane) and the trainer learns a spectral network
   (file format version 3, ``nbrdf_train_spectral_from_arrays``: 16 B-spline coefficients over
@@ -295,9 +297,10 @@ def distill(args) -> dict:
         native.for_anisotropy(config, anisotropic, scale_samples=args.samples is None)
     except native.TrainError as error:
         raise DistillError(str(error)) from None
+    fold = "reciprocal-mean" if args.reciprocal else "as-measured"
     start = time.perf_counter()
     try:
-        view, light, n_validation = native.sample_directions(config)
+        view, light, n_validation = native.sample_directions(config, fold=fold)
     except native.TrainError as error:
         raise DistillError(str(error)) from None
     values = eval_cos(bsdf, view, light)
@@ -328,7 +331,7 @@ def distill(args) -> dict:
         text = train(
             config, view, light, values, n_validation, name=args.name or network_name(output),
             source=f"Mitsuba BSDF {args.source}", details=details, swapped_eval_cos=swapped,
-            fold="reciprocal-mean" if args.reciprocal else "as-measured", on_epoch=progress.update)
+            fold=fold, on_epoch=progress.update)
     except native.TrainError as error:
         raise DistillError(str(error)) from None
     finally:
@@ -384,7 +387,8 @@ def parser() -> argparse.ArgumentParser:
                                      "spectral network, file format version 3: 16 B-spline coefficients over "
                                      "360-830 nm, learnt from the BSDF evaluated every 10 nm), e.g. llvm_ad_spectral")
     p.add_argument("--reciprocal", action="store_true",
-                   help="learn (f(view, light) + f(light, view)) / 2 instead of the BSDF as it evaluates")
+                   help="learn (f(view, light) + f(light, view)) / 2 instead of the BSDF as it evaluates (on "
+                        "pairs with both cosines at least 0.01, still --samples of them)")
     p.add_argument("--anisotropy", default="auto", choices=ANISOTROPY,
                    help="an anisotropic network (its input carries the half vector's azimuth; 5x the default "
                         "samples): on, off, or auto (default): when the BSDF's flags say Anisotropic or its values "

@@ -13,13 +13,19 @@ use crate::train::{self, EpochStats, TrainConfig, TrainReport};
 use glam::Vec3;
 
 /// The trainer's `(view, light)` pairs for `config` (training, then validation) and how many are
-/// for validation, after checking the settings' ranges.
-pub fn sample_directions(config: &TrainConfig) -> Result<(Vec<(Vec3, Vec3)>, usize)> {
+/// for validation, after checking the settings' ranges. Pairs that `fold` leaves out are replaced
+/// by the next candidates ([`arrays::sample_directions_for`]), so that a reciprocal-mean
+/// distillation trains on `config.samples` pairs, as `nbrdf train --rgl-fold reciprocal-mean` does.
+pub fn sample_directions(
+    config: &TrainConfig,
+    fold: RglFold,
+) -> Result<(Vec<(Vec3, Vec3)>, usize)> {
     super::limits::check_train(config)?;
-    arrays::sample_directions(config)
+    arrays::sample_directions_for(config, fold)
 }
 
-/// The numbers of training and validation pairs of `config`, after checking its settings.
+/// The numbers of training and validation pairs of `config`, after checking its settings: those
+/// of [`sample_directions`] with either fold, since left-out pairs are replaced.
 pub fn sample_counts(config: &TrainConfig) -> Result<(usize, usize)> {
     super::limits::check_train(config)?;
     config.validate()?;

@@ -10,7 +10,8 @@
 //!   BSDF renders. [`RglFold::ReciprocalMean`] also needs the swapped values `eval(wi = light,
 //!   wo = view) = f(light, view) cos_view` and learns `(f(v, l) + f(l, v)) / 2 cos_light =
 //!   (a + b cos_light / cos_view) / 2`; that ratio grows without bound at grazing views, so pairs
-//!   with either cosine below [`GRAZING_COS`](crate::source::GRAZING_COS) are dropped, as for RGL measurements.
+//!   with either cosine below [`GRAZING_COS`](crate::source::GRAZING_COS) are dropped, as for RGL measurements
+//!   ([`sample_directions_for`] with that fold draws none, replacing them by the next candidates).
 //! * Out-of-gamut values (slightly negative) are clamped to 0. A value that is not finite is an
 //!   error naming the pair: a BSDF returning NaN is broken, and dropping its samples would hide it.
 //! * Pairs at or below the horizon (either `z <= 0`) are dropped, as the trainer drops them.

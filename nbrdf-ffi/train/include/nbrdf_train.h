@@ -18,12 +18,15 @@
 #include <stddef.h>
 #include <stdint.h>
 
-// How a non-reciprocal source enters the training target (`nbrdf_train_from_arrays`).
+// How a non-reciprocal source enters the training target (`nbrdf_train_directions`,
+// `nbrdf_train_from_arrays`, `nbrdf_train_spectral_from_arrays`).
 typedef enum NbrdfTrainFold {
   // `f(view, light)` as given: what a scene with the source renders.
   NBRDF_TRAIN_FOLD_AS_GIVEN = 0,
-  // `(f(view, light) + f(light, view)) / 2`, from the values and the swapped values; pairs
-  // with a cosine below 0.01 are dropped (the swapped term divides by `cos_view`).
+  // `(f(view, light) + f(light, view)) / 2`, from the values and the swapped values. Pairs
+  // with a cosine below 0.01 are left out (the swapped term divides by `cos_view`):
+  // `nbrdf_train_directions` draws the next candidates in their place, and the
+  // `*_from_arrays` functions drop any they are given.
   NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN = 1,
 } NbrdfTrainFold;
 
@@ -133,7 +136,8 @@ int32_t nbrdf_train_config_for_anisotropy(struct NbrdfTrainConfig *config,
                                           int32_t scale_samples);
 
 // Stores the number of training and validation pairs of `config` (what
-// `nbrdf_train_directions` writes, training pairs first) after checking its settings.
+// `nbrdf_train_directions` writes with either fold, training pairs first) after checking its
+// settings.
 //
 // # Safety
 // `config` points to an `NbrdfTrainConfig`; the outputs point to writable `size_t`s.
@@ -146,11 +150,16 @@ int32_t nbrdf_train_sample_counts(const struct NbrdfTrainConfig *config,
 // `nbrdf_train_sample_counts` counts them; `n` must be their sum. Directions are full 3D
 // vectors: a caller must not assume any symmetry of them. With `config.anisotropic` the
 // adaptive pairs cover the half vector's azimuth too (the same config must then train).
+// `fold` (an `NbrdfTrainFold`) is the one the pairs will train with: under
+// `NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN` pairs with a cosine below 0.01 are replaced by the next
+// candidates, so that every pair is trained on, as `nbrdf train --rgl-fold reciprocal-mean`
+// draws them.
 //
 // # Safety
 // `config` points to an `NbrdfTrainConfig`; `out_view` and `out_light` hold `3 n` writable
 // floats each and do not overlap.
 int32_t nbrdf_train_directions(const struct NbrdfTrainConfig *config,
+                               int32_t fold,
                                size_t n,
                                float *out_view,
                                float *out_light);

@@ -56,15 +56,18 @@ pub enum NbrdfTrainSampling {
     NBRDF_TRAIN_SAMPLING_UNIFORM = 1,
 }
 
-/// How a non-reciprocal source enters the training target (`nbrdf_train_from_arrays`).
+/// How a non-reciprocal source enters the training target (`nbrdf_train_directions`,
+/// `nbrdf_train_from_arrays`, `nbrdf_train_spectral_from_arrays`).
 #[repr(C)]
 #[allow(non_camel_case_types)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NbrdfTrainFold {
     /// `f(view, light)` as given: what a scene with the source renders.
     NBRDF_TRAIN_FOLD_AS_GIVEN = 0,
-    /// `(f(view, light) + f(light, view)) / 2`, from the values and the swapped values; pairs
-    /// with a cosine below 0.01 are dropped (the swapped term divides by `cos_view`).
+    /// `(f(view, light) + f(light, view)) / 2`, from the values and the swapped values. Pairs
+    /// with a cosine below 0.01 are left out (the swapped term divides by `cos_view`):
+    /// `nbrdf_train_directions` draws the next candidates in their place, and the
+    /// `*_from_arrays` functions drop any they are given.
     NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN = 1,
 }
 
@@ -350,7 +353,8 @@ pub unsafe extern "C" fn nbrdf_train_config_for_anisotropy(
 }
 
 /// Stores the number of training and validation pairs of `config` (what
-/// `nbrdf_train_directions` writes, training pairs first) after checking its settings.
+/// `nbrdf_train_directions` writes with either fold, training pairs first) after checking its
+/// settings.
 ///
 /// # Safety
 /// `config` points to an `NbrdfTrainConfig`; the outputs point to writable `size_t`s.
@@ -380,6 +384,10 @@ pub unsafe extern "C" fn nbrdf_train_sample_counts(
 /// `nbrdf_train_sample_counts` counts them; `n` must be their sum. Directions are full 3D
 /// vectors: a caller must not assume any symmetry of them. With `config.anisotropic` the
 /// adaptive pairs cover the half vector's azimuth too (the same config must then train).
+/// `fold` (an `NbrdfTrainFold`) is the one the pairs will train with: under
+/// `NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN` pairs with a cosine below 0.01 are replaced by the next
+/// candidates, so that every pair is trained on, as `nbrdf train --rgl-fold reciprocal-mean`
+/// draws them.
 ///
 /// # Safety
 /// `config` points to an `NbrdfTrainConfig`; `out_view` and `out_light` hold `3 n` writable
@@ -387,6 +395,7 @@ pub unsafe extern "C" fn nbrdf_train_sample_counts(
 #[no_mangle]
 pub unsafe extern "C" fn nbrdf_train_directions(
     config: *const NbrdfTrainConfig,
+    fold: i32,
     n: usize,
     out_view: *mut f32,
     out_light: *mut f32,
@@ -394,11 +403,12 @@ pub unsafe extern "C" fn nbrdf_train_directions(
     guard("nbrdf_train_directions", || {
         // SAFETY: forwarded contract.
         let (config, threads) = unsafe { read_config(config)? };
+        let fold = read_fold(fold)?;
         check_pointer(out_view, "out_view")?;
         check_pointer(out_light, "out_light")?;
         let len = array_len(n, 3)?;
         let (pairs, _) =
-            nbrdf_core::ops::with_threads(threads, || distill::sample_directions(&config))??;
+            nbrdf_core::ops::with_threads(threads, || distill::sample_directions(&config, fold))??;
         if pairs.len() != n {
             return Err(Failure::invalid(format!(
                 "n = {n}, but the config has {} pairs (nbrdf_train_sample_counts)",
@@ -422,7 +432,7 @@ pub unsafe extern "C" fn nbrdf_train_directions(
     })
 }
 
-/// The fold of `nbrdf_train_from_arrays`'s `fold` argument (an `NbrdfTrainFold`).
+/// The fold of a `fold` argument (an `NbrdfTrainFold`).
 fn read_fold(fold: i32) -> FfiResult<RglFold> {
     match fold {
         0 => Ok(RglFold::AsMeasured),

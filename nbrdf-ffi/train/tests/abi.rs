@@ -85,7 +85,7 @@ fn directions_are_planar_unit_vectors_above_the_horizon() {
     let mut wrong2 = wrong.clone();
     // SAFETY: 3 (n - 1) floats each.
     let status = unsafe {
-        nbrdf_train_directions(&config, a.n - 1, wrong.as_mut_ptr(), wrong2.as_mut_ptr())
+        nbrdf_train_directions(&config, 0, a.n - 1, wrong.as_mut_ptr(), wrong2.as_mut_ptr())
     };
     assert_eq!(status, INVALID);
     assert!(

@@ -36,8 +36,14 @@ pub fn small_config() -> NbrdfTrainConfig {
 }
 
 /// The trainer's planar view and light directions for `config` (`3 n` floats each) with `n`
-/// and the validation count, from `nbrdf_train_sample_counts` and `nbrdf_train_directions`.
+/// and the validation count, from `nbrdf_train_sample_counts` and `nbrdf_train_directions`
+/// (for the as-given fold).
 pub fn directions(config: &NbrdfTrainConfig) -> (Vec<f32>, Vec<f32>, usize, usize) {
+    directions_for(config, NbrdfTrainFold::NBRDF_TRAIN_FOLD_AS_GIVEN as i32)
+}
+
+/// [`directions`] for the `NbrdfTrainFold` value `fold`.
+pub fn directions_for(config: &NbrdfTrainConfig, fold: i32) -> (Vec<f32>, Vec<f32>, usize, usize) {
     let (mut n_train, mut n_validation) = (0, 0);
     // SAFETY: valid pointers.
     let status = unsafe { nbrdf_train_sample_counts(config, &mut n_train, &mut n_validation) };
@@ -46,7 +52,7 @@ pub fn directions(config: &NbrdfTrainConfig) -> (Vec<f32>, Vec<f32>, usize, usiz
     let (mut view, mut light) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
     // SAFETY: 3 n floats each.
     let status =
-        unsafe { nbrdf_train_directions(config, n, view.as_mut_ptr(), light.as_mut_ptr()) };
+        unsafe { nbrdf_train_directions(config, fold, n, view.as_mut_ptr(), light.as_mut_ptr()) };
     assert_eq!(status, OK, "{}", last_error());
     (view, light, n, n_validation)
 }
