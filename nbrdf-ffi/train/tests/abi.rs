@@ -8,7 +8,7 @@ use std::path::Path;
 use std::ptr::{null, null_mut};
 
 mod common;
-use common::{directions, last_error, small_config, INVALID, NULL, OK};
+use common::{directions, last_error, planar_pairs, small_config, INVALID, NULL, OK};
 
 /// Planar directions and Lambertian `f cos_light` values (albedo 0.6, 0.4, 0.2) for `config`.
 struct Arrays {
@@ -131,12 +131,9 @@ fn arrays_of_a_lambertian_train_a_network_that_matches_it() {
 
 /// Half vectors off the x-z plane among the first `n` pairs of planar directions.
 fn off_plane_half_vectors(a: &Arrays) -> usize {
-    (0..a.n)
-        .filter(|&i| {
-            let v = glam::Vec3::new(a.view[i], a.view[a.n + i], a.view[2 * a.n + i]);
-            let l = glam::Vec3::new(a.light[i], a.light[a.n + i], a.light[2 * a.n + i]);
-            (v + l).normalize().y.abs() > 0.1
-        })
+    planar_pairs(&a.view, &a.light, a.n)
+        .into_iter()
+        .filter(|&(v, l)| (v + l).normalize().y.abs() > 0.1)
         .count()
 }
 

@@ -10,7 +10,7 @@ use nbrdf_core::train::TrainConfig;
 use nbrdf_train::*;
 
 mod common;
-use common::{directions_for, last_error, small_config, INVALID};
+use common::{directions_for, last_error, planar_pairs, small_config, INVALID};
 
 const AS_GIVEN: i32 = NbrdfTrainFold::NBRDF_TRAIN_FOLD_AS_GIVEN as i32;
 const RECIPROCAL: i32 = NbrdfTrainFold::NBRDF_TRAIN_FOLD_RECIPROCAL_MEAN as i32;
@@ -35,12 +35,6 @@ fn core_config() -> TrainConfig {
     }
 }
 
-/// The planar arrays of the C call as `(view, light)` pairs.
-fn pairs_of(view: &[f32], light: &[f32], n: usize) -> Vec<(Vec3, Vec3)> {
-    let at = |d: &[f32], i: usize| Vec3::new(d[i], d[n + i], d[2 * n + i]);
-    (0..n).map(|i| (at(view, i), at(light, i))).collect()
-}
-
 fn left_out(pairs: &[(Vec3, Vec3)]) -> usize {
     pairs
         .iter()
@@ -51,7 +45,7 @@ fn left_out(pairs: &[(Vec3, Vec3)]) -> usize {
 #[test]
 fn reciprocal_pairs_are_the_cores_and_none_is_left_out() {
     let (view, light, n, n_validation) = directions_for(&c_config(), RECIPROCAL);
-    let pairs = pairs_of(&view, &light, n);
+    let pairs = planar_pairs(&view, &light, n);
     let (expected, expected_validation) =
         sample_directions_for(&core_config(), RglFold::ReciprocalMean).unwrap();
     assert_eq!((n, n_validation), (SAMPLES + 300, 300));
@@ -68,7 +62,7 @@ fn as_given_pairs_are_the_cores_and_some_would_be_left_out() {
     // What the reciprocal distillation drew before the fold argument: the fix is only visible
     // if the as-given pairs hold pairs the reciprocal mean leaves out.
     let (view, light, n, _) = directions_for(&c_config(), AS_GIVEN);
-    let pairs = pairs_of(&view, &light, n);
+    let pairs = planar_pairs(&view, &light, n);
     let (expected, _) = sample_directions_for(&core_config(), RglFold::AsMeasured).unwrap();
     assert!(pairs == expected, "the C pairs differ from the core's");
     let dropped = left_out(&pairs);

@@ -3,6 +3,7 @@
 
 #![allow(dead_code)] // each test file uses its own subset
 
+use glam::Vec3;
 use nbrdf_train::*;
 use std::ffi::CStr;
 
@@ -55,4 +56,11 @@ pub fn directions_for(config: &NbrdfTrainConfig, fold: i32) -> (Vec<f32>, Vec<f3
         unsafe { nbrdf_train_directions(config, fold, n, view.as_mut_ptr(), light.as_mut_ptr()) };
     assert_eq!(status, OK, "{}", last_error());
     (view, light, n, n_validation)
+}
+
+/// The first `n` pairs of planar direction arrays (`3 n` floats each, as the C calls take and
+/// give them) as `(view, light)` vectors.
+pub fn planar_pairs(view: &[f32], light: &[f32], n: usize) -> Vec<(Vec3, Vec3)> {
+    let at = |d: &[f32], i: usize| Vec3::new(d[i], d[n + i], d[2 * n + i]);
+    (0..n).map(|i| (at(view, i), at(light, i))).collect()
 }
