@@ -11,7 +11,7 @@ TRAIN_LIB := target/release/libnbrdf_train.so
 CLI := target/release/nbrdf
 PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*') mitsuba-plugin/pyproject.toml nbrdf-ffi/include/nbrdf.h nbrdf-ffi/train/include/nbrdf_train.h
 
-.PHONY: setup build install demo test test-rust test-python bench lint clean FORCE
+.PHONY: setup build install demo test test-rust test-python test-cuda bench lint clean FORCE
 
 setup: $(VENV)/.plugin-installed llvm
 
@@ -85,6 +85,15 @@ test-rust:
 
 test-python: setup
 	$(PY) -m pytest tests -q
+
+# The plugin's parity, chi2, variant and estimation tests in cuda_ad_* variants instead of llvm_ad_*
+# (needs an NVIDIA GPU and driver; tests/conftest.py, NBRDF_TEST_JIT). The CLI's subprocess tests
+# are left out: they ask for llvm variants by name.
+CUDA_TESTS = test_backends test_sampling test_variants test_spectral test_spectral_networks test_two_lobe \
+	test_anisotropic test_tabulated test_many_materials test_usage test_merl_bsdf test_nbrdf_eval \
+	test_hardening_plugin test_estimate_latent test_estimate
+test-cuda: setup
+	NBRDF_TEST_JIT=cuda $(PY) -m pytest $(CUDA_TESTS:%=tests/%.py) -q -rs
 
 # Speed figures (criterion): NBRDF evaluations, MERL lookups and Blinn-Phong samples per second.
 bench:

@@ -3,6 +3,10 @@
 * ``variant`` - parametrised over scalar_rgb and llvm_ad_rgb; sets the Mitsuba variant.
 * ``jit_variant`` - llvm_ad_rgb and cuda_ad_rgb (the latter skipped, with the reason, without a
   CUDA device); the backend parity tests run in both.
+* ``NBRDF_TEST_JIT=cuda`` (environment; ``make test-cuda``) runs every test written for an
+  ``llvm_ad_*`` variant in the matching ``cuda_ad_*`` variant instead: ``mi.set_variant`` maps the
+  names (test ids keep the llvm names) and the libLLVM check becomes the CUDA check. Tests that run
+  the CLI in a subprocess still ask for the llvm variant there.
 * ``shared`` - the read-only data directory ``../shared`` next to the repository (or
   $NBRDF_SHARED); tests that need it are skipped, with the reason, when it is absent.
 * ``merl_table`` - a MERL-format table synthesised once per session with
@@ -15,6 +19,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 from pathlib import Path
 
@@ -29,6 +34,9 @@ from nbrdf_testing import write_merl, write_network
 from nbrdf_tools.paths import default_cli, shared_dir
 
 SHARED = shared_dir()
+JIT_BACKEND = os.environ.get("NBRDF_TEST_JIT", "llvm").strip().lower()
+if JIT_BACKEND not in ("llvm", "cuda"):
+    raise pytest.UsageError(f"NBRDF_TEST_JIT={JIT_BACKEND!r}: expected llvm or cuda")
 KERAS_MATERIALS = ["alum-bronze", "blue-metallic-paint", "specular-black-phenolic", "white-diffuse-bball", "pink-fabric"]
 SYNTH_MATERIAL = "gold-metallic-paint"
 VARIANTS = ["scalar_rgb", "llvm_ad_rgb"]
@@ -89,12 +97,32 @@ def _cuda_problem() -> str | None:
 JIT_VARIANTS = ["llvm_ad_rgb", "cuda_ad_rgb"]
 
 
+def _on_cuda(name: str) -> str:
+    return "cuda_" + name[len("llvm_"):] if name.startswith("llvm_") else name
+
+
+def _redirect_llvm_to_cuda() -> None:
+    """The NBRDF_TEST_JIT=cuda mode: every llvm_ad_* variant a test (or the plugin, in process)
+    sets becomes its cuda_ad_* twin, and "is the llvm variant usable" asks about CUDA."""
+    set_variant = mi.set_variant
+
+    def set_cuda_variant(*names):
+        return set_variant(*(_on_cuda(n) for n in names))
+
+    mi.set_variant = set_cuda_variant
+    nbrdf_mitsuba.llvm.problem = nbrdf_mitsuba._llvm.problem = _cuda_problem
+
+
+if JIT_BACKEND == "cuda":
+    _redirect_llvm_to_cuda()
+
+
 def _use_jit_variant(name: str):
     """Sets a JIT variant in symbolic mode for one test (skipped, naming the reason, where the
     variant cannot run) and puts symbolic mode back after it."""
     problem = _llvm_problem() if name.startswith("llvm") else _cuda_problem()
     if problem:
-        pytest.skip(f"{name} unavailable: {problem}")
+        pytest.skip(f"{_on_cuda(name) if JIT_BACKEND == 'cuda' else name} unavailable: {problem}")
     mi.set_variant(name)
     _set_symbolic(True)
     yield name
@@ -181,7 +209,7 @@ def restore_variant():
 
 def use_variant(variant: str) -> None:
     """Sets ``variant``, skipping (with the reason) where this Mitsuba or its libLLVM lacks it."""
-    if variant not in mi.variants():
+    if (_on_cuda(variant) if JIT_BACKEND == "cuda" else variant) not in mi.variants():
         pytest.skip(f"the installed Mitsuba has no {variant} variant")
     if variant.startswith("llvm"):
         problem = nbrdf_mitsuba.llvm.problem()

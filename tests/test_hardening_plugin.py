@@ -359,6 +359,22 @@ def test_sharp_lobes_pass_zoomed_chi2_rust(llvm_variant, merl_table, exponent, t
     assert ok, messages
 
 
+def test_traced_log1m_is_relatively_exact_near_zero(llvm_variant):
+    """ln(1 - x) of the traced pdfs against float64 log1p over 12 decades: a sharp lobe's pdf
+    is exp(n ln(1 - x)) with x ~ 1/n, so a 1e-7 absolute error (CUDA's approximate log near 1)
+    would be a 10 % error at n = 1e6."""
+    from nbrdf_mitsuba import jit
+
+    x = np.concatenate([np.geomspace(1e-12, 0.999, 4000), [0.0, 0.0625, np.nextafter(0.0625, 0)]]).astype(np.float32)
+    got = np.asarray(jit._log1m(mi.Float(x)).numpy(), np.float64)
+    want = np.log1p(-x.astype(np.float64))
+    small = x < 0.0625
+    np.testing.assert_allclose(got[small], want[small], rtol=1e-6, atol=0)
+    # Above 1/16 the backend's own log (CUDA's is good to 2^-22.6 in log2, ~1.1e-7 in ln) is
+    # accurate enough: there a lobe of n >= 16 is already below exp(-1) of its peak.
+    np.testing.assert_allclose(got[~small], want[~small], rtol=1e-6, atol=2.5e-7)
+
+
 @pytest.mark.parametrize("backend", ["jit", "rust"])
 def test_zoomed_chi2_detects_a_five_percent_error_in_the_exponent(llvm_variant, merl_table, backend):
     """The zoomed test can fail: sampling n = 0.95e6 against the pdf of n = 1e6 is rejected."""
