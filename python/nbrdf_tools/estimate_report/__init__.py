@@ -244,9 +244,9 @@ def table(results: list[dict], models: list[str]) -> list[str]:
 
 
 def chosen_strengths(results: list[dict], work: Path) -> list[str]:
-    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (a prior strength
-    from the decoded start, or the common start without the prior), and the held-out losses of
-    the candidates (from the network file's provenance)."""
+    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (the code
+    penalty's and the pull's strengths from the decoded start, or the common start without the
+    prior), and the held-out losses of the candidates (from the network file's provenance)."""
     lines = []
     for r in results:
         path = work / r["material"] / "nbrdf.nbrdf.json"
@@ -256,7 +256,8 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         losses = provenance.get("held_out_losses") or {}
         text = ", ".join(f"{k}: {v:.4g}" for k, v in losses.items())
         chosen = ("the common start, no prior (the result is the no-prior estimate)"
-                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}")
+                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}"
+                  + (f", code penalty {provenance['code_prior']}" if provenance.get("code_prior") is not None else ""))
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else ""))
     return lines
 
@@ -343,9 +344,10 @@ def main(argv: list[str] | None = None) -> int:
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
              *table(results, models), "", *summary(results), "",
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
-             "The `nbrdf` estimates' start and prior strength (the weight phase's pull toward the decoded "
-             "weights; candidates 0.1, 0.001 and 0 from the decoded code, and `common`: the common "
-             "initialisation without the prior), chosen per estimate by its last training view, held out:", "",
+             "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
+             "training codes, `code` 0 or 0.001; the weight phase's pull toward the decoded weights, `pull` "
+             "0.1, 0.001 or 0, from each code; and `common`: the common initialisation without the prior), "
+             "chosen per estimate by its last training view, held out:", "",
              *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
