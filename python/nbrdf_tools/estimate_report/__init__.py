@@ -173,7 +173,8 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
     images = sorted(folder.glob("train*.exr"))
     argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
-            "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]), "-q"]
+            "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]),
+            "--seed", str(settings["seed"]), "-q"]
     start, cpu = time.perf_counter(), time.process_time()
     status = estimate.main(argv)
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
@@ -293,6 +294,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the estimates' seed (default: 0); the training and novel images do not depend on it")
     p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
     p.add_argument("--stored-only", action="store_true",
                    help="estimate nothing: tabulate the results stored in WORK, list the cases missing")
@@ -311,6 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         settings["steps"] = args.steps
     if args.spp:
         settings["spp"] = args.spp
+    settings["seed"] = args.seed
     models = [m for m in args.models.split(",") if m]
     bad = set(models) - set(MODELS)
     if bad:
@@ -338,7 +342,8 @@ def main(argv: list[str] | None = None) -> int:
              f"A sphere, {settings['views']} training views ({settings['resolution']}x{settings['resolution']}, "
              f"{settings['reference_spp']} spp references) under {len(LIGHTS)} point lights and a dim sky; every model "
              f"fitted to the same images by `python -m nbrdf_mitsuba.estimate` ({settings['steps']} steps, "
-             f"{settings['spp']} spp per render, prb depth 3). Measured on a novel view under a novel light and in "
+             f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on a novel view under "
+             "a novel light and in "
              f"BRDF space (mean |ln(1 + f cos) - ln(1 + f' cos)|, {settings['log_samples']} uniform pairs). "
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
