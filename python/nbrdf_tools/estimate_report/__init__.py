@@ -255,7 +255,7 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
             continue
         provenance = json.loads(path.read_text()).get("provenance", {})
         losses = provenance.get("held_out_losses") or {}
-        text = ", ".join(f"{k}: {v:.4g}" for k, v in losses.items())
+        text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
         chosen = ("the common start, no prior (the result is the no-prior estimate)"
                   if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}"
                   + (f", code penalty {provenance['code_prior']}" if provenance.get("code_prior") is not None else ""))
