@@ -36,6 +36,7 @@ SCENE = """<scene version="3.0.0">
 VIEWS = ["0, 0, 4", "3, 1, 2.5"]
 NOVEL = "-3, 1.5, 2.5"
 TRUTH = {"diffuse_reflectance": [0.6, 0.2, 0.1], "alpha": 0.15}
+AE_FILE = Path(__file__).resolve().parent.parent / "nbrdf-core" / "data" / "models" / "autoencoder.json"
 
 
 def write_scene(path: Path, origins=VIEWS) -> Path:
@@ -263,7 +264,7 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """The code and the candidates (three strengths from the decoded start, the common start)
     see the training views but the last; the last alone judges them, the lowest held-out loss
-    wins, the refit uses every view, and a seed repeats it."""
+    wins, the refit uses every view, and a seed repeats it (the code penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
@@ -271,7 +272,7 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
     outs = [tmp_path / f"prior{k}.nbrdf.json" for k in range(2)]
     for out in outs:
         rendered.clear()
-        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
     assert set(losses) == {str(s) for s in E.PRIOR_STRENGTHS} | {E.COMMON_START}
@@ -303,7 +304,7 @@ def test_where_the_held_out_view_prefers_the_common_start_the_prior_is_no_prior(
     # Judged in order: the three decoded strengths, then the common start.
     rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 3 else loss)
     prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
-    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
     assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
     assert provenance["held_out_losses"][E.COMMON_START] == -1.0 and len(provenance["code"]) == 32
@@ -311,3 +312,110 @@ def test_where_the_held_out_view_prefers_the_common_start_the_prior_is_no_prior(
     assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
                "--threads", "1") == 0
     assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]
+
+
+def test_code_penalty_and_its_gradient_against_a_float64_oracle():
+    """The code phase's penalty, ``s mean(((z - m) / sd)^2)`` with ``m``, ``sd`` the training
+    codes' mean and spread, equals a NumPy float64 oracle from the autoencoder file's anchors,
+    and its gradient equals central differences of that oracle."""
+    from nbrdf_mitsuba.estimate import prior_penalty
+    from nbrdf_mitsuba.latent import Decoder
+
+    anchors = np.asarray(json.loads(AE_FILE.read_text())["anchors"], dtype=np.float64)
+    m, sd = anchors.mean(axis=0), anchors.std(axis=0)
+    strength = 1e-3
+
+    def oracle(z):
+        return strength * np.mean(((z - m) / sd) ** 2)
+
+    penalty = prior_penalty(*Decoder(AE_FILE).code_distribution(), strength)
+    rng = np.random.default_rng(7)
+    for z in (m + 2.5 * sd * rng.standard_normal(m.size), anchors[3] + 0.1):
+        value, grad = penalty(z)
+        # The decoder holds its anchors in float32 (the oracle reads the file's float64 text).
+        assert value == pytest.approx(oracle(z), rel=1e-7)
+        h = 1e-5
+        for f in (oracle, lambda x: penalty(x)[0]):
+            numeric = np.array([(f(z + h * e) - f(z - h * e)) / (2 * h) for e in np.eye(z.size)])
+            assert np.abs(grad).max() > 0
+            np.testing.assert_allclose(grad, numeric, rtol=1e-6, atol=1e-9 * np.abs(numeric).max())
+    assert prior_penalty(m, sd * sd, 0.0) is None  # strength 0: no penalty at all, not a zero one
+
+
+def test_code_prior_schedule():
+    from nbrdf_mitsuba.estimate import CODE_PRIOR_STRENGTHS, FALLBACK_CODE_PRIOR, schedule
+
+    assert 0.0 in CODE_PRIOR_STRENGTHS and len(CODE_PRIOR_STRENGTHS) > 1
+    plan = schedule(100, 3, None)
+    assert plan["code_strengths"] == CODE_PRIOR_STRENGTHS and plan["candidate"] == 30 and plan["common"] == 70
+    assert schedule(100, 3, None, 0.0)["code_strengths"] == (0.0,)
+    assert schedule(100, 1, None)["code_strengths"] == (FALLBACK_CODE_PRIOR,)  # nothing to hold out
+    assert schedule(100, 3, 0.5)["code_strengths"] == (FALLBACK_CODE_PRIOR,)  # a fixed pull fixes both
+    both = schedule(100, 3, 0.5, 0.25)
+    assert both["code_strengths"] == (0.25,) and both["candidate"] == 0 and both["common"] == 0
+
+
+def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+    """By default each code strength gets its own code phase and the pull's three candidates;
+    all of them and the common start see the training views but the last, the last alone judges
+    them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    rendered, judged = spy_on_views(monkeypatch, E)
+    outs = [tmp_path / f"code{k}.nbrdf.json" for k in range(2)]
+    for out in outs:
+        rendered.clear()
+        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    provenance = json.loads(outs[0].read_text())["provenance"]
+    losses = provenance["held_out_losses"]
+    pairs = [(c, w) for c in E.CODE_PRIOR_STRENGTHS for w in E.PRIOR_STRENGTHS]
+    names = [f"code {c}, pull {w}" for c, w in pairs]
+    assert set(losses) == set(names) | {E.COMMON_START}  # fit-phong's rewrite sorts the keys
+    assert all(math.isfinite(v) for v in losses.values())
+    best = min(losses, key=losses.get)
+    if best == E.COMMON_START:
+        assert provenance["start"] == E.COMMON_START and provenance["code_prior"] is None
+    else:
+        c, w = pairs[names.index(best)]
+        assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
+    n = len(pairs) + 1
+    assert judged == [1] * (2 * n)  # the last training view, once per candidate and run
+    # Screening (49), a code phase per strength (2 steps each), the pull's candidates (2 steps
+    # each), the common start (4) on view 0; the refit on both views.
+    refit = 6 if best == E.COMMON_START else 4
+    assert rendered == [(0,)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS) + 2 * len(pairs) + 4) + [(0, 1)] * refit
+    first, second = (json.loads(out.read_text()) for out in outs)
+    assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
+
+
+def test_code_prior_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, monkeypatch):
+    """Where the held-out view picks code strength 0, the estimate is the one of ``--code-prior 0``
+    (the code phase without the penalty, as before it existed) weight for weight; its candidates'
+    held-out losses are that run's bit for bit, and those from code strength 1e-3 differ."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    pull = E.PRIOR_STRENGTHS.index(1e-3)  # judged in order: the pull's strengths from code strength 0 first
+    _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == pull else loss)
+    nets = {}
+    for name, extra in (("fixed", ("--code-prior", "0")), ("chosen", ())):
+        judged.clear()
+        nets[name] = tmp_path / f"{name}.nbrdf.json"
+        assert run(scene, images, nets[name], "--steps", "6", "--spp", "2", "--threads", "1", *extra) == 0
+    fixed, chosen = (json.loads(nets[k].read_text()) for k in ("fixed", "chosen"))
+    assert chosen["provenance"]["code_prior"] == fixed["provenance"]["code_prior"] == 0.0
+    assert chosen["provenance"]["prior_weight"] == fixed["provenance"]["prior_weight"] == 1e-3
+    assert chosen["layers"] == fixed["layers"] and chosen["provenance"]["code"] == fixed["provenance"]["code"]
+    losses = chosen["provenance"]["held_out_losses"]
+    for strength in E.PRIOR_STRENGTHS:
+        assert losses[f"code 0.0, pull {strength}"] == fixed["provenance"]["held_out_losses"][str(strength)]
+        if strength != 1e-3:
+            assert losses[f"code 0.001, pull {strength}"] != losses[f"code 0.0, pull {strength}"]
+
+
+def test_code_prior_must_be_finite_and_non_negative(setup, tmp_path, capsys):
+    scene, images = setup
+    out = tmp_path / "out.nbrdf.json"
+    for value in ("-1", "nan"):
+        expect_error(capsys, run(scene, images, out, "--code-prior", value), out, "--code-prior must be")

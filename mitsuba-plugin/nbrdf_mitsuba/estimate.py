@@ -8,16 +8,19 @@ are optimised by Adam on the images' log-radiance error, every view each step:
 
 * ``nbrdf`` (default): first the 32-value latent code through the pretrained decoder
   (:mod:`nbrdf_mitsuba.latent`: the gradient of the weights, which ``jit_weights="opaque"``
-  makes scene parameters, chained to the code), starting from the best of 49 training codes;
-  then the 675 weights themselves, held near the decoded ones by a penalty (the squared distance
-  in the autoencoder's standardised weight space). The penalty's strength is chosen by a held-out
-  training view (``--prior-weight`` fixes it instead): the code is fitted on all views but the
-  last, each strength of ``PRIOR_STRENGTHS`` fits the weights on those views for a share of the
-  steps, the one with the lowest loss on the held-out view is kept and the weights are refitted
-  on every view with it. One more candidate starts from the common initialisation without the
-  pull (the ``nbrdf-no-prior`` start, as many steps as a decoded candidate's code and weights);
-  where the held-out view prefers it, the result is the ``nbrdf-no-prior`` estimate itself.
-  Writes an ``*.nbrdf.json`` with ``nbrdf fit-phong``'s sampling.
+  makes scene parameters, chained to the code), starting from the best of 49 training codes,
+  with a Gaussian penalty on the code (the training codes' mean and spread); then the 675
+  weights themselves, held near the decoded ones by a penalty (the squared distance in the
+  autoencoder's standardised weight space). Both penalties' strengths are chosen together by a
+  held-out training view (``--prior-weight`` and ``--code-prior`` fix them instead): the code is
+  fitted on all views but the last once per strength of ``CODE_PRIOR_STRENGTHS`` (the screening
+  of the starts shared), from each decoded code every strength of ``PRIOR_STRENGTHS`` fits the
+  weights on those views for a share of the steps, the pair with the lowest loss on the held-out
+  view is kept and the weights are refitted on every view with it. One more candidate starts
+  from the common initialisation without the pull (the ``nbrdf-no-prior`` start, as many steps
+  as a decoded candidate's code and weights); where the held-out view prefers it, the result
+  is the ``nbrdf-no-prior`` estimate itself. A fixed ``--prior-weight`` holds no view out: the
+  code's strength is then ``--code-prior``, else 0. Writes an ``*.nbrdf.json`` with ``nbrdf fit-phong``'s sampling.
 * ``nbrdf-no-prior``: the weights alone, from the common initialisation (the trainer's seed-0
   start, twin of ``network/mod.rs`` ``paper_init``).
 * ``principled``, ``roughconductor``, ``roughplastic``: Mitsuba's BSDFs' parameters (colours and
@@ -80,6 +83,15 @@ PRIOR_STRENGTHS = (1e-1, 1e-3, 0.0)
 COMMON_START = "common"
 #: The strength where no view can be held out (one image) or no weight step is left to judge.
 FALLBACK_STRENGTH = 1e-3
+#: Strengths of the code phase's Gaussian penalty (the training codes' mean and spread), each a
+#: code phase of its own whose decoded start runs every candidate of the weight phase; the held-out
+#: view judges the pairs together. 0 is the code phase without the penalty; 1e-3 kept the codes
+#: near the training codes and lowered the novel-view error on five of the seven report materials,
+#: raised it on two (docs/experiments.md, issue 33).
+CODE_PRIOR_STRENGTHS = (0.0, 1e-3)
+#: The code penalty's strength where nothing is chosen (one image, no weight step, or a fixed
+#: ``--prior-weight``): none, the code phase as it was before the penalty.
+FALLBACK_CODE_PRIOR = 0.0
 #: Share of the weight phase's steps each candidate strength is fitted for before it is judged.
 CANDIDATE_SHARE = 0.5
 #: The held-out view is judged with this many times the samples of a training render (one render
@@ -497,8 +509,9 @@ def estimate(args, on_step=None) -> dict:
 def _estimate(args, on_step=None) -> dict:
     if args.steps < 1 or args.spp < 1:
         raise EstimateError("--steps and --spp must be at least 1")
-    if args.prior_weight is not None and not (args.prior_weight >= 0 and math.isfinite(args.prior_weight)):
-        raise EstimateError("--prior-weight must be a finite number >= 0")
+    for name, value in (("--prior-weight", args.prior_weight), ("--code-prior", args.code_prior)):
+        if value is not None and not (value >= 0 and math.isfinite(value)):
+            raise EstimateError(f"{name} must be a finite number >= 0")
     scene_file = Scene(args.scene, args.bsdf_id, parse_defines(args.define))
     model = Network(args.model == "nbrdf", args.prior_weight) if args.model.startswith("nbrdf") else Analytic(args.model)
     start = time.perf_counter()
@@ -511,8 +524,11 @@ def _estimate(args, on_step=None) -> dict:
             dr.set_thread_count(args.threads)
         from tqdm import tqdm
 
-        plan = schedule(args.steps, len(est.references), args.prior_weight if model_has_prior(model) else 0.0)
-        total = args.steps + len(plan["strengths"]) * plan["candidate"] + plan["common"]
+        plan = schedule(args.steps, len(est.references), args.prior_weight if model_has_prior(model) else 0.0,
+                        args.code_prior)
+        codes = len(plan["code_strengths"])
+        total = (args.steps + (codes - 1) * plan["code"] + codes * len(plan["strengths"]) * plan["candidate"]
+                 + plan["common"])
         with tqdm(total=total, unit="step", desc=f"estimate {args.model}", disable=args.quiet,
                   file=sys.stderr) as bar:
             result = _optimise(est, model, args, bar, plan)
@@ -526,48 +542,66 @@ def model_has_prior(model) -> bool:
     return isinstance(model, Network) and model.prior
 
 
-def schedule(steps: int, views: int, prior_weight: float | None) -> dict:
+def schedule(steps: int, views: int, prior_weight: float | None, code_prior: float | None = None) -> dict:
     """The prior's plan: steps of the code phase and of the weight phase, the candidate
-    strengths (one: no choice), the steps of each decoded candidate's weight fit and of the
-    common start's candidate (0: not a candidate)."""
+    strengths of the weight phase's pull and of the code's penalty (one each: no choice), the
+    steps of each decoded candidate's weight fit and of the common start's candidate (0: not a
+    candidate). A fixed ``prior_weight`` fixes the code's too (``code_prior``, else none)."""
     code = max(1, round(CODE_SHARE * steps)) if steps > 1 else 1
     weights = steps - code
+    fixed_code = (code_prior if code_prior is not None else FALLBACK_CODE_PRIOR,)
     if prior_weight is not None:
-        strengths = (prior_weight,)
+        strengths, code_strengths = (prior_weight,), fixed_code
     elif views < 2 or weights < 1:
-        strengths = (FALLBACK_STRENGTH,)
+        strengths, code_strengths = (FALLBACK_STRENGTH,), fixed_code
     else:
         strengths = PRIOR_STRENGTHS
-    candidate = max(1, round(CANDIDATE_SHARE * weights)) if len(strengths) > 1 else 0
+        code_strengths = fixed_code if code_prior is not None else CODE_PRIOR_STRENGTHS
+    selecting = len(strengths) * len(code_strengths) > 1
+    candidate = max(1, round(CANDIDATE_SHARE * weights)) if selecting else 0
     # The common start gets the optimisation steps a decoded candidate had (code, then weights).
-    common = code + candidate if candidate else 0
-    return {"code": code, "weights": weights, "strengths": strengths, "candidate": candidate, "common": common}
+    common = code + candidate if len(strengths) > 1 else 0
+    return {"code": code, "weights": weights, "strengths": strengths, "code_strengths": code_strengths,
+            "candidate": candidate, "common": common}
 
 
-def prior_penalty(decoded: np.ndarray, std2: np.ndarray, strength: float):
-    """``strength`` times the mean squared standardised distance to ``decoded``, and its gradient."""
+def prior_penalty(center: np.ndarray, variance: np.ndarray, strength: float):
+    """``strength`` times the mean squared standardised distance to ``center``, and its gradient:
+    the weights' pull toward the decoded ones (``variance`` the autoencoder's per-weight one) and
+    the code's Gaussian penalty (the training codes' mean and variance)."""
     if strength == 0:
         return None
 
-    def penalty(w):
-        d = w - decoded
-        return strength * float(np.mean(d * d / std2)), strength * 2.0 * d / std2 / d.size
+    def penalty(x):
+        d = x - center
+        return strength * float(np.mean(d * d / variance)), strength * 2.0 * d / variance / d.size
 
     return penalty
 
 
-def choose_start(est: Estimator, decoded: np.ndarray, std2: np.ndarray, plan: dict, bar) -> tuple:
+def candidate_name(candidate, several_codes: bool) -> str:
+    """A candidate's key in ``held_out_losses``: the pull's strength (or ``common``), prefixed
+    with the code penalty's where several are candidates."""
+    if candidate == COMMON_START:
+        return COMMON_START
+    code_strength, strength = candidate
+    return f"code {code_strength}, pull {strength}" if several_codes else str(strength)
+
+
+def choose_start(est: Estimator, decoded: dict, std2: np.ndarray, plan: dict, bar) -> tuple:
     """The candidate whose short fit on the training views but the held-out one (``est.views``)
-    has the lowest loss on the held-out view (the last): a strength of the pull toward
-    ``decoded`` (a float), or ``COMMON_START``; ties go to the first, the tightest."""
+    has the lowest loss on the held-out view (the last): a pair (code penalty's strength, strength
+    of the pull toward ``decoded[code strength]``) or ``COMMON_START``; ties go to the first (no
+    code penalty, the tightest pull). Returns it and the held-out losses by candidate."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
     losses = {}
     try:
-        for strength in plan["strengths"]:
-            phase = Phase("weights", decoded, plan["candidate"], Network._set_weights,
-                          prior_penalty(decoded, std2, strength))
-            losses[strength] = est.held_out_loss(est.run(phase, bar, plan["code"]), held_out)
+        for code_strength, start in decoded.items():
+            for strength in plan["strengths"]:
+                phase = Phase("weights", start, plan["candidate"], Network._set_weights,
+                              prior_penalty(start, std2, strength))
+                losses[code_strength, strength] = est.held_out_loss(est.run(phase, bar, plan["code"]), held_out)
         if plan["common"]:
             # The no-prior estimate's steps and render seeds, on the views but the held-out one.
             phase = Phase("weights", common_initialisation(), plan["common"], Network._set_weights, None)
@@ -577,43 +611,61 @@ def choose_start(est: Estimator, decoded: np.ndarray, std2: np.ndarray, plan: di
     return min(losses, key=losses.__getitem__), losses
 
 
+def fit_codes(est: Estimator, decoder, plan: dict, bar) -> dict:
+    """Per strength of the code penalty: the code fitted through the decoder from the best
+    screened training code (the screening shared), each phase with the same render seeds."""
+    picks = np.linspace(0, len(decoder.anchors) - 1, SCREENED_STARTS).round().astype(int)
+    candidates = np.concatenate([decoder.anchors.mean(axis=0, keepdims=True), decoder.anchors[picks]])
+    code0 = est.screen_codes(decoder, candidates)
+    spread = decoder.code_distribution() if any(plan["code_strengths"]) else (None, None)
+
+    def apply(params, bsdf_id, code):
+        params[f"{bsdf_id}.weights"] = decoder.decode(code)
+
+    return {strength: est.run(Phase("code", code0, plan["code"], apply, prior_penalty(*spread, strength)), bar, 0)
+            for strength in plan["code_strengths"]}
+
+
 def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, dict]:
     """The code through the decoder, then the weights held near the decoded ones by the chosen
-    strength; the weights and the summary's additions."""
+    strengths; the weights and the summary's additions."""
     from .latent import Decoder, LatentError
 
     try:
         decoder = Decoder(args.ae)
+        selecting = plan["candidate"] > 0
+        if selecting:
+            # Nothing the held-out view judges may have seen it: the code too is fitted without it.
+            est.views = list(range(len(est.references) - 1))
+        codes = fit_codes(est, decoder, plan, bar)
     except LatentError as error:
         raise EstimateError(str(error)) from None
-    picks = np.linspace(0, len(decoder.anchors) - 1, SCREENED_STARTS).round().astype(int)
-    candidates = np.concatenate([decoder.anchors.mean(axis=0, keepdims=True), decoder.anchors[picks]])
-    selecting = len(plan["strengths"]) > 1
-    if selecting:
-        # Nothing the held-out view judges may have seen it: the code too is fitted without it.
-        est.views = list(range(len(est.references) - 1))
-    code0 = est.screen_codes(decoder, candidates)
-    code = est.run(Phase("code", code0, plan["code"], lambda p, i, c: p.__setitem__(f"{i}.weights", decoder.decode(c)),
-                         None), bar, 0)
-    decoded = decoder.decode_numpy(code).astype(np.float64)
+    decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
     std2 = decoder.std.astype(np.float64) ** 2
-    choice, losses = plan["strengths"][0], {}
+    choice, losses = (plan["code_strengths"][0], plan["strengths"][0]), {}
     if selecting:
         choice, losses = choose_start(est, decoded, std2, plan, bar)
         est.views = list(range(len(est.references)))
-    extra = {"code": [float(c) for c in code], "start": "decoded", "prior_weight": choice}
-    weights = decoded
     if choice == COMMON_START:
-        # Exactly the nbrdf-no-prior estimate (its start, steps and seeds); the code is kept for the record.
+        # Exactly the nbrdf-no-prior estimate (its start, steps and seeds); the code of the best
+        # decoded candidate is kept for the record.
+        code_strength = min((k for k in losses if k != COMMON_START), key=losses.__getitem__)[0]
         bar.total += plan["code"]
-        extra.update(start=COMMON_START, prior_weight=None)
+        extra = {"code": [float(c) for c in codes[code_strength]], "start": COMMON_START, "prior_weight": None,
+                 "code_prior": None}
         weights = est.run(Phase("weights", common_initialisation(), plan["code"] + plan["weights"],
                                 Network._set_weights, None), bar, 0)
-    elif plan["weights"] > 0:
-        phase = Phase("weights", decoded, plan["weights"], Network._set_weights, prior_penalty(decoded, std2, choice))
-        weights = est.run(phase, bar, plan["code"])
+    else:
+        code_strength, strength = choice
+        extra = {"code": [float(c) for c in codes[code_strength]], "start": "decoded", "prior_weight": strength,
+                 "code_prior": code_strength}
+        weights = decoded[code_strength]
+        if plan["weights"] > 0:
+            phase = Phase("weights", weights, plan["weights"], Network._set_weights,
+                          prior_penalty(weights, std2, strength))
+            weights = est.run(phase, bar, plan["code"])
     if losses:
-        extra["held_out_losses"] = {str(k): v for k, v in losses.items()}
+        extra["held_out_losses"] = {candidate_name(k, len(codes) > 1): v for k, v in losses.items()}
     return weights, extra
 
 
@@ -634,7 +686,7 @@ def _optimise(est: Estimator, model, args, bar, plan: dict) -> dict:
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
-    for key in ("code", "start", "prior_weight", "held_out_losses"):
+    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
@@ -680,6 +732,11 @@ def parser() -> argparse.ArgumentParser:
                    help="strength of the penalty holding the weights near the decoded ones (default: chosen among "
                         f"{', '.join(map(str, PRIOR_STRENGTHS))} and the common start without the prior, by the "
                         f"last training view, held out; {FALLBACK_STRENGTH} with one image)")
+    p.add_argument("--code-prior", type=float,
+                   help="strength of the Gaussian penalty holding the latent code near the training codes (default: "
+                        f"chosen among {', '.join(map(str, CODE_PRIOR_STRENGTHS))} together with the weights' "
+                        f"strength, by the same held-out view; {FALLBACK_CODE_PRIOR} with one image or a fixed "
+                        "--prior-weight)")
     p.add_argument("--ae", type=Path, help="the autoencoder (default: the pretrained one)")
     p.add_argument("-D", dest="define", action="append", default=[], metavar="KEY=VALUE",
                    help="set a scene parameter ($KEY in the XML), as for rendering")

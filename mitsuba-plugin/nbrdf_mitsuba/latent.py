@@ -122,6 +122,16 @@ class Decoder:
             weights = dr.minimum(dr.maximum(weights, clamp[0]), clamp[1])
         return weights
 
+    def code_distribution(self) -> tuple[np.ndarray, np.ndarray]:
+        """The training codes' (anchors') mean and variance per value, float64: the Gaussian a
+        code penalty holds an estimate's code to (it has no other notion of "near the training
+        materials")."""
+        if len(self.anchors) < 2:
+            raise LatentError(f"{self.path}: {len(self.anchors)} training codes (anchors): a code prior needs two "
+                              "or more")
+        anchors = self.anchors.astype(np.float64)
+        return anchors.mean(axis=0), anchors.var(axis=0)
+
     def decode_numpy(self, code) -> np.ndarray:
         """``decode`` of a NumPy code, as float32 NumPy (no gradients)."""
         import mitsuba as mi

@@ -173,7 +173,8 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
     images = sorted(folder.glob("train*.exr"))
     argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
-            "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]), "-q"]
+            "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]),
+            "--seed", str(settings["seed"]), "-q"]
     start, cpu = time.perf_counter(), time.process_time()
     status = estimate.main(argv)
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
@@ -244,9 +245,9 @@ def table(results: list[dict], models: list[str]) -> list[str]:
 
 
 def chosen_strengths(results: list[dict], work: Path) -> list[str]:
-    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (a prior strength
-    from the decoded start, or the common start without the prior), and the held-out losses of
-    the candidates (from the network file's provenance)."""
+    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (the code
+    penalty's and the pull's strengths from the decoded start, or the common start without the
+    prior), and the held-out losses of the candidates (from the network file's provenance)."""
     lines = []
     for r in results:
         path = work / r["material"] / "nbrdf.nbrdf.json"
@@ -254,9 +255,10 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
             continue
         provenance = json.loads(path.read_text()).get("provenance", {})
         losses = provenance.get("held_out_losses") or {}
-        text = ", ".join(f"{k}: {v:.4g}" for k, v in losses.items())
+        text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
         chosen = ("the common start, no prior (the result is the no-prior estimate)"
-                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}")
+                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}"
+                  + (f", code penalty {provenance['code_prior']}" if provenance.get("code_prior") is not None else ""))
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else ""))
     return lines
 
@@ -292,6 +294,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the estimates' seed (default: 0); the training and novel images do not depend on it")
     p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
     p.add_argument("--stored-only", action="store_true",
                    help="estimate nothing: tabulate the results stored in WORK, list the cases missing")
@@ -310,6 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         settings["steps"] = args.steps
     if args.spp:
         settings["spp"] = args.spp
+    settings["seed"] = args.seed
     models = [m for m in args.models.split(",") if m]
     bad = set(models) - set(MODELS)
     if bad:
@@ -337,15 +342,17 @@ def main(argv: list[str] | None = None) -> int:
              f"A sphere, {settings['views']} training views ({settings['resolution']}x{settings['resolution']}, "
              f"{settings['reference_spp']} spp references) under {len(LIGHTS)} point lights and a dim sky; every model "
              f"fitted to the same images by `python -m nbrdf_mitsuba.estimate` ({settings['steps']} steps, "
-             f"{settings['spp']} spp per render, prb depth 3). Measured on a novel view under a novel light and in "
+             f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on a novel view under "
+             "a novel light and in "
              f"BRDF space (mean |ln(1 + f cos) - ln(1 + f' cos)|, {settings['log_samples']} uniform pairs). "
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
              *table(results, models), "", *summary(results), "",
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
-             "The `nbrdf` estimates' start and prior strength (the weight phase's pull toward the decoded "
-             "weights; candidates 0.1, 0.001 and 0 from the decoded code, and `common`: the common "
-             "initialisation without the prior), chosen per estimate by its last training view, held out:", "",
+             "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
+             "training codes, `code` 0 or 0.001; the weight phase's pull toward the decoded weights, `pull` "
+             "0.1, 0.001 or 0, from each code; and `common`: the common initialisation without the prior), "
+             "chosen per estimate by its last training view, held out:", "",
              *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "

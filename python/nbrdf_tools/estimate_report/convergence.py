@@ -9,8 +9,9 @@ checkpoint and rendered at the report's novel view and light. For a one-phase mo
 without the prior, an analytic BSDF) the parameters after ``N`` steps of the long run are exactly
 those of an ``N``-step run (the same per-step render seeds, the same Adam steps). For ``nbrdf``
 the split between the code and the weight phases scales with the total, so its snapshots are
-points of the ``--steps`` schedule (a snapshot in the code phase is the decoded code), not
-shorter runs. Snapshots have no fitted sampling (cosine-lobe sampling: unbiased, noisier).
+points of the ``--steps`` schedule (a snapshot in the code phase is the decoded code; where
+several strengths of the code penalty are candidates, the last one's code), not shorter runs.
+Snapshots have no fitted sampling (cosine-lobe sampling: unbiased, noisier).
 Results are stored in ``WORK/MATERIAL/convergence-MODEL-STEPS.json`` (resumable).
 """
 
