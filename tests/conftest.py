@@ -97,8 +97,11 @@ def _cuda_problem() -> str | None:
 JIT_VARIANTS = ["llvm_ad_rgb", "cuda_ad_rgb"]
 
 
-def _on_cuda(name: str) -> str:
-    return "cuda_" + name[len("llvm_"):] if name.startswith("llvm_") else name
+def _variant_run_for(name: str) -> str:
+    """The variant a test that asks for ``name`` runs in: its cuda_* twin under NBRDF_TEST_JIT=cuda."""
+    if JIT_BACKEND == "cuda" and name.startswith("llvm_"):
+        return "cuda_" + name[len("llvm_"):]
+    return name
 
 
 def _redirect_llvm_to_cuda() -> None:
@@ -107,7 +110,7 @@ def _redirect_llvm_to_cuda() -> None:
     set_variant = mi.set_variant
 
     def set_cuda_variant(*names):
-        return set_variant(*(_on_cuda(n) for n in names))
+        return set_variant(*map(_variant_run_for, names))
 
     mi.set_variant = set_cuda_variant
     nbrdf_mitsuba.llvm.problem = nbrdf_mitsuba._llvm.problem = _cuda_problem
@@ -122,7 +125,7 @@ def _use_jit_variant(name: str):
     variant cannot run) and puts symbolic mode back after it."""
     problem = _llvm_problem() if name.startswith("llvm") else _cuda_problem()
     if problem:
-        pytest.skip(f"{_on_cuda(name) if JIT_BACKEND == 'cuda' else name} unavailable: {problem}")
+        pytest.skip(f"{_variant_run_for(name)} unavailable: {problem}")
     mi.set_variant(name)
     _set_symbolic(True)
     yield name
@@ -209,7 +212,7 @@ def restore_variant():
 
 def use_variant(variant: str) -> None:
     """Sets ``variant``, skipping (with the reason) where this Mitsuba or its libLLVM lacks it."""
-    if (_on_cuda(variant) if JIT_BACKEND == "cuda" else variant) not in mi.variants():
+    if _variant_run_for(variant) not in mi.variants():
         pytest.skip(f"the installed Mitsuba has no {variant} variant")
     if variant.startswith("llvm"):
         problem = nbrdf_mitsuba.llvm.problem()
