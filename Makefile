@@ -78,13 +78,21 @@ install: build
 demo: setup
 	$(PY) -m nbrdf_tools.demo
 
-test: setup test-rust test-python
+# `make test` on CI's two cores: the Rust tests' build runs beside the release builds (its own
+# profile directory, so cargo does not serialise them, and the release crates' single codegen unit
+# leaves a core idle much of the time), then the Python tests on PYTEST_WORKERS pytest-xdist
+# workers (most of a test's time is Dr.Jit's LLVM compiling one kernel on one core).
+NPROC := $(shell nproc 2>/dev/null || echo 2)
+PYTEST_WORKERS ?= 2
+test:
+	+$(MAKE) --no-print-directory -j$(NPROC) --output-sync=target setup test-rust
+	+$(MAKE) --no-print-directory test-python
 
 test-rust:
 	$(CARGO) test --workspace --profile test-release --all-features
 
 test-python: setup
-	$(PY) -m pytest tests -q
+	$(PY) -m pytest tests -q -n $(PYTEST_WORKERS) --dist worksteal
 
 # The plugin's parity, chi2, variant and estimation tests in cuda_ad_* variants instead of llvm_ad_*
 # (needs an NVIDIA GPU and driver; tests/conftest.py, NBRDF_TEST_JIT). The CLI's subprocess tests
