@@ -24,15 +24,15 @@ $(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e ./python
 	touch $@
 
-# Three release builds, each its own cargo call so that features do not unify: the C ABI library
-# without nbrdf-core's training stack and CLI dependencies (as mitsuba-plugin/setup.py builds it),
-# the trainer's C ABI for `python -m nbrdf_mitsuba.distill` (libnbrdf_train, nbrdf-ffi/train), and
-# the CLI (target/release/nbrdf, feature `cli`).
+# Two release builds, each its own cargo call so that features do not unify: the C ABI library
+# without nbrdf-core's training stack and CLI dependencies (as mitsuba-plugin/setup.py builds it);
+# then the trainer's C ABI for `python -m nbrdf_mitsuba.distill` (libnbrdf_train, nbrdf-ffi/train)
+# and the CLI (target/release/nbrdf, feature `cli`) on one nbrdf-core: `cli` adds only the
+# binary's dependencies, which the trainer's library never references, so it stays as built alone.
 build: $(LIB)
 $(LIB): FORCE
 	$(CARGO) build --release -p nbrdf-ffi
-	$(CARGO) build --release -p nbrdf-train-ffi
-	$(CARGO) build --release -p nbrdf-core --features cli --bin nbrdf
+	$(CARGO) build --release -p nbrdf-train-ffi -p nbrdf-core --features nbrdf-core/cli
 
 # The trainer library and the CLI come out of $(LIB)'s recipe; naming them lets a change to
 # either alone (the CLI's sources, say) reinstall the plugin that bundles them.
@@ -78,15 +78,15 @@ install: build
 demo: setup
 	$(PY) -m nbrdf_tools.demo
 
-# `make test` on CI's two cores: the Rust tests' build runs beside the release builds (its own
-# profile directory, so cargo does not serialise them, and the release crates' single codegen unit
-# leaves a core idle much of the time), then the Python tests on PYTEST_WORKERS pytest-xdist
-# workers (most of a test's time is Dr.Jit's LLVM compiling one kernel on one core).
+# `make test` on CI's two cores: the Rust tests (build and run) beside the release builds and the
+# Python tests (its own profile directory, so cargo does not serialise them, and the release
+# crates' single codegen unit leaves a core idle much of the time); the Python tests start once
+# `setup` is done, on PYTEST_WORKERS pytest-xdist workers (much of a test's time is Dr.Jit's LLVM
+# compiling one kernel on one core).
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 PYTEST_WORKERS ?= 2
 test:
-	+$(MAKE) --no-print-directory -j$(NPROC) --output-sync=target setup test-rust
-	+$(MAKE) --no-print-directory test-python
+	+$(MAKE) --no-print-directory -j$(NPROC) --output-sync=target test-rust test-python
 
 test-rust:
 	$(CARGO) test --workspace --profile test-release --all-features
