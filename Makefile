@@ -78,15 +78,16 @@ install: build
 demo: setup
 	$(PY) -m nbrdf_tools.demo
 
-# `make test` on CI's two cores: the Rust tests (build and run) beside the release builds and the
-# Python tests (its own profile directory, so cargo does not serialise them, and the release
-# crates' single codegen unit leaves a core idle much of the time); the Python tests start once
-# `setup` is done, on PYTEST_WORKERS pytest-xdist workers (much of a test's time is Dr.Jit's LLVM
-# compiling one kernel on one core).
+# `make test` on CI's two cores: the Rust tests' build runs beside the release builds (its own
+# profile directory, so cargo does not serialise them, and the release crates' single codegen unit
+# leaves a core idle much of the time), then the Python tests on PYTEST_WORKERS pytest-xdist
+# workers (much of a test's time is Dr.Jit's LLVM compiling one kernel on one core). Starting the
+# Python tests beside the Rust tests' build instead was slower on two cores.
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 PYTEST_WORKERS ?= 2
 test:
-	+$(MAKE) --no-print-directory -j$(NPROC) --output-sync=target test-rust test-python
+	+$(MAKE) --no-print-directory -j$(NPROC) --output-sync=target setup test-rust
+	+$(MAKE) --no-print-directory test-python
 
 test-rust:
 	$(CARGO) test --workspace --profile test-release --all-features
