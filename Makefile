@@ -24,15 +24,19 @@ $(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e ./python
 	touch $@
 
-# Two release builds, each its own cargo call so that features do not unify: the C ABI library
-# without nbrdf-core's training stack and CLI dependencies (as mitsuba-plugin/setup.py builds it);
-# then the trainer's C ABI for `python -m nbrdf_mitsuba.distill` (libnbrdf_train, nbrdf-ffi/train)
-# and the CLI (target/release/nbrdf, feature `cli`) on one nbrdf-core: `cli` adds only the
-# binary's dependencies, which the trainer's library never references, so it stays as built alone.
+# Three release builds, each its own cargo call so that features do not unify, and each the
+# cargo call mitsuba-plugin/setup.py makes (so that the plugin's install below and the wheel built
+# from the sdist in tests/test_packaging.py find them built): the C ABI library without
+# nbrdf-core's training stack and CLI dependencies; the trainer's C ABI for `python -m
+# nbrdf_mitsuba.distill` (libnbrdf_train, nbrdf-ffi/train); the CLI (target/release/nbrdf,
+# feature `cli`), as setuptools-rust builds it. Building the last two in one call compiles
+# nbrdf-core once for both, but for a library as well as a binary, which setuptools-rust's build
+# of the binary alone cannot reuse: it compiled nbrdf-core and its dependencies again.
 build: $(LIB)
 $(LIB): FORCE
 	$(CARGO) build --release -p nbrdf-ffi
-	$(CARGO) build --release -p nbrdf-train-ffi -p nbrdf-core --features nbrdf-core/cli
+	$(CARGO) build --release -p nbrdf-train-ffi
+	$(CARGO) build --release --manifest-path nbrdf-core/Cargo.toml --features cli --bin nbrdf
 
 # The trainer library and the CLI come out of $(LIB)'s recipe; naming them lets a change to
 # either alone (the CLI's sources, say) reinstall the plugin that bundles them.

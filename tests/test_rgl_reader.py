@@ -27,13 +27,16 @@ ATOL_OF_PEAK = 1e-7
 
 
 def build_rgl_eval() -> Path:
-    """Builds the example binary and returns its path."""
+    """Builds the example binary and returns its path. In the profile and with the features of
+    `make test-rust` (`cargo test --workspace --profile test-release --all-features`, which builds
+    the examples too), so that under `make test` this is a no-op: a release build of its own
+    compiled nbrdf-core and the dev-dependencies again (80 s of the Python tests)."""
     target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
     if not target.is_absolute():
         target = REPO / target
-    subprocess.run(["cargo", "build", "--release", "-q", "-p", "nbrdf-core", "--example", "rgl_eval"],
-                   cwd=REPO, check=True)
-    return target / "release" / "examples" / "rgl_eval"
+    subprocess.run(["cargo", "build", "-q", "--workspace", "--profile", "test-release", "--all-features",
+                    "--example", "rgl_eval"], cwd=REPO, check=True)
+    return target / "test-release" / "examples" / "rgl_eval"
 
 
 @pytest.fixture(scope="module")

@@ -55,7 +55,8 @@ def parser() -> argparse.ArgumentParser:
     parser.add_argument("--train-args", default="", help="extra arguments of `nbrdf train`, e.g. '--epochs 30'")
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--quick", action="store_true",
-                        help="tiny images, few samples, one material, briefly trained networks (CI, checks)")
+                        help="tiny images, few samples, one material, briefly trained networks, each render "
+                             "timed once (CI, checks)")
     parser.add_argument("--json", type=Path, help="write the results as JSON here as well")
     parser.add_argument("--out", type=Path,
                         help="output folder of everything, caches included (default: out/convergence with the "

@@ -112,23 +112,25 @@ def render_seed(level_index: int, scene_index: int, seed_index: int) -> int:
     return 1000 * (level_index + 1) + scene_index + 100_000 * seed_index
 
 
-def fastest_render(scene, spp: int, seed: int) -> tuple[np.ndarray, float]:
+def fastest_render(scene, spp: int, seed: int, repeat: bool = True) -> tuple[np.ndarray, float]:
     """(image, seconds): short renders are timed again (same seed, same image) and the fastest
-    run kept, since other processes on the machine disturb short timings the most."""
+    run kept, since other processes on the machine disturb short timings the most; with
+    ``repeat`` False (``--quick``, whose timings are not figures) each is rendered once."""
     image, seconds = timed_render(scene, spp, seed=seed)
-    for _ in range(timing_repeats(spp) - 1):
+    for _ in range(timing_repeats(spp) - 1 if repeat else 0):
         seconds = min(seconds, timed_render(scene, spp, seed=seed)[1])
     return image, seconds
 
 
 def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str, save_dir: Path | None,
             save_spp: set[int], seeds: int = 1, timing_only: dict | None = None,
-            timings: list[dict] | None = None) -> list[dict]:
+            timings: list[dict] | None = None, repeat_timings: bool = True) -> list[dict]:
     """Renders every strategy at every spp level, ``seeds`` times with independent random numbers
     (interleaved, so that machine load hits them alike), and measures each against its reference
     and against the ground truth. Rows carry the seed's index (``seed``). The scenes of
     ``timing_only`` (name: scene) are rendered in the same interleaved order and only timed, into
-    ``timings`` (rows of strategy, spp, seed and seconds)."""
+    ``timings`` (rows of strategy, spp, seed and seconds); ``repeat_timings``: see
+    :func:`fastest_render`."""
     rows = []
     timing_only = timing_only or {}
     for entry in strategies.values():
@@ -141,7 +143,8 @@ def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str,
             for seed_index, (strategy_index, (name, entry)) in itertools.product(range(seeds),
                                                                                  enumerate(strategies.items())):
                 image, seconds = fastest_render(entry["scene"], spp,
-                                                render_seed(level_index, strategy_index, seed_index))
+                                                render_seed(level_index, strategy_index, seed_index),
+                                                repeat_timings)
                 row = {"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds,
                        **metrics.render_metrics(entry["reference"], image, mask),
                        "nonfinite": metrics.nonfinite_count(image)}
@@ -155,7 +158,7 @@ def measure(strategies: dict, levels: list[int], mask, ground_truth, label: str,
             for seed_index, (scene_index, (name, scene)) in itertools.product(range(seeds),
                                                                              enumerate(timing_only.items())):
                 seed = render_seed(level_index, len(strategies) + scene_index, seed_index)
-                _, seconds = fastest_render(scene, spp, seed)
+                _, seconds = fastest_render(scene, spp, seed, repeat_timings)
                 timings.append({"strategy": name, "spp": spp, "seed": seed_index, "seconds": seconds})
                 renders.update()
     return rows
@@ -284,7 +287,7 @@ def _veach_material(args, setup: VeachSetup, material: Material, cache: RenderCa
     floor = {COST_FLOOR_BSDF: mask_scene} if "measured" in strategies else {}
     timings = []
     rows = measure(strategies, levels, mask, ground_truth, label, save_dir, save_spp, args.seeds,
-                   timing_only=floor, timings=timings)
+                   timing_only=floor, timings=timings, repeat_timings=not args.quick)
     for row in timings:
         row.update(scene="veach", material=label, integrator=setup.integrator)
     write_exr(save_dir / "ground-truth.exr", ground_truth)
@@ -409,7 +412,8 @@ def run_kitchen(args, artefacts: Artefacts, cache: RenderCache, out: Path, notes
                       **representation_metrics(ground_truth, nbrdf_ref, overridden)}
     strategies = _kitchen_strategies(args, setup, bsdfs, nbrdf_ref, has_phong, has_two_lobes, notes)
     save_dir = out / "renders" / "kitchen"
-    rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]}, args.seeds)
+    rows = measure(strategies, levels, None, ground_truth, "kitchen", save_dir, {levels[0], levels[-1]}, args.seeds,
+                   repeat_timings=not args.quick)
     for row in rows:
         row.update(scene="kitchen", material=label, integrator="path", region="image")
     # Fireflies traceable to our BSDFs: the NBRDF and the table, Phong-sampled alike with the same
