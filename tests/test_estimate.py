@@ -192,21 +192,6 @@ def test_a_non_finite_loss_steps_back_and_halves_the_step(setup, tmp_path):
     assert est.halvings == 1 and len(est.history) == 4 and np.all(np.isfinite(theta))
 
 
-def test_code_phase_rate_falls_linearly_over_its_second_half():
-    """The code phase's step size: the full rate for the first half, then a straight line to
-    CODE_FINAL_RATE_SHARE at the last step (closed form); the other phases keep a constant rate."""
-    from nbrdf_mitsuba import estimate as E
-
-    steps = 40
-    shares = np.array([E.rate_share("code", k, steps) for k in range(steps)])
-    assert np.all(shares[:20] == 1.0)
-    expected = 1.0 + (E.CODE_FINAL_RATE_SHARE - 1.0) * (np.arange(20, 40) - 20) / 19
-    np.testing.assert_allclose(shares[20:], expected, rtol=0, atol=1e-12)
-    assert shares[-1] == pytest.approx(E.CODE_FINAL_RATE_SHARE) and np.all(np.diff(shares) <= 0)
-    assert all(E.rate_share(kind, k, steps) == 1.0 for kind in ("weights", "analytic") for k in range(steps))
-    assert E.rate_share("code", 0, 1) == 1.0  # a one-step phase takes its full step
-
-
 def test_common_initialisation_is_the_trainers_seed_0_start():
     from nbrdf_mitsuba.estimate import common_initialisation
     from nbrdf_tools.compare_materials import splitmix_uniforms

@@ -65,10 +65,6 @@ CODE_SHARE = 0.4
 #: hardly fell (docs/experiments.md, issue 33). The analytic models' 0.1 settled higher than 0.05
 #: (principled on colodur_napoli_4f: novel-view RMSE 0.015 against 0.009 at 100 steps).
 LEARNING_RATES = {"code": 0.2, "weights": 0.003, "analytic": 0.05}
-#: The code phase's step size falls linearly over its second half to this share of its rate: at a
-#: constant 0.2 the code kept wandering on the renders' noise to its last step, and the seeds'
-#: fitted codes lay up to half their norm apart (docs/experiments.md, issue 33).
-CODE_FINAL_RATE_SHARE = 0.1
 #: Times the step may halve after non-finite losses before the estimate gives up.
 MAX_HALVINGS = 12
 #: Training codes tried as starts of the latent phase (evenly spaced through the anchors), each
@@ -383,15 +379,6 @@ class Adam:
         return theta - self.rate * m_hat / (np.sqrt(v_hat) + self.eps)
 
 
-def rate_share(kind: str, step: int, steps: int) -> float:
-    """The share of a phase's step size at its ``step`` (0-based) of ``steps``: 1, except in the
-    code phase's second half, where it falls linearly to ``CODE_FINAL_RATE_SHARE`` at the last."""
-    half = steps / 2
-    if kind != "code" or step < half:
-        return 1.0
-    return 1.0 + (CODE_FINAL_RATE_SHARE - 1.0) * (step - half) / max(1.0, steps - 1 - half)
-
-
 def image_loss(images: list, references: list):
     """Mean squared error of ``ln(1 + radiance)`` over every view, pixel and channel (the log
     keeps highlights from swamping the rest of the object)."""
@@ -463,13 +450,11 @@ class Estimator:
         return value, grad
 
     def run(self, phase: Phase, bar, first_step: int) -> np.ndarray:
-        rate = LEARNING_RATES[phase.kind]
-        adam = Adam(phase.theta.size, rate)
+        adam = Adam(phase.theta.size, LEARNING_RATES[phase.kind])
         theta = phase.theta.copy()
         accepted = (theta.copy(), adam.state())
         step = 0
         while step < phase.steps:
-            adam.rate = rate * rate_share(phase.kind, step, phase.steps)
             value, grad = self.loss_and_grad(phase, theta, first_step + step)
             if grad is None:
                 # A diverging step: back to the last state with a finite loss, half the step.
@@ -479,7 +464,7 @@ class Estimator:
                                         f"{MAX_HALVINGS} halvings of the step")
                 theta = accepted[0].copy()
                 adam.restore(accepted[1])
-                rate *= 0.5
+                adam.rate *= 0.5
                 continue
             accepted = (theta.copy(), adam.state())
             self.history.append(value)
