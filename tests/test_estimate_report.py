@@ -27,6 +27,38 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     assert not (work / "mitsuba-roughplastic" / "principled.result.json").exists()
 
 
+def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_variant, tmp_path):
+    """The table's image metrics are the means over every novel pair; a result stored before the
+    pairs changed is measured again from its stored estimate, which is not estimated again."""
+    import json
+
+    import numpy as np
+
+    from nbrdf_tools.estimate_report import NOVEL_PAIRS, main
+
+    work, out = tmp_path / "work", tmp_path / "estimation.md"
+    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out)]
+    assert main(argv) == 0
+    folder = work / "mitsuba-roughplastic"
+    assert len(NOVEL_PAIRS) == 3
+    for prefix in ("novel", "novel1", "novel2"):
+        assert (folder / f"{prefix}-truth-0.exr").is_file() and (folder / f"{prefix}-roughplastic-0.exr").is_file()
+    stored = folder / "roughplastic.result.json"
+    result = json.loads(stored.read_text())
+    assert len(result["novel"]) == 3
+    assert result["rmse_tonemapped"] == np.mean([m["rmse_tonemapped"] for m in result["novel"]])
+    # The pairs differ in light and view: their errors are three numbers, not one repeated.
+    assert len({round(m["rmse_tonemapped"], 8) for m in result["novel"]}) == 3
+    estimate_file = folder / "roughplastic.json"
+    before = estimate_file.stat().st_mtime_ns
+    old = {k: v for k, v in result.items() if k not in ("novel", "novel_pairs")}
+    stored.write_text(json.dumps({**old, "rmse_tonemapped": 1.0}))
+    assert main(argv) == 0
+    again = json.loads(stored.read_text())
+    assert estimate_file.stat().st_mtime_ns == before
+    assert again["rmse_tonemapped"] == result["rmse_tonemapped"] and again["novel_pairs"] == result["novel_pairs"]
+
+
 def test_merl_truths_are_unseen_by_the_prior():
     """A MERL truth from the autoencoder's training split would flatter the prior: the
     report's tables must come from its test split."""
@@ -38,3 +70,39 @@ def test_merl_truths_are_unseen_by_the_prior():
     split = json.loads((REPO / "nbrdf-core" / "data" / "models" / "autoencoder.json").read_text())["split"]
     assert set(MERL) <= set(split["test"])
     assert not set(MERL) & (set(split["train"]) | set(split.get("validation", [])))
+
+
+def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
+    """``--views N`` adds training images; image i is the same whatever N, so runs with
+    different view counts are comparable (and share a work folder)."""
+    import numpy as np
+    import pytest
+
+    from nbrdf_tools.estimate_report import MITSUBA_TRUTH, QUICK, dict_to_xml, parser, prepare, read_exr
+
+    material = {"xml": dict_to_xml(MITSUBA_TRUTH), "dict": MITSUBA_TRUTH}
+    prepare("m", material, {**QUICK, "views": 2}, tmp_path)
+    first = [read_exr(tmp_path / "m" / f"train{i}.exr") for i in range(2)]
+    assert not (tmp_path / "m" / "train2.exr").exists()
+    prepare("m", material, {**QUICK, "views": 3}, tmp_path)
+    for i in range(2):
+        assert np.array_equal(read_exr(tmp_path / "m" / f"train{i}.exr"), first[i])
+    assert (tmp_path / "m" / "train2.exr").is_file()
+    assert (tmp_path / "m" / "train.xml").read_text().count("<sensor") == 3
+    with pytest.raises(SystemExit):
+        parser().parse_args(["--views", "99"])
+
+
+def test_convergence_curve_runs(llvm_variant, tmp_path):
+    """``python -m nbrdf_tools.estimate_report.convergence``: one analytic model's novel-view RMSE
+    at each checkpoint, table and figure written (a short run at the report's full size)."""
+    from nbrdf_tools.estimate_report import convergence
+
+    out = tmp_path / "convergence.md"
+    assert convergence.main(["--work", str(tmp_path / "work"), "--materials", "mitsuba-roughplastic",
+                             "--models", "roughplastic", "--steps", "4", "--checkpoints", "2", "--out", str(out)]) == 0
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| mitsuba-roughplastic")]
+    assert len(rows) == 1
+    cells = [float(c) for c in rows[0].strip("|").split("|")[2:]]
+    assert len(cells) == 2 and all(0 < c < 1 for c in cells)
+    assert (tmp_path / "images" / "estimation-convergence.png").stat().st_size > 0

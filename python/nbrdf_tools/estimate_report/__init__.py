@@ -7,14 +7,15 @@ For each ground-truth material (the four shared RGL measurements through Mitsuba
 two MERL tables made by ``nbrdf synth`` through the ``merl`` plugin, one Mitsuba BSDF) it renders
 the training images of a sphere itself (``--views`` sensors around it, two point lights and a dim
 constant environment), runs ``python -m nbrdf_mitsuba.estimate`` with every model on the same
-images, and measures each estimate on a novel view under a novel light (tone-mapped RMSE, SSIM,
-HDR-FLIP of :mod:`nbrdf_tools.metrics`) and in BRDF space against the truth (the mean log error
+images, and measures each estimate on novel views under novel lights (three pairs, the means of
+tone-mapped RMSE, SSIM, HDR-FLIP of :mod:`nbrdf_tools.metrics`) and in BRDF space against the truth (the mean log error
 of :func:`nbrdf_tools.compare_materials.log_error`, uniform directions). Each (material, model)
 is stored in ``WORK/MATERIAL/MODEL.result.json`` as it finishes; a rerun skips those done
 (resumable; ``--stored-only`` tabulates the stored results alone and lists the cases not run).
 Writes the Markdown table per material and model, the seconds of each estimate, the prior's
 strength each ``nbrdf`` estimate chose by its held-out training view, and a figure (truth and
-every estimate at the novel view).
+every estimate at the first novel pair). A stored estimate whose novel pairs were not today's is
+measured again, not estimated again.
 """
 
 from __future__ import annotations
@@ -40,9 +41,16 @@ MERL = ("green-metallic-paint", "red-specular-plastic")
 MITSUBA_TRUTH = {"type": "roughplastic", "alpha": 0.15,
                  "diffuse_reflectance": {"type": "rgb", "value": [0.6, 0.2, 0.1]}}
 #: Training sensors (origins looking at the sphere) and lights; the novel ones differ from all.
-VIEWS = ["0, 0, 4", "3, 1, 2.5", "-2.5, 2, 2.5", "0.5, -1.5, 3.6"]
+#: The first ``--views`` are used; the later ones add directions no earlier view covers (the
+#: right side grazed by the first light, the top) and stay away from the novel view.
+VIEWS = ["0, 0, 4", "3, 1, 2.5", "-2.5, 2, 2.5", "0.5, -1.5, 3.6", "3.5, -1, -1.5", "-1.5, 3.5, 1.5"]
 LIGHTS = [("3, 3, 4", 40.0), ("-4, 2, 1", 25.0)]
 NOVEL_VIEW, NOVEL_LIGHT = "-3, -0.5, 2.8", ("1, 4, 2", 40.0)
+#: Novel (view, light) pairs, each image lit by its light alone; the first is the one the rounds
+#: before 8 measured alone. The others put the light where no training light was (below left,
+#: low on the right) and look from where no training view did, so a score is not one highlight's.
+NOVEL_PAIRS = [(NOVEL_VIEW, NOVEL_LIGHT), ("1.5, 3, 2.5", ("-2, -3, 3", 30.0)),
+               ("-0.5, -3.5, 2", ("4, 0, 1.5", 30.0))]
 #: 100 steps: principled's novel-view error on colodur_napoli_4f still fell from 60 to 80 steps
 #: and had flattened by 100 (docs/results/estimation.md, convergence).
 FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "spp": 8, "steps": 100}
@@ -151,27 +159,59 @@ def read_exr(path: Path) -> np.ndarray:
     return np.array(bitmap, dtype=np.float64)
 
 
-def measure(truth: dict, estimate: dict, reference: np.ndarray, image: np.ndarray, samples: int) -> dict:
-    import mitsuba as mi
+def novel_prefix(pair: int) -> str:
+    """File names of novel pair ``pair``: ``novel-*`` for the first (as before there were three)."""
+    return "novel" if pair == 0 else f"novel{pair}"
 
+
+def novel_images(bsdf_xml: str, folder: Path, who: str, settings: dict) -> list[Path]:
+    """``who``'s render of every novel pair (``who``: ``truth`` or a model)."""
+    paths = []
+    for pair, (view, light) in enumerate(NOVEL_PAIRS):
+        prefix = folder / f"{novel_prefix(pair)}-{who}"
+        (path,) = render_scene(scene_xml(bsdf_xml, [view], [light], settings["resolution"]),
+                               prefix.with_name(prefix.name + ".xml"), settings["reference_spp"],
+                               prefix.with_name(prefix.name + "-"))
+        paths.append(path)
+    return paths
+
+
+def measure_novel(folder: Path, images: list[Path]) -> dict:
+    """Image metrics per novel pair against the truth's, and their means (the table's figures)."""
     from nbrdf_tools import metrics
-    from nbrdf_tools.compare_materials import log_error
 
-    return {"rmse_tonemapped": metrics.rmse_tonemapped(reference, image), "ssim": metrics.ssim(reference, image),
-            "flip_hdr": metrics.flip_hdr(reference, image),
-            "log_error": log_error(mi.load_dict(truth), mi.load_dict(estimate), "uniform", samples)}
+    per_pair = []
+    for pair, path in enumerate(images):
+        reference, image = read_exr(folder / f"{novel_prefix(pair)}-truth-0.exr"), read_exr(path)
+        per_pair.append({"rmse_tonemapped": metrics.rmse_tonemapped(reference, image),
+                         "ssim": metrics.ssim(reference, image), "flip_hdr": metrics.flip_hdr(reference, image)})
+    means = {key: float(np.mean([m[key] for m in per_pair])) for key in per_pair[0]}
+    return {**means, "novel": per_pair, "novel_pairs": novel_setup()}
+
+
+def novel_setup() -> list:
+    """What a stored result's novel metrics were measured on (remeasured where it changed)."""
+    return [[view, light, intensity] for view, (light, intensity) in NOVEL_PAIRS]
 
 
 def run_case(name: str, material: dict, model: str, settings: dict, work: Path) -> dict:
-    """One (material, model): estimate, novel render, metrics; stored as MODEL.result.json."""
+    """One (material, model): estimate, novel renders, metrics; stored as MODEL.result.json. A
+    stored result is reused; if its novel pairs are not today's, the stored estimate is measured
+    again (not estimated again)."""
     from nbrdf_mitsuba import estimate
+
+    from nbrdf_tools.compare_materials import log_error
 
     folder = work / name
     stored = folder / f"{model}.result.json"
-    if stored.is_file():
-        return json.loads(stored.read_text())
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
-    images = sorted(folder.glob("train*.exr"))
+    if stored.is_file():
+        result = json.loads(stored.read_text())
+        if result.get("novel_pairs") != novel_setup() and out.is_file():
+            result.update(measure_novel(folder, novel_images(estimate_bsdf_xml(model, out), folder, model, settings)))
+            stored.write_text(json.dumps(result, indent=2) + "\n")
+        return result
+    images = training_images(folder, settings["views"])
     argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
             "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]),
             "--seed", str(settings["seed"]), "-q"]
@@ -180,27 +220,31 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
     if status != 0:
         raise SystemExit(f"{name} {model}: the estimate failed (status {status})")
-    novel = scene_xml(estimate_bsdf_xml(model, out), [NOVEL_VIEW], [NOVEL_LIGHT], settings["resolution"])
-    (image_path,) = render_scene(novel, folder / f"novel-{model}.xml", settings["reference_spp"],
-                                 folder / f"novel-{model}-")
-    reference = read_exr(folder / "novel-truth-0.exr")
+    import mitsuba as mi
+
     result = {"material": name, "model": model, "seconds": seconds, "cpu_seconds": cpu_seconds,
-              **measure(material["dict"], estimate_bsdf_dict(model, out), reference, read_exr(image_path),
-                        settings["log_samples"])}
+              **measure_novel(folder, novel_images(estimate_bsdf_xml(model, out), folder, model, settings)),
+              "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(model, out)),
+                                     "uniform", settings["log_samples"])}
     stored.write_text(json.dumps(result, indent=2) + "\n")
     return result
 
 
+def training_images(folder: Path, views: int) -> list[Path]:
+    return [folder / f"train{i}.exr" for i in range(views)]
+
+
 def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
-    """The truth's training and novel images (once per material)."""
+    """The truth's training and novel images (once per material; view i's image does not depend
+    on how many views there are)."""
     folder = work / name
     folder.mkdir(parents=True, exist_ok=True)
-    if not (folder / "novel-truth-0.exr").is_file():
+    if not all(p.is_file() for p in training_images(folder, settings["views"])):
         views = VIEWS[: settings["views"]]
         render_scene(scene_xml(material["xml"], views, LIGHTS, settings["resolution"]), folder / "truth.xml",
                      settings["reference_spp"], folder / "train")
-        render_scene(scene_xml(material["xml"], [NOVEL_VIEW], [NOVEL_LIGHT], settings["resolution"]),
-                     folder / "novel-truth.xml", settings["reference_spp"], folder / "novel-truth-")
+    if not all((folder / f"{novel_prefix(pair)}-truth-0.exr").is_file() for pair in range(len(NOVEL_PAIRS))):
+        novel_images(material["xml"], folder, "truth", settings)
     # The estimate's scene: the same as the truth's, its BSDF a placeholder the estimate replaces.
     placeholder = dict_to_xml({"type": "diffuse"})
     (folder / "train.xml").write_text(scene_xml(placeholder, VIEWS[: settings["views"]], LIGHTS,
@@ -236,11 +280,14 @@ def figure(results: list[dict], work: Path, path: Path, models: list[str]) -> No
 
 
 def table(results: list[dict], models: list[str]) -> list[str]:
-    lines = ["| material | model | RMSE (tone-mapped) | SSIM | HDR-FLIP | BRDF log error | seconds (CPU s) |",
-             "|---|---|---|---|---|---|---|"]
+    """Image metrics are means over the novel pairs; the RMSE of each pair beside them."""
+    lines = ["| material | model | RMSE (tone-mapped) | RMSE per novel pair | SSIM | HDR-FLIP | BRDF log error | "
+             "seconds (CPU s) |", "|---|---|---|---|---|---|---|---|"]
     for r in results:
-        lines.append(f"| {r['material']} | {r['model']} | {r['rmse_tonemapped']:.4f} | {r['ssim']:.4f} | "
-                     f"{r['flip_hdr']:.4f} | {r['log_error']:.4f} | {r['seconds']:.0f} ({r['cpu_seconds']:.0f}) |")
+        pairs = " / ".join(f"{m['rmse_tonemapped']:.4f}" for m in r.get("novel", []))
+        lines.append(f"| {r['material']} | {r['model']} | {r['rmse_tonemapped']:.4f} | {pairs or '-'} | "
+                     f"{r['ssim']:.4f} | {r['flip_hdr']:.4f} | {r['log_error']:.4f} | "
+                     f"{r['seconds']:.0f} ({r['cpu_seconds']:.0f}) |")
     return lines
 
 
@@ -265,7 +312,7 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
 
 def summary(results: list[dict]) -> list[str]:
     """Per material: the model with the lowest novel-view RMSE, and nbrdf's over the best analytic's."""
-    lines, ratios = [], []
+    lines, ratios = [], {}
     for name in dict.fromkeys(r["material"] for r in results):
         rows = {r["model"]: r for r in results if r["material"] == name}
         best = min(rows.values(), key=lambda r: r["rmse_tonemapped"])
@@ -274,15 +321,19 @@ def summary(results: list[dict]) -> list[str]:
         if "nbrdf" in rows and analytic:
             best_analytic = min(analytic, key=lambda r: r["rmse_tonemapped"])
             ratio = rows["nbrdf"]["rmse_tonemapped"] / best_analytic["rmse_tonemapped"]
-            ratios.append(ratio)
+            ratios[name] = ratio
             text += f"; nbrdf / best analytic ({best_analytic['model']}) = {ratio:.2f}x"
         if "nbrdf" in rows and "nbrdf-no-prior" in rows:
             text += (f"; prior {rows['nbrdf']['rmse_tonemapped']:.4f} vs no prior "
                      f"{rows['nbrdf-no-prior']['rmse_tonemapped']:.4f}")
         lines.append(text)
     if ratios:
-        lines.append(f"* mean nbrdf / best analytic novel-view RMSE: {np.mean(ratios):.2f}x over {len(ratios)} "
-                     "materials")
+        lines.append(f"* mean nbrdf / best analytic novel-view RMSE: {np.mean(list(ratios.values())):.2f}x over "
+                     f"{len(ratios)} materials")
+        # The issue's target is over measured materials; an analytic truth is the analytic model's home ground.
+        measured = [v for k, v in ratios.items() if not k.startswith("mitsuba-")]
+        if measured and len(measured) < len(ratios):
+            lines.append(f"* mean over the {len(measured)} measured materials (RGL and MERL): {np.mean(measured):.2f}x")
     return lines
 
 
@@ -294,6 +345,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
+    p.add_argument("--views", type=int, choices=range(2, len(VIEWS) + 1), metavar=f"2..{len(VIEWS)}",
+                   help=f"training views, each an image under both lights (default: {FULL['views']})")
     p.add_argument("--seed", type=int, default=0,
                    help="the estimates' seed (default: 0); the training and novel images do not depend on it")
     p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
@@ -314,6 +367,8 @@ def main(argv: list[str] | None = None) -> int:
         settings["steps"] = args.steps
     if args.spp:
         settings["spp"] = args.spp
+    if args.views:
+        settings["views"] = args.views
     settings["seed"] = args.seed
     models = [m for m in args.models.split(",") if m]
     bad = set(models) - set(MODELS)
@@ -342,8 +397,9 @@ def main(argv: list[str] | None = None) -> int:
              f"A sphere, {settings['views']} training views ({settings['resolution']}x{settings['resolution']}, "
              f"{settings['reference_spp']} spp references) under {len(LIGHTS)} point lights and a dim sky; every model "
              f"fitted to the same images by `python -m nbrdf_mitsuba.estimate` ({settings['steps']} steps, "
-             f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on a novel view under "
-             "a novel light and in "
+             f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on "
+             f"{len(NOVEL_PAIRS)} novel views, each under its own novel light (the image metrics are means over "
+             "the pairs), and in "
              f"BRDF space (mean |ln(1 + f cos) - ln(1 + f' cos)|, {settings['log_samples']} uniform pairs). "
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
@@ -357,9 +413,10 @@ def main(argv: list[str] | None = None) -> int:
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
              "estimate of a run includes compiling Mitsuba's kernels for the network (cached afterwards). Novel "
-             "view: one sensor and one light none of the training images used; the errors hold Monte Carlo noise "
-             f"of {settings['reference_spp']}-spp renders on both sides.", "",
-             f"![truth and estimates at the novel view]({os.path.relpath(image, out.parent)})", ""]
+             "pairs (view; light): " + "; ".join(f"({v}; {light} at {i:g})" for v, (light, i) in NOVEL_PAIRS)
+             + ", no view and no light any training image used; the errors hold Monte Carlo noise of "
+             f"{settings['reference_spp']}-spp renders on both sides.", "",
+             f"![truth and estimates at the first novel pair]({os.path.relpath(image, out.parent)})", ""]
     out.write_text("\n".join(lines))
     print(f"wrote {out} and {image}")
     return 0

@@ -43,7 +43,8 @@ def write_snapshot(path: Path, model: str, kind: str, theta, decoder) -> None:
 
 
 def run_curve(name: str, model: str, settings: dict, checkpoints: list[int], work: Path) -> dict:
-    """The novel-view RMSE of ``model`` after each checkpoint of one ``settings['steps']``-step run."""
+    """The novel-view RMSE of ``model`` after each checkpoint of one ``settings['steps']``-step run
+    (the report's first novel pair: a curve needs one render per checkpoint, not a table's three)."""
     from nbrdf_mitsuba import estimate
     from nbrdf_mitsuba.latent import Decoder
 
@@ -62,8 +63,8 @@ def run_curve(name: str, model: str, settings: dict, checkpoints: list[int], wor
             write_snapshot(snapshot_file(folder, model, steps, done), model, kind, theta, decoder)
 
     out = folder / f"convergence-{model}-{steps}{'.nbrdf.json' if model.startswith('nbrdf') else '.json'}"
-    argv = [str(folder / "train.xml"), "--images", *map(str, sorted(folder.glob("train*.exr"))), "--bsdf-id", "mat",
-            "-o", str(out), "--model", model, "--steps", str(steps), "--spp", str(settings["spp"]), "-q"]
+    argv = [str(folder / "train.xml"), "--images", *map(str, report.training_images(folder, settings["views"])),
+            "--bsdf-id", "mat", "-o", str(out), "--model", model, "--steps", str(steps), "--spp", str(settings["spp"]), "-q"]
     start, cpu = time.perf_counter(), time.process_time()
     estimate.estimate(estimate.parser().parse_args(argv), on_step)
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
