@@ -113,6 +113,10 @@ def materials(work: Path, quick: bool, names: list[str] | None) -> dict[str, dic
                 print(f"skipping rgl-{name}: {path} is absent", file=sys.stderr)
         for name in MERL:
             table = work / "tables" / f"{name}.binary"
+            if names and f"merl-{name}" not in names:
+                # Not asked for: named so that --materials can list it, its table not made.
+                found[f"merl-{name}"] = {}
+                continue
             if not table.is_file():
                 table.parent.mkdir(parents=True, exist_ok=True)
                 subprocess.run([str(default_cli()), "synth", "--model", "sgd", "--material", name, "-o", str(table)],
