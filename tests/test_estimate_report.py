@@ -74,7 +74,8 @@ def test_merl_truths_are_unseen_by_the_prior():
 
 def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
     """``--views N`` adds training images; image i is the same whatever N, so runs with
-    different view counts are comparable (and share a work folder)."""
+    different view counts are comparable; their results are not: a work folder estimated with
+    other views is refused."""
     import numpy as np
     import pytest
 
@@ -91,6 +92,19 @@ def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
     assert (tmp_path / "m" / "train.xml").read_text().count("<sensor") == 3
     with pytest.raises(SystemExit):
         parser().parse_args(["--views", "99"])
+
+
+def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
+    import pytest
+
+    from nbrdf_tools.estimate_report import main
+
+    work, out = tmp_path / "work", tmp_path / "estimation.md"
+    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out)]
+    assert main(argv) == 0
+    with pytest.raises(SystemExit, match="was estimated with .*'steps': 3.*'steps': 4.*another --work"):
+        main([*argv, "--steps", "4"])
+    assert main(argv) == 0  # the same settings: resumed
 
 
 def test_convergence_curve_runs(llvm_variant, tmp_path):

@@ -8,10 +8,12 @@ two MERL tables made by ``nbrdf synth`` through the ``merl`` plugin, one Mitsuba
 the training images of a sphere itself (``--views`` sensors around it, two point lights and a dim
 constant environment), runs ``python -m nbrdf_mitsuba.estimate`` with every model on the same
 images, and measures each estimate on novel views under novel lights (three pairs, the means of
-tone-mapped RMSE, SSIM, HDR-FLIP of :mod:`nbrdf_tools.metrics`) and in BRDF space against the truth (the mean log error
-of :func:`nbrdf_tools.compare_materials.log_error`, uniform directions). Each (material, model)
-is stored in ``WORK/MATERIAL/MODEL.result.json`` as it finishes; a rerun skips those done
-(resumable; ``--stored-only`` tabulates the stored results alone and lists the cases not run).
+tone-mapped RMSE, SSIM, HDR-FLIP of :mod:`nbrdf_tools.metrics`) and in BRDF space against the
+truth (the mean log error of :func:`nbrdf_tools.compare_materials.log_error`, uniform
+directions). Each (material, model) is stored in ``WORK/MATERIAL/MODEL.result.json`` as it
+finishes; a rerun skips those done (resumable; ``--stored-only`` tabulates the stored results
+alone and lists the cases not run), and refuses a work folder whose results were estimated with
+other views, steps, samples or seed.
 Writes the Markdown table per material and model, the seconds of each estimate, the prior's
 strength each ``nbrdf`` estimate chose by its held-out training view, and a figure (truth and
 every estimate at the first novel pair). A stored estimate whose novel pairs were not today's is
@@ -164,7 +166,7 @@ def read_exr(path: Path) -> np.ndarray:
 
 
 def novel_prefix(pair: int) -> str:
-    """File names of novel pair ``pair``: ``novel-*`` for the first (as before there were three)."""
+    """File names of novel pair ``pair``: the first keeps the ``novel-*`` names it had alone."""
     return "novel" if pair == 0 else f"novel{pair}"
 
 
@@ -211,6 +213,10 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
     if stored.is_file():
         result = json.loads(stored.read_text())
+        asked = estimate_settings(settings)
+        if result.get("settings", asked) != asked:
+            raise SystemExit(f"{stored} was estimated with {result['settings']}, this run asks for {asked}: "
+                             "give it another --work")
         if result.get("novel_pairs") != novel_setup() and out.is_file():
             result.update(measure_novel(folder, novel_images(estimate_bsdf_xml(model, out), folder, model, settings)))
             stored.write_text(json.dumps(result, indent=2) + "\n")
@@ -226,12 +232,19 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
         raise SystemExit(f"{name} {model}: the estimate failed (status {status})")
     import mitsuba as mi
 
-    result = {"material": name, "model": model, "seconds": seconds, "cpu_seconds": cpu_seconds,
-              **measure_novel(folder, novel_images(estimate_bsdf_xml(model, out), folder, model, settings)),
+    novel = novel_images(estimate_bsdf_xml(model, out), folder, model, settings)
+    result = {"material": name, "model": model, "settings": estimate_settings(settings), "seconds": seconds,
+              "cpu_seconds": cpu_seconds, **measure_novel(folder, novel),
               "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(model, out)),
                                      "uniform", settings["log_samples"])}
     stored.write_text(json.dumps(result, indent=2) + "\n")
     return result
+
+
+def estimate_settings(settings: dict) -> dict:
+    """What an estimate depends on besides its material and model (results stored before this
+    was recorded carry none and are taken as they are)."""
+    return {key: settings[key] for key in ("views", "steps", "spp", "seed")}
 
 
 def training_images(folder: Path, views: int) -> list[Path]:
