@@ -74,8 +74,7 @@ def test_merl_truths_are_unseen_by_the_prior():
 
 def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
     """``--views N`` adds training images; image i is the same whatever N, so runs with
-    different view counts are comparable; their results are not: a work folder estimated with
-    other views is refused."""
+    different view counts are comparable (their results are not: the next test)."""
     import numpy as np
     import pytest
 

@@ -182,12 +182,13 @@ def novel_images(bsdf_xml: str, folder: Path, who: str, settings: dict) -> list[
     return paths
 
 
-def measure_novel(folder: Path, images: list[Path]) -> dict:
-    """Image metrics per novel pair against the truth's, and their means (the table's figures)."""
+def measure_estimate(folder: Path, model: str, estimate: Path, settings: dict) -> dict:
+    """The stored ``estimate`` of ``model`` rendered at every novel pair; per pair its image
+    metrics against the truth's, and their means (the table's figures)."""
     from nbrdf_tools import metrics
 
     per_pair = []
-    for pair, path in enumerate(images):
+    for pair, path in enumerate(novel_images(estimate_bsdf_xml(model, estimate), folder, model, settings)):
         reference, image = read_exr(folder / f"{novel_prefix(pair)}-truth-0.exr"), read_exr(path)
         per_pair.append({"rmse_tonemapped": metrics.rmse_tonemapped(reference, image),
                          "ssim": metrics.ssim(reference, image), "flip_hdr": metrics.flip_hdr(reference, image)})
@@ -218,7 +219,7 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
             raise SystemExit(f"{stored} was estimated with {result['settings']}, this run asks for {asked}: "
                              "give it another --work")
         if result.get("novel_pairs") != novel_setup() and out.is_file():
-            result.update(measure_novel(folder, novel_images(estimate_bsdf_xml(model, out), folder, model, settings)))
+            result.update(measure_estimate(folder, model, out, settings))
             stored.write_text(json.dumps(result, indent=2) + "\n")
         return result
     images = training_images(folder, settings["views"])
@@ -232,9 +233,8 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
         raise SystemExit(f"{name} {model}: the estimate failed (status {status})")
     import mitsuba as mi
 
-    novel = novel_images(estimate_bsdf_xml(model, out), folder, model, settings)
     result = {"material": name, "model": model, "settings": estimate_settings(settings), "seconds": seconds,
-              "cpu_seconds": cpu_seconds, **measure_novel(folder, novel),
+              "cpu_seconds": cpu_seconds, **measure_estimate(folder, model, out, settings),
               "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(model, out)),
                                      "uniform", settings["log_samples"])}
     stored.write_text(json.dumps(result, indent=2) + "\n")
