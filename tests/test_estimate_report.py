@@ -15,6 +15,12 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     assert "| mitsuba-roughplastic | nbrdf |" in text and "| mitsuba-roughplastic | roughplastic |" in text
     assert "lowest novel-view RMSE" in text
     assert (tmp_path / "images" / "estimation.png").stat().st_size > 0
+    # The ceiling: the isotropic network distilled from the truth, measured on the same pairs.
+    import json
+
+    ceiling = json.loads((work / "mitsuba-roughplastic" / "nbrdf-from-truth.nbrdf.json").read_text())
+    assert ceiling["layers"][0]["inputs"] == 6 and ceiling["sampling"]
+    assert "| mitsuba-roughplastic | nbrdf-from-truth |" in text and "the network trained on the truth itself" in text
     stored = work / "mitsuba-roughplastic" / "nbrdf.result.json"
     before = stored.stat().st_mtime_ns
     assert main(argv) == 0
@@ -37,7 +43,7 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
     from nbrdf_tools.estimate_report import NOVEL_PAIRS, main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
-    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out)]
+    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
     assert main(argv) == 0
     folder = work / "mitsuba-roughplastic"
     assert len(NOVEL_PAIRS) == 3
@@ -57,6 +63,19 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
     again = json.loads(stored.read_text())
     assert estimate_file.stat().st_mtime_ns == before
     assert again["rmse_tonemapped"] == result["rmse_tonemapped"] and again["novel_pairs"] == result["novel_pairs"]
+
+
+def test_the_ceiling_is_no_competitor():
+    """The network distilled from the truth is reported beside the estimates, never as a
+    material's lowest nor in the estimate's ratio to the best analytic model."""
+    from nbrdf_tools.estimate_report import CEILING, summary
+
+    rows = [("nbrdf", 0.02), ("nbrdf-no-prior", 0.04), ("principled", 0.03), (CEILING, 0.006)]
+    lines = summary([{"material": "rgl-x", "model": m, "rmse_tonemapped": v} for m, v in rows])
+    assert lines[0].startswith("* rgl-x: lowest novel-view RMSE: nbrdf;")
+    assert "nbrdf / best analytic (principled) = 0.67x" in lines[0]
+    assert "the network trained on the truth itself 0.0060" in lines[0]
+    assert lines[-1].startswith(f"* the ceiling, {CEILING}") and "0.20x over the 1 measured" in lines[-1]
 
 
 def test_merl_truths_are_unseen_by_the_prior():
@@ -99,7 +118,7 @@ def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
     from nbrdf_tools.estimate_report import main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
-    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out)]
+    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
     assert main(argv) == 0
     with pytest.raises(SystemExit, match="was estimated with .*'steps': 3.*'steps': 4.*another --work"):
         main([*argv, "--steps", "4"])

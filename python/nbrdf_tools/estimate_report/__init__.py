@@ -18,6 +18,12 @@ Writes the Markdown table per material and model, the seconds of each estimate, 
 strength each ``nbrdf`` estimate chose by its held-out training view, and a figure (truth and
 every estimate at the first novel pair). A stored estimate whose novel pairs were not today's is
 measured again, not estimated again.
+
+Beside the estimates, each material gets the network's ceiling, ``nbrdf-from-truth``: the same
+675-weight network distilled from the truth's BRDF itself (``python -m nbrdf_mitsuba.distill``,
+isotropic, the trainer's defaults), not from images, measured the same way. It is no competitor
+(it never counts as a material's lowest): it says how much of an estimate's error is the
+network's form and how much the few images (``--no-ceiling`` leaves it out).
 """
 
 from __future__ import annotations
@@ -36,6 +42,8 @@ import numpy as np
 from nbrdf_tools.paths import REPO, default_cli, default_out, shared_dir
 
 MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
+#: The network distilled from the truth's BRDF (not an estimate from images): the ceiling.
+CEILING = "nbrdf-from-truth"
 RGL = ("paper_white", "cc_iris_purple_gem", "cc_ibiza_sunset", "colodur_napoli_4f")
 #: From the autoencoder's test split (its JSON's "split"): the prior never saw these materials.
 MERL = ("green-metallic-paint", "red-specular-plastic")
@@ -55,8 +63,10 @@ NOVEL_PAIRS = [(NOVEL_VIEW, NOVEL_LIGHT), ("1.5, 3, 2.5", ("-2, -3, 3", 30.0)),
                ("-0.5, -3.5, 2", ("4, 0, 1.5", 30.0))]
 #: 100 steps: principled's novel-view error on colodur_napoli_4f still fell from 60 to 80 steps
 #: and had flattened by 100 (docs/results/estimation.md, convergence).
-FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "spp": 8, "steps": 100}
-QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "spp": 2, "steps": 3}
+FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "spp": 8, "steps": 100, "ceiling_training": []}
+#: The ceiling's distillation is cut to a few thousand pairs and epochs in the quick run (a test).
+QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "spp": 2, "steps": 3,
+         "ceiling_training": ["--samples", "4000", "--epochs", "2"]}
 
 
 def sensor(origin: str, resolution: int) -> str:
@@ -241,6 +251,41 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     return result
 
 
+def run_ceiling(name: str, material: dict, settings: dict, work: Path) -> dict:
+    """The network distilled from the truth's BRDF (:data:`CEILING`), with the estimates' fitted
+    sampling, measured as an estimate is; stored as ``CEILING.result.json`` (re-measured, not
+    distilled again, where the novel pairs changed)."""
+    from nbrdf_mitsuba import distill, estimate
+
+    from nbrdf_tools.compare_materials import log_error
+
+    folder = work / name
+    stored, out = folder / f"{CEILING}.result.json", folder / f"{CEILING}.nbrdf.json"
+    if stored.is_file():
+        result = json.loads(stored.read_text())
+        if result.get("novel_pairs") != novel_setup() and out.is_file():
+            result.update(measure_estimate(folder, CEILING, out, settings))
+            stored.write_text(json.dumps(result, indent=2) + "\n")
+        return result
+    source = folder / "truth.json"
+    source.write_text(json.dumps(material["dict"]))
+    start, cpu = time.perf_counter(), time.process_time()
+    # Isotropic: the estimates are isotropic 675-weight networks, and so is their ceiling.
+    status = distill.main([str(source), "-o", str(out), "--anisotropy", "off", "-q", *settings["ceiling_training"]])
+    if status != 0:
+        raise SystemExit(f"{name} {CEILING}: the distillation failed (status {status})")
+    estimate.fit_sampling(out)
+    seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
+    import mitsuba as mi
+
+    result = {"material": name, "model": CEILING, "seconds": seconds, "cpu_seconds": cpu_seconds,
+              **measure_estimate(folder, CEILING, out, settings),
+              "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(CEILING, out)),
+                                     "uniform", settings["log_samples"])}
+    stored.write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
 def estimate_settings(settings: dict) -> dict:
     """What an estimate depends on besides its material and model (results stored before this
     was recorded carry none and are taken as they are)."""
@@ -329,9 +374,12 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
 
 def summary(results: list[dict]) -> list[str]:
     """Per material: the model with the lowest novel-view RMSE, and nbrdf's over the best analytic's."""
-    lines, ratios = [], {}
+    lines, ratios, ceilings = [], {}, {}
     for name in dict.fromkeys(r["material"] for r in results):
         rows = {r["model"]: r for r in results if r["material"] == name}
+        ceiling = rows.pop(CEILING, None)
+        if not rows:
+            continue
         best = min(rows.values(), key=lambda r: r["rmse_tonemapped"])
         analytic = [r for m, r in rows.items() if not m.startswith("nbrdf")]
         text = f"* {name}: lowest novel-view RMSE: {best['model']}"
@@ -343,6 +391,10 @@ def summary(results: list[dict]) -> list[str]:
         if "nbrdf" in rows and "nbrdf-no-prior" in rows:
             text += (f"; prior {rows['nbrdf']['rmse_tonemapped']:.4f} vs no prior "
                      f"{rows['nbrdf-no-prior']['rmse_tonemapped']:.4f}")
+        if ceiling is not None and analytic:
+            best_analytic = min(analytic, key=lambda r: r["rmse_tonemapped"])
+            ceilings[name] = ceiling["rmse_tonemapped"] / best_analytic["rmse_tonemapped"]
+            text += f"; the network trained on the truth itself {ceiling['rmse_tonemapped']:.4f}"
         lines.append(text)
     if ratios:
         lines.append(f"* mean nbrdf / best analytic novel-view RMSE: {np.mean(list(ratios.values())):.2f}x over "
@@ -351,6 +403,10 @@ def summary(results: list[dict]) -> list[str]:
         measured = [v for k, v in ratios.items() if not k.startswith("mitsuba-")]
         if measured and len(measured) < len(ratios):
             lines.append(f"* mean over the {len(measured)} measured materials (RGL and MERL): {np.mean(measured):.2f}x")
+    measured = [v for k, v in ceilings.items() if not k.startswith("mitsuba-")]
+    if measured:
+        lines.append(f"* the ceiling, {CEILING} (distilled from the truth's BRDF, not from images) / best analytic "
+                     f"estimate: {np.mean(measured):.2f}x over the {len(measured)} measured materials")
     return lines
 
 
@@ -366,6 +422,8 @@ def parser() -> argparse.ArgumentParser:
                    help=f"training views, each an image under both lights (default: {FULL['views']})")
     p.add_argument("--seed", type=int, default=0,
                    help="the estimates' seed (default: 0); the training and novel images do not depend on it")
+    p.add_argument("--no-ceiling", action="store_true",
+                   help=f"leave out {CEILING}, the network distilled from the truth's BRDF (the estimates' ceiling)")
     p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
     p.add_argument("--stored-only", action="store_true",
                    help="estimate nothing: tabulate the results stored in WORK, list the cases missing")
@@ -405,10 +463,18 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
             results.append(result)
+        if not args.no_ceiling:
+            if args.stored_only and not (work / name / f"{CEILING}.result.json").is_file():
+                missing.append(f"{name} {CEILING}")
+            else:
+                result = run_ceiling(name, material, settings, work)
+                print(f"{name} {CEILING}: novel RMSE {result['rmse_tonemapped']:.4f}, log error "
+                      f"{result['log_error']:.4f}, {result['seconds']:.0f} s", flush=True)
+                results.append(result)
     out = args.out or work / "estimation.md"
     image = out.parent / "images" / "estimation.png"
     image.parent.mkdir(parents=True, exist_ok=True)
-    figure(results, work, image, models)
+    figure(results, work, image, models + ([] if args.no_ceiling else [CEILING]))
     command = "python -m nbrdf_tools.estimate_report " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["```sh", command.strip(), "```", "", "# Material estimation from images (issue 33)", "",
              f"A sphere, {settings['views']} training views ({settings['resolution']}x{settings['resolution']}, "
@@ -421,6 +487,11 @@ def main(argv: list[str] | None = None) -> int:
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
              *table(results, models), "", *summary(results), "",
+             *([] if args.no_ceiling else [
+                 f"`{CEILING}` is no estimate: the same isotropic 675-weight network distilled from the truth's BRDF "
+                 "(`python -m nbrdf_mitsuba.distill`, the trainer's defaults), measured the same way. Its error is "
+                 "what the network's form leaves; the rest of an estimate's is what the few images and the "
+                 "optimisation leave.", ""]),
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
              "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
              "training codes, `code` 0 or 0.001; the weight phase's pull toward the decoded weights, `pull` "
