@@ -211,26 +211,52 @@ def novel_setup() -> list:
     return [[view, light, intensity] for view, (light, intensity) in NOVEL_PAIRS]
 
 
+def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict) -> dict | None:
+    """The result stored in ``stored``, measured again from its stored ``out`` where its novel
+    pairs are not today's; None where nothing is stored."""
+    if not stored.is_file():
+        return None
+    result = json.loads(stored.read_text())
+    if result.get("novel_pairs") != novel_setup() and out.is_file():
+        result.update(measure_estimate(folder, model, out, settings))
+        stored.write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def store_result(stored: Path, material: dict, model: str, out: Path, settings: dict, seconds: float,
+                 cpu_seconds: float, extra: dict) -> dict:
+    """``out`` measured at the novel pairs and in BRDF space against the truth, stored."""
+    import mitsuba as mi
+
+    from nbrdf_tools.compare_materials import log_error
+
+    folder = stored.parent
+    result = {"material": folder.name, "model": model, **extra, "seconds": seconds, "cpu_seconds": cpu_seconds,
+              **measure_estimate(folder, model, out, settings),
+              "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(model, out)),
+                                     "uniform", settings["log_samples"])}
+    stored.write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
 def run_case(name: str, material: dict, model: str, settings: dict, work: Path) -> dict:
     """One (material, model): estimate, novel renders, metrics; stored as MODEL.result.json. A
     stored result is reused; if its novel pairs are not today's, the stored estimate is measured
     again (not estimated again)."""
     from nbrdf_mitsuba import estimate
 
-    from nbrdf_tools.compare_materials import log_error
-
     folder = work / name
     stored = folder / f"{model}.result.json"
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
+    asked = estimate_settings(settings)
     if stored.is_file():
-        result = json.loads(stored.read_text())
-        asked = estimate_settings(settings)
-        if result.get("settings", asked) != asked:
-            raise SystemExit(f"{stored} was estimated with {result['settings']}, this run asks for {asked}: "
+        # Checked before any re-measuring: a result of other settings is refused, not updated.
+        earlier = json.loads(stored.read_text()).get("settings", asked)
+        if earlier != asked:
+            raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: "
                              "give it another --work")
-        if result.get("novel_pairs") != novel_setup() and out.is_file():
-            result.update(measure_estimate(folder, model, out, settings))
-            stored.write_text(json.dumps(result, indent=2) + "\n")
+    result = stored_result(stored, folder, model, out, settings)
+    if result is not None:
         return result
     images = training_images(folder, settings["views"])
     argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
@@ -241,14 +267,7 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
     if status != 0:
         raise SystemExit(f"{name} {model}: the estimate failed (status {status})")
-    import mitsuba as mi
-
-    result = {"material": name, "model": model, "settings": estimate_settings(settings), "seconds": seconds,
-              "cpu_seconds": cpu_seconds, **measure_estimate(folder, model, out, settings),
-              "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(model, out)),
-                                     "uniform", settings["log_samples"])}
-    stored.write_text(json.dumps(result, indent=2) + "\n")
-    return result
+    return store_result(stored, material, model, out, settings, seconds, cpu_seconds, {"settings": asked})
 
 
 def run_ceiling(name: str, material: dict, settings: dict, work: Path) -> dict:
@@ -257,15 +276,10 @@ def run_ceiling(name: str, material: dict, settings: dict, work: Path) -> dict:
     distilled again, where the novel pairs changed)."""
     from nbrdf_mitsuba import distill, estimate
 
-    from nbrdf_tools.compare_materials import log_error
-
     folder = work / name
     stored, out = folder / f"{CEILING}.result.json", folder / f"{CEILING}.nbrdf.json"
-    if stored.is_file():
-        result = json.loads(stored.read_text())
-        if result.get("novel_pairs") != novel_setup() and out.is_file():
-            result.update(measure_estimate(folder, CEILING, out, settings))
-            stored.write_text(json.dumps(result, indent=2) + "\n")
+    result = stored_result(stored, folder, CEILING, out, settings)
+    if result is not None:
         return result
     source = folder / "truth.json"
     source.write_text(json.dumps(material["dict"]))
@@ -276,14 +290,7 @@ def run_ceiling(name: str, material: dict, settings: dict, work: Path) -> dict:
         raise SystemExit(f"{name} {CEILING}: the distillation failed (status {status})")
     estimate.fit_sampling(out)
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
-    import mitsuba as mi
-
-    result = {"material": name, "model": CEILING, "seconds": seconds, "cpu_seconds": cpu_seconds,
-              **measure_estimate(folder, CEILING, out, settings),
-              "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(CEILING, out)),
-                                     "uniform", settings["log_samples"])}
-    stored.write_text(json.dumps(result, indent=2) + "\n")
-    return result
+    return store_result(stored, material, CEILING, out, settings, seconds, cpu_seconds, {})
 
 
 def estimate_settings(settings: dict) -> dict:
