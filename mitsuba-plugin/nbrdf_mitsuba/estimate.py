@@ -723,7 +723,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True,
                    help="OUT.nbrdf.json (nbrdf models) or OUT.json (analytic models: a mi.load_dict dictionary)")
     p.add_argument("--model", choices=MODELS, default="nbrdf", help="what to fit (default: nbrdf, with the prior)")
-    p.add_argument("--steps", type=int, default=150, help="optimisation steps, each rendering every view (default: 150)")
+    p.add_argument("--steps", type=int, default=200, help="optimisation steps, each rendering every view (default: 200)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel of each render (default: 16)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the renders (default: 0)")
     p.add_argument("--max-depth", type=int, default=3, help="prb's path depth (default: 3, direct light and one "
