@@ -212,12 +212,17 @@ def novel_setup() -> list:
     return [[view, light, intensity] for view, (light, intensity) in NOVEL_PAIRS]
 
 
-def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict) -> dict | None:
+def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict,
+                  asked: dict | None = None) -> dict | None:
     """The result stored in ``stored``, measured again from its stored ``out`` where its novel
-    pairs are not today's; None where nothing is stored."""
+    pairs are not today's; None where nothing is stored. Where ``asked`` is given, a result
+    estimated with other settings is refused (before any re-measuring: it is not updated)."""
     if not stored.is_file():
         return None
     result = json.loads(stored.read_text())
+    earlier = result.get("settings", asked)
+    if earlier != asked:
+        raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: give it another --work")
     if result.get("novel_pairs") != novel_setup() and out.is_file():
         result.update(measure_estimate(folder, model, out, settings))
         stored.write_text(json.dumps(result, indent=2) + "\n")
@@ -250,13 +255,7 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     stored = folder / f"{model}.result.json"
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
     asked = estimate_settings(settings)
-    if stored.is_file():
-        # Checked before any re-measuring: a result of other settings is refused, not updated.
-        earlier = json.loads(stored.read_text()).get("settings", asked)
-        if earlier != asked:
-            raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: "
-                             "give it another --work")
-    result = stored_result(stored, folder, model, out, settings)
+    result = stored_result(stored, folder, model, out, settings, asked)
     if result is not None:
         return result
     images = training_images(folder, settings["views"])
@@ -380,6 +379,11 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
     return lines
 
 
+def measured_only(by_material: dict) -> list:
+    """The values of the measured materials (RGL and MERL), not of the Mitsuba BSDF truths."""
+    return [v for k, v in by_material.items() if not k.startswith("mitsuba-")]
+
+
 def summary(results: list[dict]) -> list[str]:
     """Per material: the model with the lowest novel-view RMSE, and nbrdf's over the best analytic's."""
     lines, ratios, ceilings = [], {}, {}
@@ -390,17 +394,16 @@ def summary(results: list[dict]) -> list[str]:
             continue
         best = min(rows.values(), key=lambda r: r["rmse_tonemapped"])
         analytic = [r for m, r in rows.items() if not m.startswith("nbrdf")]
+        best_analytic = min(analytic, key=lambda r: r["rmse_tonemapped"]) if analytic else None
         text = f"* {name}: lowest novel-view RMSE: {best['model']}"
-        if "nbrdf" in rows and analytic:
-            best_analytic = min(analytic, key=lambda r: r["rmse_tonemapped"])
+        if "nbrdf" in rows and best_analytic:
             ratio = rows["nbrdf"]["rmse_tonemapped"] / best_analytic["rmse_tonemapped"]
             ratios[name] = ratio
             text += f"; nbrdf / best analytic ({best_analytic['model']}) = {ratio:.2f}x"
         if "nbrdf" in rows and "nbrdf-no-prior" in rows:
             text += (f"; prior {rows['nbrdf']['rmse_tonemapped']:.4f} vs no prior "
                      f"{rows['nbrdf-no-prior']['rmse_tonemapped']:.4f}")
-        if ceiling is not None and analytic:
-            best_analytic = min(analytic, key=lambda r: r["rmse_tonemapped"])
+        if ceiling is not None and best_analytic:
             ceilings[name] = ceiling["rmse_tonemapped"] / best_analytic["rmse_tonemapped"]
             text += f"; the network trained on the truth itself {ceiling['rmse_tonemapped']:.4f}"
         lines.append(text)
@@ -408,10 +411,10 @@ def summary(results: list[dict]) -> list[str]:
         lines.append(f"* mean nbrdf / best analytic novel-view RMSE: {np.mean(list(ratios.values())):.2f}x over "
                      f"{len(ratios)} materials")
         # The issue's target is over measured materials; an analytic truth is the analytic model's home ground.
-        measured = [v for k, v in ratios.items() if not k.startswith("mitsuba-")]
+        measured = measured_only(ratios)
         if measured and len(measured) < len(ratios):
             lines.append(f"* mean over the {len(measured)} measured materials (RGL and MERL): {np.mean(measured):.2f}x")
-    measured = [v for k, v in ceilings.items() if not k.startswith("mitsuba-")]
+    measured = measured_only(ceilings)
     if measured:
         lines.append(f"* the ceiling, {CEILING} (distilled from the truth's BRDF, not from images) / best analytic "
                      f"estimate: {np.mean(measured):.2f}x over the {len(measured)} measured materials")
@@ -461,28 +464,22 @@ def main(argv: list[str] | None = None) -> int:
     work.mkdir(parents=True, exist_ok=True)
     chosen = materials(work, args.quick, args.materials.split(",") if args.materials else None)
     results, missing = [], []
+    columns = models + ([] if args.no_ceiling else [CEILING])
     for name, material in chosen.items():
         prepare(name, material, settings, work)
-        for model in models:
+        for model in columns:
             if args.stored_only and not (work / name / f"{model}.result.json").is_file():
                 missing.append(f"{name} {model}")
                 continue
-            result = run_case(name, material, model, settings, work)
+            result = (run_ceiling(name, material, settings, work) if model == CEILING
+                      else run_case(name, material, model, settings, work))
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
             results.append(result)
-        if not args.no_ceiling:
-            if args.stored_only and not (work / name / f"{CEILING}.result.json").is_file():
-                missing.append(f"{name} {CEILING}")
-            else:
-                result = run_ceiling(name, material, settings, work)
-                print(f"{name} {CEILING}: novel RMSE {result['rmse_tonemapped']:.4f}, log error "
-                      f"{result['log_error']:.4f}, {result['seconds']:.0f} s", flush=True)
-                results.append(result)
     out = args.out or work / "estimation.md"
     image = out.parent / "images" / "estimation.png"
     image.parent.mkdir(parents=True, exist_ok=True)
-    figure(results, work, image, models + ([] if args.no_ceiling else [CEILING]))
+    figure(results, work, image, columns)
     command = "python -m nbrdf_tools.estimate_report " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["```sh", command.strip(), "```", "", "# Material estimation from images (issue 33)", "",
              f"A sphere, {settings['views']} training views ({settings['resolution']}x{settings['resolution']}, "
