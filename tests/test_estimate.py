@@ -262,7 +262,7 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 
 def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The code and the candidates (three strengths from the decoded start, the common start)
+    """The code and the candidates (each pull strength from the decoded start, the common start)
     see the training views but the last; the last alone judges them, the lowest held-out loss
     wins, the refit uses every view, and a seed repeats it (the code penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
@@ -285,11 +285,11 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
         assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
     else:
         assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
-    assert judged == [1] * 8  # the last training view, once per candidate and run
-    # Screening (49 starts), code (2 steps), candidates (3 x 2 steps from the decoded start, 4
-    # from the common one) on view 0; the refit on both (6 steps from the common start, else 4).
+    assert judged == [1] * 2 * (len(E.PRIOR_STRENGTHS) + 1)  # the last training view, once per candidate and run
+    # Screening (49 starts), code (2 steps), candidates (2 steps per strength from the decoded
+    # start, 4 from the common one) on view 0; the refit on both (6 steps from the common start, else 4).
     refit = 6 if best == E.COMMON_START else 4
-    assert rendered == [(0,)] * (49 + 2 + 6 + 4) + [(0, 1)] * refit, rendered
+    assert rendered == [(0,)] * (49 + 2 + 2 * len(E.PRIOR_STRENGTHS) + 4) + [(0, 1)] * refit, rendered
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
@@ -301,8 +301,9 @@ def test_where_the_held_out_view_prefers_the_common_start_the_prior_is_no_prior(
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
-    # Judged in order: the three decoded strengths, then the common start.
-    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 3 else loss)
+    # Judged in order: the decoded start's strengths, then the common start.
+    common = len(E.PRIOR_STRENGTHS)
+    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == common else loss)
     prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
     assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
@@ -340,6 +341,51 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
             assert np.abs(grad).max() > 0
             np.testing.assert_allclose(grad, numeric, rtol=1e-6, atol=1e-9 * np.abs(numeric).max())
     assert prior_penalty(m, sd * sd, 0.0) is None  # strength 0: no penalty at all, not a zero one
+
+
+def test_output_pull_against_a_float64_oracle(llvm_variant):
+    """The weight phase's pull, ``s mean((z(x) - z(c))^2)`` over the pull's direction pairs and the
+    three channels, ``z = ln(1 + f)`` of the network: its value equals an oracle built from
+    ``nbrdf_tools.network`` (the float64 forward pass and network input, at the same uniform
+    hemisphere warp in NumPy), and its hand-written gradient equals central differences."""
+    from nbrdf_mitsuba import estimate as E
+    from nbrdf_tools import network as N
+
+    rng = np.random.default_rng(3)
+    center = 0.3 * rng.standard_normal(675)
+    center[-3:] += 3.0  # every output positive, so that ln(1 + f) is the output layer's value
+    strength = 0.1
+    u = np.random.default_rng(E.PULL_SEED).random((4, E.PULL_PAIRS)).astype(np.float32).astype(np.float64)
+
+    def hemisphere(u1, u2):
+        r = np.sqrt(1 - u1 * u1)
+        return np.stack([r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2), u1], axis=1)
+
+    inputs = N.network_input(hemisphere(u[0], u[1]), hemisphere(u[2], u[3]))
+    np.testing.assert_allclose(E._pull_inputs(), inputs, atol=2e-5)
+
+    def layers(flat):  # docs/design.md section 4: per layer W (inputs x outputs, row-major), then b
+        out, at = [], 0
+        for n_in, n_out in ((6, 21), (21, 21), (21, 3)):
+            out.append((flat[at:at + n_in * n_out].reshape(n_in, n_out), flat[at + n_in * n_out:at + n_in * n_out + n_out]))
+            at += n_in * n_out + n_out
+        return out
+
+    def oracle(x):
+        z, z_center = (np.log1p(N.forward(layers(w), inputs)) for w in (x, center))
+        return strength * np.mean((z - z_center) ** 2)
+
+    pull = E.output_pull(center, strength)
+    x = center + 0.05 * rng.standard_normal(675)
+    value, grad = pull(x)
+    assert value > 0 and value == pytest.approx(oracle(x), rel=1e-3)  # float32 directions in the pull
+    assert pull(center)[0] == 0 and not np.any(pull(center)[1])
+    h = 1e-6
+    picks = rng.choice(675, 40, replace=False)
+    numeric = np.array([(pull(x + h * e)[0] - pull(x - h * e)[0]) / (2 * h) for e in np.eye(675)[picks]])
+    assert np.abs(grad[picks]).max() > 0
+    np.testing.assert_allclose(grad[picks], numeric, rtol=1e-5, atol=1e-7 * np.abs(numeric).max())
+    assert E.output_pull(center, 0.0) is None  # strength 0: no pull at all, not a zero one
 
 
 def test_code_prior_schedule():
@@ -396,8 +442,8 @@ def test_code_prior_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, 
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
-    pull = E.PRIOR_STRENGTHS.index(1e-3)  # judged in order: the pull's strengths from code strength 0 first
-    _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == pull else loss)
+    picked = E.PRIOR_STRENGTHS[0]  # judged in order: the pull's strengths from code strength 0 first
+    _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
     nets = {}
     for name, extra in (("fixed", ("--code-prior", "0")), ("chosen", ())):
         judged.clear()
@@ -405,12 +451,12 @@ def test_code_prior_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, 
         assert run(scene, images, nets[name], "--steps", "6", "--spp", "2", "--threads", "1", *extra) == 0
     fixed, chosen = (json.loads(nets[k].read_text()) for k in ("fixed", "chosen"))
     assert chosen["provenance"]["code_prior"] == fixed["provenance"]["code_prior"] == 0.0
-    assert chosen["provenance"]["prior_weight"] == fixed["provenance"]["prior_weight"] == 1e-3
+    assert chosen["provenance"]["prior_weight"] == fixed["provenance"]["prior_weight"] == picked
     assert chosen["layers"] == fixed["layers"] and chosen["provenance"]["code"] == fixed["provenance"]["code"]
     losses = chosen["provenance"]["held_out_losses"]
     for strength in E.PRIOR_STRENGTHS:
         assert losses[f"code 0.0, pull {strength}"] == fixed["provenance"]["held_out_losses"][str(strength)]
-        if strength != 1e-3:
+        if strength != picked:
             assert losses[f"code 0.001, pull {strength}"] != losses[f"code 0.0, pull {strength}"]
 
 

@@ -70,6 +70,12 @@ QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "spp": 2, "steps": 3
          "ceiling_training": ["--samples", "4000", "--epochs", "2"]}
 
 
+def _or(values) -> str:
+    """Values as prose: ``0.1 or 0``, ``0, 0.001 or 0.1``."""
+    text = [f"{v:g}" for v in values]
+    return text[0] if len(text) == 1 else ", ".join(text[:-1]) + " or " + text[-1]
+
+
 def sensor(origin: str, resolution: int) -> str:
     return f"""
     <sensor type="perspective">
@@ -476,6 +482,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
             results.append(result)
+    from nbrdf_mitsuba import estimate
+
     out = args.out or work / "estimation.md"
     image = out.parent / "images" / "estimation.png"
     image.parent.mkdir(parents=True, exist_ok=True)
@@ -499,9 +507,9 @@ def main(argv: list[str] | None = None) -> int:
                  "optimisation leave.", ""]),
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
              "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
-             "training codes, `code` 0 or 0.001; the weight phase's pull toward the decoded weights, `pull` "
-             "0.1, 0.001 or 0, from each code; and `common`: the common initialisation without the prior), "
-             "chosen per estimate by its last training view, held out:", "",
+             f"training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the weight phase's pull toward the "
+             f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code; and `common`: the "
+             "common initialisation without the prior), chosen per estimate by its last training view, held out:", "",
              *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
