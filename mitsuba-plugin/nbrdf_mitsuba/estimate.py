@@ -76,9 +76,9 @@ MAX_HALVINGS = 12
 SCREENED_STARTS = 48
 #: Strengths of the weight phase's pull toward the decoded network (:func:`output_pull`), one
 #: picked per estimate by the held-out training view: a hold, and none at all (the decoded start
-#: only). A pull in weight space (the autoencoder's standardised weights) lost to the network
-#: without the prior on a MERL truth; this one came within 1 % of it there, and the held-out view
-#: never chose a strength of 1 (docs/experiments.md, issue 33, round 10).
+#: only). A pull in weight space (the autoencoder's standardised weights) held the weights, not
+#: the BRDF, and lost to the network without the prior on a MERL truth by more than this one
+#: does; the held-out view never chose a strength of 1 (docs/experiments.md, issue 33, round 10).
 PRIOR_STRENGTHS = (1e-1, 0.0)
 #: Uniform direction pairs (above the horizon, a fixed draw) at which the pull compares the networks.
 PULL_PAIRS = 4096
