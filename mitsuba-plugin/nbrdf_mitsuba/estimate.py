@@ -341,20 +341,26 @@ class Network:
         params[f"{bsdf_id}.weights"] = weights
 
 
+def _layers(flat: np.ndarray) -> list:
+    """``(W, b)`` views of flat width-21 weights, ``W`` (inputs, outputs) as in the file (docs/design.md
+    section 4: per layer the weights row-major, then the biases)."""
+    layers, at = [], 0
+    for n_in, n_out in ((6, HIDDEN), (HIDDEN, HIDDEN), (HIDDEN, 3)):
+        W = flat[at:at + n_in * n_out].reshape(n_in, n_out)
+        at += n_in * n_out
+        layers.append((W, flat[at:at + n_out]))
+        at += n_out
+    return layers
+
+
 def write_network(path: Path, flat: np.ndarray, name: str, provenance: dict) -> None:
     """An ``*.nbrdf.json`` (docs/design.md section 4) of flat width-21 weights; refuses
     non-finite weights."""
     flat = np.asarray(flat, dtype=np.float32)
     if flat.size != HIDDEN * HIDDEN + 11 * HIDDEN + 3 or not np.all(np.isfinite(flat)):
         raise EstimateError("internal: refusing to write a network with non-finite or missing weights")
-    layers, at = [], 0
-    for n_in, n_out in ((6, HIDDEN), (HIDDEN, HIDDEN), (HIDDEN, 3)):
-        W = flat[at:at + n_in * n_out]
-        at += n_in * n_out
-        b = flat[at:at + n_out]
-        at += n_out
-        layers.append({"inputs": n_in, "outputs": n_out, "weights": [float(v) for v in W],
-                       "bias": [float(v) for v in b]})
+    layers = [{"inputs": W.shape[0], "outputs": W.shape[1], "weights": [float(v) for v in W.ravel()],
+               "bias": [float(v) for v in b]} for W, b in _layers(flat)]
     document = {"format": "nbrdf", "version": 1, "name": name, "layers": layers, "provenance": provenance}
     path.write_text(json.dumps(document))
 
@@ -596,21 +602,11 @@ def _pull_inputs() -> np.ndarray:
                      for c in x], axis=1)
 
 
-def _layers(flat: np.ndarray) -> list:
-    layers, at = [], 0
-    for n_in, n_out in ((6, HIDDEN), (HIDDEN, HIDDEN), (HIDDEN, 3)):
-        W = flat[at:at + n_in * n_out].reshape(n_in, n_out)
-        at += n_in * n_out
-        layers.append((W, flat[at:at + n_out]))
-        at += n_out
-    return layers
-
-
-def _hidden_and_output(flat: np.ndarray, x: np.ndarray):
+def _hidden_and_output(layers: list, x: np.ndarray):
     """The hidden layers' pre-activations and the output's log-space value ``z`` (``f = max(e^z - 1,
     0)``). Float64 twin of ``jit.TracedNetwork.eval_input`` before its output's ``expm1``; held to
     ``nbrdf_tools.network.forward`` by tests/test_estimate.py::test_output_pull_against_a_float64_oracle."""
-    (W1, b1), (W2, b2), (W3, b3) = _layers(flat)
+    (W1, b1), (W2, b2), (W3, b3) = layers
     z1 = x @ W1 + b1
     z2 = np.maximum(z1, 0) @ W2 + b2
     return z1, z2, np.maximum(z2, 0) @ W3 + b3
@@ -626,11 +622,12 @@ def output_pull(center: np.ndarray, strength: float):
     if strength == 0:
         return None
     x = _pull_inputs()
-    target = _hidden_and_output(np.asarray(center, np.float64), x)[2]
+    target = _hidden_and_output(_layers(np.asarray(center, np.float64)), x)[2]
 
     def penalty(flat):
-        (_, _), (W2, _), (W3, _) = _layers(flat)
-        z1, z2, z3 = _hidden_and_output(flat, x)
+        layers = _layers(flat)
+        (_, _), (W2, _), (W3, _) = layers
+        z1, z2, z3 = _hidden_and_output(layers, x)
         d = z3 - target
         g3 = strength * 2.0 * d / d.size
         g2 = (g3 @ W3.T) * (z2 > 0)
