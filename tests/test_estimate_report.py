@@ -63,6 +63,19 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
     again = json.loads(stored.read_text())
     assert estimate_file.stat().st_mtime_ns == before
     assert again["rmse_tonemapped"] == result["rmse_tonemapped"] and again["novel_pairs"] == result["novel_pairs"]
+    # Other samples for the novel renders: the truth's are rendered again and the stored estimate is
+    # measured again at them, not estimated again.
+    truth = folder / "novel-truth-0.exr"
+    truth_before = truth.read_bytes()
+    record = json.loads((folder / "novel-truth.json").read_text())
+    assert record["novel_spp"] == again["novel_spp"] == 16 and record["truth_spp"] == again["truth_spp"] == 64
+    assert main([*argv, "--measure-spp", "32"]) == 0
+    remeasured = json.loads(stored.read_text())
+    assert estimate_file.stat().st_mtime_ns == before
+    record = json.loads((folder / "novel-truth.json").read_text())
+    assert record["novel_spp"] == remeasured["novel_spp"] == 32 and record["truth_spp"] == remeasured["truth_spp"] == 128
+    assert truth.read_bytes() != truth_before and remeasured["rmse_tonemapped"] != result["rmse_tonemapped"]
+    assert "novel renders take 32 spp, the truth's 128" in out.read_text()
 
 
 def test_the_ceiling_is_no_competitor():

@@ -64,9 +64,16 @@ NOVEL_PAIRS = [(NOVEL_VIEW, NOVEL_LIGHT), ("1.5, 3, 2.5", ("-2, -3, 3", 30.0)),
 #: 200 steps: at 100 the analytic baselines were still falling on the MERL truths (principled on
 #: red-specular-plastic 0.0397 at 100, 0.0303 at 200); an estimate of the prior stays under 3
 #: minutes on two cores (docs/results/estimation.md, round 9).
-FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "spp": 8, "steps": 200, "ceiling_training": []}
+#: The estimates' novel renders take ``measure_spp`` (the truth's more, below): at the training
+#: references' 128 spp the renders' noise was most of the ceiling's error on the MERL truths
+#: (docs/results/estimation.md, round 11).
+FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "measure_spp": 4096, "spp": 8, "steps": 200,
+        "ceiling_training": []}
 #: The ceiling's distillation is cut to a few thousand pairs and epochs in the quick run (a test).
-QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "spp": 2, "steps": 3,
+#: The truth's novel renders take this many times ``measure_spp``: the measured truths' own
+#: sampling (``merl``'s, ``measured``'s) is the noisiest of the renders compared.
+TRUTH_SPP_FACTOR = 4
+QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "measure_spp": 16, "spp": 2, "steps": 3,
          "ceiling_training": ["--samples", "4000", "--epochs", "2"]}
 
 
@@ -187,13 +194,17 @@ def novel_prefix(pair: int) -> str:
     return "novel" if pair == 0 else f"novel{pair}"
 
 
+def novel_spp(settings: dict, who: str) -> int:
+    return settings["measure_spp"] * (TRUTH_SPP_FACTOR if who == "truth" else 1)
+
+
 def novel_images(bsdf_xml: str, folder: Path, who: str, settings: dict) -> list[Path]:
     """``who``'s render of every novel pair (``who``: ``truth`` or a model)."""
     paths = []
     for pair, (view, light) in enumerate(NOVEL_PAIRS):
         prefix = folder / f"{novel_prefix(pair)}-{who}"
         (path,) = render_scene(scene_xml(bsdf_xml, [view], [light], settings["resolution"]),
-                               prefix.with_name(prefix.name + ".xml"), settings["reference_spp"],
+                               prefix.with_name(prefix.name + ".xml"), novel_spp(settings, who),
                                prefix.with_name(prefix.name + "-"))
         paths.append(path)
     return paths
@@ -210,12 +221,25 @@ def measure_estimate(folder: Path, model: str, estimate: Path, settings: dict) -
         per_pair.append({"rmse_tonemapped": metrics.rmse_tonemapped(reference, image),
                          "ssim": metrics.ssim(reference, image), "flip_hdr": metrics.flip_hdr(reference, image)})
     means = {key: float(np.mean([m[key] for m in per_pair])) for key in per_pair[0]}
-    return {**means, "novel": per_pair, "novel_pairs": novel_setup()}
+    return {**means, "novel": per_pair, **novel_record(settings)}
 
 
 def novel_setup() -> list:
     """What a stored result's novel metrics were measured on (remeasured where it changed)."""
     return [[view, light, intensity] for view, (light, intensity) in NOVEL_PAIRS]
+
+
+def novel_record(settings: dict) -> dict:
+    """What the novel renders were: the pairs, the estimates' and the truth's samples."""
+    return {"novel_pairs": novel_setup(), "novel_spp": novel_spp(settings, "estimate"),
+            "truth_spp": novel_spp(settings, "truth")}
+
+
+def measured_as_today(result: dict, settings: dict) -> bool:
+    """Whether ``result`` (a stored result, or the truth's novel images' record) was measured as
+    today's settings would (results from before the samples were recorded had 128 on both sides)."""
+    record = novel_record(settings)
+    return all(result.get(key) == value for key, value in record.items())
 
 
 def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict,
@@ -229,7 +253,7 @@ def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: d
     earlier = result.get("settings", asked)
     if earlier != asked:
         raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: give it another --work")
-    if result.get("novel_pairs") != novel_setup() and out.is_file():
+    if not measured_as_today(result, settings) and out.is_file():
         result.update(measure_estimate(folder, model, out, settings))
         stored.write_text(json.dumps(result, indent=2) + "\n")
     return result
@@ -318,8 +342,12 @@ def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
         views = VIEWS[: settings["views"]]
         render_scene(scene_xml(material["xml"], views, LIGHTS, settings["resolution"]), folder / "truth.xml",
                      settings["reference_spp"], folder / "train")
-    if not all((folder / f"{novel_prefix(pair)}-truth-0.exr").is_file() for pair in range(len(NOVEL_PAIRS))):
+    record = folder / "novel-truth.json"
+    rendered = json.loads(record.read_text()) if record.is_file() else {}
+    if not (measured_as_today(rendered, settings)
+            and all((folder / f"{novel_prefix(pair)}-truth-0.exr").is_file() for pair in range(len(NOVEL_PAIRS)))):
         novel_images(material["xml"], folder, "truth", settings)
+        record.write_text(json.dumps(novel_record(settings)) + "\n")
     # The estimate's scene: the same as the truth's, its BSDF a placeholder the estimate replaces.
     placeholder = dict_to_xml({"type": "diffuse"})
     (folder / "train.xml").write_text(scene_xml(placeholder, VIEWS[: settings["views"]], LIGHTS,
@@ -435,6 +463,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
+    p.add_argument("--measure-spp", type=int,
+                   help=f"samples per pixel of the novel renders, truth and estimates (default: {FULL['measure_spp']})")
     p.add_argument("--views", type=int, choices=range(2, len(VIEWS) + 1), metavar=f"2..{len(VIEWS)}",
                    help=f"training views, each an image under both lights (default: {FULL['views']})")
     p.add_argument("--seed", type=int, default=0,
@@ -461,6 +491,8 @@ def main(argv: list[str] | None = None) -> int:
         settings["spp"] = args.spp
     if args.views:
         settings["views"] = args.views
+    if args.measure_spp:
+        settings["measure_spp"] = args.measure_spp
     settings["seed"] = args.seed
     models = [m for m in args.models.split(",") if m]
     bad = set(models) - set(MODELS)
@@ -515,8 +547,9 @@ def main(argv: list[str] | None = None) -> int:
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
              "estimate of a run includes compiling Mitsuba's kernels for the network (cached afterwards). Novel "
              "pairs (view; light): " + "; ".join(f"({v}; {light} at {i:g})" for v, (light, i) in NOVEL_PAIRS)
-             + ", no view and no light any training image used; the errors hold Monte Carlo noise of "
-             f"{settings['reference_spp']}-spp renders on both sides.", "",
+             + ", no view and no light any training image used; the estimates' novel renders take "
+             f"{novel_spp(settings, 'estimate')} spp, the truth's {novel_spp(settings, 'truth')}, and the errors "
+             "hold their Monte Carlo noise.", "",
              f"![truth and estimates at the first novel pair]({os.path.relpath(image, out.parent)})", ""]
     out.write_text("\n".join(lines))
     print(f"wrote {out} and {image}")
