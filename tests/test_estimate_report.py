@@ -145,7 +145,8 @@ def test_convergence_curve_runs(llvm_variant, tmp_path):
 
     out = tmp_path / "convergence.md"
     assert convergence.main(["--work", str(tmp_path / "work"), "--materials", "mitsuba-roughplastic",
-                             "--models", "roughplastic", "--steps", "4", "--checkpoints", "2", "--out", str(out)]) == 0
+                             "--models", "roughplastic", "--steps", "4", "--checkpoints", "2", "--out", str(out),
+                             "--measure-spp", "64"]) == 0
     rows = [line for line in out.read_text().splitlines() if line.startswith("| mitsuba-roughplastic")]
     assert len(rows) == 1
     cells = [float(c) for c in rows[0].strip("|").split("|")[2:]]

@@ -137,6 +137,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--models", default="nbrdf,nbrdf-no-prior,principled", help="comma-separated models")
     p.add_argument("--steps", type=int, default=60, help="steps of each estimate (default: 60)")
     p.add_argument("--checkpoints", default="10,20,30,45,60", help="steps after which to measure")
+    p.add_argument("--measure-spp", type=int, default=report.FULL["measure_spp"],
+                   help=f"samples per pixel of the novel renders (the truth's: {report.TRUTH_SPP_FACTOR}x; "
+                        "default: %(default)s)")
     p.add_argument("--out", type=Path, help="Markdown table (default: WORK/convergence.md); the figure goes to "
                                             "images/estimation-convergence.png beside it")
     return p
@@ -148,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")
-    settings = dict(report.FULL, steps=args.steps)
+    settings = dict(report.FULL, steps=args.steps, measure_spp=args.measure_spp)
     checkpoints = sorted({int(c) for c in args.checkpoints.split(",") if c} | {args.steps})
     models = [m for m in args.models.split(",") if m]
     if set(models) - set(report.MODELS):
