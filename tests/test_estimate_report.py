@@ -3,6 +3,8 @@ writes the table and figure, and resumes (a rerun reuses the stored results)."""
 
 from __future__ import annotations
 
+import pytest
+
 
 def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     from nbrdf_tools.estimate_report import main
@@ -76,6 +78,14 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
     assert record["novel_spp"] == remeasured["novel_spp"] == 32 and record["truth_spp"] == remeasured["truth_spp"] == 128
     assert truth.read_bytes() != truth_before and remeasured["rmse_tonemapped"] != result["rmse_tonemapped"]
     assert "novel renders take 32 spp, the truth's 128" in out.read_text()
+
+
+def test_bad_counts_are_refused(tmp_path):
+    from nbrdf_tools.estimate_report import main
+
+    for flag in ("--steps", "--spp", "--measure-spp"):
+        with pytest.raises(SystemExit, match=f"{flag} must be at least 1"):
+            main(["--quick", "--work", str(tmp_path), flag, "0"])
 
 
 def test_the_ceiling_is_no_competitor():

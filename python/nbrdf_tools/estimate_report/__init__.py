@@ -485,14 +485,14 @@ def main(argv: list[str] | None = None) -> int:
     mi.set_variant("llvm_ad_rgb")
     settings = dict(QUICK if args.quick else FULL)
     settings["log_samples"] = 2000 if args.quick else 50000
-    if args.steps:
-        settings["steps"] = args.steps
-    if args.spp:
-        settings["spp"] = args.spp
+    for key in ("steps", "spp", "measure_spp"):
+        value = getattr(args, key)
+        if value is not None and value < 1:
+            raise SystemExit(f"--{key.replace('_', '-')} must be at least 1")
+        if value is not None:
+            settings[key] = value
     if args.views:
         settings["views"] = args.views
-    if args.measure_spp:
-        settings["measure_spp"] = args.measure_spp
     settings["seed"] = args.seed
     models = [m for m in args.models.split(",") if m]
     bad = set(models) - set(MODELS)
