@@ -86,6 +86,10 @@ def test_bad_counts_are_refused(tmp_path):
     for flag in ("--steps", "--spp", "--measure-spp"):
         with pytest.raises(SystemExit, match=f"{flag} must be at least 1"):
             main(["--quick", "--work", str(tmp_path), flag, "0"])
+    from nbrdf_tools.estimate_report import convergence
+
+    with pytest.raises(SystemExit, match="--measure-spp must be at least 1"):
+        convergence.main(["--work", str(tmp_path), "--materials", "mitsuba-roughplastic", "--measure-spp", "0"])
 
 
 def test_the_ceiling_is_no_competitor():

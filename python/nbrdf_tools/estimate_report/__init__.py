@@ -464,7 +464,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
     p.add_argument("--measure-spp", type=int,
-                   help=f"samples per pixel of the novel renders, truth and estimates (default: {FULL['measure_spp']})")
+                   help=f"samples per pixel of the estimates' novel renders (the truth's: {TRUTH_SPP_FACTOR}x; "
+                        f"default: {FULL['measure_spp']})")
     p.add_argument("--views", type=int, choices=range(2, len(VIEWS) + 1), metavar=f"2..{len(VIEWS)}",
                    help=f"training views, each an image under both lights (default: {FULL['views']})")
     p.add_argument("--seed", type=int, default=0,
