@@ -478,6 +478,15 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def given_counts(args: argparse.Namespace, keys: tuple[str, ...]) -> dict:
+    """The counts among ``keys`` given on the command line; one below 1 is refused."""
+    given = {key: getattr(args, key) for key in keys if getattr(args, key) is not None}
+    for key, value in given.items():
+        if value < 1:
+            raise SystemExit(f"--{key.replace('_', '-')} must be at least 1")
+    return given
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     import nbrdf_mitsuba  # noqa: F401  (first: registers the plugins, finds a libLLVM)
@@ -486,12 +495,7 @@ def main(argv: list[str] | None = None) -> int:
     mi.set_variant("llvm_ad_rgb")
     settings = dict(QUICK if args.quick else FULL)
     settings["log_samples"] = 2000 if args.quick else 50000
-    for key in ("steps", "spp", "measure_spp"):
-        value = getattr(args, key)
-        if value is not None and value < 1:
-            raise SystemExit(f"--{key.replace('_', '-')} must be at least 1")
-        if value is not None:
-            settings[key] = value
+    settings.update(given_counts(args, ("steps", "spp", "measure_spp")))
     if args.views:
         settings["views"] = args.views
     settings["seed"] = args.seed

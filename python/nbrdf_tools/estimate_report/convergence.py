@@ -151,9 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")
-    if args.steps < 1 or args.measure_spp < 1:
-        raise SystemExit("--steps and --measure-spp must be at least 1")
-    settings = dict(report.FULL, steps=args.steps, measure_spp=args.measure_spp)
+    settings = dict(report.FULL, **report.given_counts(args, ("steps", "measure_spp")))
     checkpoints = sorted({int(c) for c in args.checkpoints.split(",") if c} | {args.steps})
     models = [m for m in args.models.split(",") if m]
     if set(models) - set(report.MODELS):
