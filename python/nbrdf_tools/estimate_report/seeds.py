@@ -122,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     command = "python -m nbrdf_tools.estimate_report.seeds " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["```sh", command.strip(), "```", "",
              f"Novel-view RMSE (tone-mapped, the mean of the novel pairs) of each estimate over {len(seeds)} seeds "
-             f"({', '.join(map(str, seeds))}); `{report.CEILING}` has no seed. The summary below reads the means.", "",
+             f"({', '.join(map(str, seeds))}), their mean and sample standard deviation (sd); `{report.CEILING}` has no "
+             "seed. The summary below reads the means.", "",
              *table(cases, seeds), "", *report.summary(mean_results(cases)), "",
              *([f"Not run at every seed (means over fewer): {', '.join(incomplete)}.", ""] if incomplete else [])]
     text = "\n".join(lines)
