@@ -49,7 +49,7 @@ def row(text, material, model):
     return [c.strip() for c in line.strip("|").split("|")]
 
 
-def test_means_spreads_and_summary_of_the_means(tmp_path, capsys):
+def test_means_spreads_and_summary_of_the_means(tmp_path):
     out = tmp_path / "seeds.md"
     assert seeds.main(["--work", *map(str, seed_folders(tmp_path)), "--out", str(out)]) == 0
     text = out.read_text()
@@ -88,6 +88,15 @@ def test_a_case_missing_at_a_seed_is_named(tmp_path):
 def test_folders_that_differ_in_more_than_the_seed_are_refused(tmp_path):
     works = seed_folders(tmp_path / "a", seeds_=(0, 1)) + seed_folders(tmp_path / "b", {**SETTINGS, "steps": 100},
                                                                          seeds_=(2,))
+    with pytest.raises(SystemExit, match="differ in more than their seed"):
+        seeds.main(["--work", *map(str, works)])
+
+
+def test_folders_measured_on_other_novel_pairs_are_refused(tmp_path):
+    works = seed_folders(tmp_path)
+    stored = works[1] / "rgl-paper_white" / "nbrdf.result.json"
+    result = json.loads(stored.read_text())
+    stored.write_text(json.dumps({**result, "novel_pairs": [["0, 0, 4", "1, 1, 1", 10.0]]}))
     with pytest.raises(SystemExit, match="differ in more than their seed"):
         seeds.main(["--work", *map(str, works)])
 

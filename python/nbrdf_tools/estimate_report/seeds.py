@@ -38,11 +38,16 @@ def seed_of(result: dict) -> int | None:
     return (result.get("settings") or {}).get("seed")
 
 
+#: What a result records of its novel renders (the pairs, the estimates' and the truth's samples):
+#: the keys of the report's own record, so that a key it adds is compared here too.
+NOVEL_KEYS = tuple(report.novel_record(report.FULL))
+
+
 def comparable(results: list[dict]) -> None:
     """Refuses results that differ in anything but their seed (views, steps, samples, the novel
-    renders' samples) and two folders holding the same seed."""
+    pairs and their renders' samples) and two folders holding the same seed."""
     kinds = {json.dumps({**{k: v for k, v in r["settings"].items() if k != "seed"},
-                         **{k: r.get(k) for k in ("novel_spp", "truth_spp")}}, sort_keys=True)
+                         **{k: r.get(k) for k in NOVEL_KEYS}}, sort_keys=True)
              for r in results if r.get("settings")}
     if len(kinds) > 1:
         raise SystemExit("the folders' results differ in more than their seed: " + "; ".join(sorted(kinds)))
