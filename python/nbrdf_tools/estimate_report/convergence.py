@@ -91,7 +91,7 @@ def measure_curve(folder: Path, model: str, steps: int, kinds: dict, settings: d
         path = snapshot_file(folder, model, steps, done)
         xml = report.scene_xml(report.estimate_bsdf_xml(model, path), [report.NOVEL_VIEW], [report.NOVEL_LIGHT],
                                settings["resolution"])
-        (image,) = report.render_scene(xml, path.with_suffix(".xml"), settings["measure_spp"],
+        (image,) = report.render_scene(xml, path.with_suffix(".xml"), report.novel_spp(settings, model),
                                        path.with_name(path.name.split(".")[0] + "-"))
         rows.append({"steps": done, "phase": kinds[done],
                      "rmse_tonemapped": metrics.rmse_tonemapped(reference, report.read_exr(image))})
