@@ -465,3 +465,86 @@ def test_code_prior_must_be_finite_and_non_negative(setup, tmp_path, capsys):
     out = tmp_path / "out.nbrdf.json"
     for value in ("-1", "nan"):
         expect_error(capsys, run(scene, images, out, "--code-prior", value), out, "--code-prior must be")
+
+
+def constant_network(value: float) -> np.ndarray:
+    """Flat width-21 weights of ``f = value`` everywhere (every weight 0, the output bias ln(1 + f))."""
+    flat = np.zeros(675)
+    flat[-3:] = np.log1p(value)
+    return flat
+
+
+def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_variant):
+    """The albedo check's half-vector quadrature: a constant ``f = c`` reflects ``pi c`` at every
+    incidence angle; a network with a narrow peak at the half vector, ``f = e^(k max(cos th_h - t,
+    0)) - 1``, matches a direct float64 integral over the view directions (``nbrdf_tools.network``'s
+    forward pass and input, a fine grid in ``cos theta_v`` and ``phi_v``)."""
+    from nbrdf_mitsuba import estimate as E
+    from nbrdf_tools import network as N
+
+    albedo = E.directional_albedo(constant_network(0.2))
+    np.testing.assert_allclose(albedo, np.pi * 0.2, rtol=2e-4)
+
+    k, t = 60.0, 0.95  # 18 degrees wide in theta_h at its base, f = e^3 - 1 at its top
+    W1, b1 = np.zeros((6, 21)), np.zeros(21)
+    W1[2, 0], b1[0] = 1.0, -t  # hidden unit 0: cos theta_h - t
+    W2, W3 = np.zeros((21, 21)), np.zeros((21, 3))
+    W2[0, 0] = 1.0
+    W3[0] = k * np.array([1.0, 0.5, 0.2])
+    peaked = np.concatenate([W1.ravel(), b1, W2.ravel(), np.zeros(21), W3.ravel(), np.zeros(3)])
+    albedo = E.directional_albedo(peaked)
+
+    n = 500
+    mu = (np.arange(n) + 0.5) / n  # cos theta_v, so that d v = d mu d phi
+    phi = 2 * np.pi * (np.arange(2 * n) + 0.5) / (2 * n)
+    mu, phi = (a.ravel() for a in np.meshgrid(mu, phi, indexing="ij"))
+    r = np.sqrt(1 - mu * mu)
+    view = np.stack([r * np.cos(phi), r * np.sin(phi), mu], axis=1)
+    layers = [(W1, b1), (W2, np.zeros(21)), (W3, np.zeros(3))]
+    for row, degrees in enumerate(E.ALBEDO_INCIDENCE):
+        a = np.radians(degrees)
+        light = np.tile([np.sin(a), 0.0, np.cos(a)], (len(mu), 1))
+        f = N.forward(layers, N.network_input(view, light))
+        direct = (f * mu[:, None]).sum(axis=0) * (1.0 / n) * (2 * np.pi / (2 * n))
+        np.testing.assert_allclose(albedo[row], direct, rtol=2e-3, err_msg=f"{degrees} degrees")
+    assert albedo[0, 0] > E.ALBEDO_BOUND  # the peak is bright enough to matter for the bound
+
+
+def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(setup, tmp_path, monkeypatch):
+    """With the bound below every decoded candidate's albedo (0), none is chosen even where the
+    held-out view prefers it: the estimate is the nbrdf-no-prior one, and the provenance names the
+    rejected candidates with their albedo. The common start is never rejected."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    common = len(E.PRIOR_STRENGTHS)
+    # The held-out view prefers the first decoded candidate by far.
+    spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
+    monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
+    prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
+    provenance = json.loads(prior.read_text())["provenance"]
+    assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
+    assert provenance["held_out_losses"][str(E.PRIOR_STRENGTHS[0])] == -1.0
+    assert set(provenance["albedo_rejected"]) == {str(s) for s in E.PRIOR_STRENGTHS}
+    assert all(v > 0 for v in provenance["albedo_rejected"].values()) and common == len(provenance["albedo_rejected"])
+    assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
+               "--threads", "1") == 0
+    assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]
+
+
+def test_a_final_network_over_the_bound_falls_back_to_the_common_start(setup, tmp_path, monkeypatch):
+    """Without a held-out choice (a fixed ``--prior-weight``) the decoded start's final network is
+    checked too: over the bound, the written network is the nbrdf-no-prior estimate."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
+    prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--prior-weight", "0.1") == 0
+    provenance = json.loads(prior.read_text())["provenance"]
+    assert provenance["start"] == E.COMMON_START and set(provenance["albedo_rejected"]) == {"final"}
+    assert "held_out_losses" not in provenance
+    assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
+               "--threads", "1") == 0
+    assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]

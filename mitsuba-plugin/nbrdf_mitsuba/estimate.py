@@ -103,6 +103,18 @@ CANDIDATE_SHARE = 0.5
 #: The held-out view is judged with this many times the samples of a training render (one render
 #: per candidate, the same seed for all: the candidates' differences are not Monte Carlo noise).
 HELD_OUT_SPP_FACTOR = 4
+#: A decoded candidate whose network reflects more than this share of the light it receives (its
+#: directional albedo, at some incidence angle and channel) is not a material: it is never chosen.
+#: The held-out view alone cannot see it, because the excess lies where no training light fell: a
+#: decoded candidate chosen by the view (0.00208 against the common start's 0.00217) gave a final
+#: network with an albedo of 15 and 5x the novel-view error. Above 1 because an estimate carries the
+#: images' noise: paper_white's estimates reach 1.16 (its truth's network 0.98), while the 432
+#: decoded training codes stay below 0.73 (docs/experiments.md, issue 33, round 13).
+ALBEDO_BOUND = 1.5
+#: Incidence angles (degrees) of the albedo check, and its half-vector grid: ``theta_h`` by
+#: ``(pi / 2) u^2`` (dense at the specular peak), ``phi_h`` uniform.
+ALBEDO_INCIDENCE = (0, 15, 30, 45, 60, 70, 80, 87)
+ALBEDO_GRID = (96, 48)
 INIT_RANGE = 0.05  # network/mod.rs INIT_RANGE
 HIDDEN = 21
 
@@ -639,6 +651,53 @@ def output_pull(center: np.ndarray, strength: float):
     return penalty
 
 
+_ALBEDO_QUADRATURE: list = []
+
+
+def _albedo_quadrature() -> tuple[np.ndarray, np.ndarray]:
+    """Network inputs ``(K N, 6)`` and weights ``(K, N)`` of the directional albedo ``a(l) = int
+    f(v, l) cos theta_v dv`` at the ``K`` incidence angles of ``ALBEDO_INCIDENCE``: the integral
+    over the half vector ``h`` (``v = 2 (h.l) h - l``, ``dv = 4 (h.l) dh``), midpoints of the
+    ``ALBEDO_GRID``, so that a narrow specular peak is resolved where a grid over ``v`` would
+    alias it. The inputs are the plugin's own (``jit.network_input``)."""
+    if _ALBEDO_QUADRATURE:
+        return _ALBEDO_QUADRATURE[0]
+    from . import jit
+
+    n_theta, n_phi = ALBEDO_GRID
+    u = (np.arange(n_theta) + 0.5) / n_theta
+    theta = 0.5 * np.pi * u * u
+    phi = 2 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    theta, phi = (a.ravel() for a in np.meshgrid(theta, phi, indexing="ij"))
+    d_area = np.repeat(np.pi * u / n_theta, n_phi) * (2 * np.pi / n_phi) * np.sin(theta)  # d theta d phi sin theta
+    h = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=1)
+    angles = np.radians(ALBEDO_INCIDENCE)
+    light = np.stack([np.sin(angles), np.zeros_like(angles), np.cos(angles)], axis=1)
+    h_dot_l = light @ h.T  # (K, N)
+    view = 2 * h_dot_l[..., None] * h[None] - light[:, None]
+    weights = np.where((h_dot_l > 0) & (view[..., 2] > 0), view[..., 2] * 4 * h_dot_l * d_area, 0.0)
+
+    def vector(a):
+        return mi.Vector3f(*(mi.Float(a[:, i].astype(np.float32)) for i in range(3)))
+
+    lights = np.repeat(light, h.shape[0], axis=0)
+    x = jit.network_input(vector(view.reshape(-1, 3)), vector(lights))
+    x = np.stack([np.zeros(len(lights)) if c is None else np.asarray(dr.detach(c).numpy(), np.float64).reshape(-1)
+                  for c in x], axis=1)
+    _ALBEDO_QUADRATURE.append((x, weights))
+    return x, weights
+
+
+def directional_albedo(flat: np.ndarray) -> np.ndarray:
+    """The directional albedo ``(K, 3)`` of flat width-21 weights at the incidence angles of
+    ``ALBEDO_INCIDENCE`` (:func:`_albedo_quadrature`): at most 1 for a material that conserves
+    energy."""
+    x, weights = _albedo_quadrature()
+    z = _hidden_and_output(_layers(np.asarray(flat, np.float64)), x)[2]
+    f = np.maximum(np.expm1(z), 0.0).reshape(*weights.shape, 3)
+    return np.einsum("knc,kn->kc", f, weights)
+
+
 def candidate_name(candidate, several_codes: bool) -> str:
     """A candidate's key in ``held_out_losses``: the pull's strength (or ``common``), prefixed
     with the code penalty's where several are candidates."""
@@ -652,23 +711,30 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
     """The candidate whose short fit on the training views but the held-out one (``est.views``)
     has the lowest loss on the held-out view (the last): a pair (code penalty's strength, strength
     of the pull toward ``decoded[code strength]``) or ``COMMON_START``; ties go to the first (no
-    code penalty, the tightest pull). Returns it and the held-out losses by candidate."""
+    code penalty, the tightest pull). A decoded candidate whose fit's albedo exceeds
+    ``ALBEDO_BOUND`` is not chosen. Returns the choice, the held-out losses by candidate and the
+    albedos of the rejected ones."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
-    losses = {}
+    losses, rejected = {}, {}
     try:
         for code_strength, start in decoded.items():
             for strength in plan["strengths"]:
                 phase = Phase("weights", start, plan["candidate"], Network._set_weights,
                               output_pull(start, strength))
-                losses[code_strength, strength] = est.held_out_loss(est.run(phase, bar, plan["code"]), held_out)
+                fitted = est.run(phase, bar, plan["code"])
+                losses[code_strength, strength] = est.held_out_loss(fitted, held_out)
+                albedo = float(directional_albedo(fitted).max())
+                if albedo > ALBEDO_BOUND:
+                    rejected[code_strength, strength] = albedo
         if plan["common"]:
             # The no-prior estimate's steps and render seeds, on the views but the held-out one.
             phase = Phase("weights", common_initialisation(), plan["common"], Network._set_weights, None)
             losses[COMMON_START] = est.held_out_loss(est.run(phase, bar, 0), held_out)
     finally:
         est.on_step = on_step
-    return min(losses, key=losses.__getitem__), losses
+    allowed = [k for k in losses if k not in rejected] or list(losses)
+    return min(allowed, key=losses.__getitem__), losses, rejected
 
 
 def fit_codes(est: Estimator, decoder, plan: dict, bar) -> dict:
@@ -701,20 +767,11 @@ def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, d
     except LatentError as error:
         raise EstimateError(str(error)) from None
     decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
-    choice, losses = (plan["code_strengths"][0], plan["strengths"][0]), {}
+    choice, losses, rejected = (plan["code_strengths"][0], plan["strengths"][0]), {}, {}
     if selecting:
-        choice, losses = choose_start(est, decoded, plan, bar)
+        choice, losses, rejected = choose_start(est, decoded, plan, bar)
         est.views = list(range(len(est.references)))
-    if choice == COMMON_START:
-        # Exactly the nbrdf-no-prior estimate (its start, steps and seeds); the code of the best
-        # decoded candidate is kept for the record.
-        code_strength = min((k for k in losses if k != COMMON_START), key=losses.__getitem__)[0]
-        bar.total += plan["code"]
-        extra = {"code": [float(c) for c in codes[code_strength]], "start": COMMON_START, "prior_weight": None,
-                 "code_prior": None}
-        weights = est.run(Phase("weights", common_initialisation(), plan["code"] + plan["weights"],
-                                Network._set_weights, None), bar, 0)
-    else:
+    if choice != COMMON_START:
         code_strength, strength = choice
         extra = {"code": [float(c) for c in codes[code_strength]], "start": "decoded", "prior_weight": strength,
                  "code_prior": code_strength}
@@ -723,8 +780,26 @@ def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, d
             phase = Phase("weights", weights, plan["weights"], Network._set_weights,
                           output_pull(weights, strength))
             weights = est.run(phase, bar, plan["code"])
+        albedo = float(directional_albedo(weights).max())
+        if albedo > ALBEDO_BOUND:
+            # Not a material: the estimate falls back to the common start, as where it is chosen.
+            rejected["final"] = albedo
+            choice = COMMON_START
+    if choice == COMMON_START:
+        # Exactly the nbrdf-no-prior estimate (its start, steps and seeds); the code of the best
+        # decoded candidate is kept for the record.
+        decoded_losses = [k for k in losses if k != COMMON_START]
+        code_strength = min(decoded_losses, key=losses.__getitem__)[0] if decoded_losses else plan["code_strengths"][0]
+        bar.total += plan["code"] + (plan["weights"] if "final" in rejected else 0)
+        extra = {"code": [float(c) for c in codes[code_strength]], "start": COMMON_START, "prior_weight": None,
+                 "code_prior": None}
+        weights = est.run(Phase("weights", common_initialisation(), plan["code"] + plan["weights"],
+                                Network._set_weights, None), bar, 0)
     if losses:
         extra["held_out_losses"] = {candidate_name(k, len(codes) > 1): v for k, v in losses.items()}
+    if rejected:
+        extra["albedo_rejected"] = {k if k == "final" else candidate_name(k, len(codes) > 1): v
+                                    for k, v in rejected.items()}
     return weights, extra
 
 
@@ -745,7 +820,7 @@ def _optimise(est: Estimator, model, args, bar, plan: dict) -> dict:
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
-    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses"):
+    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses", "albedo_rejected"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
