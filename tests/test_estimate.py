@@ -533,6 +533,21 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
     assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]
 
 
+def test_every_network_estimate_records_its_albedo_and_warns_over_the_bound(setup, tmp_path, monkeypatch, capsys):
+    """The written network's largest directional albedo is in its provenance; over the bound (here
+    0, so any network) the estimate still writes it, with a warning on stderr."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    out = tmp_path / "no-prior.nbrdf.json"
+    assert run(scene, images, out, "--model", "nbrdf-no-prior", "--steps", "3", "--spp", "2") == 0
+    albedo = json.loads(out.read_text())["provenance"]["albedo_max"]
+    assert 0 < albedo < E.ALBEDO_BOUND and "warning: the estimated network" not in capsys.readouterr().err
+    monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
+    assert run(scene, images, out, "--model", "nbrdf-no-prior", "--steps", "3", "--spp", "2") == 0
+    assert "reflects up to" in capsys.readouterr().err and out.is_file()
+
+
 def test_a_final_network_over_the_bound_falls_back_to_the_common_start(setup, tmp_path, monkeypatch):
     """Without a held-out choice (a fixed ``--prior-weight``) the decoded start's final network is
     checked too: over the bound, the written network is the nbrdf-no-prior estimate."""

@@ -817,10 +817,16 @@ def _optimise(est: Estimator, model, args, bar, plan: dict) -> dict:
         summary.update(extra)
     else:
         weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
+    summary["albedo_max"] = float(directional_albedo(weights).max())
+    if summary["albedo_max"] > ALBEDO_BOUND:
+        # Nothing to fall back to (the common start, or no prior asked): written, but not silently.
+        print(f"warning: the estimated network reflects up to {summary['albedo_max']:.3g} times the light it "
+              f"receives (directional albedo; a material reflects at most 1): the images do not constrain it "
+              "where their lights do not reach", file=sys.stderr)
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
-    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses", "albedo_rejected"):
+    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses", "albedo_rejected", "albedo_max"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
