@@ -821,7 +821,7 @@ def _optimise(est: Estimator, model, args, bar, plan: dict) -> dict:
     if summary["albedo_max"] > ALBEDO_BOUND:
         # Nothing to fall back to (the common start, or no prior asked): written, but not silently.
         print(f"warning: the estimated network reflects up to {summary['albedo_max']:.3g} times the light it "
-              f"receives (directional albedo; a material reflects at most 1): the images do not constrain it "
+              "receives (directional albedo; a material reflects at most 1): the images do not constrain it "
               "where their lights do not reach", file=sys.stderr)
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
