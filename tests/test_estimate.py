@@ -232,12 +232,10 @@ def test_prior_schedule_holds_out_a_view_only_where_it_can():
 
     plan = schedule(100, 3, None)
     assert (plan["code"], plan["weights"], plan["strengths"], plan["candidate"]) == (40, 60, PRIOR_STRENGTHS, 30)
-    assert plan["common"] == 70  # a decoded candidate's code and weight steps
     assert schedule(100, 1, None)["strengths"] == (FALLBACK_STRENGTH,)  # nothing to hold out
     assert schedule(1, 3, None)["strengths"] == (FALLBACK_STRENGTH,)  # no weight step to judge
-    assert schedule(100, 1, None)["common"] == 0 and schedule(1, 3, None)["common"] == 0
     fixed = schedule(100, 3, 0.5)
-    assert fixed["strengths"] == (0.5,) and fixed["candidate"] == 0 and fixed["common"] == 0
+    assert fixed["strengths"] == (0.5,) and fixed["candidate"] == 0
 
 
 def spy_on_views(monkeypatch, estimate_module, judge=None):
@@ -262,9 +260,9 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 
 def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The code and the candidates (each pull strength from the decoded start, the common start)
-    see the training views but the last; the last alone judges them, the lowest held-out loss
-    wins, the refit uses every view, and a seed repeats it (the code penalty fixed at 0)."""
+    """The code and the candidates (each pull strength from the decoded start) see the training
+    views but the last; the last alone judges them, the lowest held-out loss wins, the refit uses
+    every view, and a seed repeats it (the code penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
@@ -275,44 +273,21 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    assert set(losses) == {str(s) for s in E.PRIOR_STRENGTHS} | {E.COMMON_START}
+    assert set(losses) == {str(s) for s in E.PRIOR_STRENGTHS}
     assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
     assert len(set(losses.values())) > 1, losses
     best = min(losses, key=losses.get)
-    if best == E.COMMON_START:
-        assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
-    else:
-        assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
-    assert judged == [1] * 2 * (len(E.PRIOR_STRENGTHS) + 1)  # the last training view, once per candidate and run
+    assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
+    assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < E.ALBEDO_BOUND
+    assert judged == [1] * 2 * len(E.PRIOR_STRENGTHS)  # the last training view, once per candidate and run
     # Screening (49 starts), code (2 steps), candidates (2 steps per strength from the decoded
-    # start, 4 from the common one) on view 0; the refit on both (6 steps from the common start, else 4).
-    refit = 6 if best == E.COMMON_START else 4
-    assert rendered == [(0,)] * (49 + 2 + 2 * len(E.PRIOR_STRENGTHS) + 4) + [(0, 1)] * refit, rendered
+    # start) on view 0; the refit on both (4 steps).
+    assert rendered == [(0,)] * (49 + 2 + 2 * len(E.PRIOR_STRENGTHS)) + [(0, 1)] * 4, rendered
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
-
-
-def test_where_the_held_out_view_prefers_the_common_start_the_prior_is_no_prior(setup, tmp_path, monkeypatch):
-    """The common start's candidate judged best (its held-out loss made the lowest): the written
-    network is the nbrdf-no-prior estimate's, weight for weight (same start, steps and seeds)."""
-    from nbrdf_mitsuba import estimate as E
-
-    scene, images = setup
-    # Judged in order: the decoded start's strengths, then the common start.
-    common = len(E.PRIOR_STRENGTHS)
-    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == common else loss)
-    prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
-    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
-    provenance = json.loads(prior.read_text())["provenance"]
-    assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
-    assert provenance["held_out_losses"][E.COMMON_START] == -1.0 and len(provenance["code"]) == 32
-    assert rendered[-6:] == [(0, 1)] * 6
-    assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
-               "--threads", "1") == 0
-    assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]
 
 
 def test_code_penalty_and_its_gradient_against_a_float64_oracle():
@@ -393,17 +368,17 @@ def test_code_prior_schedule():
 
     assert 0.0 in CODE_PRIOR_STRENGTHS and len(CODE_PRIOR_STRENGTHS) > 1
     plan = schedule(100, 3, None)
-    assert plan["code_strengths"] == CODE_PRIOR_STRENGTHS and plan["candidate"] == 30 and plan["common"] == 70
+    assert plan["code_strengths"] == CODE_PRIOR_STRENGTHS and plan["candidate"] == 30
     assert schedule(100, 3, None, 0.0)["code_strengths"] == (0.0,)
     assert schedule(100, 1, None)["code_strengths"] == (FALLBACK_CODE_PRIOR,)  # nothing to hold out
     assert schedule(100, 3, 0.5)["code_strengths"] == (FALLBACK_CODE_PRIOR,)  # a fixed pull fixes both
     both = schedule(100, 3, 0.5, 0.25)
-    assert both["code_strengths"] == (0.25,) and both["candidate"] == 0 and both["common"] == 0
+    assert both["code_strengths"] == (0.25,) and both["candidate"] == 0
 
 
 def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """By default each code strength gets its own code phase and the pull's three candidates;
-    all of them and the common start see the training views but the last, the last alone judges
+    all of them see the training views but the last, the last alone judges
     them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
     from nbrdf_mitsuba import estimate as E
 
@@ -417,20 +392,15 @@ def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup,
     losses = provenance["held_out_losses"]
     pairs = [(c, w) for c in E.CODE_PRIOR_STRENGTHS for w in E.PRIOR_STRENGTHS]
     names = [f"code {c}, pull {w}" for c, w in pairs]
-    assert set(losses) == set(names) | {E.COMMON_START}  # fit-phong's rewrite sorts the keys
+    assert set(losses) == set(names)  # fit-phong's rewrite sorts the keys
     assert all(math.isfinite(v) for v in losses.values())
     best = min(losses, key=losses.get)
-    if best == E.COMMON_START:
-        assert provenance["start"] == E.COMMON_START and provenance["code_prior"] is None
-    else:
-        c, w = pairs[names.index(best)]
-        assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
-    n = len(pairs) + 1
-    assert judged == [1] * (2 * n)  # the last training view, once per candidate and run
+    c, w = pairs[names.index(best)]
+    assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
+    assert judged == [1] * (2 * len(pairs))  # the last training view, once per candidate and run
     # Screening (49), a code phase per strength (2 steps each), the pull's candidates (2 steps
-    # each), the common start (4) on view 0; the refit on both views.
-    refit = 6 if best == E.COMMON_START else 4
-    assert rendered == [(0,)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS) + 2 * len(pairs) + 4) + [(0, 1)] * refit
+    # each) on view 0; the refit on both views (4 steps).
+    assert rendered == [(0,)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS) + 2 * len(pairs)) + [(0, 1)] * 4
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 
@@ -512,12 +482,11 @@ def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_varia
 
 def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(setup, tmp_path, monkeypatch):
     """With the bound below every decoded candidate's albedo (0), none is chosen even where the
-    held-out view prefers it: the estimate is the nbrdf-no-prior one, and the provenance names the
-    rejected candidates with their albedo. The common start is never rejected."""
+    held-out view prefers it: the estimate falls back to the common start, the nbrdf-no-prior
+    estimate, and the provenance names the rejected candidates with their albedo."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
-    common = len(E.PRIOR_STRENGTHS)
     # The held-out view prefers the first decoded candidate by far.
     spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
     monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
@@ -527,7 +496,7 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
     assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
     assert provenance["held_out_losses"][str(E.PRIOR_STRENGTHS[0])] == -1.0
     assert set(provenance["albedo_rejected"]) == {str(s) for s in E.PRIOR_STRENGTHS}
-    assert all(v > 0 for v in provenance["albedo_rejected"].values()) and common == len(provenance["albedo_rejected"])
+    assert all(v > 0 for v in provenance["albedo_rejected"].values())
     assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
                "--threads", "1") == 0
     assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]

@@ -83,9 +83,11 @@ PRIOR_STRENGTHS = (1e-1, 0.0)
 #: Uniform direction pairs (above the horizon, a fixed draw) at which the pull compares the networks.
 PULL_PAIRS = 4096
 PULL_SEED = 7
-#: The held-out choice's last candidate: the common initialisation (the ``nbrdf-no-prior`` start),
-#: no pull. With it the prior is never kept where the held-out view says no prior fits better; on
-#: a MERL truth the decoded start lost to it on the novel view (docs/experiments.md, issue 33).
+#: The start the estimate falls back to where the prior's network is no material (its albedo above
+#: ``ALBEDO_BOUND``): the common initialisation, no pull, the ``nbrdf-no-prior`` estimate. It was a
+#: candidate of the held-out choice until round 13; where the view chose it, the decoded network
+#: was either better on the novel views (iris_purple_gem, 0.0401 against 0.0484) or no material
+#: (albedo 1.6-227), which the albedo check catches (docs/experiments.md, issue 33, round 13).
 COMMON_START = "common"
 #: The strength where no view can be held out (one image) or no weight step is left to judge.
 FALLBACK_STRENGTH = 1e-1
@@ -104,10 +106,10 @@ CANDIDATE_SHARE = 0.5
 #: per candidate, the same seed for all: the candidates' differences are not Monte Carlo noise).
 HELD_OUT_SPP_FACTOR = 4
 #: A decoded candidate whose network reflects more than this share of the light it receives (its
-#: directional albedo, at some incidence angle and channel) is not a material: it is never chosen.
-#: The held-out view alone cannot see it, because the excess lies where no training light fell: a
-#: decoded candidate chosen by the view (0.00208 against the common start's 0.00217) gave a final
-#: network with an albedo of 15 and 5x the novel-view error. Above 1 because an estimate carries the
+#: directional albedo, at some incidence angle and channel) is not a material: it is never chosen,
+#: nor kept as the final network. The held-out view cannot see it, because the excess lies where no
+#: training light fell: a decoded candidate chosen by the view gave a final network with an albedo
+#: of 15 and 5x the novel-view error. Above 1 because an estimate carries the
 #: images' noise: paper_white's estimates reach 1.16 (its truth's network 0.98), while the 432
 #: decoded training codes stay below 0.73 (docs/experiments.md, issue 33, round 13).
 ALBEDO_BOUND = 1.5
@@ -551,8 +553,7 @@ def _estimate(args, on_step=None) -> dict:
         plan = schedule(args.steps, len(est.references), args.prior_weight if model_has_prior(model) else 0.0,
                         args.code_prior)
         codes = len(plan["code_strengths"])
-        total = (args.steps + (codes - 1) * plan["code"] + codes * len(plan["strengths"]) * plan["candidate"]
-                 + plan["common"])
+        total = args.steps + (codes - 1) * plan["code"] + codes * len(plan["strengths"]) * plan["candidate"]
         with tqdm(total=total, unit="step", desc=f"estimate {args.model}", disable=args.quiet,
                   file=sys.stderr) as bar:
             result = _optimise(est, model, args, bar, plan)
@@ -569,8 +570,8 @@ def model_has_prior(model) -> bool:
 def schedule(steps: int, views: int, prior_weight: float | None, code_prior: float | None = None) -> dict:
     """The prior's plan: steps of the code phase and of the weight phase, the candidate
     strengths of the weight phase's pull and of the code's penalty (one each: no choice), the
-    steps of each decoded candidate's weight fit and of the common start's candidate (0: not a
-    candidate). A fixed ``prior_weight`` fixes the code's too (``code_prior``, else none)."""
+    steps of each decoded candidate's weight fit (0: nothing to choose). A fixed ``prior_weight``
+    fixes the code's too (``code_prior``, else none)."""
     code = max(1, round(CODE_SHARE * steps)) if steps > 1 else 1
     weights = steps - code
     fixed_code = (code_prior if code_prior is not None else FALLBACK_CODE_PRIOR,)
@@ -583,10 +584,8 @@ def schedule(steps: int, views: int, prior_weight: float | None, code_prior: flo
         code_strengths = fixed_code if code_prior is not None else CODE_PRIOR_STRENGTHS
     selecting = len(strengths) * len(code_strengths) > 1
     candidate = max(1, round(CANDIDATE_SHARE * weights)) if selecting else 0
-    # The common start gets the optimisation steps a decoded candidate had (code, then weights).
-    common = code + candidate if len(strengths) > 1 else 0
     return {"code": code, "weights": weights, "strengths": strengths, "code_strengths": code_strengths,
-            "candidate": candidate, "common": common}
+            "candidate": candidate}
 
 
 def prior_penalty(center: np.ndarray, variance: np.ndarray, strength: float):
@@ -699,10 +698,8 @@ def directional_albedo(flat: np.ndarray) -> np.ndarray:
 
 
 def candidate_name(candidate, several_codes: bool) -> str:
-    """A candidate's key in ``held_out_losses``: the pull's strength (or ``common``), prefixed
-    with the code penalty's where several are candidates."""
-    if candidate == COMMON_START:
-        return COMMON_START
+    """A candidate's key in ``held_out_losses``: the pull's strength, prefixed with the code
+    penalty's where several are candidates."""
     code_strength, strength = candidate
     return f"code {code_strength}, pull {strength}" if several_codes else str(strength)
 
@@ -710,9 +707,9 @@ def candidate_name(candidate, several_codes: bool) -> str:
 def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
     """The candidate whose short fit on the training views but the held-out one (``est.views``)
     has the lowest loss on the held-out view (the last): a pair (code penalty's strength, strength
-    of the pull toward ``decoded[code strength]``) or ``COMMON_START``; ties go to the first (no
-    code penalty, the tightest pull). A decoded candidate whose fit's albedo exceeds
-    ``ALBEDO_BOUND`` is not chosen. Returns the choice, the held-out losses by candidate and the
+    of the pull toward ``decoded[code strength]``); ties go to the first (no code penalty, the
+    tightest pull). A candidate whose fit's albedo exceeds ``ALBEDO_BOUND`` is not chosen; where
+    none is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate and the
     albedos of the rejected ones."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
@@ -727,14 +724,10 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
                 albedo = float(directional_albedo(fitted).max())
                 if albedo > ALBEDO_BOUND:
                     rejected[code_strength, strength] = albedo
-        if plan["common"]:
-            # The no-prior estimate's steps and render seeds, on the views but the held-out one.
-            phase = Phase("weights", common_initialisation(), plan["common"], Network._set_weights, None)
-            losses[COMMON_START] = est.held_out_loss(est.run(phase, bar, 0), held_out)
     finally:
         est.on_step = on_step
-    allowed = [k for k in losses if k not in rejected] or list(losses)
-    return min(allowed, key=losses.__getitem__), losses, rejected
+    allowed = [k for k in losses if k not in rejected]
+    return (min(allowed, key=losses.__getitem__) if allowed else COMMON_START), losses, rejected
 
 
 def fit_codes(est: Estimator, decoder, plan: dict, bar) -> dict:
@@ -782,14 +775,14 @@ def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, d
             weights = est.run(phase, bar, plan["code"])
         albedo = float(directional_albedo(weights).max())
         if albedo > ALBEDO_BOUND:
-            # Not a material: the estimate falls back to the common start, as where it is chosen.
+            # Not a material: the estimate falls back to the common start.
             rejected["final"] = albedo
             choice = COMMON_START
     if choice == COMMON_START:
         # Exactly the nbrdf-no-prior estimate (its start, steps and seeds); the code of the best
         # decoded candidate is kept for the record.
-        decoded_losses = [k for k in losses if k != COMMON_START]
-        code_strength = min(decoded_losses, key=losses.__getitem__)[0] if decoded_losses else plan["code_strengths"][0]
+        code_strength = min(losses, key=losses.__getitem__)[0] if losses else plan["code_strengths"][0]
+        # Its steps replace the decoded start's weight phase, or follow it where that was run.
         bar.total += plan["code"] + (plan["weights"] if "final" in rejected else 0)
         extra = {"code": [float(c) for c in codes[code_strength]], "start": COMMON_START, "prior_weight": None,
                  "code_prior": None}

@@ -396,8 +396,9 @@ def table(results: list[dict], models: list[str]) -> list[str]:
 
 def chosen_strengths(results: list[dict], work: Path) -> list[str]:
     """Per ``nbrdf`` estimate: the candidate its held-out training view chose (the code
-    penalty's and the pull's strengths from the decoded start, or the common start without the
-    prior), and the held-out losses of the candidates (from the network file's provenance)."""
+    penalty's and the pull's strengths from the decoded start), or the common start without the
+    prior where the albedo check rejected the decoded network, the held-out losses of the
+    candidates and the rejected albedos (from the network file's provenance)."""
     lines = []
     for r in results:
         path = work / r["material"] / "nbrdf.nbrdf.json"
@@ -409,7 +410,9 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         chosen = ("the common start, no prior (the result is the no-prior estimate)"
                   if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}"
                   + (f", code penalty {provenance['code_prior']}" if provenance.get("code_prior") is not None else ""))
-        lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else ""))
+        rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
+        lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
+                     + (f"; albedo over the bound, rejected: {rejected}" if rejected else ""))
     return lines
 
 
@@ -545,8 +548,9 @@ def main(argv: list[str] | None = None) -> int:
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
              "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
              f"training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the weight phase's pull toward the "
-             f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code; and `common`: the "
-             "common initialisation without the prior), chosen per estimate by its last training view, held out:", "",
+             f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code), chosen per estimate "
+             "by its last training view, held out; where the albedo check rejected every candidate or the final "
+             f"network (directional albedo above {estimate.ALBEDO_BOUND:g}), the common start without the prior:", "",
              *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
