@@ -117,6 +117,14 @@ ALBEDO_BOUND = 1.5
 #: ``(pi / 2) u^2`` (dense at the specular peak), ``phi_h`` uniform.
 ALBEDO_INCIDENCE = (0, 15, 30, 45, 60, 70, 80, 87)
 ALBEDO_GRID = (96, 48)
+#: Attempts of the prior (code phases, candidates, final fit) before the fallback to the common
+#: start, each with its own render seeds: which code the code phase reaches is decided by the
+#: renders' noise (the same screened start at every seed), and on ibiza_sunset a second or third
+#: attempt gave a material where the first had not (novel-view RMSE 0.0278 and 0.0248 against the
+#: fallback's 0.0367 and 0.0427; docs/experiments.md, issue 33, round 13).
+PRIOR_ATTEMPTS = 3
+#: Offset of the estimate's seed from one attempt to the next.
+ATTEMPT_SEED_STRIDE = 7919
 INIT_RANGE = 0.05  # network/mod.rs INIT_RANGE
 HIDDEN = 21
 
@@ -745,54 +753,79 @@ def fit_codes(est: Estimator, decoder, plan: dict, bar) -> dict:
             for strength in plan["code_strengths"]}
 
 
-def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, dict]:
-    """The code through the decoder, then the weights held near the decoded ones by the chosen
-    strengths; the weights and the summary's additions."""
-    from .latent import Decoder, LatentError
-
-    try:
-        decoder = Decoder(args.ae)
-        selecting = plan["candidate"] > 0
-        if selecting:
-            # Nothing the held-out view judges may have seen it: the code too is fitted without it.
-            est.views = list(range(len(est.references) - 1))
-        codes = fit_codes(est, decoder, plan, bar)
-    except LatentError as error:
-        raise EstimateError(str(error)) from None
+def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
+    """One attempt of the prior at the estimator's seed: the code through the decoder, then the
+    weights held near the decoded ones by the chosen strengths. Returns the weights (``None``
+    where the albedo check rejected every candidate or the final network), the summary's
+    additions, and the rejected albedos."""
+    selecting = plan["candidate"] > 0
+    if selecting:
+        # Nothing the held-out view judges may have seen it: the code too is fitted without it.
+        est.views = list(range(len(est.references) - 1))
+    codes = fit_codes(est, decoder, plan, bar)
     decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
     choice, losses, rejected = (plan["code_strengths"][0], plan["strengths"][0]), {}, {}
     if selecting:
         choice, losses, rejected = choose_start(est, decoded, plan, bar)
         est.views = list(range(len(est.references)))
-    if choice != COMMON_START:
-        code_strength, strength = choice
-        extra = {"code": [float(c) for c in codes[code_strength]], "start": "decoded", "prior_weight": strength,
-                 "code_prior": code_strength}
-        weights = decoded[code_strength]
-        if plan["weights"] > 0:
-            phase = Phase("weights", weights, plan["weights"], Network._set_weights,
-                          output_pull(weights, strength))
-            weights = est.run(phase, bar, plan["code"])
-        albedo = float(directional_albedo(weights).max())
-        if albedo > ALBEDO_BOUND:
-            # Not a material: the estimate falls back to the common start.
-            rejected["final"] = albedo
-            choice = COMMON_START
+    extra = {"held_out_losses": {candidate_name(k, len(codes) > 1): v for k, v in losses.items()}} if losses else {}
     if choice == COMMON_START:
-        # Exactly the nbrdf-no-prior estimate (its start, steps and seeds); the code of the best
-        # decoded candidate is kept for the record.
-        code_strength = min(losses, key=losses.__getitem__)[0] if losses else plan["code_strengths"][0]
-        # Its steps replace the decoded start's weight phase, or follow it where that was run.
-        bar.total += plan["code"] + (plan["weights"] if "final" in rejected else 0)
-        extra = {"code": [float(c) for c in codes[code_strength]], "start": COMMON_START, "prior_weight": None,
-                 "code_prior": None}
-        weights = est.run(Phase("weights", common_initialisation(), plan["code"] + plan["weights"],
-                                Network._set_weights, None), bar, 0)
-    if losses:
-        extra["held_out_losses"] = {candidate_name(k, len(codes) > 1): v for k, v in losses.items()}
-    if rejected:
-        extra["albedo_rejected"] = {k if k == "final" else candidate_name(k, len(codes) > 1): v
-                                    for k, v in rejected.items()}
+        code_strength = min(losses, key=losses.__getitem__)[0]
+        extra["code"] = [float(c) for c in codes[code_strength]]
+        return None, extra, rejected
+    code_strength, strength = choice
+    extra.update({"code": [float(c) for c in codes[code_strength]], "start": "decoded", "prior_weight": strength,
+                  "code_prior": code_strength})
+    weights = decoded[code_strength]
+    if plan["weights"] > 0:
+        phase = Phase("weights", weights, plan["weights"], Network._set_weights, output_pull(weights, strength))
+        weights = est.run(phase, bar, plan["code"])
+    albedo = float(directional_albedo(weights).max())
+    if albedo > ALBEDO_BOUND:
+        rejected["final"] = albedo
+        return None, extra, rejected
+    return weights, extra, rejected
+
+
+def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, dict]:
+    """Up to ``PRIOR_ATTEMPTS`` attempts of the prior, each with its own render seeds, until the
+    albedo check keeps a network; else the common start, the nbrdf-no-prior estimate (its start,
+    steps and seeds, so the same network). The weights and the summary's additions."""
+    from .latent import Decoder, LatentError
+
+    try:
+        decoder = Decoder(args.ae)
+    except LatentError as error:
+        raise EstimateError(str(error)) from None
+    seed, rejected_all, attempt_steps = est.seed, {}, bar.total - args.steps + plan["code"] + plan["weights"]
+    try:
+        for attempt in range(PRIOR_ATTEMPTS):
+            est.seed = seed + ATTEMPT_SEED_STRIDE * attempt
+            if attempt > 0:
+                bar.total += attempt_steps
+            try:
+                weights, extra, rejected = prior_attempt(est, decoder, plan, bar)
+            except LatentError as error:
+                raise EstimateError(str(error)) from None
+            prefix = f"attempt {attempt}: " if attempt else ""
+            rejected_all.update({prefix + (k if k == "final" else candidate_name(k, len(plan["code_strengths"]) > 1)): v
+                                 for k, v in rejected.items()})
+            if weights is not None:
+                extra["attempts"] = attempt + 1
+                break
+        else:
+            # No attempt gave a material: the nbrdf-no-prior estimate; the last attempt's best code is
+            # kept for the record.
+            est.seed = seed
+            bar.total += plan["code"] + plan["weights"]
+            extra.update({"start": COMMON_START, "prior_weight": None, "code_prior": None,
+                          "attempts": PRIOR_ATTEMPTS})
+            weights = est.run(Phase("weights", common_initialisation(), plan["code"] + plan["weights"],
+                                    Network._set_weights, None), bar, 0)
+    finally:
+        est.seed = seed
+    if rejected_all:
+        extra["albedo_rejected"] = rejected_all
     return weights, extra
 
 
@@ -819,7 +852,8 @@ def _optimise(est: Estimator, model, args, bar, plan: dict) -> dict:
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
-    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses", "albedo_rejected", "albedo_max"):
+    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses", "albedo_rejected", "attempts",
+                "albedo_max"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
