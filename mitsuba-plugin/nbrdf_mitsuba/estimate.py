@@ -39,6 +39,7 @@ written. Deterministic for a seed (each render's seed derives from it).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import shutil
@@ -658,17 +659,13 @@ def output_pull(center: np.ndarray, strength: float):
     return penalty
 
 
-_ALBEDO_QUADRATURE: list = []
-
-
+@functools.cache
 def _albedo_quadrature() -> tuple[np.ndarray, np.ndarray]:
     """Network inputs ``(K N, 6)`` and weights ``(K, N)`` of the directional albedo ``a(l) = int
     f(v, l) cos theta_v dv`` at the ``K`` incidence angles of ``ALBEDO_INCIDENCE``: the integral
     over the half vector ``h`` (``v = 2 (h.l) h - l``, ``dv = 4 (h.l) dh``), midpoints of the
     ``ALBEDO_GRID``, so that a narrow specular peak is resolved where a grid over ``v`` would
     alias it. The inputs are the plugin's own (``jit.network_input``)."""
-    if _ALBEDO_QUADRATURE:
-        return _ALBEDO_QUADRATURE[0]
     from . import jit
 
     n_theta, n_phi = ALBEDO_GRID
@@ -691,7 +688,6 @@ def _albedo_quadrature() -> tuple[np.ndarray, np.ndarray]:
     x = jit.network_input(vector(view.reshape(-1, 3)), vector(lights))
     x = np.stack([np.zeros(len(lights)) if c is None else np.asarray(dr.detach(c).numpy(), np.float64).reshape(-1)
                   for c in x], axis=1)
-    _ALBEDO_QUADRATURE.append((x, weights))
     return x, weights
 
 
@@ -797,7 +793,8 @@ def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, d
         decoder = Decoder(args.ae)
     except LatentError as error:
         raise EstimateError(str(error)) from None
-    seed, rejected_all, attempt_steps = est.seed, {}, bar.total - args.steps + plan["code"] + plan["weights"]
+    # An attempt costs what the progress bar was sized for (code and weight steps add up to --steps).
+    seed, rejected_all, attempt_steps = est.seed, {}, bar.total
     try:
         for attempt in range(PRIOR_ATTEMPTS):
             est.seed = seed + ATTEMPT_SEED_STRIDE * attempt
