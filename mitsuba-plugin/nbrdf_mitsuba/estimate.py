@@ -701,6 +701,16 @@ def directional_albedo(flat: np.ndarray) -> np.ndarray:
     return np.einsum("knc,kn->kc", f, weights)
 
 
+def largest_albedo(flat: np.ndarray) -> float:
+    """The largest directional albedo of a network over the incidence angles and channels."""
+    return float(directional_albedo(flat).max())
+
+
+def is_material(albedo: float) -> bool:
+    """Whether a network of largest directional albedo ``albedo`` passes the albedo check."""
+    return albedo <= ALBEDO_BOUND
+
+
 def candidate_name(candidate, several_codes: bool) -> str:
     """A candidate's key in ``held_out_losses``: the pull's strength, prefixed with the code
     penalty's where several are candidates."""
@@ -725,8 +735,8 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
                               output_pull(start, strength))
                 fitted = est.run(phase, bar, plan["code"])
                 losses[code_strength, strength] = est.held_out_loss(fitted, held_out)
-                albedo = float(directional_albedo(fitted).max())
-                if albedo > ALBEDO_BOUND:
+                albedo = largest_albedo(fitted)
+                if not is_material(albedo):
                     rejected[code_strength, strength] = albedo
     finally:
         est.on_step = on_step
@@ -776,10 +786,11 @@ def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
     if plan["weights"] > 0:
         phase = Phase("weights", weights, plan["weights"], Network._set_weights, output_pull(weights, strength))
         weights = est.run(phase, bar, plan["code"])
-    albedo = float(directional_albedo(weights).max())
-    if albedo > ALBEDO_BOUND:
+    albedo = largest_albedo(weights)
+    if not is_material(albedo):
         rejected["final"] = albedo
         return None, extra, rejected
+    extra["albedo_max"] = albedo
     return weights, extra, rejected
 
 
@@ -840,8 +851,9 @@ def _optimise(est: Estimator, model, args, bar, plan: dict) -> dict:
         summary.update(extra)
     else:
         weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
-    summary["albedo_max"] = float(directional_albedo(weights).max())
-    if summary["albedo_max"] > ALBEDO_BOUND:
+    if "albedo_max" not in summary:  # the prior's kept network has been checked already
+        summary["albedo_max"] = largest_albedo(weights)
+    if not is_material(summary["albedo_max"]):
         # Nothing to fall back to (the common start, or no prior asked): written, but not silently.
         print(f"warning: the estimated network reflects up to {summary['albedo_max']:.3g} times the light it "
               "receives (directional albedo; a material reflects at most 1): the images do not constrain it "
