@@ -763,7 +763,7 @@ def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
     """One attempt of the prior at the estimator's seed: the code through the decoder, then the
     weights held near the decoded ones by the chosen strengths. Returns the weights (``None``
     where the albedo check rejected every candidate or the final network), the summary's
-    additions, and the rejected albedos."""
+    additions, and the rejected albedos by candidate name (``final``: the final network)."""
     selecting = plan["candidate"] > 0
     if selecting:
         # Nothing the held-out view judges may have seen it: the code too is fitted without it.
@@ -774,14 +774,16 @@ def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
     if selecting:
         choice, losses, rejected = choose_start(est, decoded, plan, bar)
         est.views = list(range(len(est.references)))
-    extra = {"held_out_losses": {candidate_name(k, len(codes) > 1): v for k, v in losses.items()}} if losses else {}
+    several_codes = len(codes) > 1
+    extra = {"held_out_losses": {candidate_name(k, several_codes): v for k, v in losses.items()}} if losses else {}
+    rejected = {candidate_name(k, several_codes): v for k, v in rejected.items()}
+    # The common start keeps the best decoded candidate's code for the record.
+    code_strength = min(losses, key=losses.__getitem__)[0] if choice == COMMON_START else choice[0]
+    extra["code"] = [float(c) for c in codes[code_strength]]
     if choice == COMMON_START:
-        code_strength = min(losses, key=losses.__getitem__)[0]
-        extra["code"] = [float(c) for c in codes[code_strength]]
         return None, extra, rejected
-    code_strength, strength = choice
-    extra.update({"code": [float(c) for c in codes[code_strength]], "start": "decoded", "prior_weight": strength,
-                  "code_prior": code_strength})
+    strength = choice[1]
+    extra.update({"start": "decoded", "prior_weight": strength, "code_prior": code_strength})
     weights = decoded[code_strength]
     if plan["weights"] > 0:
         phase = Phase("weights", weights, plan["weights"], Network._set_weights, output_pull(weights, strength))
@@ -816,8 +818,7 @@ def fit_with_prior(est: Estimator, args, plan: dict, bar) -> tuple[np.ndarray, d
             except LatentError as error:
                 raise EstimateError(str(error)) from None
             prefix = f"attempt {attempt}: " if attempt else ""
-            rejected_all.update({prefix + (k if k == "final" else candidate_name(k, len(plan["code_strengths"]) > 1)): v
-                                 for k, v in rejected.items()})
+            rejected_all.update({prefix + k: v for k, v in rejected.items()})
             if weights is not None:
                 extra["attempts"] = attempt + 1
                 break
