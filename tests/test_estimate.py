@@ -260,9 +260,9 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 
 def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The code and the candidates (each pull strength from the decoded start) see the training
-    views but the last; the last alone judges them, the lowest held-out loss wins, the refit uses
-    every view, and a seed repeats it (the code penalty fixed at 0)."""
+    """The code sees every training view; the candidates (each pull strength from the decoded
+    start) see all but the last, the last alone judges them, the lowest held-out loss wins, the
+    refit uses every view, and a seed repeats it (the code penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
@@ -282,9 +282,9 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
     assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < E.ALBEDO_BOUND
     assert judged == [1] * 2 * len(E.PRIOR_STRENGTHS)  # the last training view, once per candidate and run
-    # Screening (49 starts), code (2 steps), candidates (2 steps per strength from the decoded
-    # start) on view 0; the refit on both (4 steps).
-    assert rendered == [(0,)] * (49 + 2 + 2 * len(E.PRIOR_STRENGTHS)) + [(0, 1)] * 4, rendered
+    # Screening (49 starts) and code (2 steps) on both views; candidates (2 steps per strength
+    # from the decoded start) on view 0; the refit on both (4 steps).
+    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(E.PRIOR_STRENGTHS)) + [(0, 1)] * 4, rendered
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
@@ -378,8 +378,8 @@ def test_code_prior_schedule():
 
 def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """By default each code strength gets its own code phase and the pull's three candidates;
-    all of them see the training views but the last, the last alone judges
-    them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
+    the code phases see every training view, the candidates all but the last, the last alone
+    judges them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
@@ -398,9 +398,10 @@ def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup,
     c, w = pairs[names.index(best)]
     assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
     assert judged == [1] * (2 * len(pairs))  # the last training view, once per candidate and run
-    # Screening (49), a code phase per strength (2 steps each), the pull's candidates (2 steps
-    # each) on view 0; the refit on both views (4 steps).
-    assert rendered == [(0,)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS) + 2 * len(pairs)) + [(0, 1)] * 4
+    # Screening (49) and a code phase per strength (2 steps each) on both views, the pull's
+    # candidates (2 steps each) on view 0; the refit on both views (4 steps).
+    assert rendered == [(0, 1)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
+        [(0, 1)] * 4
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 
