@@ -720,14 +720,15 @@ def candidate_name(candidate, several_codes: bool) -> str:
 
 
 def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
-    """The candidate whose short fit on the training views but the held-out one (``est.views``)
-    has the lowest loss on the held-out view (the last): a pair (code penalty's strength, strength
-    of the pull toward ``decoded[code strength]``); ties go to the first (no code penalty, the
-    tightest pull). A candidate whose fit's albedo exceeds ``ALBEDO_BOUND`` is not chosen; where
-    none is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate and the
+    """The candidate whose short fit on the training views but the held-out one (the last) has
+    the lowest loss on the held-out view: a pair (code penalty's strength, strength of the pull
+    toward ``decoded[code strength]``); ties go to the first (no code penalty, the tightest pull).
+    A candidate whose fit's albedo exceeds ``ALBEDO_BOUND`` is not chosen; where none is left,
+    ``COMMON_START``. Returns the choice, the held-out losses by candidate and the
     albedos of the rejected ones."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
+    views, est.views = est.views, list(range(held_out))
     losses, rejected = {}, {}
     try:
         for code_strength, start in decoded.items():
@@ -740,7 +741,7 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
                 if not is_material(albedo):
                     rejected[code_strength, strength] = albedo
     finally:
-        est.on_step = on_step
+        est.on_step, est.views = on_step, views
     allowed = [k for k in losses if k not in rejected]
     return (min(allowed, key=losses.__getitem__) if allowed else COMMON_START), losses, rejected
 
@@ -774,11 +775,7 @@ def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
     decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
     choice, losses, rejected = (plan["code_strengths"][0], plan["strengths"][0]), {}, {}
     if selecting:
-        est.views = list(range(len(est.references) - 1))
-        try:
-            choice, losses, rejected = choose_start(est, decoded, plan, bar)
-        finally:
-            est.views = list(range(len(est.references)))
+        choice, losses, rejected = choose_start(est, decoded, plan, bar)
     several_codes = len(codes) > 1
     extra = {"held_out_losses": {candidate_name(k, several_codes): v for k, v in losses.items()}} if losses else {}
     rejected = {candidate_name(k, several_codes): v for k, v in rejected.items()}
