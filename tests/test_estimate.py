@@ -481,6 +481,31 @@ def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_varia
     assert albedo[0, 0] > E.ALBEDO_BOUND  # the peak is bright enough to matter for the bound
 
 
+def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_variant):
+    """The bound is 1, or the albedo up to ``ALBEDO_LIT_INCIDENCE`` where higher, plus the margin,
+    never above ``ALBEDO_BOUND``: a uniformly bright network passes where a dim one with a bright
+    grazing lobe (light where no training light falls square) does not. Constant networks reflect
+    ``pi c`` at every angle (closed form), so the check's verdict follows from the bound alone."""
+    from nbrdf_mitsuba import estimate as E
+
+    angles = np.asarray(E.ALBEDO_INCIDENCE)
+    lit = angles <= E.ALBEDO_LIT_INCIDENCE
+    assert lit.any() and not lit.all()
+
+    def profile(square: float, grazing: float) -> np.ndarray:
+        return np.where(lit, square, grazing)[:, None] * np.array([1.0, 0.5, 0.25])
+
+    margin = 1 + E.ALBEDO_MARGIN
+    assert E.albedo_bound(profile(0.4, 0.6)) == pytest.approx(margin)  # under 1: energy conservation
+    assert E.albedo_bound(profile(1.14, 1.2)) == pytest.approx(1.14 * margin)  # the images ask for it
+    assert E.albedo_bound(profile(0.46, 1.42)) == pytest.approx(margin)  # ibiza_sunset's grazing lobe: over it
+    assert E.albedo_bound(profile(2.0, 2.0)) == E.ALBEDO_BOUND
+
+    for c, passes in [(0.3, True), (1.2, True), (E.ALBEDO_BOUND * 1.05, False)]:
+        albedo, material = E.albedo_check(constant_network(c / np.pi))
+        assert albedo == pytest.approx(c, rel=1e-3) and material == passes, c
+
+
 def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(setup, tmp_path, monkeypatch):
     """With the bound below every decoded candidate's albedo (0), none is chosen even where the
     held-out view prefers it: the estimate falls back to the common start, the nbrdf-no-prior

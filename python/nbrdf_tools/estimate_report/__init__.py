@@ -550,7 +550,9 @@ def main(argv: list[str] | None = None) -> int:
              f"training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the weight phase's pull toward the "
              f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code), chosen per estimate "
              "by its last training view, held out; where the albedo check rejected every candidate or the final "
-             f"network (directional albedo above {estimate.ALBEDO_BOUND:g}), the common start without the prior:", "",
+             f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
+             f"incidence if higher, by more than {estimate.ALBEDO_MARGIN:.0%}, or above {estimate.ALBEDO_BOUND:g}), "
+             "the common start without the prior:", "",
              *chosen_strengths(results, work), "",
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
