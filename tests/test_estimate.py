@@ -261,15 +261,24 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """The code sees every training view; the candidates (each pull strength from the decoded
-    start) see all but the last, the last alone judges them, the lowest held-out loss wins, the
-    refit uses every view, and a seed repeats it (the code penalty fixed at 0)."""
+    start) see all but the last, the last alone judges them, the lowest held-out loss wins, its fit goes on
+    over every view for the rest of the weight phase, and a seed repeats it (the code penalty
+    fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
     rendered, judged = spy_on_views(monkeypatch, E)
+    runs, run_phase = [], E.Estimator.run
+
+    def spy_run(self, phase, bar, first_step):
+        runs.append((phase.kind, phase.theta.copy(), run_phase(self, phase, bar, first_step)))
+        return runs[-1][2]
+
+    monkeypatch.setattr(E.Estimator, "run", spy_run)
     outs = [tmp_path / f"prior{k}.nbrdf.json" for k in range(2)]
     for out in outs:
         rendered.clear()
+        runs.clear()
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
@@ -283,8 +292,14 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < E.ALBEDO_BOUND
     assert judged == [1] * 2 * len(E.PRIOR_STRENGTHS)  # the last training view, once per candidate and run
     # Screening (49 starts) and code (2 steps) on both views; candidates (2 steps per strength
-    # from the decoded start) on view 0; the refit on both (4 steps).
-    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(E.PRIOR_STRENGTHS)) + [(0, 1)] * 4, rendered
+    # from the decoded start) on view 0; the chosen one's fit on both (the weight phase's other 2).
+    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(E.PRIOR_STRENGTHS)) + [(0, 1)] * 2, rendered
+    # The last run starts where the chosen candidate's fit ended (the runs: code, candidates, final).
+    candidates = runs[1:-1]
+    assert [kind for kind, _, _ in runs] == ["code"] + ["weights"] * (len(E.PRIOR_STRENGTHS) + 1)
+    chosen = candidates[list(E.PRIOR_STRENGTHS).index(float(best))]
+    np.testing.assert_array_equal(runs[-1][1], chosen[2])
+    assert all(np.array_equal(candidates[0][1], start) for _, start, _ in candidates)  # all from the decoded start
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
@@ -399,9 +414,9 @@ def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup,
     assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
     assert judged == [1] * (2 * len(pairs))  # the last training view, once per candidate and run
     # Screening (49) and a code phase per strength (2 steps each) on both views, the pull's
-    # candidates (2 steps each) on view 0; the refit on both views (4 steps).
+    # candidates (2 steps each) on view 0; the chosen one's fit on both views (2 more steps).
     assert rendered == [(0, 1)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
-        [(0, 1)] * 4
+        [(0, 1)] * 2
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 

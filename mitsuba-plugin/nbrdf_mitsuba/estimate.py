@@ -17,8 +17,8 @@ are optimised by Adam on the images' log-radiance error, every view each step:
   ``--code-prior`` fix them instead): the code is fitted on every view once per strength of
   ``CODE_PRIOR_STRENGTHS`` (the screening of the starts shared); from each decoded code every
   strength of ``PRIOR_STRENGTHS`` fits the weights on all views but the last (the held-out one)
-  for a share of the steps; the pair with the lowest loss on the held-out view is kept and the
-  weights are refitted on every view with it. A candidate or final network whose directional
+  for a share of the steps; the pair with the lowest loss on the held-out view is kept, and its fit
+  goes on over every view for the rest of the weight phase's steps. A candidate or final network whose directional
   albedo exceeds its bound (:func:`albedo_bound`: 1, or the network's own albedo where the
   lights fall square if higher, plus ``ALBEDO_MARGIN``; at most ``ALBEDO_BOUND``) is no material
   and is not kept; the prior is then attempted
@@ -574,7 +574,7 @@ def _estimate(args, on_step=None) -> dict:
         plan = schedule(args.steps, len(est.references), args.prior_weight if model_has_prior(model) else 0.0,
                         args.code_prior)
         codes = len(plan["code_strengths"])
-        total = args.steps + (codes - 1) * plan["code"] + codes * len(plan["strengths"]) * plan["candidate"]
+        total = args.steps + (codes - 1) * plan["code"] + (codes * len(plan["strengths"]) - 1) * plan["candidate"]
         with tqdm(total=total, unit="step", desc=f"estimate {args.model}", disable=args.quiet,
                   file=sys.stderr) as bar:
             result = _optimise(est, model, args, bar, plan)
@@ -741,18 +741,18 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
     the lowest loss on the held-out view: a pair (code penalty's strength, strength of the pull
     toward ``decoded[code strength]``); ties go to the first (no code penalty, the tightest pull).
     A candidate whose fit fails the albedo check (:func:`albedo_check`) is not chosen; where none is left,
-    ``COMMON_START``. Returns the choice, the held-out losses by candidate and the
-    albedos of the rejected ones."""
+    ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
+    rejected ones and the chosen candidate's fitted weights (``None`` for ``COMMON_START``)."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
     views, est.views = est.views, list(range(held_out))
-    losses, rejected = {}, {}
+    losses, rejected, fits = {}, {}, {}
     try:
         for code_strength, start in decoded.items():
             for strength in plan["strengths"]:
                 phase = Phase("weights", start, plan["candidate"], Network._set_weights,
                               output_pull(start, strength))
-                fitted = est.run(phase, bar, plan["code"])
+                fitted = fits[code_strength, strength] = est.run(phase, bar, plan["code"])
                 losses[code_strength, strength] = est.held_out_loss(fitted, held_out)
                 albedo, material = albedo_check(fitted)
                 if not material:
@@ -760,7 +760,8 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
     finally:
         est.on_step, est.views = on_step, views
     allowed = [k for k in losses if k not in rejected]
-    return (min(allowed, key=losses.__getitem__) if allowed else COMMON_START), losses, rejected
+    choice = min(allowed, key=losses.__getitem__) if allowed else COMMON_START
+    return choice, losses, rejected, fits.get(choice)
 
 
 def fit_codes(est: Estimator, decoder, plan: dict, bar) -> dict:
@@ -790,9 +791,9 @@ def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
     # issue 33, round 15). The candidates' weights, which can fit noise, are fitted without it.
     codes = fit_codes(est, decoder, plan, bar)
     decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
-    choice, losses, rejected = (plan["code_strengths"][0], plan["strengths"][0]), {}, {}
+    choice, losses, rejected, fitted = (plan["code_strengths"][0], plan["strengths"][0]), {}, {}, None
     if selecting:
-        choice, losses, rejected = choose_start(est, decoded, plan, bar)
+        choice, losses, rejected, fitted = choose_start(est, decoded, plan, bar)
     several_codes = len(codes) > 1
     extra = {"held_out_losses": {candidate_name(k, several_codes): v for k, v in losses.items()}} if losses else {}
     rejected = {candidate_name(k, several_codes): v for k, v in rejected.items()}
@@ -803,9 +804,14 @@ def prior_attempt(est: Estimator, decoder, plan: dict, bar) -> tuple:
         return None, extra, rejected
     strength = choice[1]
     extra.update({"start": "decoded", "prior_weight": strength, "code_prior": code_strength})
-    weights = decoded[code_strength]
-    if plan["weights"] > 0:
-        phase = Phase("weights", weights, plan["weights"], Network._set_weights, output_pull(weights, strength))
+    # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
+    # from the decoded start had): refitted from the decoded start instead, the network lost
+    # what the held-out view had judged (iris_purple_gem at seed 0: 0.0310 against 0.0247;
+    # docs/experiments.md, issue 33, round 16).
+    center = decoded[code_strength]
+    weights, steps = (center, plan["weights"]) if fitted is None else (fitted, plan["weights"] - plan["candidate"])
+    if steps > 0:
+        phase = Phase("weights", weights, steps, Network._set_weights, output_pull(center, strength))
         weights = est.run(phase, bar, plan["code"])
     albedo, material = albedo_check(weights)
     if not material:
