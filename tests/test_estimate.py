@@ -261,9 +261,9 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """The code sees every training view; the candidates (each pull strength from the decoded
-    start) see all but the last, the last alone judges them, the lowest held-out loss wins, its fit goes on
-    over every view for the rest of the weight phase, and a seed repeats it (the code penalty
-    fixed at 0)."""
+    start) see all but the last, the last alone judges them, the lowest held-out loss wins, its
+    fit goes on over every view for the rest of the weight phase, and a seed repeats it (the code
+    penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup

@@ -17,13 +17,13 @@ are optimised by Adam on the images' log-radiance error, every view each step:
   ``--code-prior`` fix them instead): the code is fitted on every view once per strength of
   ``CODE_PRIOR_STRENGTHS`` (the screening of the starts shared); from each decoded code every
   strength of ``PRIOR_STRENGTHS`` fits the weights on all views but the last (the held-out one)
-  for a share of the steps; the pair with the lowest loss on the held-out view is kept, and its fit
-  goes on over every view for the rest of the weight phase's steps. A candidate or final network whose directional
-  albedo exceeds its bound (:func:`albedo_bound`: 1, or the network's own albedo where the
-  lights fall square if higher, plus ``ALBEDO_MARGIN``; at most ``ALBEDO_BOUND``) is no material
-  and is not kept; the prior is then attempted
-  again with other render seeds, up to ``PRIOR_ATTEMPTS`` times, before the estimate falls back
-  to the ``nbrdf-no-prior`` estimate itself. A fixed ``--prior-weight`` holds no view out: the
+  for a share of the steps; the pair with the lowest loss on the held-out view is kept, and its
+  fit goes on over every view for the rest of the weight phase's steps. A candidate or final
+  network whose directional albedo exceeds its bound (:func:`albedo_bound`: 1, or the network's
+  own albedo where the lights fall square if higher, plus ``ALBEDO_MARGIN``; at most
+  ``ALBEDO_BOUND``) is no material and is not kept; the prior is then attempted again with
+  other render seeds, up to ``PRIOR_ATTEMPTS`` times, before the estimate falls back to the
+  ``nbrdf-no-prior`` estimate itself. A fixed ``--prior-weight`` holds no view out: the
   code's strength is then ``--code-prior``, else 0. Writes an ``*.nbrdf.json`` with ``nbrdf
   fit-phong``'s sampling.
 * ``nbrdf-no-prior``: the weights alone, from the common initialisation (the trainer's seed-0
@@ -726,7 +726,8 @@ def albedo_check(flat: np.ndarray) -> tuple[float, bool]:
     """A network's largest directional albedo over the incidence angles and channels, and
     whether it passes the albedo check (at most :func:`albedo_bound`)."""
     albedo = directional_albedo(flat)
-    return float(albedo.max()), bool(albedo.max() <= albedo_bound(albedo))
+    largest = float(albedo.max())
+    return largest, largest <= albedo_bound(albedo)
 
 
 def candidate_name(candidate, several_codes: bool) -> str:
@@ -740,8 +741,8 @@ def choose_start(est: Estimator, decoded: dict, plan: dict, bar) -> tuple:
     """The candidate whose short fit on the training views but the held-out one (the last) has
     the lowest loss on the held-out view: a pair (code penalty's strength, strength of the pull
     toward ``decoded[code strength]``); ties go to the first (no code penalty, the tightest pull).
-    A candidate whose fit fails the albedo check (:func:`albedo_check`) is not chosen; where none is left,
-    ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
+    A candidate whose fit fails the albedo check (:func:`albedo_check`) is not chosen; where none
+    is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
     rejected ones and the chosen candidate's fitted weights (``None`` for ``COMMON_START``)."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
