@@ -934,8 +934,9 @@ def parser() -> argparse.ArgumentParser:
                                                             "bounce)")
     p.add_argument("--prior-weight", type=float,
                    help="strength of the pull holding the network's BRDF near the decoded one's (default: chosen among "
-                        f"{', '.join(map(str, PRIOR_STRENGTHS))} and the common start without the prior, by the "
-                        f"last training view, held out; {FALLBACK_STRENGTH} with one image)")
+                        f"{', '.join(map(str, PRIOR_STRENGTHS))} by the last training view, held out; the common start "
+                        f"without the prior only where the albedo check rejects every network of the prior; "
+                        f"{FALLBACK_STRENGTH} with one image)")
     p.add_argument("--code-prior", type=float,
                    help="strength of the Gaussian penalty holding the latent code near the training codes (default: "
                         f"chosen among {', '.join(map(str, CODE_PRIOR_STRENGTHS))} together with the weights' "
