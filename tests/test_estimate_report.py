@@ -139,6 +139,27 @@ def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
         parser().parse_args(["--views", "99"])
 
 
+def test_training_images_may_be_finer_than_the_novel_views(llvm_variant, tmp_path):
+    """``--train-resolution N``: the training images and the estimate's scene at N x N, the novel
+    views at the report's own size; recorded in the estimates' settings only where it differs,
+    and a folder's images at another size are rendered again."""
+    from nbrdf_tools.estimate_report import (MITSUBA_TRUTH, QUICK, dict_to_xml, estimate_settings, image_side,
+                                             prepare)
+
+    material = {"xml": dict_to_xml(MITSUBA_TRUTH), "dict": MITSUBA_TRUTH}
+    settings = {**QUICK, "train_resolution": 24, "seed": 0}
+    prepare("m", material, settings, tmp_path)
+    folder = tmp_path / "m"
+    assert [image_side(folder / f"train{i}.exr") for i in range(QUICK["views"])] == [24] * QUICK["views"]
+    assert image_side(folder / "novel-truth-0.exr") == QUICK["resolution"] == 16
+    assert '<integer name="width" value="24"/>' in (folder / "train.xml").read_text()
+    assert estimate_settings(settings)["train_resolution"] == 24
+    assert "train_resolution" not in estimate_settings({**settings, "train_resolution": None})
+    prepare("m", material, {**QUICK, "seed": 0}, tmp_path)  # back to the default: rendered again at 16
+    assert image_side(folder / "train0.exr") == 16
+    assert '<integer name="width" value="16"/>' in (folder / "train.xml").read_text()
+
+
 def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
     import pytest
 
@@ -149,6 +170,8 @@ def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
     assert main(argv) == 0
     with pytest.raises(SystemExit, match="was estimated with .*'steps': 3.*'steps': 4.*another --work"):
         main([*argv, "--steps", "4"])
+    with pytest.raises(SystemExit, match="'train_resolution': 24.*another --work"):
+        main([*argv, "--train-resolution", "24"])
     assert main(argv) == 0  # the same settings: resumed
 
 

@@ -325,12 +325,27 @@ def run_ceiling(name: str, material: dict, settings: dict, work: Path) -> dict:
 
 def estimate_settings(settings: dict) -> dict:
     """What an estimate depends on besides its material and model (results stored before this
-    was recorded carry none and are taken as they are)."""
-    return {key: settings[key] for key in ("views", "steps", "spp", "seed")}
+    was recorded carry none and are taken as they are; the training images' side only where it is
+    not the novel views', so that results from before it could differ still match)."""
+    asked = {key: settings[key] for key in ("views", "steps", "spp", "seed")}
+    if train_resolution(settings) != settings["resolution"]:
+        asked["train_resolution"] = train_resolution(settings)
+    return asked
 
 
 def training_images(folder: Path, views: int) -> list[Path]:
     return [folder / f"train{i}.exr" for i in range(views)]
+
+
+def train_resolution(settings: dict) -> int:
+    """The training images' side in pixels: ``--train-resolution``, else the novel views'."""
+    return settings.get("train_resolution") or settings["resolution"]
+
+
+def image_side(path: Path) -> int:
+    import mitsuba as mi
+
+    return int(mi.Bitmap(str(path)).size()[0])
 
 
 def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
@@ -338,9 +353,11 @@ def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
     on how many views there are)."""
     folder = work / name
     folder.mkdir(parents=True, exist_ok=True)
-    if not all(p.is_file() for p in training_images(folder, settings["views"])):
+    side = train_resolution(settings)
+    images = training_images(folder, settings["views"])
+    if not all(p.is_file() and image_side(p) == side for p in images):
         views = VIEWS[: settings["views"]]
-        render_scene(scene_xml(material["xml"], views, LIGHTS, settings["resolution"]), folder / "truth.xml",
+        render_scene(scene_xml(material["xml"], views, LIGHTS, side), folder / "truth.xml",
                      settings["reference_spp"], folder / "train")
     record = folder / "novel-truth.json"
     rendered = json.loads(record.read_text()) if record.is_file() else {}
@@ -350,8 +367,7 @@ def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
         record.write_text(json.dumps(novel_record(settings)) + "\n")
     # The estimate's scene: the same as the truth's, its BSDF a placeholder the estimate replaces.
     placeholder = dict_to_xml({"type": "diffuse"})
-    (folder / "train.xml").write_text(scene_xml(placeholder, VIEWS[: settings["views"]], LIGHTS,
-                                                settings["resolution"]))
+    (folder / "train.xml").write_text(scene_xml(placeholder, VIEWS[: settings["views"]], LIGHTS, side))
 
 
 def figure(results: list[dict], work: Path, path: Path, models: list[str]) -> None:
@@ -471,6 +487,10 @@ def parser() -> argparse.ArgumentParser:
                         f"default: {FULL['measure_spp']})")
     p.add_argument("--views", type=int, choices=range(2, len(VIEWS) + 1), metavar=f"2..{len(VIEWS)}",
                    help=f"training views, each an image under both lights (default: {FULL['views']})")
+    p.add_argument("--train-resolution", type=int, metavar="N",
+                   help=f"side of the training images in pixels (default: the novel views' {FULL['resolution']}); "
+                        "at 64 a sharp highlight is one pixel wide, at 128 it is resolved, at about 3x the time of "
+                        "a network's estimate")
     p.add_argument("--seed", type=int, default=0,
                    help="the estimates' seed (default: 0); the training and novel images do not depend on it")
     p.add_argument("--no-ceiling", action="store_true",
@@ -498,7 +518,7 @@ def main(argv: list[str] | None = None) -> int:
     mi.set_variant("llvm_ad_rgb")
     settings = dict(QUICK if args.quick else FULL)
     settings["log_samples"] = 2000 if args.quick else 50000
-    settings.update(given_counts(args, ("steps", "spp", "measure_spp")))
+    settings.update(given_counts(args, ("steps", "spp", "measure_spp", "train_resolution")))
     if args.views:
         settings["views"] = args.views
     settings["seed"] = args.seed
@@ -530,8 +550,9 @@ def main(argv: list[str] | None = None) -> int:
     figure(results, work, image, columns)
     command = "python -m nbrdf_tools.estimate_report " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["```sh", command.strip(), "```", "", "# Material estimation from images (issue 33)", "",
-             f"A sphere, {settings['views']} training views ({settings['resolution']}x{settings['resolution']}, "
-             f"{settings['reference_spp']} spp references) under {len(LIGHTS)} point lights and a dim sky; every model "
+             f"A sphere, {settings['views']} training views ({train_resolution(settings)}x{train_resolution(settings)}, "
+             f"{settings['reference_spp']} spp references; the novel views {settings['resolution']}x"
+             f"{settings['resolution']}) under {len(LIGHTS)} point lights and a dim sky; every model "
              f"fitted to the same images by `python -m nbrdf_mitsuba.estimate` ({settings['steps']} steps, "
              f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on "
              f"{len(NOVEL_PAIRS)} novel views, each under its own novel light (the image metrics are means over "
