@@ -168,10 +168,16 @@ def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
     work, out = tmp_path / "work", tmp_path / "estimation.md"
     argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
     assert main(argv) == 0
+    folder = work / "mitsuba-roughplastic"
+    before = {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in (".exr", ".xml")}
     with pytest.raises(SystemExit, match="was estimated with .*'steps': 3.*'steps': 4.*another --work"):
         main([*argv, "--steps", "4"])
     with pytest.raises(SystemExit, match="'train_resolution': 24.*another --work"):
         main([*argv, "--train-resolution", "24"])
+    with pytest.raises(SystemExit, match="'views': 2.*'views': 3.*another --work"):
+        main([*argv, "--views", "3"])
+    # Refused before anything is rendered: the folder's images are the ones its estimate was fitted to.
+    assert {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in (".exr", ".xml")} == before
     assert main(argv) == 0  # the same settings: resumed
 
 

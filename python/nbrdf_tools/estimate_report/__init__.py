@@ -242,6 +242,21 @@ def measured_as_today(result: dict, settings: dict) -> bool:
     return all(result.get(key) == value for key, value in record.items())
 
 
+def refuse_other_settings(stored: Path, result: dict, asked: dict | None) -> None:
+    """Stops where the stored ``result`` was estimated with other settings than ``asked``."""
+    earlier = result.get("settings", asked)
+    if earlier != asked:
+        raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: give it another --work")
+
+
+def refuse_other_folder(folder: Path, settings: dict) -> None:
+    """Stops before anything in ``folder`` is rendered again where one of its estimates, of any
+    model, was made with other settings: its training images must stay the ones it was fitted to."""
+    asked = estimate_settings(settings)
+    for stored in sorted(folder.glob("*.result.json")):
+        refuse_other_settings(stored, json.loads(stored.read_text()), asked)
+
+
 def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict,
                   asked: dict | None = None) -> dict | None:
     """The result stored in ``stored``, measured again from its stored ``out`` where its novel
@@ -250,9 +265,7 @@ def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: d
     if not stored.is_file():
         return None
     result = json.loads(stored.read_text())
-    earlier = result.get("settings", asked)
-    if earlier != asked:
-        raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: give it another --work")
+    refuse_other_settings(stored, result, asked)
     if not measured_as_today(result, settings) and out.is_file():
         result.update(measure_estimate(folder, model, out, settings))
         stored.write_text(json.dumps(result, indent=2) + "\n")
@@ -532,6 +545,7 @@ def main(argv: list[str] | None = None) -> int:
     results, missing = [], []
     columns = models + ([] if args.no_ceiling else [CEILING])
     for name, material in chosen.items():
+        refuse_other_folder(work / name, settings)
         prepare(name, material, settings, work)
         for model in columns:
             if args.stored_only and not (work / name / f"{model}.result.json").is_file():
