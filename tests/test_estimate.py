@@ -192,6 +192,38 @@ def test_a_non_finite_loss_steps_back_and_halves_the_step(setup, tmp_path):
     assert est.halvings == 1 and len(est.history) == 4 and np.all(np.isfinite(theta))
 
 
+def test_a_run_away_loss_steps_back_to_the_phases_best(setup, tmp_path):
+    """A finite loss growing step after step (as at 2 spp on 128x128 images) is taken back to
+    the state of the phase's lowest loss, with half the step, not written as the estimate."""
+    from nbrdf_mitsuba import estimate as E
+
+    scene, images = setup
+    model = E.Analytic("roughconductor")
+    est = E.Estimator(E.Scene(scene, "mat", {}), model, images, 2, 0, 3, tmp_path)
+    (phase,) = model.phases(6)
+    seen = []
+
+    def penalty(theta):
+        # The third evaluation runs away (a thousand times any image loss here).
+        seen.append(theta.copy())
+        return (1e3 if len(seen) == 3 else 0.0), np.zeros_like(theta)
+
+    phase.penalty = penalty
+
+    class Bar:
+        def update(self, n):
+            pass
+
+        def set_postfix(self, **kw):
+            pass
+
+    est.run(phase, Bar(), 0)
+    lowest = int(np.argmin(est.history[:2]))
+    assert est.halvings == 1 and len(est.history) == 6 and max(est.history) < 1.0
+    # The step after the run-away restarts from the best of the two states before it.
+    np.testing.assert_array_equal(seen[3], seen[lowest])
+
+
 def test_common_initialisation_is_the_trainers_seed_0_start():
     from nbrdf_mitsuba.estimate import common_initialisation
     from nbrdf_tools.compare_materials import splitmix_uniforms

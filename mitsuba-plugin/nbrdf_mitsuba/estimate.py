@@ -35,8 +35,9 @@ are optimised by Adam on the images' log-radiance error, every view each step:
 Robust: images of the wrong count or size, non-finite pixels, no BSDF with the id, a variant
 without automatic differentiation or images that do not depend on the BSDF are errors (exit
 status 2, one line naming the problem). A step whose loss or gradient is not finite (or whose
-weights the BSDF rejects) is taken back and the step size halved; no non-finite result is ever
-written. Deterministic for a seed (each render's seed derives from it).
+weights the BSDF rejects), or whose loss has run away to ten times the phase's lowest, is taken
+back and the step size halved; no non-finite result is ever written. Deterministic for a seed
+(each render's seed derives from it).
 """
 
 from __future__ import annotations
@@ -71,8 +72,13 @@ CODE_SHARE = 0.4
 #: hardly fell (docs/experiments.md, issue 33). The analytic models' 0.1 settled higher than 0.05
 #: (principled on colodur_napoli_4f: novel-view RMSE 0.015 against 0.009 at 100 steps).
 LEARNING_RATES = {"code": 0.2, "weights": 0.003, "analytic": 0.05}
-#: Times the step may halve after non-finite losses before the estimate gives up.
+#: Times the step may halve after non-finite or run-away losses before the estimate gives up.
 MAX_HALVINGS = 12
+#: A step whose loss is this many times the phase's lowest so far has run away: at 2 spp on
+#: 128x128 images a network's loss grew 1.5x a step from 0.009 to 10, a finite loss the
+#: non-finite check let through (docs/experiments.md, issue 33, round 20). A step's Monte Carlo
+#: noise stays far below this factor.
+RUNAWAY_FACTOR = 10.0
 #: Training codes tried as starts of the latent phase (evenly spaced through the anchors), each
 #: judged by one render per view at a quarter of the samples (a few steps' cost in all): on a
 #: MERL truth the best of 49 started 15 % lower in loss than the best of 9, a gap the code phase
@@ -500,20 +506,27 @@ class Estimator:
         adam = Adam(phase.theta.size, LEARNING_RATES[phase.kind])
         theta = phase.theta.copy()
         accepted = (theta.copy(), adam.state())
+        best = (math.inf, accepted)
         step = 0
         while step < phase.steps:
             value, grad = self.loss_and_grad(phase, theta, first_step + step)
-            if grad is None:
-                # A diverging step: back to the last state with a finite loss, half the step.
+            runaway = grad is not None and value > RUNAWAY_FACTOR * best[0]
+            if grad is None or runaway:
+                # A diverging step: back to the last state with a finite loss (where the loss ran
+                # away, to the phase's best: the states before it were already running away),
+                # half the step.
                 self.halvings += 1
                 if self.halvings > MAX_HALVINGS:
-                    raise EstimateError(f"the optimisation diverged: the loss stayed non-finite after "
+                    raise EstimateError(f"the optimisation diverged: the loss stayed non-finite or ran away after "
                                         f"{MAX_HALVINGS} halvings of the step")
-                theta = accepted[0].copy()
-                adam.restore(accepted[1])
+                back = best[1] if runaway else accepted
+                theta = back[0].copy()
+                adam.restore(back[1])
                 adam.rate *= 0.5
                 continue
             accepted = (theta.copy(), adam.state())
+            if value < best[0]:
+                best = (value, accepted)
             self.history.append(value)
             if step == 0 and first_step == 0 and not np.any(grad != 0):
                 raise EstimateError(f"the images do not depend on BSDF '{self.bsdf_id}' (zero gradient at the "
