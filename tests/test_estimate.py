@@ -166,41 +166,44 @@ def test_deterministic_for_a_seed(setup, tmp_path):
     assert outs[0].read_bytes() != outs[2].read_bytes()
 
 
-def test_a_non_finite_loss_steps_back_and_halves_the_step(setup, tmp_path):
+class SilentBar:
+    """What ``Estimator.run`` asks of its progress bar, showing nothing."""
+
+    def update(self, n):
+        pass
+
+    def set_postfix(self, **kw):
+        pass
+
+
+def roughconductor_phase(setup, tmp_path, steps, penalty):
+    """An estimator of the test scene's roughconductor and its one phase of ``steps`` steps,
+    ``penalty(theta)`` added to its loss (how a test makes a step diverge)."""
     from nbrdf_mitsuba import estimate as E
 
     scene, images = setup
     model = E.Analytic("roughconductor")
     est = E.Estimator(E.Scene(scene, "mat", {}), model, images, 2, 0, 3, tmp_path)
-    (phase,) = model.phases(4)
+    (phase,) = model.phases(steps)
+    phase.penalty = penalty
+    return est, phase
+
+
+def test_a_non_finite_loss_steps_back_and_halves_the_step(setup, tmp_path):
     calls = []
 
     def penalty(theta):
         calls.append(1)
         return (math.nan if len(calls) == 2 else 0.0), np.zeros_like(theta)
 
-    phase.penalty = penalty
-
-    class Bar:
-        def update(self, n):
-            pass
-
-        def set_postfix(self, **kw):
-            pass
-
-    theta = est.run(phase, Bar(), 0)
+    est, phase = roughconductor_phase(setup, tmp_path, 4, penalty)
+    theta = est.run(phase, SilentBar(), 0)
     assert est.halvings == 1 and len(est.history) == 4 and np.all(np.isfinite(theta))
 
 
 def test_a_run_away_loss_steps_back_to_the_phases_best(setup, tmp_path):
     """A finite loss growing step after step (as at 2 spp on 128x128 images) is taken back to
     the state of the phase's lowest loss, with half the step, not written as the estimate."""
-    from nbrdf_mitsuba import estimate as E
-
-    scene, images = setup
-    model = E.Analytic("roughconductor")
-    est = E.Estimator(E.Scene(scene, "mat", {}), model, images, 2, 0, 3, tmp_path)
-    (phase,) = model.phases(6)
     seen = []
 
     def penalty(theta):
@@ -208,16 +211,8 @@ def test_a_run_away_loss_steps_back_to_the_phases_best(setup, tmp_path):
         seen.append(theta.copy())
         return (1e3 if len(seen) == 3 else 0.0), np.zeros_like(theta)
 
-    phase.penalty = penalty
-
-    class Bar:
-        def update(self, n):
-            pass
-
-        def set_postfix(self, **kw):
-            pass
-
-    est.run(phase, Bar(), 0)
+    est, phase = roughconductor_phase(setup, tmp_path, 6, penalty)
+    est.run(phase, SilentBar(), 0)
     lowest = int(np.argmin(est.history[:2]))
     assert est.halvings == 1 and len(est.history) == 6 and max(est.history) < 1.0
     # The step after the run-away restarts from the best of the two states before it.

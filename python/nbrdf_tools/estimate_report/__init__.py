@@ -242,30 +242,25 @@ def measured_as_today(result: dict, settings: dict) -> bool:
     return all(result.get(key) == value for key, value in record.items())
 
 
-def refuse_other_settings(stored: Path, result: dict, asked: dict | None) -> None:
-    """Stops where the stored ``result`` was estimated with other settings than ``asked``."""
-    earlier = result.get("settings", asked)
-    if earlier != asked:
-        raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: give it another --work")
-
-
 def refuse_other_folder(folder: Path, settings: dict) -> None:
-    """Stops before anything in ``folder`` is rendered again where one of its estimates, of any
-    model, was made with other settings: its training images must stay the ones it was fitted to."""
+    """Stops before anything in ``folder`` is rendered again or re-measured where one of its
+    estimates, of any model, was made with other settings: its training images must stay the ones
+    it was fitted to. (The ceiling, distilled rather than estimated, records none and passes.)"""
     asked = estimate_settings(settings)
     for stored in sorted(folder.glob("*.result.json")):
-        refuse_other_settings(stored, json.loads(stored.read_text()), asked)
+        earlier = json.loads(stored.read_text()).get("settings", asked)
+        if earlier != asked:
+            raise SystemExit(f"{stored} was estimated with {earlier}, this run asks for {asked}: "
+                             "give it another --work")
 
 
-def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict,
-                  asked: dict | None = None) -> dict | None:
+def stored_result(stored: Path, folder: Path, model: str, out: Path, settings: dict) -> dict | None:
     """The result stored in ``stored``, measured again from its stored ``out`` where its novel
-    pairs are not today's; None where nothing is stored. Where ``asked`` is given, a result
-    estimated with other settings is refused (before any re-measuring: it is not updated)."""
+    pairs are not today's; None where nothing is stored. Its settings were checked by
+    :func:`refuse_other_folder` before the folder was prepared."""
     if not stored.is_file():
         return None
     result = json.loads(stored.read_text())
-    refuse_other_settings(stored, result, asked)
     if not measured_as_today(result, settings) and out.is_file():
         result.update(measure_estimate(folder, model, out, settings))
         stored.write_text(json.dumps(result, indent=2) + "\n")
@@ -297,8 +292,7 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     folder = work / name
     stored = folder / f"{model}.result.json"
     out = folder / (f"{model}.nbrdf.json" if model.startswith("nbrdf") else f"{model}.json")
-    asked = estimate_settings(settings)
-    result = stored_result(stored, folder, model, out, settings, asked)
+    result = stored_result(stored, folder, model, out, settings)
     if result is not None:
         return result
     images = training_images(folder, settings["views"])
@@ -310,7 +304,8 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
     if status != 0:
         raise SystemExit(f"{name} {model}: the estimate failed (status {status})")
-    return store_result(stored, material, model, out, settings, seconds, cpu_seconds, {"settings": asked})
+    return store_result(stored, material, model, out, settings, seconds, cpu_seconds,
+                        {"settings": estimate_settings(settings)})
 
 
 def run_ceiling(name: str, material: dict, settings: dict, work: Path) -> dict:
