@@ -4,7 +4,8 @@ estimated from images of a known scene by differentiable rendering (Mitsuba's ``
 The scene holds the object whose BSDF (the one with id ``ID``, whatever its type) is to be
 estimated, its sensors and emitters; image ``i`` (EXR, linear RGB) is the scene seen by its
 ``i``-th sensor. That BSDF is replaced by the model (``--model``) and the model's parameters
-are optimised by Adam on the images' log-radiance error, every view each step:
+are optimised by Adam on the images' error relative to ``1 + radiance`` (:func:`image_loss`), every
+view each step:
 
 * ``nbrdf`` (default): first the 32-value latent code through the pretrained decoder
   (:mod:`nbrdf_mitsuba.latent`: the gradient of the weights, which ``jit_weights="opaque"``
@@ -433,11 +434,19 @@ class Adam:
 
 
 def image_loss(images: list, references: list):
-    """Mean squared error of ``ln(1 + radiance)`` over every view, pixel and channel (the log
-    keeps highlights from swamping the rest of the object)."""
+    """Mean squared error relative to ``1 + reference``, ``((x - r) / (1 + r))^2``, over every
+    view, pixel and channel: the first-order twin of the squared error of ``ln(1 + x)`` (the
+    weight keeps highlights from swamping the rest of the object), but linear in the render.
+    ``mi.render`` draws the adjoint pass's samples apart from the primal's, so a step's gradient
+    is the loss's derivative at the noisy render times an independent derivative of the render;
+    linear in the render, that derivative's mean is its value at the mean render, and the fit
+    settles where the mean render is the reference. The log's was biased bright where renders
+    are noisy, most around a highlight narrower than a pixel, which it fitted 2-3 pixels wide
+    (docs/experiments.md, issue 33, round 22). Held to a float64 oracle and to that property by
+    tests/test_estimate.py::test_image_loss_is_linear_in_the_render."""
     total = 0.0
     for image, reference in zip(images, references):
-        d = dr.log(1.0 + dr.maximum(image, 0.0)) - dr.log(1.0 + reference)
+        d = (image - reference) / (1.0 + reference)
         total = total + dr.mean(dr.square(d), axis=None)
     return total / len(images)
 
