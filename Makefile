@@ -16,7 +16,7 @@ PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*
 setup: $(VENV)/.plugin-installed llvm
 
 # Python environment: Mitsuba, Dr.Jit and the script and test dependencies, and the scripts'
-# package nbrdf_tools (editable: `python -m nbrdf_tools.convergence` runs this checkout's code).
+# package nbrdf_tools (editable: `python -m nbrdf_tools scenes` runs this checkout's code).
 $(VENV)/.deps-installed: python/requirements.txt python/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip

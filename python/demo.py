@@ -1,4 +1,4 @@
-"""Entry point of `make demo`: see nbrdf_tools.demo (also ``python -m nbrdf_tools.demo``)."""
+"""Entry point of `make demo`: see nbrdf_tools.demo (also ``python -m nbrdf_tools demo``)."""
 
 import sys
 

@@ -31,7 +31,7 @@ import pytest
 
 import nbrdf_testing
 from nbrdf_testing import write_merl, write_network
-from nbrdf_tools.paths import default_cli, shared_dir
+from nbrdf_tools.common.paths import default_cli, shared_dir
 
 SHARED = shared_dir()
 JIT_BACKEND = os.environ.get("NBRDF_TEST_JIT", "llvm").strip().lower()

@@ -4,10 +4,10 @@ Everything here is written from docs/design.md (sections 2-4 and 6) in float64 N
 calling the Rust code, so that the tests compare two implementations. These are the deliberate
 second copies of the Rust formulas; docs/design.md's twin table ("Twins") names each one's Rust
 twin and the test that holds the two together. The network's input and forward pass are not
-repeated here: they are ``nbrdf_tools.network``'s (the one NumPy copy, shared with the tools).
+repeated here: they are ``nbrdf_tools.common.network``'s (the one NumPy copy, shared with the tools).
 
 ``to_angles`` / ``from_angles``, ``merl_trilinear`` and ``nbrdf_reference`` take planar (3, n)
-batches in their historical ``(light, view)`` order (the Rust API, ``nbrdf_tools.network`` and
+batches in their historical ``(light, view)`` order (the Rust API, ``nbrdf_tools.common.network`` and
 the Mitsuba wrappers below (``bsdf_eval`` and friends) take ``(view, light)``).
 """
 
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nbrdf_tools import network
-from nbrdf_tools.network import apply, rot_y, rot_z
+from nbrdf_tools.common import network
+from nbrdf_tools.common.network import apply, rot_y, rot_z
 
 N_TH, N_TD, N_PD = 90, 90, 180
 CELLS = N_TH * N_TD * N_PD
@@ -230,7 +230,7 @@ def keras_layers(h5_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def network_input(light: np.ndarray, view: np.ndarray, anisotropic: bool = False) -> np.ndarray:
-    """(n, 6) network input of planar directions (``nbrdf_tools.network.network_input``)."""
+    """(n, 6) network input of planar directions (``nbrdf_tools.common.network.network_input``)."""
     return network.network_input(np.asarray(view).T, np.asarray(light).T, anisotropic)
 
 

@@ -1,4 +1,4 @@
-"""``python -m nbrdf_tools.anisotropic_report`` at a small budget: the network distilled with
+"""``python -m nbrdf_tools anisotropic`` at a small budget: the network distilled with
 ``--anisotropy on`` renders an anisotropic roughconductor on turned surfaces much closer to
 Mitsuba's own BSDF than the one distilled with ``--anisotropy off``. Were ``phi_h`` dropped
 anywhere (sampling, encoding, plugin), both networks would be isotropic and render alike, and the
@@ -14,7 +14,7 @@ SMALL = ["--samples", "30000", "--epochs", "30", "--size", "64", "--spp", "4", "
 
 
 def test_the_anisotropic_network_renders_much_closer_than_the_isotropic_one(llvm_variant, tmp_path):
-    from nbrdf_tools.anisotropic_report import main
+    from nbrdf_tools.pages.anisotropic import main
 
     assert main(["--out", str(tmp_path), *SMALL]) == 0
     result = json.loads((tmp_path / "anisotropic.json").read_text())
@@ -26,7 +26,7 @@ def test_the_anisotropic_network_renders_much_closer_than_the_isotropic_one(llvm
 
 
 def test_bad_arguments_are_usage_errors(tmp_path):
-    from nbrdf_tools.anisotropic_report import main
+    from nbrdf_tools.pages.anisotropic import main
 
     with pytest.raises(SystemExit) as exit_info:
         main(["--out", str(tmp_path), "--alpha-u", "0"])

@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 from nbrdf_testing import write_network
-from nbrdf_tools.paths import default_cli
+from nbrdf_tools.common.paths import default_cli
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
@@ -286,7 +286,7 @@ def resolves(dotted: str) -> bool:
 
 
 def test_documented_python_names_exist():
-    """Modules and functions the pages name (``nbrdf_tools.scenes.kitchen``,
+    """Modules and functions the pages name (``nbrdf_tools.common.scenes.kitchen``,
     ``nbrdf_mitsuba.use_wavefront_mode``, ...) exist: renamed ones are caught."""
     names = {(name, f"{_relative(page)}:{page.read_text().count(chr(10), 0, match.start()) + 1}")
              for page in DOCS for match in PYTHON_NAME.finditer(page.read_text())

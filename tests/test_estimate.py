@@ -221,7 +221,7 @@ def test_a_run_away_loss_steps_back_to_the_phases_best(setup, tmp_path):
 
 def test_common_initialisation_is_the_trainers_seed_0_start():
     from nbrdf_mitsuba.estimate import common_initialisation
-    from nbrdf_tools.compare_materials import splitmix_uniforms
+    from nbrdf_tools.common.compare_materials import splitmix_uniforms
 
     flat = common_initialisation()
     assert flat.size == 675 and flat.dtype == np.float32
@@ -400,10 +400,10 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
 def test_output_pull_against_a_float64_oracle(llvm_variant):
     """The weight phase's pull, ``s mean((z(x) - z(c))^2)`` over the pull's direction pairs and the
     three channels, ``z = ln(1 + f)`` of the network: its value equals an oracle built from
-    ``nbrdf_tools.network`` (the float64 forward pass and network input, at the same uniform
+    ``nbrdf_tools.common.network`` (the float64 forward pass and network input, at the same uniform
     hemisphere warp in NumPy), and its hand-written gradient equals central differences."""
     from nbrdf_mitsuba import estimate as E
-    from nbrdf_tools import network as N
+    from nbrdf_tools.common import network as N
 
     rng = np.random.default_rng(3)
     center = 0.3 * rng.standard_normal(675)
@@ -527,10 +527,10 @@ def constant_network(value: float) -> np.ndarray:
 def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_variant):
     """The albedo check's half-vector quadrature: a constant ``f = c`` reflects ``pi c`` at every
     incidence angle; a network with a narrow peak at the half vector, ``f = e^(k max(cos th_h - t,
-    0)) - 1``, matches a direct float64 integral over the view directions (``nbrdf_tools.network``'s
+    0)) - 1``, matches a direct float64 integral over the view directions (``nbrdf_tools.common.network``'s
     forward pass and input, a fine grid in ``cos theta_v`` and ``phi_v``)."""
     from nbrdf_mitsuba import estimate as E
-    from nbrdf_tools import network as N
+    from nbrdf_tools.common import network as N
 
     albedo = E.directional_albedo(constant_network(0.2))
     np.testing.assert_allclose(albedo, np.pi * 0.2, rtol=2e-4)

@@ -14,7 +14,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from nbrdf_tools.paths import default_cli
+from nbrdf_tools.common.paths import default_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 AE_FILE = ROOT / "nbrdf-core" / "data" / "models" / "autoencoder.json"

@@ -1,4 +1,4 @@
-"""``python -m nbrdf_tools.estimate_report --quick`` (issue 33): runs end to end on a tiny case,
+"""``python -m nbrdf_tools estimation --quick`` (issue 33): runs end to end on a tiny case,
 writes the table and figure, and resumes (a rerun reuses the stored results)."""
 
 from __future__ import annotations
@@ -7,13 +7,13 @@ import pytest
 
 
 def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
-    from nbrdf_tools.estimate_report import main
+    from nbrdf_tools.pages.estimation import main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
     argv = ["--quick", "--work", str(work), "--models", "nbrdf,roughplastic", "--out", str(out)]
     assert main(argv) == 0
     text = out.read_text()
-    assert text.startswith("```sh\npython -m nbrdf_tools.estimate_report")
+    assert text.startswith("```sh\npython -m nbrdf_tools estimation")
     assert "| mitsuba-roughplastic | nbrdf |" in text and "| mitsuba-roughplastic | roughplastic |" in text
     assert "lowest novel-view RMSE" in text
     assert (tmp_path / "images" / "estimation.png").stat().st_size > 0
@@ -42,7 +42,7 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
 
     import numpy as np
 
-    from nbrdf_tools.estimate_report import NOVEL_PAIRS, main
+    from nbrdf_tools.pages.estimation import NOVEL_PAIRS, main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
     argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
@@ -81,12 +81,12 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
 
 
 def test_bad_counts_are_refused(tmp_path):
-    from nbrdf_tools.estimate_report import main
+    from nbrdf_tools.pages.estimation import main
 
     for flag in ("--steps", "--spp", "--measure-spp"):
         with pytest.raises(SystemExit, match=f"{flag} must be at least 1"):
             main(["--quick", "--work", str(tmp_path), flag, "0"])
-    from nbrdf_tools.estimate_report import convergence
+    from nbrdf_tools.pages.estimation import convergence
 
     with pytest.raises(SystemExit, match="--measure-spp must be at least 1"):
         convergence.main(["--work", str(tmp_path), "--materials", "mitsuba-roughplastic", "--measure-spp", "0"])
@@ -95,7 +95,7 @@ def test_bad_counts_are_refused(tmp_path):
 def test_the_ceiling_is_no_competitor():
     """The network distilled from the truth is reported beside the estimates, never as a
     material's lowest nor in the estimate's ratio to the best analytic model."""
-    from nbrdf_tools.estimate_report import CEILING, summary
+    from nbrdf_tools.pages.estimation import CEILING, summary
 
     rows = [("nbrdf", 0.02), ("nbrdf-no-prior", 0.04), ("principled", 0.03), (CEILING, 0.006)]
     lines = summary([{"material": "rgl-x", "model": m, "rmse_tonemapped": v} for m, v in rows])
@@ -110,8 +110,8 @@ def test_merl_truths_are_unseen_by_the_prior():
     report's tables must come from its test split."""
     import json
 
-    from nbrdf_tools.estimate_report import MERL
-    from nbrdf_tools.paths import REPO
+    from nbrdf_tools.pages.estimation import MERL
+    from nbrdf_tools.common.paths import REPO
 
     split = json.loads((REPO / "nbrdf-core" / "data" / "models" / "autoencoder.json").read_text())["split"]
     assert set(MERL) <= set(split["test"])
@@ -124,7 +124,7 @@ def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
     import numpy as np
     import pytest
 
-    from nbrdf_tools.estimate_report import MITSUBA_TRUTH, QUICK, dict_to_xml, parser, prepare, read_exr
+    from nbrdf_tools.pages.estimation import MITSUBA_TRUTH, QUICK, dict_to_xml, parser, prepare, read_exr
 
     material = {"xml": dict_to_xml(MITSUBA_TRUTH), "dict": MITSUBA_TRUTH}
     prepare("m", material, {**QUICK, "views": 2}, tmp_path)
@@ -143,7 +143,7 @@ def test_training_images_may_be_finer_than_the_novel_views(llvm_variant, tmp_pat
     """``--train-resolution N``: the training images and the estimate's scene at N x N, the novel
     views at the report's own size; recorded in the estimates' settings only where it differs,
     and a folder's images at another size are rendered again."""
-    from nbrdf_tools.estimate_report import (MITSUBA_TRUTH, QUICK, dict_to_xml, estimate_settings, image_side,
+    from nbrdf_tools.pages.estimation import (MITSUBA_TRUTH, QUICK, dict_to_xml, estimate_settings, image_side,
                                              prepare)
 
     material = {"xml": dict_to_xml(MITSUBA_TRUTH), "dict": MITSUBA_TRUTH}
@@ -163,7 +163,7 @@ def test_training_images_may_be_finer_than_the_novel_views(llvm_variant, tmp_pat
 def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
     import pytest
 
-    from nbrdf_tools.estimate_report import main
+    from nbrdf_tools.pages.estimation import main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
     argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
@@ -182,9 +182,9 @@ def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
 
 
 def test_convergence_curve_runs(llvm_variant, tmp_path):
-    """``python -m nbrdf_tools.estimate_report.convergence``: one analytic model's novel-view RMSE
+    """``python -m nbrdf_tools estimation-convergence``: one analytic model's novel-view RMSE
     at each checkpoint, table and figure written (a short run at the report's full size)."""
-    from nbrdf_tools.estimate_report import convergence
+    from nbrdf_tools.pages.estimation import convergence
 
     out = tmp_path / "convergence.md"
     assert convergence.main(["--work", str(tmp_path / "work"), "--materials", "mitsuba-roughplastic",

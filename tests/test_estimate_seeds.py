@@ -1,4 +1,4 @@
-"""``python -m nbrdf_tools.estimate_report.seeds``: the stored results of several seeds' report
+"""``python -m nbrdf_tools estimation-seeds``: the stored results of several seeds' report
 runs, tabulated together. Checked against means and spreads computed here in float64 from the
 numbers written, on invented results (nothing is estimated)."""
 
@@ -9,7 +9,7 @@ import statistics
 
 import pytest
 
-from nbrdf_tools.estimate_report import seeds
+from nbrdf_tools.pages.estimation import seeds
 
 SETTINGS = {"views": 3, "steps": 200, "spp": 8}
 RMSE = {  # (material, model) -> RMSE per seed 0, 1, 2
@@ -53,7 +53,7 @@ def test_means_spreads_and_summary_of_the_means(tmp_path):
     out = tmp_path / "seeds.md"
     assert seeds.main(["--work", *map(str, seed_folders(tmp_path)), "--out", str(out)]) == 0
     text = out.read_text()
-    assert text.startswith("```sh\npython -m nbrdf_tools.estimate_report.seeds --work")
+    assert text.startswith("```sh\npython -m nbrdf_tools estimation-seeds --work")
     for (material, model), values in RMSE.items():
         cells = row(text, material, model)
         assert cells[2:5] == [f"{v:.4f}" for v in values]

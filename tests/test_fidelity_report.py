@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from nbrdf_testing import SCALE, cell_centre_angles, from_angles, read_merl
-from nbrdf_tools import analytic_fit as af
-from nbrdf_tools import compare_materials as cm
-from nbrdf_tools import fidelity_report
-from nbrdf_tools.paths import default_cli
+from nbrdf_tools.common import analytic_fit as af
+from nbrdf_tools.common import compare_materials as cm
+from nbrdf_tools.pages import fidelity as fidelity_report
+from nbrdf_tools.common.paths import default_cli
 
 
 def _cli():
@@ -167,7 +167,7 @@ def test_report_runs_end_to_end(merl_table, tmp_path):
             "--cli", str(cli), "--no-progress"]
     assert fidelity_report.main(argv) == 0
     text = report.read_text()
-    assert text.splitlines()[2:4] == ["```sh", "python -m nbrdf_tools.fidelity_report " + " ".join(argv)]
+    assert text.splitlines()[2:4] == ["```sh", "python -m nbrdf_tools fidelity " + " ".join(argv)]
     assert "No anisotropic material was given" in text
     document = json.loads(report.with_suffix(".json").read_text())
     rows = {r["method"]: r for r in document["rows"]}
@@ -198,7 +198,7 @@ def test_anisotropic_table_end_to_end(tmp_path):
             "--out", str(tmp_path / "work"), "--report", str(report), "--cli", str(cli), "--no-progress"]
     assert fidelity_report.main(argv) == 0
     text = report.read_text()
-    assert text.splitlines()[2:4] == ["```sh", "python -m nbrdf_tools.fidelity_report " + shlex.join(argv)]
+    assert text.splitlines()[2:4] == ["```sh", "python -m nbrdf_tools fidelity " + shlex.join(argv)]
     section = text[text.index("## Anisotropic materials"):]
     assert "### principled_aniso" in section and "### ggx" in section and "### Verdict" in section
     rows = json.loads(report.with_suffix(".json").read_text())["rows"]

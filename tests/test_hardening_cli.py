@@ -147,7 +147,7 @@ def test_latent_commands_refuse_anisotropic_networks(cli, tmp_path):
     ("micrometres", "wavelengths", "nanometres"),
 ])
 def test_bad_spectral_measurements_name_the_field(cli, shared, tmp_path, defect, field, words):
-    from nbrdf_tools import spectral_rgl
+    from nbrdf_tools.data import spectral_rgl
 
     rgb = spectral_rgl.read_tensor_file(shared / "data" / "rgl" / "paper_white_rgb.bsdf")
     fields = spectral_rgl.spectral_fields(rgb, np.linspace(360.0, 1000.0, 9))

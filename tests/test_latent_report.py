@@ -1,4 +1,4 @@
-"""The latent-space report's own pieces (nbrdf_tools.latent_report, nbrdf_tools.network) and the
+"""The latent-space report's own pieces (nbrdf_tools.pages.latent, nbrdf_tools.common.network) and the
 CLI commands it drives
 that have no scene: ``nbrdf tabulate`` (checked against a NumPy evaluation of the network at the
 cell centres of docs/design.md section 3), the distillation of the authors' networks into the common
@@ -15,7 +15,8 @@ import pytest
 
 from nbrdf_testing import (CELLS, SCALE, bsdf_eval, cell_centre_angles, f32, from_angles, nbrdf_reference,
                            normalize, random_layers, random_pairs, read_merl, write_network)
-from nbrdf_tools import latent_report, network
+from nbrdf_tools.pages import latent as latent_report
+from nbrdf_tools.common import network
 
 
 def _cli_or_skip() -> Path:
@@ -74,7 +75,7 @@ def test_appearance_tells_a_sharp_highlight_from_a_broad_one_and_reads_colour():
 
 
 def test_numpy_network_matches_the_plugin(variant, tmp_path):
-    """nbrdf_tools.network (the scripts' NumPy forward pass) against its Rust twin through the
+    """nbrdf_tools.common.network (the scripts' NumPy forward pass) against its Rust twin through the
     `nbrdf` BSDF, and against the tests' float64 oracle written from the paper."""
     import mitsuba as mi
 

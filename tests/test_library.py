@@ -1,4 +1,4 @@
-"""``python -m nbrdf_tools.library``: a small library (a MERL table from ``nbrdf synth``, a
+"""``python -m nbrdf_tools library``: a small library (a MERL table from ``nbrdf synth``, a
 Mitsuba BSDF as load_dict JSON and as scene XML, a corrupt measurement) converted locally and on
 a real Dask LocalCluster, with tiny training budgets.
 
@@ -34,7 +34,7 @@ import pytest
 from nbrdf_tools.library import main as library_main
 from nbrdf_tools.library import sources, store
 from nbrdf_tools.library.task import error_message
-from nbrdf_tools.paths import default_cli, shared_dir
+from nbrdf_tools.common.paths import default_cli, shared_dir
 
 CLI = default_cli()
 needs_cli = pytest.mark.skipif(not CLI.is_file(), reason=f"the nbrdf CLI {CLI} is not built (make build)")
@@ -203,7 +203,7 @@ def test_row_numbers_agree_with_independent_computations(converted, sources_dir)
     """The log errors against the Rust tool (`nbrdf compare`, its own evaluation of table and
     network on the same directions); the tone-mapped RMSE against NumPy on the sphere images."""
     import nbrdf_mitsuba  # noqa: F401
-    from nbrdf_tools import compare_materials as cm
+    from nbrdf_tools.common import compare_materials as cm
 
     out, _ = converted
     row = rows_by_name(out)["white"]

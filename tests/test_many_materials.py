@@ -65,7 +65,7 @@ def _dispatch_eval(bsdfs, view, light):
 
 def test_shared_kernel_equals_each_literal_kernel_the_oracle_and_the_library(llvm, networks, shared_kernel):
     from nbrdf_mitsuba import _native
-    from nbrdf_tools import network as nbrdf_network
+    from nbrdf_tools.common import network as nbrdf_network
 
     view, light = random_pairs(4000, 31)
     view, light = f32(view), f32(light)
@@ -142,7 +142,7 @@ def _spheres(bsdfs: list[dict], width: int = 96) -> dict:
 
 
 def test_a_scene_of_distinct_networks_renders_each_sphere_like_the_network_alone(llvm, networks, shared_kernel):
-    from nbrdf_tools.render import primary_hit_mask
+    from nbrdf_tools.common.render import primary_hit_mask
 
     black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}
     networks = networks[:3]  # each sphere alone compiles its own kernel: keep the test small
@@ -188,12 +188,12 @@ def test_bench_many_quick_json(llvm, tmp_path):
     import subprocess
     import sys
 
-    from nbrdf_tools.paths import default_cli
+    from nbrdf_tools.common.paths import default_cli
 
     if not default_cli().exists():
         pytest.skip(f"the nbrdf CLI {default_cli()} is not built (make build)")
     out = tmp_path / "bench.json"
-    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_many", "--quick", "--no-progress",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench.many", "--quick", "--no-progress",
                           "--modes", "auto,roughconductor", "--out", str(tmp_path), "--json", str(out)],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]

@@ -1,7 +1,7 @@
 """Spectral RGL measurements (``*_spec.bsdf``, issue 31): the Rust reader evaluated per
 wavelength against Mitsuba's own ``measured`` plugin in spectral variants (the independent
 reference), and its linear sRGB projection against a NumPy float64 integral. No spectral file is
-at hand, so each test writes one from a real RGB measurement (``nbrdf_tools.spectral_rgl``:
+at hand, so each test writes one from a real RGB measurement (``nbrdf_tools.data.spectral_rgl``:
 every cell's RGB value times three smooth basis spectra, at irregular wavelengths)."""
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 from test_rgl_reader import ATOL_OF_PEAK, RTOL, _direction_pairs, build_rgl_eval
 
-from nbrdf_tools import spectral_basis, spectral_rgl
-from nbrdf_tools.paths import default_cli
+from nbrdf_tools.pages import spectral_basis
+from nbrdf_tools.data import spectral_rgl
+from nbrdf_tools.common.paths import default_cli
 
 MATERIALS = ["paper_white_rgb", "cc_iris_purple_gem_rgb"]
 # Irregular steps over the RGL database's 360-1000 nm, so that interpolation between unequal

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from nbrdf_testing import random_layers, write_network
-from nbrdf_tools import metrics
-from nbrdf_tools.render import bsdf_xml, render, render_passes
+from nbrdf_tools.common import metrics
+from nbrdf_tools.common.render import bsdf_xml, render, render_passes
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -29,7 +29,7 @@ PHONG = {"exponent": 40.0, "specular_weight": 0.7}
 
 
 def veach(plates, integrator="bsdf", xml=False, size=VEACH_SIZE):
-    from nbrdf_tools.scenes.veach import load_veach_xml, veach_scene_dict
+    from nbrdf_tools.common.scenes.veach import load_veach_xml, veach_scene_dict
 
     if xml:
         return load_veach_xml(plates, integrator=integrator, resolution=size)
@@ -38,7 +38,7 @@ def veach(plates, integrator="bsdf", xml=False, size=VEACH_SIZE):
 
 @pytest.fixture
 def plates_mask(llvm_variant):
-    from nbrdf_tools.scenes.veach import plate_mask
+    from nbrdf_tools.common.scenes.veach import plate_mask
 
     return plate_mask(veach({"type": "diffuse"}))
 
@@ -49,7 +49,7 @@ def plates_mask(llvm_variant):
 
 @pytest.mark.parametrize("integrator", ["bsdf", "mis"])
 def test_veach_xml_is_the_dict_scene(llvm_variant, integrator, network_file, merl_table):
-    """scenes/veach_mis.xml and nbrdf_tools.scenes.veach give bit-identical renders, with our BSDFs
+    """scenes/veach_mis.xml and nbrdf_tools.common.scenes.veach give bit-identical renders, with our BSDFs
     and built-ins on the plates; no NaN or Inf."""
     cases = [
         {"type": "nbrdf", "filename": str(network_file)},
@@ -70,7 +70,7 @@ def test_veach_xml_is_the_dict_scene(llvm_variant, integrator, network_file, mer
 def test_veach_xml_defaults_and_parameters(llvm_variant, merl_table, tmp_path):
     """The XML loads with its defaults (the built-in plate) and as a user would call it: one
     plate file for all plates, or one per plate, and emitter_samples = 0 for BSDF sampling."""
-    from nbrdf_tools.scenes.veach import VEACH_XML
+    from nbrdf_tools.common.scenes.veach import VEACH_XML
 
     scene = mi.load_file(str(VEACH_XML), resx="32", resy="22")
     assert "RoughPlastic" in str(scene)
@@ -134,7 +134,7 @@ def test_phong_sampling_beats_uniform_on_a_glossy_material(llvm_variant, merl_ta
 
 
 def test_override_xml_replaces_only_the_named_bsdfs():
-    from nbrdf_tools.scenes.kitchen import bsdf_ids, override_xml
+    from nbrdf_tools.common.scenes.kitchen import bsdf_ids, override_xml
 
     text = """<scene version="3.0.0">
       <bsdf type="twosided" id="A"><bsdf type="diffuse"/></bsdf>
@@ -156,7 +156,7 @@ def test_override_xml_replaces_only_the_named_bsdfs():
 def test_kitchen_loads_and_renders_with_nbrdf_and_merl(llvm_variant, shared, network_file, merl_table):
     """The kitchen with the described materials replaced, alternately by an NBRDF and a MERL
     table (one load and one kernel compile: the scene is large), renders without NaN or Inf."""
-    from nbrdf_tools.scenes.kitchen import bsdf_ids, kitchen_path, load_description, load_kitchen, override_xml
+    from nbrdf_tools.common.scenes.kitchen import bsdf_ids, kitchen_path, load_description, load_kitchen, override_xml
 
     path = kitchen_path(shared / "scenes" / "kitchen")
     overrides = load_description()["overrides"]
@@ -232,7 +232,7 @@ def test_ssim_and_flip_on_images_with_known_answers():
 
 
 def test_ground_truth_cache_rerenders_when_inputs_change(llvm_variant, tmp_path):
-    from nbrdf_tools.ground_truth import RenderCache
+    from nbrdf_tools.common.ground_truth import RenderCache
 
     table = tmp_path / "table.binary"
     table.write_bytes(b"one")
@@ -298,7 +298,7 @@ def test_convergence_quick_json(tmp_path):
     out = tmp_path / "result.json"
     # A fresh clone: no shared data; the MERL material is synthesised and trained by the CLI.
     env = {**os.environ, "NBRDF_SHARED": str(tmp_path / "nonexistent")} if can_train else None
-    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.pages.scenes", "--scene", "veach", "--quick",
                           "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress",
                           "--seeds", "2", "--strategies",
                           "uniform,cosine,phong-fit,two-lobe-fit,phong-predicted,tabulated,default",
@@ -349,7 +349,7 @@ def test_convergence_rgl_path_against_measured(tmp_path, shared):
     mine = tmp_path / "my_paint.bsdf"
     mine.write_bytes((shared / "data" / "rgl" / "cc_ibiza_sunset_rgb.bsdf").read_bytes())
     out = tmp_path / "result.json"
-    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "veach", "--quick",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.pages.scenes", "--scene", "veach", "--quick",
                           "--materials", "", "--rgl", str(mine), "--seeds", "3", "--json", str(out),
                           "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress"],
                          capture_output=True, text=True, timeout=300)
@@ -387,7 +387,7 @@ def test_convergence_kitchen_quick_with_the_new_strategies(tmp_path, shared):
     materials = tmp_path / "kitchen_materials.json"
     materials.write_text(json.dumps(description))
     out = tmp_path / "result.json"
-    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--scene", "kitchen", "--quick",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.pages.scenes", "--scene", "kitchen", "--quick",
                           "--kitchen", str(shared / "scenes" / "kitchen"), "--kitchen-materials", str(materials),
                           "--seeds", "2", "--strategies", "cosine,phong-fit,two-lobe-fit,tabulated,default,measured",
                           "--json", str(out), "--out", str(tmp_path / "out"), "--cli", str(cli), "--no-progress"],
@@ -418,7 +418,7 @@ def test_convergence_kitchen_quick_with_the_new_strategies(tmp_path, shared):
 def test_equal_time_summary_is_robust_to_one_bad_seed():
     """Median over seeds: one seed with a firefly (RMSE x100) moves the pooled RMSE, not the
     median; the ratio to measured and the best strategy follow the median."""
-    from nbrdf_tools.convergence import equal_time_summary
+    from nbrdf_tools.pages.scenes import equal_time_summary
 
     rows = []
     for strategy, base in (("cosine", 1.0), ("phong-fit", 0.5), ("measured", 0.6)):
@@ -440,7 +440,7 @@ def test_cost_floor_bounds_the_equal_time_ratio_by_the_scene_s_share_of_the_time
     ratio = RMSE / measured's RMSE, time ratio = seconds / measured's, bound = per-sample ratio x
     sqrt(floor seconds / measured's); medians over seeds; strategies that are not NBRDF sampling
     (measured) have no entry; spp beyond what every strategy reached is ignored."""
-    from nbrdf_tools.convergence import cost_floor
+    from nbrdf_tools.pages.scenes import cost_floor
 
     rows, timings = [], []
     base = {"cosine": (2.0, 0.7), "tabulated": (0.45, 0.75), "measured": (0.5, 1.0)}
@@ -473,7 +473,7 @@ def test_convergence_reports_missing_inputs_before_any_work(tmp_path):
     for extra, expected in ((["--rgl", "cc_ibiza_sunset_rgb"], "cc_ibiza_sunset_rgb.bsdf"),
                             (["--rgl", str(tmp_path / "mine.bsdf")], str(tmp_path / "mine.bsdf")),
                             (["--scene", "kitchen"], "kitchen scene")):
-        run = subprocess.run([sys.executable, "-m", "nbrdf_tools.convergence", "--quick", "--out", str(out),
+        run = subprocess.run([sys.executable, "-m", "nbrdf_tools.pages.scenes", "--quick", "--out", str(out),
                               "--cli", str(cli), "--no-progress", *extra],
                              capture_output=True, text=True, timeout=120, env=env)
         assert run.returncode == 2, run.stderr[-2000:]
@@ -482,7 +482,7 @@ def test_convergence_reports_missing_inputs_before_any_work(tmp_path):
 
 
 def test_rgl_materials_are_accepted_as_paths(tmp_path):
-    from nbrdf_tools.materials import Artefacts
+    from nbrdf_tools.common.materials import Artefacts
 
     mine = tmp_path / "my_material.bsdf"
     mine.write_bytes(b"")
@@ -503,7 +503,7 @@ def test_bench_rays_quick_json(tmp_path):
 
     rgl = SHARED / "data" / "rgl" / "paper_white_rgb.bsdf"
     out = tmp_path / "bench.json"
-    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_rays", "--quick", "--no-progress",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench.rays", "--quick", "--no-progress",
                           "--json", str(out), "--out", str(tmp_path / "bench"), "--cli", str(cli)],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
@@ -557,7 +557,7 @@ def test_bench_rays_runs_in_scalar_rgb(tmp_path):
     """docs/mitsuba.md's scalar rows: one mode, the rust backend, the chosen BSDFs and the reference."""
     cli = _cli_or_skip()
     out = tmp_path / "scalar.json"
-    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench_rays", "--variant", "scalar_rgb", "--bsdfs", "nbrdf",
+    run = subprocess.run([sys.executable, "-m", "nbrdf_tools.bench.rays", "--variant", "scalar_rgb", "--bsdfs", "nbrdf",
                           "--width", "48", "--spp", "1", "--repeats", "1", "--no-progress", "--json", str(out),
                           "--out", str(tmp_path / "bench"), "--cli", str(cli)],
                          capture_output=True, text=True, timeout=300)
@@ -571,7 +571,7 @@ def test_bench_rays_runs_in_scalar_rgb(tmp_path):
 
 def test_command_errors_carry_the_commands_stderr(tmp_path):
     """The scripts' one CLI wrapper: a failing command raises with its exit status and stderr."""
-    from nbrdf_tools import cli
+    from nbrdf_tools.common import cli
 
     exe = _cli_or_skip()
     with pytest.raises(cli.CommandError) as failure:

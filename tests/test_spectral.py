@@ -187,10 +187,10 @@ def test_chi2_in_a_spectral_variant(plugin, sampling, backend, files, restore_va
 
 @pytest.mark.parametrize("plugin", ["nbrdf", "merl"])
 def test_veach_renders_follow_the_rgb_render(plugin, files, restore_variant):
-    """The Veach scene, tiny (nbrdf_tools.variants_report's renders): llvm_ad_mono is the luminance
+    """The Veach scene, tiny (nbrdf_tools.pages.variants's renders): llvm_ad_mono is the luminance
     of llvm_ad_rgb at the same seed (direct lighting is linear in the BSDF value and the lights
     are grey), llvm_ad_spectral_polarized is llvm_ad_spectral, and no image has NaN."""
-    from nbrdf_tools.variants_report import render_variant
+    from nbrdf_tools.pages.variants import render_variant
     from test_variants import LUMINANCE  # written out from Mitsuba's definition there
 
     for variant in ("llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral", "llvm_ad_spectral_polarized"):

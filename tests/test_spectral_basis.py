@@ -1,4 +1,4 @@
-"""``nbrdf_tools.spectral_basis`` (the measurement behind the choice of a spectral network's
+"""``nbrdf_tools.pages.spectral_basis`` (the measurement behind the choice of a spectral network's
 output, docs/results/spectral-basis.md): each candidate reproduces exactly what it can represent
 (closed forms), the sRGB projection of a unit spectrum is white, and the weight count is the RGB
 network's for three outputs."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nbrdf_tools import spectral_basis as sb
+from nbrdf_tools.pages import spectral_basis as sb
 
 
 def test_weights_count_the_network():

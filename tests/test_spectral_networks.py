@@ -3,7 +3,7 @@ coefficients of a clamped uniform cubic B-spline over 360-830 nm (docs/design.md
 networks").
 
 The references are independent of the plugin and of the library: the network's forward pass in
-float64 NumPy (``nbrdf_tools.network``), the basis from SciPy's ``BSpline`` and the sRGB
+float64 NumPy (``nbrdf_tools.common.network``), the basis from SciPy's ``BSpline`` and the sRGB
 projection integrated here from Mitsuba's CIE 1931 and D65 tables. The Dr.Jit twin of the basis
 is held to the C ABI's ``nbrdf_material_eval_spectral``; sampling is checked with Mitsuba's chi^2
 test in a spectral variant."""
@@ -21,7 +21,7 @@ import pytest
 
 from conftest import bsdf_calls, use_variant
 from nbrdf_testing import random_pairs
-from nbrdf_tools import network
+from nbrdf_tools.common import network
 
 COUNT, MIN_NM, MAX_NM = 16, 360.0, 830.0
 PHONG = {"sampling": "phong", "exponent": 30.0, "specular_weight": 0.5}
@@ -362,16 +362,16 @@ def test_distill_evaluates_the_source_at_each_wavelength(restore_variant):
 
 
 def test_spectral_report_quick(tmp_path, restore_variant):
-    """``python -m nbrdf_tools.spectral_report --quick`` on one material: the page opens with its
+    """``python -m nbrdf_tools spectral-networks --quick`` on one material: the page opens with its
     command, states the weights, has a row per network, and the figure is written."""
     use_variant("llvm_ad_spectral")
-    from nbrdf_tools import spectral_report
+    from nbrdf_tools.pages import spectral_networks as spectral_report
 
     out, figure = tmp_path / "spectral.md", tmp_path / "spectral.png"
     argv = ["--quick", "--materials", "Cu", "--out", str(out), "--figure", str(figure), "--work", str(tmp_path)]
     assert spectral_report.main(argv) == 0
     text = out.read_text()
-    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools.spectral_report --quick")
+    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools spectral-networks --quick")
     assert "961 (6-21-21-16)" in text and "675 (6-21-21-3): 1.42x" in text
     assert text.count("| Cu | `llvm_ad_") == 4
     assert figure.stat().st_size > 10_000

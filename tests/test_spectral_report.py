@@ -1,4 +1,4 @@
-"""The pieces of ``python -m nbrdf_tools.spectral_report`` (issue 31), at tiny sizes.
+"""The pieces of ``python -m nbrdf_tools spectral-networks`` (issue 31), at tiny sizes.
 
 References: NumPy float64 log errors, a closed-form interpolation error (a quadratic spectrum:
 the chord of ``a + b l + c l^2`` between samples ``h`` apart is off by ``c (l - l0)(l1 - l)``),
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import use_variant
-from nbrdf_tools import spectral_report
+from nbrdf_tools.pages import spectral_networks as spectral_report
 from test_spectral_networks import spectral_layers
 
 
@@ -123,7 +123,7 @@ def test_report_runs_and_resumes(tmp_path, monkeypatch, restore_variant):
             "--threads", "1", "--no-progress"]
     assert spectral_report.main(argv) == 0
     text = out.read_text()
-    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools.spectral_report --quick")
+    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools spectral-networks --quick")
     assert "961 (6-21-21-16)" in text and "675 (6-21-21-3): 1.42x" in text
     for section in ("## Log error per wavelength", "## Sphere images", "## Sampling the source's spectrum",
                     "## Training"):

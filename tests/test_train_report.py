@@ -1,5 +1,5 @@
-"""The Python-side comparison (nbrdf_tools.compare_materials), the training report
-(nbrdf_tools.train_report) and the RGL tabulation it relies on.
+"""The Python-side comparison (nbrdf_tools.common.compare_materials), the training report
+(nbrdf_tools.pages.training) and the RGL tabulation it relies on.
 
 Short runs only: networks of 100,000 samples and a few epochs, small sphere images.
 """
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from conftest import _cli, _llvm_problem
-from nbrdf_tools import compare_materials as cm
-from nbrdf_tools import train_report
+from nbrdf_tools.common import compare_materials as cm
+from nbrdf_tools.pages import training as train_report
 
 RESOLUTION, SAMPLES = 32, 4000
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 import subprocess
 
-from nbrdf_tools import compare_materials
-from nbrdf_tools.paths import default_cli
+from nbrdf_tools.common import compare_materials
+from nbrdf_tools.common.paths import default_cli
 
 
 def test_short_training_from_a_measurement_matches_measured(llvm_variant, shared, tmp_path):

@@ -2,7 +2,7 @@
 format version 3) by default, learnt at the file's own wavelengths; ``--output-kind rgb`` gives
 the RGB network of its sRGB projection; ``--output-kind spectral`` of an RGB source is refused.
 
-The spectral file is written from a real RGB measurement (``nbrdf_tools.spectral_rgl``, as in
+The spectral file is written from a real RGB measurement (``nbrdf_tools.data.spectral_rgl``, as in
 tests/test_rgl_spectral.py). The references are independent of nbrdf: Mitsuba's own ``measured``
 in ``llvm_ad_spectral`` for the spectrum, and for the projection Mitsuba's ``measured`` on the
 RGB file in ``scalar_rgb`` times the float64 sRGB matrix of the three basis spectra."""
@@ -19,8 +19,9 @@ from test_rgl_reader import _mitsuba_eval
 from test_rgl_spectral import WAVELENGTHS, _mitsuba_spectral
 
 from conftest import use_variant
-from nbrdf_tools import spectral_basis, spectral_rgl
-from nbrdf_tools.paths import default_cli
+from nbrdf_tools.pages import spectral_basis
+from nbrdf_tools.data import spectral_rgl
+from nbrdf_tools.common.paths import default_cli
 
 MATERIAL = "paper_white_rgb"
 #: A short run: enough for both networks to learn the material's shape, small for CI.

@@ -1,13 +1,17 @@
-"""nbrdf_tools: the evaluation and report scripts of nbrdf as one importable package.
+"""nbrdf_tools: nbrdf's results pages, benchmarks, the library command and their shared helpers.
 
-Modules: :mod:`~nbrdf_tools.paths` (where the repository, the shared data and the ``nbrdf`` CLI
-are), :mod:`~nbrdf_tools.cli` (running the CLI), :mod:`~nbrdf_tools.render` (renders, masks,
-EXR/PNG), :mod:`~nbrdf_tools.metrics` (image metrics), :mod:`~nbrdf_tools.network` (the NumPy
-forward pass), :mod:`~nbrdf_tools.scenes` (Veach and kitchen), :mod:`~nbrdf_tools.materials`,
-:mod:`~nbrdf_tools.ground_truth` (cached references), :mod:`~nbrdf_tools.analytic_fit` (GGX,
-Blinn-Phong, ABC and SGD fits in log space). Scripts, each ``python -m nbrdf_tools.X``:
-``demo``, ``convergence``, ``train_report``, ``latent_report``, ``compare_materials``,
-``bench_rays``, ``fidelity_report``.
+``python -m nbrdf_tools`` lists the commands and ``python -m nbrdf_tools COMMAND ...`` runs one.
+Grouped by kind:
+
+* :mod:`~nbrdf_tools.common`: shared helpers (paths, running the CLI, renders and EXR, image
+  metrics, the NumPy network, scenes, test materials, cached references, analytic fits, the
+  two-material comparison);
+* :mod:`~nbrdf_tools.pages`: one generator per page of ``docs/results/``, named after it;
+* :mod:`~nbrdf_tools.bench`: speed benchmarks (rays per second);
+* :mod:`~nbrdf_tools.library`: whole material libraries into networks (a user command);
+* :mod:`~nbrdf_tools.data`: makers of data the project ships or tests with (the pretrained
+  models, spectral RGL files);
+* :mod:`~nbrdf_tools.demo`: ``make demo``.
 
 Modules that render import ``nbrdf_mitsuba`` before Mitsuba (it points Dr.Jit at a usable
 libLLVM); the package itself imports neither.

@@ -5,7 +5,7 @@ ground truth) and with the network (``nbrdf``, Phong-sampled) on the plates, pri
 error between them, and write the EXR renders, a plain side-by-side PNG and the README's
 labelled picture (``--figure``, default docs/images/demo.png).
 
-    python -m nbrdf_tools.demo [--material NAME] [--spp N] [--out DIR] [--figure PNG] [--no-progress]
+    python -m nbrdf_tools demo [--material NAME] [--spp N] [--out DIR] [--figure PNG] [--no-progress]
 
 Needs only the nbrdf CLI (the fits are embedded in it), no shared data.
 """
@@ -21,10 +21,10 @@ import nbrdf_mitsuba  # first: finds a libLLVM for Dr.Jit before Mitsuba starts 
 import mitsuba as mi
 import numpy as np
 
-from nbrdf_tools import cli, metrics, progress
-from nbrdf_tools.paths import REPO, MissingDataError, default_cli, default_out
-from nbrdf_tools.render import render_passes, write_exr, write_png
-from nbrdf_tools.scenes.veach import veach_scene_dict
+from nbrdf_tools.common import cli, metrics, progress
+from nbrdf_tools.common.paths import REPO, MissingDataError, default_cli, default_out
+from nbrdf_tools.common.render import render_passes, write_exr, write_png
+from nbrdf_tools.common.scenes.veach import veach_scene_dict
 
 DEFAULT_MATERIAL = "gold-metallic-paint"
 DEFAULT_FIGURE = REPO / "docs" / "images" / "demo.png"

@@ -2,7 +2,7 @@
 BRDF with its fitted sampling, measures each against its own source, and shows the library at a
 glance.
 
-    python -m nbrdf_tools.library SRC... -o OUT [--train-args "..."] [--only PATTERN] [--force]
+    python -m nbrdf_tools library SRC... -o OUT [--train-args "..."] [--only PATTERN] [--force]
         [--executor local|dask] [--jobs N] [--address tcp://HOST:8786] [--no-progress]
 
 Modules: :mod:`~nbrdf_tools.library.sources` (which files are materials),

@@ -1,4 +1,4 @@
-"""``python -m nbrdf_tools.library SRC... -o OUT``: the command (see the package's docstring)."""
+"""``python -m nbrdf_tools library SRC... -o OUT``: the command (see the package's docstring)."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from nbrdf_tools import cli, progress
+from nbrdf_tools.common import cli, progress
 from nbrdf_tools.library import executors, report, sources, store
 from nbrdf_tools.library.task import Settings
-from nbrdf_tools.paths import MissingDataError, default_cli
+from nbrdf_tools.common.paths import MissingDataError, default_cli
 
 # Bump when what a material's outputs hold changes: every material is then redone.
 FORMAT_VERSION = 1
@@ -25,7 +25,7 @@ EXIT_INTERRUPTED = 130
 
 def parse_args(argv):
     p = argparse.ArgumentParser(
-        prog="python -m nbrdf_tools.library",
+        prog="python -m nbrdf_tools library",
         description="Convert a library of materials (MERL tables .binary, RGL measurements .bsdf, Mitsuba BSDFs as "
                     "load_dict .json or scene .xml) into neural BRDFs with their fitted sampling, each measured "
                     "against its own source; writes OUT/index.json, index.csv, gallery.png and index.html. "
@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
             rows[source.name] = earlier  # a failure of these settings, not retried (--only)
         else:
             rows[source.name] = _pending_row(source, key, "not converted (not selected by --only)")
-    meta = {"command": "python -m nbrdf_tools.library " + shlex.join(argv), "format": FORMAT_VERSION,
+    meta = {"command": "python -m nbrdf_tools library " + shlex.join(argv), "format": FORMAT_VERSION,
             "nbrdf": version, "train_args": list(args.train_args),
             "fit_args": list(args.fit_args), "resolution": args.resolution,
             "metric_samples": args.metric_samples}

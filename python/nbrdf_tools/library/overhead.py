@@ -1,7 +1,7 @@
 """The executors' own cost, measured with no-op tasks: what the library pays per material on
 top of the conversion itself (docs/scale.md's cost model).
 
-    python -m nbrdf_tools.library.overhead [--tasks 200] [--workers 1,2] [--executor local,dask]
+    python -m nbrdf_tools library-overhead [--tasks 200] [--workers 1,2] [--executor local,dask]
 
 For each executor and worker count: the start (pool or local cluster up, and the first no-op
 task back: the workers' interpreter start and their import of the plugin included), then
@@ -45,7 +45,7 @@ def measure(kind: str, workers: int, tasks: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m nbrdf_tools.library.overhead",
+    p = argparse.ArgumentParser(prog="python -m nbrdf_tools library-overhead",
                                 description="The library executors' overhead with no-op tasks: start, "
                                             "milliseconds per task, close.")
     p.add_argument("--tasks", type=int, default=200, help="no-op tasks per measurement (default: %(default)s)")

@@ -32,15 +32,15 @@ from pathlib import Path
 
 import numpy as np
 
-from nbrdf_tools import cli
+from nbrdf_tools.common import cli
 from nbrdf_tools.library.sources import Source
 
-# The metric names of nbrdf_tools.metrics and nbrdf_tools.compare_materials; lower is better
+# The metric names of nbrdf_tools.common.metrics and nbrdf_tools.common.compare_materials; lower is better
 # for all but SSIM.
 METRICS = ("rmse_tonemapped", "ssim", "flip_hdr", "log_error_adaptive", "log_error_uniform")
 HIGHER_IS_BETTER = {"ssim"}
 # Anisotropic networks: the sphere images are also rendered with the tangent frame turned, as
-# nbrdf_tools.fidelity_report does, so that the metrics see the anisotropy.
+# nbrdf_tools.pages.fidelity does, so that the metrics see the anisotropy.
 FRAME_TURNS_DEG = (0.0, 45.0, 90.0)
 # The light of the thumbnail, an index into compare_materials.LIGHT_THETAS_DEG (30 degrees).
 THUMBNAIL_LIGHT = 1
@@ -194,7 +194,7 @@ def train_command(source: Source, network: Path, settings: Settings) -> list:
 def reference_bsdf(source: Source):
     """The source as Mitsuba evaluates it: the ``merl`` table, the ``measured`` RGL data, or the
     Mitsuba BSDF the distiller read."""
-    from nbrdf_tools import compare_materials as cm
+    from nbrdf_tools.common import compare_materials as cm
 
     if source.kind != "mitsuba":
         return cm.load_bsdf(source.path)
@@ -211,8 +211,8 @@ def measure(reference, network, resolution: int, samples: int, anisotropic: bool
     """The metrics of the network against the reference (sphere images under five lights, and
     each frame turn for an anisotropic network: the means; the log-space error over ``samples``
     adaptive and uniform directions) and the thumbnail's pair of linear images (2, H, W, 3)."""
-    from nbrdf_tools import compare_materials as cm
-    from nbrdf_tools import metrics
+    from nbrdf_tools.common import compare_materials as cm
+    from nbrdf_tools.common import metrics
 
     turns = FRAME_TURNS_DEG if anisotropic else (0.0,)
     ref = np.concatenate([cm.render_spheres(reference, resolution, frame_turn_deg=t) for t in turns])
@@ -237,7 +237,7 @@ def thumbnail_png(pair: np.ndarray) -> bytes:
     matplotlib.use("Agg")
     import matplotlib.image
 
-    from nbrdf_tools import metrics
+    from nbrdf_tools.common import metrics
 
     source, network = (metrics.tone_map(image) for image in pair)
     gap = np.ones((source.shape[0], max(2, source.shape[1] // 32), 3))
@@ -265,7 +265,7 @@ def convert(source: Source, settings: Settings, key: str) -> dict:
     step = "train"
     try:
         import_plugin()
-        from nbrdf_tools import compare_materials as cm
+        from nbrdf_tools.common import compare_materials as cm
 
         with tempfile.TemporaryDirectory(prefix="nbrdf-library-") as scratch:
             network_path = Path(scratch) / f"{source.name}.nbrdf.json"

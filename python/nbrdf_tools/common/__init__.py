@@ -1,0 +1,1 @@
+"""Helpers shared by the pages, benchmarks and commands of :mod:`nbrdf_tools`."""

@@ -1,0 +1,598 @@
+"""Train an NBRDF for every table of a set and report how close the networks are.
+
+    python -m nbrdf_tools training [--set sgd|rgl|all] [--materials A,B,...] [--quick] [--out DIR]
+
+Sets (docs/design.md sections 5, 8, 9, 11, 12):
+
+* ``sgd``: the 100 MERL materials as tables synthesised from their published SGD fits
+  (``nbrdf synth --model sgd``); the reference of the metrics is the table.
+* ``rgl``: the real measurements ``SHARED/data/rgl/*.bsdf`` (or ``.bsdf`` paths given with
+  ``--materials``), tabulated onto the MERL grid with
+  ``python -m nbrdf_mitsuba.tabulate_rgl`` (``--rgl-fold mirror`` by default: the table keeps the
+  measurement's non-reciprocity, and training folds phi_d the same way); the reference of the
+  metrics is Mitsuba's ``measured`` BSDF itself, the ground truth. The authors' pretrained NBRDFs
+  of the same materials (``../shared/data/reference-nbrdf/rgl-isotropic/NAME.h5``, imported with
+  ``nbrdf_mitsuba.import_keras``) are compared against the same ground truth.
+
+Every material is trained with adaptive and uniform sampling (``nbrdf train``, the paper's recipe
+unless ``--samples``/``--epochs`` say otherwise), one network after the other (the trainer uses
+every core). Metrics (nbrdf_tools.common.compare_materials, the images and directions of ``nbrdf compare``
+through Mitsuba, for both sets alike): MAE, RMSE, relMSE, PSNR with peak = max(reference)
+(``psnr_peak_ref``), HDR-FLIP (``flip_hdr``) of linear sphere images under five light elevations,
+SSIM (scikit-image) of the tone-mapped images, and the log-space BRDF error.
+
+The default set, ``all``, is ``sgd`` alone when the shared data (RGL measurements) is absent:
+the SGD set runs on the fits embedded in the CLI.
+
+Outputs in ``--out`` (default out/train_report): ``results.csv`` (one row per material and
+method), ``report.md`` (means and standard deviations, adaptive against uniform, ours against the
+authors, worst materials, trainer speed), ``report.png`` (plots), and ``results/SET/*.json`` (one
+per trained network; a rerun skips those already done with the same recipe, so an interrupted run
+resumes), ``networks/`` and ``tables/`` (SGD tables are deleted once both networks of a material
+are done, unless ``--keep-tables``; they take 35 MB each and are re-synthesised in a second).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nbrdf_tools.common import cli
+from nbrdf_tools.common.paths import MissingDataError, default_cli, default_out, shared_dir
+
+SAMPLINGS = ("adaptive", "uniform")
+METHODS = SAMPLINGS + ("authors",)
+QUICK_MATERIALS = {
+    "sgd": ["white-paint", "chrome", "gold-metallic-paint", "blue-fabric", "alumina-oxide"],
+    "rgl": ["paper_white_rgb", "colodur_napoli_4f_rgb", "cc_ibiza_sunset_rgb", "cc_iris_purple_gem_rgb"],
+}
+QUICK_SAMPLES, QUICK_EPOCHS = 100_000, 10
+METRICS = ("mae", "rmse", "relmse", "psnr_peak_ref", "ssim", "flip_hdr", "log_error_adaptive", "log_error_uniform")
+# Stored results made with other metric definitions are recomputed.
+METRICS_VERSION = 2
+CSV_COLUMNS = ["set", "material", "method", "reference", *METRICS, "train_seconds", "wall_seconds", "epochs",
+               "best_epoch", "stopped_early", "best_validation_loss", "samples", "sample_epochs_per_second",
+               "phi_fold", "network"]
+
+
+@dataclass
+class Recipe:
+    samples: int | None  # None: the trainer's default (the paper's 800,000)
+    epochs: int | None  # None: the trainer's default (300, adaptive budget)
+    min_epochs: int | None  # None: the trainer's default (30)
+    patience: int | None  # None: the trainer's default (20)
+    seed: int
+    resolution: int
+    metric_samples: int
+    rgl_fold: str
+    fixed_budget: bool = False  # the trainer's --fixed-budget (the paper's, the defaults before 0.2)
+
+    def key(self, set_name: str) -> dict:
+        """What a stored result must match to be reused."""
+        key = {"samples": self.samples, "epochs": self.epochs, "min_epochs": self.min_epochs,
+               "patience": self.patience, "seed": self.seed, "budget": "fixed" if self.fixed_budget else "adaptive",
+               "resolution": self.resolution, "metric_samples": self.metric_samples, "metrics": METRICS_VERSION}
+        if set_name == "rgl":
+            key["phi_fold"] = self.rgl_fold
+        return {k: v for k, v in key.items() if v is not None or k not in ("min_epochs", "patience")}
+
+
+# --------------------------------------------------------------------------------------------
+# Materials and their tables
+
+
+def list_materials(set_name: str, nbrdf: Path, shared: Path) -> list[str]:
+    if set_name == "sgd":
+        return cli.nbrdf(nbrdf, "list-materials").split()
+    folder = shared / "data" / "rgl"
+    names = sorted(p.name.removesuffix(".bsdf") for p in folder.glob("*.bsdf"))
+    if not names:
+        raise SystemExit(f"error: no RGL measurements (*.bsdf) in {folder}")
+    return names
+
+
+def measured_path(shared: Path, name: str) -> Path:
+    """An RGL measurement: ``name`` is a ``.bsdf`` path or a name in ``SHARED/data/rgl``."""
+    if name.endswith(".bsdf"):
+        return Path(name)
+    return shared / "data" / "rgl" / f"{name}.bsdf"
+
+
+def material_name(name: str) -> str:
+    """The name of a material given by name or as a ``.bsdf`` path."""
+    return Path(name).name.removesuffix(".bsdf") if name.endswith(".bsdf") else name
+
+
+def table_path(out: Path, set_name: str, name: str, recipe: Recipe) -> Path:
+    suffix = f".{recipe.rgl_fold}" if set_name == "rgl" else ""
+    return out / "tables" / set_name / f"{material_name(name)}{suffix}.binary"
+
+
+def ensure_table(out: Path, set_name: str, name: str, recipe: Recipe, nbrdf: Path, shared: Path) -> Path:
+    if set_name == "rgl" and recipe.rgl_fold == "direct":  # `nbrdf train` reads the measurement itself
+        return measured_path(shared, name)
+    path = table_path(out, set_name, name, recipe)
+    if path.is_file():
+        return path
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix(".partial")
+    if set_name == "sgd":
+        cli.run([nbrdf, "synth", "--model", "sgd", "--material", name, "-o", partial])
+    else:
+        cli.run([sys.executable, "-m", "nbrdf_mitsuba.tabulate_rgl", measured_path(shared, name), "-o", partial,
+                 "--phi-fold", recipe.rgl_fold])
+    partial.replace(path)
+    return path
+
+
+def authors_path(shared: Path, name: str) -> Path:
+    """The authors' Keras network of an RGL material (in the shared data)."""
+    return shared / "data" / "reference-nbrdf" / "rgl-isotropic" / f"{material_name(name)}.h5"
+
+
+# --------------------------------------------------------------------------------------------
+# Training and comparing one network
+
+
+def result_path(out: Path, set_name: str, name: str, method: str) -> Path:
+    return out / "results" / set_name / f"{material_name(name)}.{method}.json"
+
+
+def load_result(path: Path, key: dict) -> dict | None:
+    try:
+        result = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return result if result.get("recipe") == key else None
+
+
+def metrics_of(comparison: dict) -> dict:
+    mean = comparison["mean"]
+    values = {k: mean[k] for k in METRICS if k in mean}
+    if values["psnr_peak_ref"] is None:  # infinite (no error), null in JSON
+        values["psnr_peak_ref"] = math.inf
+    return {**values, "log_error_adaptive": comparison["log_error_adaptive"],
+            "log_error_uniform": comparison["log_error_uniform"]}
+
+
+class GroundTruth:
+    """The reference BSDF of one material (Mitsuba's measured BSDF of an RGL measurement, or the
+    ``merl`` BSDF of a table) and its sphere images (rendered once)."""
+
+    def __init__(self, path: Path, resolution: int):
+        from nbrdf_tools.common import compare_materials as cm
+
+        self.bsdf = cm.load_bsdf(path)
+        self.images = cm.render_spheres(self.bsdf, resolution)
+
+    def compare(self, network: Path, recipe: Recipe) -> dict:
+        from nbrdf_tools.common import compare_materials as cm
+
+        c = cm.compare(self.bsdf, network, recipe.resolution, recipe.metric_samples, reference_images=self.images)
+        return c.to_json()
+
+
+def train_one(nbrdf: Path, table: Path, network: Path, sampling: str, recipe: Recipe, fold: str,
+              threads: int | None) -> dict:
+    cmd = [nbrdf, "train", table, "-o", network, "--sampling", sampling, "--seed", recipe.seed, "--quiet"]
+    if fold != "direct":
+        cmd += ["--phi-fold", fold]
+    if recipe.samples is not None:
+        cmd += ["--samples", recipe.samples]
+    if recipe.epochs is not None:
+        cmd += ["--epochs", recipe.epochs]
+    if recipe.min_epochs is not None:
+        cmd += ["--min-epochs", recipe.min_epochs]
+    if recipe.patience is not None:
+        cmd += ["--patience", recipe.patience]
+    if recipe.fixed_budget:
+        cmd += ["--fixed-budget"]
+    if threads is not None:
+        cmd += ["--threads", threads]
+    network.parent.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    cli.run(cmd)
+    wall = time.perf_counter() - start
+    p = json.loads(network.read_text(encoding="utf-8"))["provenance"]
+    return {"train_seconds": p["seconds"], "wall_seconds": wall, "epochs": p["epochs"], "best_epoch": p["best_epoch"],
+            "stopped_early": p["epochs"] < p["max_epochs"], "best_validation_loss": p["best_validation_loss"],
+            "samples": p["samples"], "sample_epochs_per_second": p["samples"] * p["epochs"] / p["seconds"]}
+
+
+def process_material(set_name: str, name: str, out: Path, recipe: Recipe, nbrdf: Path, shared: Path,
+                     threads: int | None, authors: bool, keep_tables: bool, progress) -> list[dict]:
+    """Every method of one material; returns their result records (stored ones where valid)."""
+    key = recipe.key(set_name)
+    methods = list(SAMPLINGS) + (["authors"] if set_name == "rgl" and authors and authors_path(shared, name).is_file()
+                                 else [])
+    fold = recipe.rgl_fold if set_name == "rgl" else "reciprocal"
+    results, truth = [], None
+    for method in methods:
+        path = result_path(out, set_name, name, method)
+        stored = load_result(path, key)
+        if stored is not None:
+            results.append(stored)
+            progress.update(1)
+            continue
+        progress.set_postfix_str(f"{material_name(name)} {method}")
+        record = {"set": set_name, "material": material_name(name), "method": method, "recipe": key,
+                  "reference": "measured" if set_name == "rgl" else "table", "phi_fold": fold}
+        if method == "authors":
+            from nbrdf_mitsuba import import_keras
+
+            network = out / "networks" / set_name / f"{material_name(name)}.authors.nbrdf.json"
+            import_keras.convert(authors_path(shared, name), network)
+            record["phi_fold"] = ""
+        else:
+            table = ensure_table(out, set_name, name, recipe, nbrdf, shared)
+            network = out / "networks" / set_name / f"{material_name(name)}.{method}.nbrdf.json"
+            record.update(train_one(nbrdf, table, network, method, recipe, fold, threads))
+        if truth is None:
+            # The reference: the measurement itself (RGL) or the table (SGD; the `merl` BSDF reads
+            # it with the reciprocal fold the networks were trained with).
+            reference = (measured_path(shared, name) if set_name == "rgl"
+                         else ensure_table(out, set_name, name, recipe, nbrdf, shared))
+            truth = GroundTruth(reference, recipe.resolution)
+        comparison = truth.compare(network, recipe)
+        record.update(metrics_of(comparison))
+        record["per_light"] = comparison["per_light"]
+        record["network"] = str(network.relative_to(out))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+        results.append(record)
+        progress.update(1)
+    if set_name == "sgd" and not keep_tables:
+        table_path(out, set_name, name, recipe).unlink(missing_ok=True)
+    return results
+
+
+# --------------------------------------------------------------------------------------------
+# Report
+
+
+def write_csv(path: Path, results: list[dict]) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        for r in results:
+            writer.writerow({k: r.get(k, "") for k in CSV_COLUMNS})
+
+
+def _fmt(x: float, kind: str) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    if kind in ("psnr_peak_ref",):
+        return f"{x:.2f}"
+    if kind in ("ssim", "flip_hdr"):
+        return f"{x:.4f}"
+    if kind in ("seconds", "epochs"):
+        return f"{x:.1f}"
+    return f"{x:.3e}"
+
+
+def _mean_std(values: list[float], kind: str) -> str:
+    v = np.array([x for x in values if x is not None and math.isfinite(x)], dtype=float)
+    if len(v) == 0:
+        return "-"
+    if len(v) == 1:
+        return _fmt(float(v[0]), kind)
+    return f"{_fmt(float(v.mean()), kind)} ± {_fmt(float(v.std(ddof=1)), kind)}"
+
+
+def _by(results, set_name, method):
+    return {r["material"]: r for r in results if r["set"] == set_name and r["method"] == method}
+
+
+def summary_table(results: list[dict], sets: list[str]) -> list[str]:
+    lines = ["| set | method | n | image MAE | image RMSE | image relMSE | PSNR, peak max(ref) (dB) | SSIM | "
+             "HDR-FLIP | log error (adaptive dirs) | log error (uniform dirs) | seconds | epochs |",
+             "|---|---|---:|---|---|---|---|---|---|---|---|---|---|"]
+    for s in sets:
+        for method in METHODS:
+            rows = list(_by(results, s, method).values())
+            if not rows:
+                continue
+            cell = {k: _mean_std([r[k] for r in rows], k) for k in METRICS}
+            secs = _mean_std([r.get("wall_seconds") for r in rows], "seconds") if method != "authors" else "-"
+            epochs = _mean_std([r.get("epochs") for r in rows], "epochs") if method != "authors" else "-"
+            lines.append(f"| {s} | {method} | {len(rows)} | {cell['mae']} | {cell['rmse']} | {cell['relmse']} | "
+                         f"{cell['psnr_peak_ref']} | {cell['ssim']} | {cell['flip_hdr']} | {cell['log_error_adaptive']} | "
+                         f"{cell['log_error_uniform']} | {secs} | {epochs} |")
+    return lines
+
+
+def adaptive_vs_uniform(results: list[dict], set_name: str) -> list[str]:
+    a, u = _by(results, set_name, "adaptive"), _by(results, set_name, "uniform")
+    common = sorted(set(a) & set(u))
+    if not common:
+        return []
+    n = len(common)
+    lines = [f"Over the {n} {set_name.upper()} materials with both networks (lower is better except "
+             "PSNR and SSIM):", "",
+             "| metric | adaptive better | uniform better | mean adaptive | mean uniform |",
+             "|---|---:|---:|---|---|"]
+    for k in METRICS:
+        higher = k in ("psnr_peak_ref", "ssim")
+        wins = sum((a[m][k] > u[m][k]) if higher else (a[m][k] < u[m][k]) for m in common)
+        losses = sum((a[m][k] < u[m][k]) if higher else (a[m][k] > u[m][k]) for m in common)
+        ma = float(np.mean([a[m][k] for m in common if math.isfinite(a[m][k])]))
+        mu = float(np.mean([u[m][k] for m in common if math.isfinite(u[m][k])]))
+        lines.append(f"| {k} | {wins} / {n} | {losses} / {n} | {_fmt(ma, k)} | {_fmt(mu, k)} |")
+    return lines
+
+
+def ours_vs_authors(results: list[dict]) -> list[str]:
+    a, u, au = _by(results, "rgl", "adaptive"), _by(results, "rgl", "uniform"), _by(results, "rgl", "authors")
+    common = sorted(set(a) & set(au))
+    if not common:
+        return []
+    lines = ["| material | RMSE ours (adaptive) | RMSE ours (uniform) | RMSE authors | RMSE margin | "
+             "SSIM ours (adaptive) | SSIM ours (uniform) | SSIM authors | SSIM margin | at least as close |",
+             "|---|---|---|---|---:|---|---|---|---:|---|"]
+    wins = 0
+    for m in common:
+        ra, sa = a[m]["rmse"], a[m]["ssim"]
+        rau, sau = au[m]["rmse"], au[m]["ssim"]
+        ru = _fmt(u[m]["rmse"], "rmse") if m in u else "-"
+        su = _fmt(u[m]["ssim"], "ssim") if m in u else "-"
+        better = ra <= rau and sa >= sau
+        wins += better
+        lines.append(f"| {m} | {_fmt(ra, 'rmse')} | {ru} | {_fmt(rau, 'rmse')} | {100 * (rau - ra) / rau:+.1f} % | "
+                     f"{_fmt(sa, 'ssim')} | {su} | {_fmt(sau, 'ssim')} | {sa - sau:+.4f} | "
+                     f"{'yes' if better else 'no'} |")
+    ma = np.mean([a[m]["rmse"] for m in common])
+    mau = np.mean([au[m]["rmse"] for m in common])
+    sa_mean = np.mean([a[m]["ssim"] for m in common])
+    sau_mean = np.mean([au[m]["ssim"] for m in common])
+    lines.append(f"| **mean** | {_fmt(ma, 'rmse')} | | {_fmt(mau, 'rmse')} | {100 * (mau - ma) / mau:+.1f} % | "
+                 f"{_fmt(sa_mean, 'ssim')} | | {_fmt(sau_mean, 'ssim')} | {sa_mean - sau_mean:+.4f} | "
+                 f"{wins} / {len(common)} |")
+    lines += ["", "RMSE margin: how much lower our (adaptive) RMSE is than the authors', in percent of theirs; "
+              "SSIM margin: our SSIM minus theirs. Both networks have 675 weights (6-21-21-3)."]
+    return lines
+
+
+def worst(results: list[dict], set_name: str, method: str = "adaptive", count: int = 5) -> list[str]:
+    rows = list(_by(results, set_name, method).values())
+    if not rows:
+        return []
+    by_rmse = sorted(rows, key=lambda r: -r["rmse"])[:count]
+    by_ssim = sorted(rows, key=lambda r: r["ssim"])[:count]
+    return [f"* {set_name.upper()} ({method}), highest image RMSE: "
+            + ", ".join(f"{r['material']} ({_fmt(r['rmse'], 'rmse')})" for r in by_rmse),
+            f"* {set_name.upper()} ({method}), lowest SSIM: "
+            + ", ".join(f"{r['material']} ({_fmt(r['ssim'], 'ssim')})" for r in by_ssim)]
+
+
+def throughput(results: list[dict]) -> list[str]:
+    trained = [r for r in results if r["method"] in SAMPLINGS and r.get("train_seconds")]
+    if not trained:
+        return []
+    sample_epochs = sum(r["samples"] * r["epochs"] for r in trained)
+    seconds = sum(r["train_seconds"] for r in trained)
+    per = [r["sample_epochs_per_second"] for r in trained]
+    return [f"{len(trained)} networks, {sample_epochs / 1e6:.0f} M sample-epochs in {seconds:.0f} s of training: "
+            f"**{sample_epochs / seconds / 1e6:.2f} M samples/s** overall (per network "
+            f"{np.mean(per) / 1e6:.2f} ± {np.std(per, ddof=1) / 1e6 if len(per) > 1 else 0:.2f} M/s; drawing the "
+            "samples and the validation passes are included in the time)."]
+
+
+def plot(path: Path, results: list[dict], sets: list[str]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    has_authors = any(r["method"] == "authors" for r in results)
+    panels = 2 + has_authors
+    fig, axes = plt.subplots(1, panels, figsize=(5.2 * panels, 4.6))
+    colours = {"sgd": "tab:blue", "rgl": "tab:orange"}
+    for s in sets:
+        a, u = _by(results, s, "adaptive"), _by(results, s, "uniform")
+        common = sorted(set(a) & set(u))
+        if not common:
+            continue
+        for ax, value in zip(axes[:2], (lambda r: r["rmse"], lambda r: max(1.0 - r["ssim"], 1e-7))):
+            ax.scatter([value(u[m]) for m in common], [value(a[m]) for m in common], s=14, color=colours[s],
+                       label=f"{s} ({len(common)})")
+    for ax, k in zip(axes[:2], ("image RMSE", "1 - SSIM")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        lo = min(ax.get_xlim()[0], ax.get_ylim()[0])
+        hi = max(ax.get_xlim()[1], ax.get_ylim()[1])
+        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
+        ax.set_xlabel(f"{k}, uniform sampling")
+        ax.set_ylabel(f"{k}, adaptive sampling")
+        ax.set_title(f"{k} per material (below the diagonal: adaptive better)", fontsize=9)
+        ax.legend(fontsize=8)
+    if has_authors:
+        ax = axes[2]
+        a, u, au = (_by(results, "rgl", m) for m in ("adaptive", "uniform", "authors"))
+        names = sorted(set(a) & set(au))
+        x = np.arange(len(names))
+        w = 0.27
+        ax.bar(x - w, [a[n]["rmse"] for n in names], w, label="ours, adaptive")
+        ax.bar(x, [u[n]["rmse"] if n in u else 0 for n in names], w, label="ours, uniform")
+        ax.bar(x + w, [au[n]["rmse"] for n in names], w, label="authors")
+        ax.set_xticks(x, [n.removesuffix("_rgb") for n in names], rotation=20, fontsize=7)
+        ax.set_ylabel("image RMSE against Mitsuba's measured BSDF")
+        ax.set_title("RGL: ours vs the authors' NBRDFs (675 weights each)", fontsize=9)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(out: Path, results: list[dict], sets: list[str], recipe: Recipe, requested: dict,
+                 elapsed: float) -> None:
+    lines = ["# Training report", "",
+             f"Recipe: {recipe.samples or 800_000:,} training samples, at most {recipe.epochs or 100} epochs "
+             f"(early stopping on a 10 % validation set after {recipe.patience or 10} epochs without a 0.1 % "
+             f"improvement, not before epoch {recipe.min_epochs or 30}), Adam 5e-4, batch 512, seed {recipe.seed}"
+             + (f"; RGL tables folded by {recipe.rgl_fold} symmetry" if "rgl" in sets else "")
+             + f". Metrics: {recipe.resolution}x{recipe.resolution} spheres under "
+             f"lights at 0, 30, 45, 60, 75 degrees (means over the five images), log-space error over "
+             f"{recipe.metric_samples:,} directions. References: SGD: the synthesised table; RGL: Mitsuba's "
+             "`measured` BSDF (the measurement itself).",
+             "",
+             f"Machine: {platform.machine()}, {os.cpu_count()} logical CPUs, {platform.system()}; "
+             f"the networks took {sum(r.get('wall_seconds') or 0 for r in results):.0f} s of `nbrdf train` in all "
+             f"(this invocation: {elapsed:.0f} s; results of earlier invocations with the same recipe are reused).", ""]
+    for s in sets:
+        got = len({r['material'] for r in results if r['set'] == s})
+        lines.append(f"* {s.upper()}: {got} of {requested[s]} requested materials done.")
+    lines += ["", "## Mean ± standard deviation over materials", ""] + summary_table(results, sets)
+    lines += ["", "Seconds: wall time of `nbrdf train` per network.", ""]
+    for s in sets:
+        table = adaptive_vs_uniform(results, s)
+        if table:
+            lines += [f"## Adaptive vs uniform sampling ({s.upper()})", ""] + table + [""]
+    if "rgl" in sets:
+        table = ours_vs_authors(results)
+        if table:
+            lines += ["## Ours vs authors on RGL", "",
+                      "Image-space errors against Mitsuba's `measured` BSDF (ground truth).", ""] + table + [""]
+    lines += ["## Worst materials", ""]
+    for s in sets:
+        lines += worst(results, s) + worst(results, s, "uniform")
+    lines += ["", "## Trainer speed", ""] + throughput(results)
+    lines += ["", "![plots](report.png)", ""]
+    (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+# --------------------------------------------------------------------------------------------
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(
+        prog="python -m nbrdf_tools training",
+        description="Train NBRDFs on every table of a set (SGD-synthesised MERL materials, tabulated RGL "
+                    "measurements) with adaptive and uniform sampling and report image-space and log-space "
+                    "errors, timings, and the comparison with the authors' networks on RGL.")
+    p.add_argument("--set", choices=("sgd", "rgl", "all"), default="all",
+                   help="which set (default: all; sgd alone when the shared data has no RGL measurements)")
+    p.add_argument("--materials", help="comma-separated subset of material names (of either set); RGL materials "
+                                       "may be paths of .bsdf measurements")
+    p.add_argument("--samples", type=int, help="training samples per network (default: the trainer's, 800,000)")
+    p.add_argument("--epochs", type=int, help="maximum epochs (default: the trainer's, 300 with early stopping)")
+    p.add_argument("--min-epochs", type=int, help="no early stopping before this epoch (default: the trainer's, 30)")
+    p.add_argument("--patience", type=int,
+                   help="epochs without a 0.1 %% validation improvement before the learning rate drops or "
+                        "training stops (default: the trainer's, 20)")
+    p.add_argument("--fixed-budget", action="store_true",
+                   help="train with the paper's fixed budget (nbrdf train --fixed-budget, the defaults before 0.2)")
+    p.add_argument("--quick", action="store_true",
+                   help=f"a check, not a result: 5 materials per set (unless --materials), {QUICK_SAMPLES:,} samples, "
+                        f"{QUICK_EPOCHS} epochs, 64x64 spheres, 20,000 metric directions (unless given)")
+    p.add_argument("--out", type=Path, default=default_out("train_report"),
+                   help="output folder of everything: results, networks, tables (default: %(default)s)")
+    p.add_argument("--resolution", type=int, help="sphere image size (default: 128, nbrdf compare's)")
+    p.add_argument("--metric-samples", type=int, help="directions of the log-space error (default: 100,000)")
+    p.add_argument("--rgl-fold", choices=("mirror", "reciprocal", "direct"), default="mirror",
+                   help="how RGL tables fold phi_d: mirror keeps the measurement's non-reciprocity (default), "
+                        "reciprocal is a standard MERL table; direct: no table, `nbrdf train X.bsdf` learns "
+                        "the measurement itself")
+    p.add_argument("--seed", type=int, default=0, help="training seed (default: 0)")
+    p.add_argument("--threads", type=int, help="trainer threads (default: one per core)")
+    p.add_argument("--no-authors", action="store_true", help="skip the authors' networks on RGL")
+    p.add_argument("--keep-tables", action="store_true", help="keep the synthesised SGD tables (35 MB each)")
+    p.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
+    p.add_argument("--shared", type=Path, default=shared_dir(),
+                   help="the shared data folder with data/rgl and data/reference-nbrdf (default: %(default)s)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    from tqdm import tqdm
+
+    try:
+        cli.check_cli(args.cli)
+    except MissingDataError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    recipe = Recipe(
+        samples=args.samples if args.samples is not None else (QUICK_SAMPLES if args.quick else None),
+        epochs=args.epochs if args.epochs is not None else (QUICK_EPOCHS if args.quick else None),
+        min_epochs=args.min_epochs,
+        patience=args.patience,
+        seed=args.seed,
+        resolution=args.resolution or (64 if args.quick else 128),
+        metric_samples=args.metric_samples or (20_000 if args.quick else 100_000),
+        rgl_fold=args.rgl_fold,
+        fixed_budget=args.fixed_budget,
+    )
+    wanted = [m.strip() for m in args.materials.split(",") if m.strip()] if args.materials else None
+    have_rgl = (args.shared / "data" / "rgl").is_dir()
+    sets = ["sgd", "rgl"] if args.set == "all" else [args.set]
+    if args.set == "all" and not have_rgl and not any(m.endswith(".bsdf") for m in wanted or []):
+        print(f"note: {args.shared}/data/rgl not found: the RGL set is left out (pass --shared or set NBRDF_SHARED)")
+        sets = ["sgd"]
+    plan: list[tuple[str, str]] = []
+    requested = {}
+    for s in sets:
+        paths = [m for m in wanted or [] if m.endswith(".bsdf")] if s == "rgl" else []
+        missing = [m for m in paths if not Path(m).is_file()]
+        if missing:
+            print(f"error: no such RGL measurement: {', '.join(missing)}", file=sys.stderr)
+            return 1
+        if s == "rgl" and not have_rgl and not paths:
+            print(f"error: {args.shared}/data/rgl not found (pass --shared, set NBRDF_SHARED, or give .bsdf paths "
+                  "with --materials)", file=sys.stderr)
+            return 1
+        try:
+            available = (list_materials(s, args.cli, args.shared) if s == "sgd" or have_rgl else []) + paths
+        except cli.CommandError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 1
+        if wanted is not None:
+            names = [m for m in wanted if m in available]
+        elif args.quick:
+            names = [m for m in QUICK_MATERIALS[s] if m in available][:5]
+        else:
+            names = available
+        requested[s] = len(names)
+        plan += [(s, n) for n in names]
+    if wanted is not None:
+        known = {n for _, n in plan}
+        unknown = [m for m in wanted if m not in known]
+        if unknown:
+            print(f"error: unknown material(s) in the chosen set(s): {', '.join(unknown)}", file=sys.stderr)
+            return 1
+    if not plan:
+        print("error: no materials to train", file=sys.stderr)
+        return 1
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    steps = sum(len(SAMPLINGS) + (s == "rgl" and not args.no_authors and authors_path(args.shared, n).is_file())
+                for s, n in plan)
+    start = time.perf_counter()
+    results: list[dict] = []
+    with tqdm(total=steps, desc="train_report", unit="net", disable=args.no_progress) as progress:
+        for s, name in plan:
+            try:
+                results += process_material(s, name, out, recipe, args.cli, args.shared, args.threads,
+                                            not args.no_authors, args.keep_tables, progress)
+            except (RuntimeError, OSError, ValueError) as error:  # CommandError included: its stderr shown
+                print(f"error: {s} {name}: {error}", file=sys.stderr)
+                return 1
+    write_csv(out / "results.csv", results)
+    write_report(out, results, sets, recipe, requested, time.perf_counter() - start)
+    plot(out / "report.png", results, sets)
+    print(f"wrote {out / 'results.csv'}, {out / 'report.md'} and {out / 'report.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
