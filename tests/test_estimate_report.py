@@ -27,7 +27,7 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     before = stored.stat().st_mtime_ns
     assert main(argv) == 0
     assert stored.stat().st_mtime_ns == before  # resumed, not re-estimated
-    assert "| mitsuba-roughplastic | nbrdf |" in out.read_text() and "prior strength" in out.read_text()
+    assert "| mitsuba-roughplastic | nbrdf |" in out.read_text() and "pull strength" in out.read_text()
     # --stored-only estimates nothing: a model never run is listed as missing.
     assert main(["--quick", "--work", str(work), "--models", "nbrdf,principled", "--out", str(out),
                  "--stored-only"]) == 0

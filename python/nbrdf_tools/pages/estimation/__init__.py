@@ -1,7 +1,8 @@
 """Material estimation from images, measured (issue 33).
 
-    python -m nbrdf_tools estimation [--out docs/results/estimation.md] [--work out/estimation]
-                                          [--materials A,B] [--models A,B] [--steps N] [--quick]
+    python -m nbrdf_tools estimation [--work out/estimation] [--out WORK/estimation.md]
+                                     [--materials A,B] [--models A,B] [--steps N] [--seed S] [--quick]
+    python -m nbrdf_tools estimation --stored-only [--out docs/results/estimation.md]
 
 For each ground-truth material (the four shared RGL measurements through Mitsuba's ``measured``,
 two MERL tables made by ``nbrdf synth`` through the ``merl`` plugin, one Mitsuba BSDF) it renders
@@ -11,13 +12,16 @@ images, and measures each estimate on novel views under novel lights (three pair
 tone-mapped RMSE, SSIM, HDR-FLIP of :mod:`nbrdf_tools.common.metrics`) and in BRDF space against the
 truth (the mean log error of :func:`nbrdf_tools.common.compare_materials.log_error`, uniform
 directions). Each (material, model) is stored in ``WORK/MATERIAL/MODEL.result.json`` as it
-finishes; a rerun skips those done (resumable; ``--stored-only`` tabulates the stored results
-alone and lists the cases not run), and refuses a work folder whose results were estimated with
-other views, steps, samples or seed.
-Writes the Markdown table per material and model, the seconds of each estimate, the prior's
-strength each ``nbrdf`` estimate chose by its held-out training view, and a figure (truth and
+finishes; a rerun skips those done (resumable; ``--stored-only --work WORK`` tabulates the stored
+results alone and lists the cases not run), and refuses a work folder whose results were estimated
+with other views, steps, samples or seed.
+Writes the run's page: the Markdown table per material and model, the seconds of each estimate,
+the candidate each ``nbrdf`` estimate chose by its held-out training view, and a figure (truth and
 every estimate at the first novel pair). A stored estimate whose novel pairs were not today's is
 measured again, not estimated again.
+
+``--stored-only`` without ``--work`` writes the results page, docs/results/estimation.md, whole
+from the figures checked in beside it (:mod:`nbrdf_tools.pages.estimation.page`).
 
 Beside the estimates, each material gets the network's ceiling, ``nbrdf-from-truth``: the same
 675-weight network distilled from the truth's BRDF itself (``python -m nbrdf_mitsuba.distill``,
@@ -56,17 +60,17 @@ MITSUBA_TRUTH = {"type": "roughplastic", "alpha": 0.15,
 VIEWS = ["0, 0, 4", "3, 1, 2.5", "-2.5, 2, 2.5", "0.5, -1.5, 3.6", "3.5, -1, -1.5", "-1.5, 3.5, 1.5"]
 LIGHTS = [("3, 3, 4", 40.0), ("-4, 2, 1", 25.0)]
 NOVEL_VIEW, NOVEL_LIGHT = "-3, -0.5, 2.8", ("1, 4, 2", 40.0)
-#: Novel (view, light) pairs, each image lit by its light alone; the first is the one the rounds
-#: before 8 measured alone. The others put the light where no training light was (below left,
-#: low on the right) and look from where no training view did, so a score is not one highlight's.
+#: Novel (view, light) pairs, each image lit by its light alone; the first keeps the file names it
+#: had when it was measured alone. The others put the light where no training light was (below
+#: left, low on the right) and look from where no training view did, so a score is not one
+#: highlight's.
 NOVEL_PAIRS = [(NOVEL_VIEW, NOVEL_LIGHT), ("1.5, 3, 2.5", ("-2, -3, 3", 30.0)),
                ("-0.5, -3.5, 2", ("4, 0, 1.5", 30.0))]
-#: 200 steps: at 100 the analytic baselines were still falling on the MERL truths (principled on
-#: red-specular-plastic 0.0397 at 100, 0.0303 at 200); an estimate of the prior stays under 3
-#: minutes on two cores (docs/results/estimation.md, round 9).
+#: 200 steps: at 100 the analytic baselines were still falling on the MERL truths, and an estimate
+#: of the prior stays within a few minutes on two cores (docs/estimation.md, "Defaults, and why").
 #: The estimates' novel renders take ``measure_spp`` (the truth's more, below): at the training
 #: references' 128 spp the renders' noise was most of the ceiling's error on the MERL truths
-#: (docs/results/estimation.md, round 11).
+#: (docs/results/estimation.md, "Setup").
 FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "measure_spp": 4096, "spp": 8, "steps": 200,
         "ceiling_training": []}
 #: The ceiling's distillation is cut to a few thousand pairs and epochs in the quick run (a test).
@@ -419,10 +423,11 @@ def table(results: list[dict], models: list[str]) -> list[str]:
 
 
 def chosen_strengths(results: list[dict], work: Path) -> list[str]:
-    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (the code
-    penalty's and the pull's strengths from the decoded start), or the common start without the
-    prior where the albedo check rejected the decoded network, the held-out losses of the
-    candidates and the rejected albedos (from the network file's provenance)."""
+    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (the code strength
+    and the pull strength from the decoded start), or the common start without the prior where
+    the albedo check rejected the decoded network, the held-out losses of the candidates and the
+    rejected albedos (from the network file's provenance; a network written before the strengths
+    had these names records them as ``prior_weight`` and ``code_prior``)."""
     lines = []
     for r in results:
         path = work / r["material"] / "nbrdf.nbrdf.json"
@@ -431,9 +436,11 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         provenance = json.loads(path.read_text()).get("provenance", {})
         losses = provenance.get("held_out_losses") or {}
         text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
+        pull = provenance.get("pull_strength", provenance.get("prior_weight"))
+        code = provenance.get("code_strength", provenance.get("code_prior"))
         chosen = ("the common start, no prior (the result is the no-prior estimate)"
-                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}"
-                  + (f", code penalty {provenance['code_prior']}" if provenance.get("code_prior") is not None else ""))
+                  if provenance.get("start") == "common" else f"pull strength {pull}"
+                  + (f", code strength {code}" if code is not None else ""))
         rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
                      + (f"; albedo over the bound, rejected: {rejected}" if rejected else ""))
@@ -484,8 +491,10 @@ def summary(results: list[dict]) -> list[str]:
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m nbrdf_tools estimation", description=__doc__.split("\n")[0])
-    p.add_argument("--out", type=Path, help="the Markdown report (default: WORK/estimation.md)")
-    p.add_argument("--work", type=Path, default=default_out("estimation"), help="working folder (resumable)")
+    p.add_argument("--out", type=Path,
+                   help="the Markdown page (default: WORK/estimation.md; with --stored-only alone: "
+                        "docs/results/estimation.md)")
+    p.add_argument("--work", type=Path, help=f"working folder (resumable; default: {default_out('estimation')})")
     p.add_argument("--materials", help="comma-separated subset of the materials")
     p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
@@ -505,7 +514,12 @@ def parser() -> argparse.ArgumentParser:
                    help=f"leave out {CEILING}, the network distilled from the truth's BRDF (the estimates' ceiling)")
     p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
     p.add_argument("--stored-only", action="store_true",
-                   help="estimate nothing: tabulate the results stored in WORK, list the cases missing")
+                   help="estimate nothing: without --work, write the results page from the stored figures "
+                        "(--stored); with --work, tabulate the results stored there and list the cases missing")
+    p.add_argument("--stored", type=Path, metavar="FILE",
+                   help="with --stored-only: the stored figures the results page is written from (default: "
+                        "docs/results/estimation/stored.json; python -m nbrdf_tools estimation-seeds --stored "
+                        "writes one)")
     return p
 
 
@@ -520,6 +534,13 @@ def given_counts(args: argparse.Namespace, keys: tuple[str, ...]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
+    if args.stored is not None and (not args.stored_only or args.work is not None):
+        raise SystemExit("--stored goes with --stored-only and without --work (the figures come from one of them)")
+    if args.stored_only and args.work is None:
+        from nbrdf_tools.pages.estimation import page
+
+        return page.write(args.stored or page.default_stored(), args.out or REPO / page.PAGE,
+                          None if args.stored is None else str(args.stored))
     import nbrdf_mitsuba  # noqa: F401  (first: registers the plugins, finds a libLLVM)
     import mitsuba as mi
 
@@ -534,7 +555,7 @@ def main(argv: list[str] | None = None) -> int:
     bad = set(models) - set(MODELS)
     if bad:
         raise SystemExit(f"unknown models: {', '.join(sorted(bad))} (these are: {', '.join(MODELS)})")
-    work = args.work
+    work = args.work or default_out("estimation")
     work.mkdir(parents=True, exist_ok=True)
     chosen = materials(work, args.quick, args.materials.split(",") if args.materials else None)
     results, missing = [], []
@@ -576,8 +597,9 @@ def main(argv: list[str] | None = None) -> int:
                  "what the network's form leaves; the rest of an estimate's is what the few images and the "
                  "optimisation leave.", ""]),
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
-             "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
-             f"training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the weight phase's pull toward the "
+             "The `nbrdf` estimates' start and strengths (the code strength, the code phase's Gaussian penalty "
+             f"toward the training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the pull strength, the weight "
+             "phase's pull toward the "
              f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code), chosen per estimate "
              "by its last training view, held out; where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "

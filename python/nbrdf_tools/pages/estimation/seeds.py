@@ -1,14 +1,16 @@
 """The estimation report over several seeds: the stored results of one run per seed, together.
 
     python -m nbrdf_tools estimation-seeds --work out/estimation out/estimation-seed1 ...
-        [--out seeds.md]
+        [--out seeds.md] [--stored docs/results/estimation/stored.json]
 
 Each ``--work`` folder holds the stored results of one run of :mod:`nbrdf_tools.pages.estimation`
 (same images, steps and samples; its own ``--seed``). Per material and model, the novel-view RMSE
 of each seed, their mean and spread; then the report's summary of the means (the lowest model per
 material, the prior over the best analytic model, the prior against no prior). A single seed's
 margin of a few percent is within the estimates' spread over seeds; the mean is what compares
-models. Nothing is estimated or measured here: run each seed's report first.
+models. Nothing is estimated or measured here: run each seed's report first. ``--stored FILE``
+writes the folders' results as the stored figures of the results page
+(:mod:`nbrdf_tools.pages.estimation.page`).
 """
 
 from __future__ import annotations
@@ -107,7 +109,11 @@ def parser() -> argparse.ArgumentParser:
                                 description=__doc__.split("\n")[0])
     p.add_argument("--work", type=Path, nargs="+", required=True,
                    help="the work folders of the seeds' runs of the report, one seed each")
-    p.add_argument("--out", type=Path, help="the Markdown page (default: print it)")
+    p.add_argument("--out", type=Path, help="the Markdown page (default: print it, unless --stored is given)")
+    p.add_argument("--stored", type=Path, metavar="FILE",
+                   help="also write the folders' results as the stored figures the results page is written from "
+                        "(python -m nbrdf_tools estimation --stored-only; the checked-in file is "
+                        "docs/results/estimation/stored.json)")
     return p
 
 
@@ -132,10 +138,16 @@ def main(argv: list[str] | None = None) -> int:
              *table(cases, seeds), "", *report.summary(mean_results(cases)), "",
              *([f"Not run at every seed (means over fewer): {', '.join(incomplete)}.", ""] if incomplete else [])]
     text = "\n".join(lines)
+    if args.stored:
+        from nbrdf_tools.pages.estimation import page
+
+        args.stored.parent.mkdir(parents=True, exist_ok=True)
+        args.stored.write_text(page.dump(page.from_results(results, args.work)))
+        print(f"wrote {args.stored}")
     if args.out:
         args.out.write_text(text)
         print(f"wrote {args.out}")
-    else:
+    elif not args.stored:
         print(text)
     return 0
 

@@ -1,0 +1,107 @@
+"""docs/results/estimation.md is exactly what its opening command writes from the figures checked
+in beside it (docs/results/estimation/stored.json), and its numbers are the stored figures'
+means, spreads and ratios, recomputed here in float64 (nothing is estimated or rendered)."""
+
+from __future__ import annotations
+
+import json
+import statistics
+
+import pytest
+
+from nbrdf_tools.common.paths import REPO
+from nbrdf_tools.pages.estimation import main, seeds
+
+PAGE = REPO / "docs" / "results" / "estimation.md"
+STORED = REPO / "docs" / "results" / "estimation" / "stored.json"
+
+
+def row(text, material, model):
+    (line,) = [x for x in text.splitlines() if x.startswith(f"| {material} | {model} |")]
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_the_page_is_what_its_command_writes(tmp_path):
+    first = PAGE.read_text().splitlines()[:3]
+    assert first == ["```sh", "python -m nbrdf_tools estimation --stored-only --out docs/results/estimation.md", "```"]
+    out = tmp_path / "estimation.md"
+    assert main(["--stored-only", "--out", str(out)]) == 0
+    assert out.read_bytes() == PAGE.read_bytes(), \
+        "docs/results/estimation.md is not what its opening command writes: run it and commit the page"
+    assert (PAGE.parent / json.loads(STORED.read_text())["figure"]["path"]).is_file()
+
+
+def test_the_tables_numbers_are_the_stored_figures():
+    stored, text = json.loads(STORED.read_text()), PAGE.read_text()
+    figures: dict[tuple[str, str], dict] = {}
+    for r in stored["results"]:
+        figures.setdefault((r["material"], r["model"]), {})[r.get("seed")] = r["rmse_tonemapped"]
+    assert len(figures) == 42
+    for (material, model), by_seed in figures.items():
+        cells = row(text, material, model)
+        values = list(by_seed.values())
+        assert float(cells[3]) == pytest.approx(statistics.fmean(values), abs=5e-5)
+        if len(values) > 1:
+            assert float(cells[4]) == pytest.approx(statistics.stdev(values), abs=5e-5)
+            assert cells[5] == f"{min(values):.4f}-{max(values):.4f}"
+        analytic = [statistics.fmean(v.values()) for (m, mod), v in figures.items()
+                    if m == material and mod in ("principled", "roughconductor", "roughplastic")]
+        assert float(cells[6].rstrip("x")) == pytest.approx(statistics.fmean(values) / min(analytic), abs=5e-3)
+        prior = figures[material, "nbrdf"]
+        if model not in ("nbrdf", "nbrdf-from-truth"):
+            shared = [s for s in by_seed if s in prior]
+            assert cells[7] == f"{sum(prior[s] < by_seed[s] for s in shared)} of {len(shared)}"
+    # The six-seed rows the page is read for.
+    assert row(text, "rgl-paper_white", "nbrdf")[2] == "0-5"
+    assert row(text, "rgl-colodur_napoli_4f", "principled")[2] == "0-2, 4"
+    assert row(text, "merl-red-specular-plastic", "nbrdf-no-prior")[7] == "5 of 6"
+    measured = [m for m in {m for m, _ in figures} if not m.startswith("mitsuba-")]
+    ratios = [statistics.fmean(figures[m, "nbrdf"].values())
+              / min(statistics.fmean(v.values()) for (mm, mod), v in figures.items()
+                    if mm == m and mod in ("principled", "roughconductor", "roughplastic")) for m in measured]
+    assert f"* mean over the 6 measured materials (RGL and MERL): {statistics.fmean(ratios):.2f}x" in text
+    prior_wall = [r["seconds"] for r in stored["results"] if r["model"] == "nbrdf" and "seconds" in r]
+    assert f"| nbrdf | {min(prior_wall)}-{max(prior_wall)} |" in text
+
+
+def work_result(work, material, model, rmse, seed):
+    folder = work / material
+    folder.mkdir(parents=True, exist_ok=True)
+    result = {"material": material, "model": model, "rmse_tonemapped": rmse, "seconds": 10.0 + rmse,
+              "cpu_seconds": 20.0, "novel": [{"rmse_tonemapped": rmse}] * 3,
+              "novel_pairs": [["0, 0, 4", "1, 1, 1", 10.0]], "novel_spp": 64, "truth_spp": 256}
+    if seed is not None:
+        result["settings"] = {"views": 2, "steps": 7, "spp": 4, "seed": seed}
+    (folder / f"{model}.result.json").write_text(json.dumps(result))
+
+
+def test_work_folders_collected_into_a_stored_file_give_the_page(tmp_path):
+    rmse = {("rgl-paper_white", "nbrdf"): [0.010, 0.014], ("rgl-paper_white", "principled"): [0.015, 0.012]}
+    works = [tmp_path / f"seed{seed}" for seed in (0, 1)]
+    for seed, work in enumerate(works):
+        for (material, model), values in rmse.items():
+            work_result(work, material, model, values[seed], seed)
+        work_result(work, "rgl-paper_white", "nbrdf-from-truth", 0.005, None)  # in both: counted once
+    stored, out = tmp_path / "stored.json", tmp_path / "page.md"
+    assert seeds.main(["--work", *map(str, works), "--stored", str(stored)]) == 0
+    collected = json.loads(stored.read_text())
+    assert collected["settings"]["steps"] == 7 and collected["settings"]["novel_spp"] == 64
+    assert [(r["model"], r.get("seed")) for r in collected["results"]] == [
+        ("nbrdf", 0), ("nbrdf", 1), ("principled", 0), ("principled", 1), ("nbrdf-from-truth", None)]
+    assert collected["results"][0]["rmse_per_pair"] == [0.010] * 3
+    assert main(["--stored-only", "--stored", str(stored), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert text.startswith(f"```sh\npython -m nbrdf_tools estimation --stored-only --stored {stored} --out ")
+    cells = row(text, "rgl-paper_white", "nbrdf")
+    assert cells[2:6] == ["0-1", "0.0120", f"{statistics.stdev([0.010, 0.014]):.4f}", "0.0100-0.0140"]
+    assert cells[6] == f"{0.012 / 0.0135:.2f}x"
+    assert row(text, "rgl-paper_white", "principled")[7] == "1 of 2"
+    assert row(text, "rgl-paper_white", "nbrdf-from-truth")[2:4] == ["-", "0.0050"]
+    assert "2 training views" in text and "7 steps, 4 spp" in text and "at 64 spp against the truth's 256" in text
+
+
+def test_stored_goes_with_stored_only_and_without_work(tmp_path):
+    with pytest.raises(SystemExit, match="--stored goes with --stored-only"):
+        main(["--stored", str(STORED), "--out", str(tmp_path / "x.md")])
+    with pytest.raises(SystemExit, match="--stored goes with --stored-only"):
+        main(["--stored-only", "--stored", str(STORED), "--work", str(tmp_path)])
