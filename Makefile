@@ -93,10 +93,12 @@ install: build
 	  'Name: nbrdf' 'Description: Neural BRDFs and MERL tables (C ABI of nbrdf)' 'Version: $(VERSION)' \
 	  'Libs: -L$${libdir} -lnbrdf_ffi' 'Cflags: -I$${includedir}' > $(DESTDIR)$(LIBDIR)/pkgconfig/nbrdf.pc
 
-# The main job on embedded data (about a minute): table, network and Phong lobe of one material,
-# the Veach scene rendered with both; writes the README's picture docs/images/demo.png and out/demo/.
+# The main job on embedded data (about a minute): table, network and sampling fit of one material,
+# the Veach scene rendered with both; writes under out/demo/ only. `make demo DEMO_ARGS=--docs-figure`
+# writes the labelled picture to the README's docs/images/demo.png instead.
+DEMO_ARGS ?=
 demo: setup
-	$(PY) -m nbrdf_tools.demo
+	$(PY) -m nbrdf_tools demo $(DEMO_ARGS)
 
 # `make test` on CI's two cores: the Rust tests' build runs beside the release builds (its own
 # profile directory, so cargo does not serialise them, and the release crates' single codegen unit
