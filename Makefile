@@ -11,9 +11,9 @@ TRAIN_LIB := target/release/libnbrdf_train.so
 CLI := target/release/nbrdf
 PLUGIN_SOURCES := $(shell find mitsuba-plugin -name '*.py' -not -path '*/build/*') mitsuba-plugin/pyproject.toml nbrdf-ffi/include/nbrdf.h nbrdf-ffi/train/include/nbrdf_train.h
 
-.PHONY: setup build install demo test test-rust test-python test-cuda bench lint clean FORCE
+.PHONY: setup build install demo test test-rust test-python test-cuda bench lint clean chromium FORCE
 
-setup: $(VENV)/.plugin-installed llvm
+setup: $(VENV)/.plugin-installed llvm chromium
 
 # Python environment: Mitsuba, Dr.Jit and the script and test dependencies, and the scripts'
 # package nbrdf_tools (editable: `python -m nbrdf_tools scenes` runs this checkout's code).
@@ -59,6 +59,22 @@ llvm: $(VENV)/.plugin-installed
 	  $(PY) -m nbrdf_mitsuba.llvm; \
 	fi
 
+# tests/test_library_page.py sorts the library's index.html in headless Chromium through its
+# chromedriver; install Debian's chromium and chromium-driver only when either is missing. Only a
+# test needs them: elsewhere say how, and the test is skipped, naming what is missing.
+chromium:
+	@if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then \
+	  if command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+	    echo "installing chromium and chromium-driver for the library page's browser test"; \
+	    packages="chromium chromium-driver"; \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$packages >/dev/null || \
+	      { apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$packages >/dev/null; } || \
+	      echo "warning: could not install $$packages; tests/test_library_page.py will be skipped"; \
+	  else \
+	    echo "note: no chromium or chromedriver found; tests/test_library_page.py will be skipped (Debian: sudo apt-get install chromium chromium-driver)"; \
+	  fi; \
+	fi
+
 # C users: `make install PREFIX=...` installs the nbrdf command, libnbrdf_ffi (SONAME
 # libnbrdf_ffi.so.$(SOVERSION)), nbrdf.h and a pkg-config file nbrdf.pc (see examples/c/).
 PREFIX ?= /usr/local
@@ -77,10 +93,12 @@ install: build
 	  'Name: nbrdf' 'Description: Neural BRDFs and MERL tables (C ABI of nbrdf)' 'Version: $(VERSION)' \
 	  'Libs: -L$${libdir} -lnbrdf_ffi' 'Cflags: -I$${includedir}' > $(DESTDIR)$(LIBDIR)/pkgconfig/nbrdf.pc
 
-# The main job on embedded data (about a minute): table, network and Phong lobe of one material,
-# the Veach scene rendered with both; writes the README's picture docs/images/demo.png and out/demo/.
+# The main job on embedded data (about a minute): table, network and sampling fit of one material,
+# the Veach scene rendered with both; writes under out/demo/ only. `make demo DEMO_ARGS=--docs-figure`
+# writes the labelled picture to the README's docs/images/demo.png instead.
+DEMO_ARGS ?=
 demo: setup
-	$(PY) -m nbrdf_tools.demo
+	$(PY) -m nbrdf_tools demo $(DEMO_ARGS)
 
 # `make test` on CI's two cores: the Rust tests' build runs beside the release builds (its own
 # profile directory, so cargo does not serialise them, and the release crates' single codegen unit

@@ -64,7 +64,9 @@ def _cell(column: str, value) -> str:
 
 _SCRIPT = """
 const table = document.getElementById("materials");
-table.querySelectorAll("th[data-column]").forEach((th, index) => {
+table.querySelectorAll("th[data-column]").forEach(th => {
+  // The header's own position: the thumbnail column before it has no data-column.
+  const index = th.cellIndex;
   th.addEventListener("click", () => {
     const ascending = th.dataset.order !== "asc";
     table.querySelectorAll("th").forEach(h => delete h.dataset.order);
