@@ -16,8 +16,9 @@ SMALL = ["--samples", "30000", "--epochs", "30", "--size", "64", "--spp", "4", "
 def test_the_anisotropic_network_renders_much_closer_than_the_isotropic_one(llvm_variant, tmp_path):
     from nbrdf_tools.pages.anisotropic import main
 
-    assert main(["--out", str(tmp_path), *SMALL]) == 0
+    assert main(["--out", str(tmp_path / "anisotropic.md"), "--data", str(tmp_path), *SMALL]) == 0
     result = json.loads((tmp_path / "anisotropic.json").read_text())
+    assert "| anisotropic (`--anisotropy on`) |" in (tmp_path / "anisotropic.md").read_text()
     assert result["networks"]["on"]["anisotropic"] is True
     assert result["networks"]["off"]["anisotropic"] is False
     aniso, iso = result["errors"]["anisotropic NBRDF"], result["errors"]["isotropic NBRDF"]
@@ -29,5 +30,5 @@ def test_bad_arguments_are_usage_errors(tmp_path):
     from nbrdf_tools.pages.anisotropic import main
 
     with pytest.raises(SystemExit) as exit_info:
-        main(["--out", str(tmp_path), "--alpha-u", "0"])
+        main(["--data", str(tmp_path), "--alpha-u", "0"])
     assert exit_info.value.code == 2

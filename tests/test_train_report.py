@@ -134,7 +134,7 @@ def _read_csv(path: Path) -> list[dict]:
 
 def test_quick_report_on_one_sgd_material_writes_csv_markdown_and_plot(cli, tmp_path):
     out = tmp_path / "report"
-    argv = ["--quick", "--set", "sgd", "--materials", "white-paint", "--out", str(out), "--no-progress",
+    argv = ["--quick", "--set", "sgd", "--materials", "white-paint", "--work", str(out), "--no-progress",
             "--epochs", "3", "--cli", str(cli)]
     assert train_report.main(argv) == 0
     rows = _read_csv(out / "results.csv")
@@ -157,13 +157,24 @@ def test_quick_report_on_one_sgd_material_writes_csv_markdown_and_plot(cli, tmp_
     before = stored.stat().st_mtime_ns
     assert train_report.main(argv) == 0
     assert stored.stat().st_mtime_ns == before
+    # With --out, the run's summary replaces the set's table in the page's data, and the stored
+    # results alone write the same page.
+    data, page = tmp_path / "training.json", tmp_path / "training.md"
+    data.write_text((train_report.REPO / "docs" / "results" / "data" / "training.json").read_text())
+    assert train_report.main([*argv, "--data", str(data), "--out", str(page)]) == 0
+    sgd = json.loads(data.read_text())["sgd"]
+    assert "notes" not in sgd and [row[:3] for row in sgd["rows"]] == [["sgd", "adaptive", "1"], ["sgd", "uniform", "1"]]
+    assert "| sgd | adaptive | 1 |" in page.read_text()
+    again = tmp_path / "again.md"
+    assert train_report.main(["--stored-only", "--data", str(data), "--out", str(again)]) == 0
+    assert again.read_text() == page.read_text()
     # ... unless the recipe changes.
     assert train_report.main([a if a != "3" else "2" for a in argv]) == 0
     assert json.loads(stored.read_text())["epochs"] == 2
 
 
 def test_unknown_material_is_an_error(cli, tmp_path, capsys):
-    assert train_report.main(["--set", "sgd", "--materials", "unobtainium", "--out", str(tmp_path),
+    assert train_report.main(["--set", "sgd", "--materials", "unobtainium", "--work", str(tmp_path),
                               "--cli", str(cli), "--no-progress"]) == 1
     assert "unknown material" in capsys.readouterr().err
 
@@ -172,14 +183,14 @@ def test_without_shared_data_the_default_sets_run_on_embedded_fits(cli, tmp_path
     """A fresh clone (no shared data): the default `--set all` is the SGD set alone, with a note;
     an RGL measurement given as a path that does not exist is an error before any training."""
     monkeypatch.setenv("NBRDF_SHARED", str(tmp_path / "nonexistent"))
-    assert train_report.main(["--materials", "unobtainium", "--out", str(tmp_path / "a"), "--cli", str(cli),
+    assert train_report.main(["--materials", "unobtainium", "--work", str(tmp_path / "a"), "--cli", str(cli),
                               "--no-progress"]) == 1
     captured = capsys.readouterr()
     assert "the RGL set is left out" in captured.out and "unknown material" in captured.err
-    assert train_report.main(["--set", "rgl", "--materials", str(tmp_path / "mine.bsdf"), "--out",
+    assert train_report.main(["--set", "rgl", "--materials", str(tmp_path / "mine.bsdf"), "--work",
                               str(tmp_path / "b"), "--cli", str(cli), "--no-progress"]) == 1
     assert "no such RGL measurement" in capsys.readouterr().err
-    assert train_report.main(["--set", "rgl", "--out", str(tmp_path / "c"), "--cli", str(cli), "--no-progress"]) == 1
+    assert train_report.main(["--set", "rgl", "--work", str(tmp_path / "c"), "--cli", str(cli), "--no-progress"]) == 1
     assert "data/rgl not found" in capsys.readouterr().err
     assert not any((tmp_path / d).exists() for d in "abc")
 
@@ -213,7 +224,7 @@ def test_measured_ground_truth_against_itself_has_no_error(shared):
 def test_quick_report_on_one_rgl_material_compares_with_measured_and_authors(cli, shared, tmp_path):
     _tabulate_rgl_with_folds()
     out = tmp_path / "rgl"
-    assert train_report.main(["--quick", "--set", "rgl", "--materials", "paper_white_rgb", "--out", str(out),
+    assert train_report.main(["--quick", "--set", "rgl", "--materials", "paper_white_rgb", "--work", str(out),
                               "--no-progress", "--epochs", "4", "--cli", str(cli), "--shared", str(shared)]) == 0
     rows = _read_csv(out / "results.csv")
     assert [r["method"] for r in rows] == ["adaptive", "uniform", "authors"]

@@ -21,11 +21,12 @@ GROUPS = {
                                    "the estimation report's loss curves"),
         "fidelity": ("nbrdf_tools.pages.fidelity", "NBRDFs against analytic fits and the measurement"),
         "latent": ("nbrdf_tools.pages.latent", "the latent space of materials"),
+        "rgl-training": ("nbrdf_tools.pages.rgl_training", "training NBRDFs from RGL measurements directly"),
         "sampling": ("nbrdf_tools.pages.sampling", "sampling variance: cosine, one lobe, two lobes"),
         "scenes": ("nbrdf_tools.pages.scenes", "sampling in scenes: convergence against spp and time"),
         "spectral-basis": ("nbrdf_tools.pages.spectral_basis", "spectral output representations"),
         "spectral-networks": ("nbrdf_tools.pages.spectral_networks", "spectral networks"),
-        "training": ("nbrdf_tools.pages.training", "training NBRDFs (MERL tables, RGL measurements)"),
+        "training": ("nbrdf_tools.pages.training", "training NBRDFs: trainer speed, SGD tables, RGL tables"),
         "variants": ("nbrdf_tools.pages.variants", "the Veach scene in every variant"),
     },
     "benchmarks": {

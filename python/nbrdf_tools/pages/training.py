@@ -1,6 +1,7 @@
 """Train an NBRDF for every table of a set and report how close the networks are.
 
-    python -m nbrdf_tools training [--set sgd|rgl|all] [--materials A,B,...] [--quick] [--out DIR]
+    python -m nbrdf_tools training --stored-only --out docs/results/training.md
+    python -m nbrdf_tools training [--set sgd|rgl|all] [--materials A,B,...] [--quick] [--work DIR] [--out PAGE]
 
 Sets (docs/design.md sections 5, 8, 9, 11, 12):
 
@@ -24,12 +25,14 @@ SSIM (scikit-image) of the tone-mapped images, and the log-space BRDF error.
 The default set, ``all``, is ``sgd`` alone when the shared data (RGL measurements) is absent:
 the SGD set runs on the fits embedded in the CLI.
 
-Outputs in ``--out`` (default out/train_report): ``results.csv`` (one row per material and
+Outputs in ``--work`` (default out/train_report): ``results.csv`` (one row per material and
 method), ``report.md`` (means and standard deviations, adaptive against uniform, ours against the
 authors, worst materials, trainer speed), ``report.png`` (plots), and ``results/SET/*.json`` (one
 per trained network; a rerun skips those already done with the same recipe, so an interrupted run
 resumes), ``networks/`` and ``tables/`` (SGD tables are deleted once both networks of a material
 are done, unless ``--keep-tables``; they take 35 MB each and are re-synthesised in a second).
+With ``--out PAGE`` a run also stores its summary table in the page's data file (``--data``) and
+rewrites the results page; ``--stored-only --out PAGE`` writes the page from that file alone.
 """
 
 from __future__ import annotations
@@ -42,13 +45,14 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from nbrdf_tools.common import cli
-from nbrdf_tools.common.paths import MissingDataError, default_cli, default_out, shared_dir
+from nbrdf_tools.common.paths import REPO, MissingDataError, default_cli, default_out, shared_dir
 
 SAMPLINGS = ("adaptive", "uniform")
 METHODS = SAMPLINGS + ("authors",)
@@ -473,9 +477,153 @@ def write_report(out: Path, results: list[dict], sets: list[str], recipe: Recipe
 # --------------------------------------------------------------------------------------------
 
 
-def parse_args(argv):
+@dataclass(frozen=True)
+class Page:
+    """A results page written from stored results: its command, file, data file, the function that
+    renders it and the data section a measuring run of ``set_name`` replaces."""
+    command: str
+    path: Path
+    data: Path
+    render: Callable[[dict], str]
+    section: Callable[[str, argparse.Namespace], str]
+    defaults: tuple[tuple[str, str], ...] = ()  # option defaults of its measuring run
+
+
+def stored_table(stored: dict) -> list[str]:
+    """A stored table (``columns``, ``rows`` of cells) in Markdown."""
+    return (["| " + " | ".join(stored["columns"]) + " |", "|" + "---|" * len(stored["columns"])]
+            + ["| " + " | ".join(row) + " |" for row in stored["rows"]])
+
+
+def stored_notes(stored: dict) -> list[str]:
+    """The stored remarks on a table, one bullet each (none once the table is measured anew)."""
+    return [f"* {note}" for note in stored.get("notes", [])]
+
+
+def store_run(page: Page, args, argv: list[str], results: list[dict], sets: list[str]) -> None:
+    """Replaces the data sections of the measured sets with this run's summary, then the page."""
+    data = json.loads(args.data.read_text(encoding="utf-8"))
+    for s in sets:
+        lines = summary_table(results, [s])
+        rows = [[c.strip() for c in line.strip().strip("|").split("|")] for line in lines[2:]]
+        data[page.section(s, args)] = {
+            "command": " ".join([f"python -m nbrdf_tools {page.command}", *argv]),
+            "machine": f"{platform.machine()}, {os.cpu_count()} logical CPUs",
+            "columns": [c.strip() for c in lines[0].strip().strip("|").split("|")], "rows": rows}
+    args.data.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    args.out.write_text(page.render(data), encoding="utf-8")
+
+
+TEMPLATE = """# Results: training NBRDFs
+
+```sh
+python -m nbrdf_tools training --stored-only --out docs/results/training.md
+```
+
+The command above writes this page from the stored results, `{data}`. To measure anew (each
+command trains its set into `out/train_report/` and replaces its table in that file and this
+page):
+
+```sh
+{sgd_command}
+{rgl_command}
+```
+
+The tables of this page were measured with the paper's fixed budget (`--fixed-budget`); the
+trainer's defaults are an adaptive budget, whose results on the RGL measurements, and on six
+MERL tables against the fixed budget, are in [rgl-training.md](rgl-training.md).
+
+The report trains every table of a set with adaptive and uniform sampling (`nbrdf train`, one
+network after the other, every core each) and writes `results.csv`, `report.md` and `report.png`
+to its work folder (`--work`, default `out/train_report/`): means and standard deviations of the
+metrics below, adaptive vs uniform counts, ours vs the authors, the worst materials, seconds per
+network and the trainer's samples per second. Options: `--set sgd|rgl|all`, `--materials A,B`,
+`--samples`, `--epochs`, `--patience`, `--quick`; an interrupted run resumes.
+
+Sets:
+
+* `sgd`: the 100 MERL materials synthesised from their SGD fits; the reference is the table.
+* `rgl`: the four real measurements of the shared data folder, tabulated with
+  `python -m nbrdf_mitsuba.tabulate_rgl --phi-fold mirror`; the reference is Mitsuba's `measured`
+  BSDF itself. The authors' networks of the same materials are compared on the same ground truth.
+
+**Metrics** (names of `nbrdf_tools.common.metrics`, the columns of `results.csv`), on 128x128 sphere
+images under lights at 0, 30, 45, 60 and 75 degrees: `mae`, `rmse`, `relmse` and `psnr_peak_ref`
+(PSNR with the reference's maximum as peak) of the linear images, `ssim` (scikit-image, Wang et
+al.'s settings) of the tone-mapped ones, `flip_hdr` (NVIDIA's HDR-FLIP) of the linear ones, and
+the log-space BRDF error over adaptively and uniformly sampled directions, `log_error_adaptive`
+and `log_error_uniform` (from `nbrdf compare`). The stored SGD and RGL tables predate `relmse`,
+`flip_hdr` and SSIM by scikit-image; a run measures them.
+
+`python -m nbrdf_tools compare A B [--json]` compares any two of a table, a network or
+an RGL `.bsdf` the same way. PSNR here is relative to the reference's maximum (as `nbrdf
+compare`). Metric definitions: [design.md section 11](../design.md#11-metrics-and-figures); the
+paper's figures: [design.md section 12](../design.md#12-reference-figures-the-paper).
+
+## Trainer speed
+
+`nbrdf train` at its defaults, no other flag, on the four shared RGL measurements, measured
+{speed_date} on {speed_machine}: the trainer of commit `2318a90` against that of `579fb03`, both
+built there (`cargo build --release -p nbrdf-core --features cli`), each material by both one
+after the other under `/usr/bin/time`, two series (the second in the reverse order):
+
+```sh
+nbrdf train ../shared/data/rgl/paper_white_rgb.bsdf -q -o paper_white_rgb.nbrdf.json
+python -m nbrdf_tools compare ../shared/data/rgl/paper_white_rgb.bsdf paper_white_rgb.nbrdf.json --json
+```
+
+(the same for cc_ibiza_sunset_rgb, colodur_napoli_4f_rgb and cc_iris_purple_gem_rgb; `nbrdf
+fit-phong` is not included, about 3 s more per material):
+
+{speed_table}
+
+{speed_notes}
+
+What was tried to make it faster and did not pay: [experiments.md](../experiments.md#training).
+
+## SGD tables
+
+Measured on {sgd_machine} (recipe: {sgd_recipe}):
+
+{sgd_table}
+
+{sgd_notes}
+
+## RGL: ours vs the authors
+
+Image RMSE and SSIM against Mitsuba's `measured` BSDF. Both networks have 675 weights; the
+authors' were trained on the measurement directly, ours on its MERL-grid tabulation. Real
+measurements need a longer run than the analytic tables; the measured-data recipe is
+{rgl_recipe}:
+
+{rgl_table}
+
+{rgl_notes}
+
+Training settings that were tried and not kept: [experiments.md](../experiments.md#training).
+"""
+
+
+def render_training(data: dict) -> str:
+    """docs/results/training.md from its stored results."""
+    speed, sgd, rgl = data["speed"], data["sgd"], data["rgl"]
+    text = TEMPLATE.format(
+        data="docs/results/data/training.json", sgd_command=sgd["command"], rgl_command=rgl["command"],
+        speed_date=speed["date"], speed_machine=speed["machine"], speed_table="\n".join(stored_table(speed)),
+        speed_notes="\n".join(stored_notes(speed)), sgd_machine=sgd["machine"],
+        sgd_recipe=sgd.get("recipe", "as in its command"), sgd_table="\n".join(stored_table(sgd)),
+        sgd_notes="\n".join(stored_notes(sgd)), rgl_recipe=rgl.get("recipe", "that of its command"),
+        rgl_table="\n".join(stored_table(rgl)), rgl_notes="\n".join(stored_notes(rgl)))
+    return text.replace("\n\n\n", "\n\n")
+
+
+TRAINING = Page("training", Path("docs/results/training.md"), Path("docs/results/data/training.json"),
+                render_training, lambda set_name, args: set_name)
+
+
+def parse_args(argv, page: Page = TRAINING):
     p = argparse.ArgumentParser(
-        prog="python -m nbrdf_tools training",
+        prog=f"python -m nbrdf_tools {page.command}",
         description="Train NBRDFs on every table of a set (SGD-synthesised MERL materials, tabulated RGL "
                     "measurements) with adaptive and uniform sampling and report image-space and log-space "
                     "errors, timings, and the comparison with the authors' networks on RGL.")
@@ -494,8 +642,15 @@ def parse_args(argv):
     p.add_argument("--quick", action="store_true",
                    help=f"a check, not a result: 5 materials per set (unless --materials), {QUICK_SAMPLES:,} samples, "
                         f"{QUICK_EPOCHS} epochs, 64x64 spheres, 20,000 metric directions (unless given)")
-    p.add_argument("--out", type=Path, default=default_out("train_report"),
-                   help="output folder of everything: results, networks, tables (default: %(default)s)")
+    p.add_argument("--out", type=Path,
+                   help=f"the results page to write ({page.path}); a measuring run then also replaces its tables "
+                        "in --data")
+    p.add_argument("--data", type=Path, default=REPO / page.data,
+                   help=f"the page's stored results (default: {page.data})")
+    p.add_argument("--stored-only", action="store_true",
+                   help="write the page (--out) from the stored results alone, measuring nothing")
+    p.add_argument("--work", type=Path, default=default_out("train_report"),
+                   help="work folder: results, report, networks, tables (default: %(default)s)")
     p.add_argument("--resolution", type=int, help="sphere image size (default: 128, nbrdf compare's)")
     p.add_argument("--metric-samples", type=int, help="directions of the log-space error (default: 100,000)")
     p.add_argument("--rgl-fold", choices=("mirror", "reciprocal", "direct"), default="mirror",
@@ -510,11 +665,20 @@ def parse_args(argv):
     p.add_argument("--shared", type=Path, default=shared_dir(),
                    help="the shared data folder with data/rgl and data/reference-nbrdf (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(**dict(page.defaults))
     return p.parse_args(argv)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+def main(argv: list[str] | None = None, page: Page = TRAINING) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parse_args(argv, page)
+    if args.stored_only:
+        if args.out is None:
+            print("error: --stored-only writes the page named by --out", file=sys.stderr)
+            return 2
+        args.out.write_text(page.render(json.loads(args.data.read_text(encoding="utf-8"))), encoding="utf-8")
+        print(f"wrote {args.out}")
+        return 0
     from tqdm import tqdm
 
     try:
@@ -573,7 +737,7 @@ def main(argv: list[str] | None = None) -> int:
     if not plan:
         print("error: no materials to train", file=sys.stderr)
         return 1
-    out = args.out
+    out = args.work
     out.mkdir(parents=True, exist_ok=True)
     steps = sum(len(SAMPLINGS) + (s == "rgl" and not args.no_authors and authors_path(args.shared, n).is_file())
                 for s, n in plan)
@@ -591,6 +755,9 @@ def main(argv: list[str] | None = None) -> int:
     write_report(out, results, sets, recipe, requested, time.perf_counter() - start)
     plot(out / "report.png", results, sets)
     print(f"wrote {out / 'results.csv'}, {out / 'report.md'} and {out / 'report.png'}")
+    if args.out is not None:
+        store_run(page, args, argv, results, sets)
+        print(f"wrote {args.data} and {args.out}")
     return 0
 
 

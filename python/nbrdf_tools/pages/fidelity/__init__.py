@@ -1,10 +1,11 @@
 """How faithful is an NBRDF, against the analytic models a Mitsuba user has and against the
 measured data itself, and how does its error fall with its size?
 
+    python -m nbrdf_tools fidelity --stored-only --out docs/results/fidelity.md
     python -m nbrdf_tools fidelity [--rgl A.bsdf,B.bsdf] [--merl X.binary,...]
         [--anisotropic C.bsdf,...] [--mitsuba roughconductor_aniso,principled_aniso]
         [--mitsuba NAME=SCENE.xml|NAME=BSDF.json|NAME={"type": ...}] [--hidden 6,8,12,21,32,48,64]
-        [--samples N] [--epochs N] [--report docs/results/fidelity.md] [--out out/fidelity]
+        [--samples N] [--epochs N] [--out docs/results/fidelity.md] [--work out/fidelity]
 
 For every material (RGL measurements read by Mitsuba's ``measured`` BSDF, the reference; MERL-
 format tables read by the project's ``merl`` BSDF, the reference):
@@ -35,9 +36,11 @@ Metrics of each against the reference (:mod:`nbrdf_tools.common.metrics`; images
 tone-mapped MAE and RMSE, SSIM, HDR-FLIP, linear RMSE, and the log-space BRDF error
 ``|ln(1 + f cos) - ln(1 + f_ref cos)|`` over adaptive and uniform directions.
 
-Outputs: the report ``--report`` (markdown, default ``OUT/fidelity.md``) and next to it
+Outputs: the page ``--out`` (markdown, default ``docs/results/fidelity.md``) and next to it
 ``NAME.json`` (every number) and ``NAME.png`` (error against memory, log x); work files
-(networks, tables, per-row results reused by a rerun with the same settings) in ``--out``.
+(networks, tables, per-row results reused by a rerun with the same settings) in ``--work``.
+With ``--stored-only`` the page is written from the stored results (``--data``, default
+``docs/results/fidelity.json``) alone.
 """
 
 from __future__ import annotations

@@ -4,6 +4,7 @@ its report."""
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
 import platform
@@ -13,10 +14,13 @@ import time
 from pathlib import Path
 
 from nbrdf_tools.common import cli
-from nbrdf_tools.common.paths import MissingDataError, default_cli, default_out, shared_dir
+from nbrdf_tools.common.paths import REPO, MissingDataError, default_cli, default_out, shared_dir
 from nbrdf_tools.pages.fidelity.report import plot, write_report
 from nbrdf_tools.pages.fidelity.run import anisotropic_models, process
 from nbrdf_tools.pages.fidelity.settings import BUILTIN, DEFAULT_HIDDEN, DEFAULT_MODELS, PAPER_HIDDEN, Material, Settings
+
+PAGE = Path("docs/results/fidelity.md")
+DATA = PAGE.with_suffix(".json")
 
 
 def _list(text: str | None) -> list[str]:
@@ -56,10 +60,13 @@ def parse_args(argv):
     p.add_argument("--no-tabulate", action="store_true", help="no MERL-table row for RGL measurements")
     p.add_argument("--seed", type=int, default=0, help="training and fitting seed (default: 0)")
     p.add_argument("--threads", type=int, help="trainer threads (default: one per core)")
-    p.add_argument("--out", type=Path, default=default_out("fidelity"),
+    p.add_argument("--out", type=Path, default=REPO / PAGE,
+                   help=f"the Markdown page; a measuring run writes NAME.json and NAME.png next to it (default: {PAGE})")
+    p.add_argument("--work", type=Path, default=default_out("fidelity"),
                    help="work folder: networks, per-row results (default: %(default)s)")
-    p.add_argument("--report", type=Path,
-                   help="the markdown report; NAME.json and NAME.png are written next to it (default: OUT/fidelity.md)")
+    p.add_argument("--stored-only", action="store_true",
+                   help="write the page from the stored results (--data) alone, measuring nothing")
+    p.add_argument("--data", type=Path, help=f"the stored results --stored-only reads (default: {DATA})")
     p.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf tool (default: %(default)s)")
     p.add_argument("--shared", type=Path, default=shared_dir(), help="the shared data folder (default: %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -113,7 +120,7 @@ def _mitsuba_materials(values: list[str] | None, out: Path) -> list[Material]:
 
 def _materials(args) -> list[Material]:
     rgl, merl, aniso = _list(args.rgl), _list(args.merl), _list(args.anisotropic)
-    mitsuba = _mitsuba_materials(args.mitsuba, args.out)
+    mitsuba = _mitsuba_materials(args.mitsuba, args.work)
     if not rgl and not merl and not aniso and not mitsuba:
         folder = args.shared / "data" / "rgl"
         rgl = [str(p) for p in sorted(folder.glob("*.bsdf"))]
@@ -139,12 +146,16 @@ def _materials(args) -> list[Material]:
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
+    if args.stored_only:
+        write_report(args.out, json.loads((args.data or REPO / DATA).read_text(encoding="utf-8")))
+        print(f"wrote {args.out}")
+        return 0
     from tqdm import tqdm
 
     from nbrdf_tools.common import analytic_fit as af
 
     try:
-        args.out.mkdir(parents=True, exist_ok=True)
+        args.work.mkdir(parents=True, exist_ok=True)
         cli.check_cli(args.cli)
         materials = _materials(args)
         settings = Settings(hidden=tuple(int(h) for h in _list(args.hidden)),
@@ -160,9 +171,8 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         print(f"error: unknown model(s) {', '.join(unknown)} (known: {', '.join(af.MODELS)})", file=sys.stderr)
         return 1
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    report = args.report or out / "fidelity.md"
+    out = args.work
+    report = args.out
     report.parent.mkdir(parents=True, exist_ok=True)
     iso_steps = 1 + len(settings.models) + len(set(settings.hidden) | {settings.table_hidden}) + len(settings.uniform_hidden)
     steps = sum(iso_steps if m.group == "isotropic" else 3 + len(anisotropic_models(settings)) for m in materials)
@@ -176,16 +186,20 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"error: {material.name}: {error}", file=sys.stderr)
                 return 1
     elapsed = time.perf_counter() - start
-    command = "python -m nbrdf_tools fidelity " + shlex.join(argv)
-    document = {"command": command, "settings": settings.__dict__, "machine": platform.machine(),
-                "cpus": os.cpu_count(), "seconds": elapsed,
+    data = report.with_suffix(".json")
+    regenerate = ["python -m nbrdf_tools fidelity", "--stored-only",
+                  *([] if data.resolve() == (REPO / DATA).resolve() else ["--data", str(data)]), "--out", str(report)]
+    document = {"command": "python -m nbrdf_tools fidelity " + shlex.join(argv), "regenerate": " ".join(regenerate),
+                "page": str(report), "date": f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d}",
+                "settings": settings.__dict__, "machine": platform.machine(), "cpus": os.cpu_count(),
+                "seconds": elapsed,
                 "materials": [{"name": m.name, "path": str(m.path), "source": m.source, "group": m.group,
-                               "spec": m.spec} for m in materials],
+                               "spec": m.spec, "plugin": m.plugin} for m in materials],
                 "rows": [{k: v for k, v in r.items() if k != "key"} for r in rows]}
-    report.with_suffix(".json").write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
+    data.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
     isotropic = [m.name for m in materials if m.group == "isotropic"]
     if isotropic:
         plot(report.with_suffix(".png"), [r for r in rows if r["group"] == "isotropic"], isotropic)
-    write_report(report, rows, materials, settings, command, elapsed)
+    write_report(report, document)
     print(f"wrote {report}, {report.with_suffix('.json')}" + (f" and {report.with_suffix('.png')}" if isotropic else ""))
     return 0
