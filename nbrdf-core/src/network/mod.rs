@@ -29,7 +29,7 @@ pub use spectral::Spectral;
 use crate::brdf::{Brdf, Directions, RgbMut};
 use crate::coords::network_input_for;
 use crate::error::{NbrdfError, Result};
-use crate::fastmath::MulAdd;
+use crate::fastmath::{expm1_with, relu, MulAdd};
 use crate::rng::{SplitMix64, Stream};
 use crate::sampling::tabulated::TableConfig;
 use crate::sampling::{SamplingKind, SamplingStrategy};
@@ -44,6 +44,14 @@ pub const DEFAULT_HIDDEN: usize = 21;
 
 /// The only importance-sampling model the file format defines.
 pub const SAMPLING_MODEL_BLINN_PHONG: &str = "blinn-phong";
+
+/// The output activation of the networks, `max(exp(z) - 1, 0)` with the exponent's argument
+/// clamped ([`expm1_with`]): finite and non-negative for every `z`, NaN included. The one
+/// definition, shared by the homogeneous kernels and the spatially varying decoder.
+#[inline(always)]
+pub fn output_activation<M: MulAdd>(z: f32) -> f32 {
+    relu(expm1_with::<M>(z))
+}
 
 /// One dense layer, `y = x W + b` with `W` row-major `inputs x outputs`: the NBRDF's layers and
 /// those of the latent-space MLPs ([`crate::latent::mlp`]).
