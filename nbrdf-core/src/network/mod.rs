@@ -19,9 +19,13 @@ pub(crate) mod spectral;
 #[cfg(test)]
 mod tests;
 
+pub(crate) use format::{describe_json_error, file_version, value_problem};
 pub use format::{
     FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_ANISOTROPIC, FORMAT_VERSION_ISOTROPIC,
+    FORMAT_VERSION_TEXTURED,
 };
+#[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+pub(crate) use kernel::has_avx2_fma;
 pub use kernel::LANES;
 pub use pruning::{active_units, ActiveUnits};
 pub use spectral::Spectral;
