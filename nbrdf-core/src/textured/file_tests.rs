@@ -381,11 +381,11 @@ fn bad_textures_are_refused_naming_the_file_and_the_field() {
         [((mapped - 0.25 - 0.5 * v) / 2.0) as f32, v as f32]
     };
     let (at_texel_0, at_texel_36) = (inverse(1.0 / 16.0), inverse(9.0 / 16.0));
-    assert_eq!(holey.footprint(at_texel_0).unwrap().texels[0], 0);
+    assert_eq!(holey.footprint(at_texel_0).unwrap().texels()[0], 0);
     assert_eq!(holey.texture().lookup(holey.mapping(), at_texel_0), None);
     assert!(m.texture().lookup(m.mapping(), at_texel_0).is_some());
     assert_eq!(holey.eval_cos(at_texel_0, view, light), [0.0; 3]);
-    assert_eq!(holey.footprint(at_texel_36).unwrap().texels[0], 36);
+    assert_eq!(holey.footprint(at_texel_36).unwrap().texels()[0], 36);
     assert_eq!(
         holey.eval_cos(at_texel_36, view, light),
         m.eval_cos(at_texel_36, view, light)

@@ -140,9 +140,21 @@ impl Default for UvMapping {
 /// (nearest) or four, in Dr.Jit's corner order `(x0, y0), (x1, y0), (x0, y1), (x1, y1)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Footprint {
-    pub texels: [usize; 4],
-    pub weights: [f32; 4],
-    pub count: usize,
+    texels: [usize; 4],
+    weights: [f32; 4],
+    count: usize,
+}
+
+impl Footprint {
+    /// The texels read, `y * width + x`.
+    pub fn texels(&self) -> &[usize] {
+        &self.texels[..self.count]
+    }
+
+    /// Their weights, summing to 1 (up to rounding).
+    pub fn weights(&self) -> &[f32] {
+        &self.weights[..self.count]
+    }
 }
 
 impl UvMapping {
@@ -270,13 +282,18 @@ impl LatentTexture {
 
     /// The channels `first..first + out.len()` filtered over `footprint`, `sum_t w_t c_t`
     /// accumulated in corner order as Dr.Jit does; a non-finite texel in the footprint makes the
-    /// result non-finite (`0 * NaN` is NaN), which callers treat as a bad texel.
+    /// result non-finite (`0 * NaN` is NaN), which callers treat as a bad texel. Callers pass a
+    /// footprint of this texture's size and `first + out.len()` at most the channel count.
     #[inline(always)]
-    pub fn filter_into<M: MulAdd>(&self, footprint: &Footprint, first: usize, out: &mut [f32]) {
+    pub(super) fn filter_into<M: MulAdd>(
+        &self,
+        footprint: &Footprint,
+        first: usize,
+        out: &mut [f32],
+    ) {
         let k = self.channel_count();
         out.fill(0.0);
-        let corners = footprint.texels.iter().zip(&footprint.weights);
-        for (&texel, &weight) in corners.take(footprint.count) {
+        for (&texel, &weight) in footprint.texels().iter().zip(footprint.weights()) {
             let values = &self.texels[texel * k + first..][..out.len()];
             for (o, &c) in out.iter_mut().zip(values) {
                 *o = M::mul_add(c, weight, *o);
