@@ -1,7 +1,8 @@
 //! Neural BRDFs (Sztrajman et al., CGF 2021) for Mitsuba 3: the math and learning core.
 //!
 //! Two layers. Rendering, always built and all that `nbrdf-ffi` links: [`brdf`], [`coords`],
-//! [`merl`], [`network`], [`rgl`], [`spectrum`], [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
+//! [`merl`], [`network`], [`textured`] (spatially varying materials), [`rgl`], [`spectrum`],
+//! [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
 //! Training and analysis (feature `train`, on by default): [`train`], [`analytic`], [`target`],
 //! [`phong_fit`], [`lobe_fit`], [`anisotropic_lobe_fit`], [`metrics`], [`latent`] and [`ops`],
 //! what each `nbrdf` command does (the CLI, feature `cli`, only parses and prints). Arrows run
@@ -25,6 +26,7 @@ pub mod sampling;
 pub mod source;
 pub mod spectral_basis;
 pub mod spectrum;
+pub mod textured;
 
 #[cfg(feature = "train")]
 pub mod analytic;

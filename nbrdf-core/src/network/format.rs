@@ -8,20 +8,24 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub const FORMAT_NAME: &str = "nbrdf";
-/// The newest version this build reads and writes. Version 2 adds `anisotropic` (default false);
-/// an isotropic network is still written as version 1, which every reader understands and which
-/// loads and evaluates as before (docs/design.md section 4). Version 3 adds `spectral`: the
-/// outputs are the coefficients of a spectral basis (docs/formats.md), written only for
-/// spectral networks.
+/// The newest version of a homogeneous network this build reads and writes. Version 2 adds
+/// `anisotropic` (default false); an isotropic network is still written as version 1, which every
+/// reader understands and which loads and evaluates as before (docs/design.md section 4).
+/// Version 3 adds `spectral`: the outputs are the coefficients of a spectral basis
+/// (docs/formats.md), written only for spectral networks.
 pub const FORMAT_VERSION: u32 = 3;
 /// The version of anisotropic RGB networks.
 pub const FORMAT_VERSION_ANISOTROPIC: u32 = 2;
 /// The version of files without version-2 features.
 pub const FORMAT_VERSION_ISOTROPIC: u32 = 1;
+/// The version of spatially varying materials: a decoder reading a latent texture
+/// (`nbrdf_core::textured`, docs/formats.md). Not a homogeneous network: [`Nbrdf::load`] refuses
+/// it, naming the kind.
+pub const FORMAT_VERSION_TEXTURED: u32 = 4;
 
 /// What a serde_json syntax error means to the user: non-finite numbers (`NaN`, `Infinity`,
 /// which Python's json module writes) are named, the rest reported as corrupt JSON.
-fn describe_json_error(text: &str, error: &serde_json::Error) -> String {
+pub(crate) fn describe_json_error(text: &str, error: &serde_json::Error) -> String {
     let (line, column) = (error.line(), error.column());
     let near = text
         .lines()
@@ -77,10 +81,25 @@ struct FileOut<'a> {
     provenance: &'a serde_json::Value,
 }
 
-/// Checks the `format` and `version` fields before anything else, so that a file of another
-/// kind or version is reported as such rather than as a missing field further in; returns the
-/// version.
+/// Checks the `format` and `version` fields of a homogeneous network before anything else, so
+/// that a file of another kind or version is reported as such rather than as a missing field
+/// further in; returns the version.
 fn check_header(root: &serde_json::Value) -> std::result::Result<u32, String> {
+    let version = file_version(root)?;
+    if version == FORMAT_VERSION_TEXTURED {
+        return Err(format!(
+            "unsupported version {version} for a homogeneous network: version \
+             {FORMAT_VERSION_TEXTURED} is a spatially varying material (a decoder reading a latent \
+             texture); load it as a textured material"
+        ));
+    }
+    Ok(version)
+}
+
+/// The `format` and `version` fields of any `*.nbrdf.json` file, homogeneous network (versions
+/// 1 to [`FORMAT_VERSION`]) or spatially varying material ([`FORMAT_VERSION_TEXTURED`]):
+/// the version, or what is wrong with them.
+pub(crate) fn file_version(root: &serde_json::Value) -> std::result::Result<u32, String> {
     let object = root
         .as_object()
         .ok_or("the top level is not a JSON object")?;
@@ -96,9 +115,10 @@ fn check_header(root: &serde_json::Value) -> std::result::Result<u32, String> {
     match object.get("version") {
         None => Err("missing field \"version\"".to_string()),
         Some(v) => match v.as_u64() {
-            Some(n) if (1..=u64::from(FORMAT_VERSION)).contains(&n) => Ok(n as u32),
+            Some(n) if (1..=u64::from(FORMAT_VERSION_TEXTURED)).contains(&n) => Ok(n as u32),
             _ => Err(format!(
-                "unsupported version {v} (this build reads versions 1 to {FORMAT_VERSION})"
+                "unsupported version {v} (this build reads versions 1 to {FORMAT_VERSION}, \
+                 networks, and {FORMAT_VERSION_TEXTURED}, spatially varying materials)"
             )),
         },
     }
@@ -165,7 +185,7 @@ pub(super) fn shape_problem(layers: &[Layer], outputs: usize) -> Option<String> 
 }
 
 /// The first non-finite parameter, if any.
-pub(super) fn value_problem(layers: &[Layer]) -> Option<String> {
+pub(crate) fn value_problem(layers: &[Layer]) -> Option<String> {
     for (k, layer) in layers.iter().enumerate() {
         if let Some(i) = layer.weights.iter().position(|w| !w.is_finite()) {
             return Some(format!(

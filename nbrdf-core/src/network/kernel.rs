@@ -6,12 +6,13 @@
 //! them on lanes, and `tests::batched_eval_matches_f64_reference_and_eval_input` holds the two together.
 
 use super::format::shape_problem;
+use super::output_activation;
 use super::{Layer, Nbrdf};
 use crate::brdf::{common_len, Directions, RgbMut};
 use crate::coords::network_input_components_for;
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
 use crate::fastmath::Fused;
-use crate::fastmath::{expm1_with, relu, MulAdd, Unfused};
+use crate::fastmath::{relu, MulAdd, Unfused};
 use crate::spectral_basis::MAX_COUNT;
 use rayon::prelude::*;
 
@@ -169,7 +170,7 @@ pub(super) fn eval_input_generic<M: MulAdd>(
     l2.affine_into::<M>(h1, h2);
     h2.iter_mut().for_each(|v| *v = relu(*v));
     l3.affine_into::<M>(h2, out);
-    out.iter_mut().for_each(|z| *z = relu(expm1_with::<M>(*z)));
+    out.iter_mut().for_each(|z| *z = output_activation::<M>(*z));
 }
 
 /// [`eval_input_generic`] compiled with AVX2 and FMA: the loops over outputs vectorise 8 wide.
@@ -252,7 +253,7 @@ impl Packed {
 
 /// Whether this CPU can run the AVX2+FMA kernel (cached by the standard library).
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-fn has_avx2_fma() -> bool {
+pub(crate) fn has_avx2_fma() -> bool {
     is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
 }
 
@@ -504,7 +505,7 @@ impl OutputSink for RowsSink<'_> {
         for (k, (w_row, &bias)) in rows.enumerate() {
             let acc = affine_chunk::<M>(w_row, bias, h2);
             for (j, i) in (start..end).enumerate() {
-                self.out[i * self.outputs + k] = relu(expm1_with::<M>(acc[j])) * cos[j];
+                self.out[i * self.outputs + k] = output_activation::<M>(acc[j]) * cos[j];
             }
         }
     }
@@ -516,7 +517,7 @@ fn output_chunk<M: MulAdd>(w: &[f32], b: &[f32], x: &[Row], cos: &Row, rgb: [&mu
     for ((w_row, &bias), out) in w.chunks_exact(x.len()).zip(b).zip(rgb) {
         let acc = affine_chunk::<M>(w_row, bias, x);
         for j in 0..LANES {
-            out[j] = relu(expm1_with::<M>(acc[j])) * cos[j];
+            out[j] = output_activation::<M>(acc[j]) * cos[j];
         }
     }
 }

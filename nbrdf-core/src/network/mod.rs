@@ -19,9 +19,13 @@ pub(crate) mod spectral;
 #[cfg(test)]
 mod tests;
 
+pub(crate) use format::{describe_json_error, file_version, value_problem};
 pub use format::{
     FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_ANISOTROPIC, FORMAT_VERSION_ISOTROPIC,
+    FORMAT_VERSION_TEXTURED,
 };
+#[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+pub(crate) use kernel::has_avx2_fma;
 pub use kernel::LANES;
 pub use pruning::{active_units, ActiveUnits};
 pub use spectral::Spectral;
@@ -29,7 +33,7 @@ pub use spectral::Spectral;
 use crate::brdf::{Brdf, Directions, RgbMut};
 use crate::coords::network_input_for;
 use crate::error::{NbrdfError, Result};
-use crate::fastmath::MulAdd;
+use crate::fastmath::{expm1_with, relu, MulAdd};
 use crate::rng::{SplitMix64, Stream};
 use crate::sampling::tabulated::TableConfig;
 use crate::sampling::{SamplingKind, SamplingStrategy};
@@ -44,6 +48,14 @@ pub const DEFAULT_HIDDEN: usize = 21;
 
 /// The only importance-sampling model the file format defines.
 pub const SAMPLING_MODEL_BLINN_PHONG: &str = "blinn-phong";
+
+/// The output activation of the networks, `max(exp(z) - 1, 0)` with the exponent's argument
+/// clamped ([`expm1_with`]): finite and non-negative for every `z`, NaN included. The one
+/// definition, shared by the homogeneous kernels and the spatially varying decoder.
+#[inline(always)]
+pub fn output_activation<M: MulAdd>(z: f32) -> f32 {
+    relu(expm1_with::<M>(z))
+}
 
 /// One dense layer, `y = x W + b` with `W` row-major `inputs x outputs`: the NBRDF's layers and
 /// those of the latent-space MLPs ([`crate::latent::mlp`]).

@@ -281,7 +281,10 @@ fn to_f32_saturating(p: f64) -> f32 {
 
 /// Splits equally long slices into aligned chunks of `chunk` lanes, for parallel iteration over
 /// several outputs at once.
-fn split_chunks<const K: usize>(mut rest: [&mut [f32]; K], chunk: usize) -> Vec<[&mut [f32]; K]> {
+pub(crate) fn split_chunks<const K: usize>(
+    mut rest: [&mut [f32]; K],
+    chunk: usize,
+) -> Vec<[&mut [f32]; K]> {
     let mut chunks = Vec::new();
     while !rest[0].is_empty() {
         let m = chunk.min(rest[0].len());
@@ -357,7 +360,7 @@ pub fn sample_batch(
 }
 
 /// `f cos / pdf`, 0 for invalid samples and where a tiny pdf would overflow the quotient.
-fn sample_weight(f_cos: f32, pdf: f32) -> f32 {
+pub(crate) fn sample_weight(f_cos: f32, pdf: f32) -> f32 {
     if pdf > 0.0 {
         let w = f_cos / pdf;
         if w.is_finite() {
