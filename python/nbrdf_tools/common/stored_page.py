@@ -1,0 +1,67 @@
+"""Results pages regenerated from stored data: each page of docs/results keeps what it reports in
+``docs/results/data/PAGE.json``, and its generator's ``--stored-only`` path writes the whole page
+from that file without measuring anything."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from nbrdf_tools.common.paths import REPO
+
+RESULTS = REPO / "docs" / "results"
+DATA = RESULTS / "data"
+
+
+def data_path(page: str) -> Path:
+    """The stored data of ``docs/results/PAGE.md``."""
+    return DATA / f"{page}.json"
+
+
+def page_path(page: str) -> Path:
+    return RESULTS / f"{page}.md"
+
+
+def load(path: Path) -> dict:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def save(path: Path, data: dict) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    return path
+
+
+def write(path: Path, text: str) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def add_arguments(parser: argparse.ArgumentParser, page: str, out: bool = True) -> None:
+    """``--stored-only`` and ``--data`` (and ``--out``, the page, unless the command has its own)."""
+    parser.add_argument("--stored-only", action="store_true",
+                        help=f"measure nothing: write the page from the stored data ({data_path(page).relative_to(REPO)})")
+    parser.add_argument("--data", type=Path, default=data_path(page),
+                        help="the stored data the page is written from (default: %(default)s)")
+    if out:
+        parser.add_argument("--out", type=Path, default=page_path(page), help="the page (default: %(default)s)")
+
+
+def link(target: str | Path, page: str) -> str:
+    """``target`` (relative to the repository) as a link from ``docs/results/PAGE.md``, wherever
+    the page is written."""
+    return os.path.relpath(REPO / target, page_path(page).parent)
+
+
+def table(spec: dict) -> list[str]:
+    """A Markdown table from ``{"columns": [...], "align": "lr...", "rows": [[...], ...]}``
+    (``l`` left, ``r`` right; the cells as stored)."""
+    columns, align = spec["columns"], spec.get("align") or "l" * len(spec["columns"])
+    lines = ["| " + " | ".join(columns) + " |", "|" + "".join("---:|" if a == "r" else "---|" for a in align)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in spec["rows"]]
+    return lines
