@@ -46,10 +46,35 @@ def add_arguments(parser: argparse.ArgumentParser, page: str, out: bool = True) 
     """``--stored-only`` and ``--data`` (and ``--out``, the page, unless the command has its own)."""
     parser.add_argument("--stored-only", action="store_true",
                         help=f"measure nothing: write the page from the stored data ({data_path(page).relative_to(REPO)})")
-    parser.add_argument("--data", type=Path, default=data_path(page),
-                        help="the stored data the page is written from (default: %(default)s)")
+    parser.add_argument("--data", type=Path,
+                        help=f"the stored data the page is written from (default: {data_path(page).relative_to(REPO)}, "
+                             "or beside --out when a measuring run writes its page elsewhere)")
     if out:
         parser.add_argument("--out", type=Path, default=page_path(page), help="the page (default: %(default)s)")
+
+
+def data_for(args: argparse.Namespace, page: str) -> Path:
+    """``--data``, else the page's stored data; a measuring run whose ``--out`` is not the page
+    itself keeps its data beside that file instead (a test or trial run leaves the record alone)."""
+    if args.data is not None:
+        return args.data
+    out = getattr(args, "out", None)
+    if args.stored_only or out is None or Path(out).resolve() == page_path(page):
+        return data_path(page)
+    return Path(out).with_suffix(".json")
+
+
+def _shown(path: Path) -> str:
+    path = Path(path).resolve()
+    return str(path.relative_to(REPO)) if path.is_relative_to(REPO) else str(path)
+
+
+def opening_command(page: str, out: Path | None = None, data: Path | None = None) -> str:
+    """The command that writes the page from its data: ``python -m nbrdf_tools PAGE --stored-only
+    --out docs/results/PAGE.md`` for the page itself, with ``--data`` only where it is not the default."""
+    out, data = out or page_path(page), data or data_path(page)
+    extra = "" if Path(data).resolve() == data_path(page) else f" --data {_shown(data)}"
+    return f"python -m nbrdf_tools {page} --stored-only{extra} --out {_shown(out)}"
 
 
 def link(target: str | Path, page: str) -> str:

@@ -236,7 +236,6 @@ def measure(shared: Path | None, quick: bool = False, seed: int = 1) -> list[dic
 
 
 PAGE = "spectral-basis"
-STORED_COMMAND = f"python -m nbrdf_tools {PAGE} --stored-only --out docs/results/{PAGE}.md"
 
 
 def tables(rows: list[dict]) -> list[str]:
@@ -254,11 +253,11 @@ def tables(rows: list[dict]) -> list[str]:
     return lines
 
 
-def page(data: dict) -> str:
+def page(data: dict, opening: str | None = None) -> str:
     """The whole page from its stored data: ``{"run": {...}, "rows": measure()}``."""
     run = data["run"]
     lines = ["# Spectral output representations: error and cost", "",
-             "```sh", f"{STORED_COMMAND}   # this page, from docs/results/data/{PAGE}.json",
+             "```sh", f"{opening}   # this page, from its stored data",
              f"{run['command']}   # to measure anew (minutes; rewrites the data and the page)", "```", "",
              "How well each candidate output layer of a spectral network can represent spectra, as least-squares "
              "fits over 360-830 nm on a 2 nm grid (the best a network with that output could do; no network is "
@@ -296,8 +295,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.stored_only:
         out = args.out or stored_page.page_path(PAGE)
-        stored_page.write(out, page(stored_page.load(args.data)))
-        print(f"wrote {out} from {args.data}")
+        stored_page.write(out, page(stored_page.load(stored_page.data_for(args, PAGE))))
+        print(f"wrote {out} from {stored_page.data_for(args, PAGE)}")
         return 0
     shared = args.shared
     if shared is None:
@@ -312,11 +311,13 @@ def main(argv=None) -> int:
                     "machine": f"{os.cpu_count()} cores (load average {os.getloadavg()[0]:.1f} at the end)",
                     "cpu_seconds": time.process_time() - cpu, "wall_seconds": time.perf_counter() - wall},
             "rows": rows}
-    text = page(data)
+    if not args.out:
+        print(page(data))
+        return 0
+    data_file = stored_page.save(stored_page.data_for(args, PAGE), data)
+    text = page(data, stored_page.opening_command(PAGE, args.out, data_file))
     print(text)
-    if args.out:
-        stored_page.save(args.data, data)
-        stored_page.write(args.out, text)
+    stored_page.write(args.out, text)
     return 0
 
 

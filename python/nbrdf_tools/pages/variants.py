@@ -46,7 +46,6 @@ from nbrdf_tools.common.render import render, write_exr
 from nbrdf_tools.common.scenes.veach import veach_scene_dict
 
 PAGE = "variants"
-STORED_COMMAND = f"python -m nbrdf_tools {PAGE} --stored-only --out docs/results/{PAGE}.md"
 MACHINE = "a shared 2-core machine"
 
 VARIANTS = ("scalar_rgb", "scalar_spectral", "llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral",
@@ -160,11 +159,13 @@ def small_png(png, path: Path) -> None:
     Image.open(png).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
 
 
-def page(data: dict) -> str:
-    """The whole page from its stored data (:func:`page_data`)."""
+def page(data: dict, opening: str | None = None) -> str:
+    """The whole page from its stored data (:func:`page_data`); ``opening``: the command that writes
+    it from that data (default: the results page's own)."""
+    opening = opening or stored_page.opening_command(PAGE)
     s = data["settings"]
     lines = ["# Every variant: the Veach scene in RGB, mono, spectral and polarized variants", "",
-             "```sh", f"{STORED_COMMAND}   # this page, from {stored_page.data_path(PAGE).relative_to(REPO)}",
+             "```sh", f"{opening}   # this page, from its stored data",
              f"{data['command']}   # to measure anew: renders every variant, rewrites the data, page and figure",
              "```", "",
              f"Mitsuba {data['mitsuba']}. LLVM variants: {s['width']} x {s['height']} pixels, "
@@ -350,8 +351,8 @@ def command_line(args: argparse.Namespace) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = parse_arguments(argv)
     if args.stored_only:
-        stored_page.write(args.out, page(stored_page.load(args.data)))
-        print(f"wrote {args.out} from {args.data}")
+        stored_page.write(args.out, page(stored_page.load(stored_page.data_for(args, PAGE))))
+        print(f"wrote {args.out} from {stored_page.data_for(args, PAGE)}")
         return 0
     progress.set_enabled(not args.no_progress)
     missing = [v for v in args.variants if v not in mi.variants()]
@@ -381,11 +382,11 @@ def main(argv: list[str] | None = None) -> int:
         timing = timing_data(timings(timed, resolution, spp, args.timing_repeats), resolution, spp,
                              args.timing_repeats)
     data = page_data(command_line(args), settings, results, comparisons, figure_path, timing)
-    stored_page.save(args.data, data)
-    text = page(data)
+    data_file = stored_page.save(stored_page.data_for(args, PAGE), data)
+    text = page(data, stored_page.opening_command(PAGE, args.out, data_file))
     stored_page.write(args.out, text)
     print(text)
-    print(f"data: {args.data}\nfigure: {figure_path}\nrenders: {args.work}")
+    print(f"data: {data_file}\nfigure: {figure_path}\nrenders: {args.work}")
     failed = any(r["nonfinite"] for per_variant in results.values() for r in per_variant.values())
     return 1 if failed else 0
 
