@@ -254,7 +254,11 @@ def tables(rows: list[dict]) -> list[str]:
 
 
 def page(data: dict, opening: str | None = None) -> str:
-    """The whole page from its stored data: ``{"run": {...}, "rows": measure()}``."""
+    """The whole page from its stored data, ``{"run": {...}, "rows": measure()}``; ``opening``: the
+    command that writes it from that data (default: the results page's own)."""
+    from nbrdf_tools.common import stored_page
+
+    opening = opening or stored_page.opening_command(PAGE)
     run = data["run"]
     lines = ["# Spectral output representations: error and cost", "",
              "```sh", f"{opening}   # this page, from its stored data",
