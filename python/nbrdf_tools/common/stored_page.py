@@ -90,3 +90,19 @@ def table(spec: dict) -> list[str]:
     lines = ["| " + " | ".join(columns) + " |", "|" + "".join("---:|" if a == "r" else "---|" for a in align)]
     lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in spec["rows"]]
     return lines
+
+
+def fill(template: str, data: dict) -> str:
+    """``template`` with each ``{{table NAME}}`` line replaced by ``data["tables"][NAME]`` (see
+    :func:`table`) and each ``{{text NAME}}`` by ``data["texts"][NAME]``: the figures and what they
+    show stay in the data, the method in the generator."""
+    lines = []
+    for line in template.splitlines():
+        key = line.strip()
+        if key.startswith("{{table ") and key.endswith("}}"):
+            lines += table(data["tables"][key[8:-2]])
+        elif key.startswith("{{text ") and key.endswith("}}"):
+            lines.append(data["texts"][key[7:-2]])
+        else:
+            lines.append(line)
+    return "\n".join(lines) + "\n"
