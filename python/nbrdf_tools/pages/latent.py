@@ -239,7 +239,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--nbrdfs", type=Path, help="the networks (default: OUT/nbrdfs)")
     p.add_argument("--train-missing", action="store_true", help="train the networks not yet in --nbrdfs")
     p.add_argument("--samples", type=int, default=800_000)
-    p.add_argument("--out", type=Path, help="output folder of everything (default: out/latent/SOURCE)")
+    p.add_argument("--out", type=Path, help="output folder of everything (default: out/latent/SOURCE); with "
+                                            "--stored-only, the page")
+    p.add_argument("--stored-only", action="store_true",
+                   help="measure nothing: write docs/results/latent.md (or --out) from its stored data, "
+                        "docs/results/data/latent.json")
     p.add_argument("--ae", type=Path, help="an existing AE.json (default: OUT/ae.json, trained if missing)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ae-seeds", type=int, default=3,
@@ -384,6 +388,11 @@ def predictor_variance(args, ae: Path) -> None:
 
 def report(argv: list[str] | None) -> int:
     args = parser().parse_args(argv)
+    if args.stored_only:
+        from nbrdf_tools.pages.latent_page import write_stored
+
+        write_stored(args.out)
+        return 0
     progress.set_enabled(not args.no_progress)
     args.out = args.out or default_out("latent", args.source)
     args.nbrdfs = args.nbrdfs or args.out / "nbrdfs"

@@ -61,6 +61,9 @@ def parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path,
                         help="output folder of everything, caches included (default: out/convergence with the "
                              "materials and references cached in out/; quick: out/convergence-quick)")
+    parser.add_argument("--stored-only", action="store_true",
+                        help="measure nothing: write docs/results/scenes.md (or --out, here the page) from its stored "
+                             "data, docs/results/data/scenes.json")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf command-line tool")
     parser.add_argument("--force", action="store_true", help="re-render cached references")
@@ -198,6 +201,11 @@ def _replot(scene_out: Path, suffix: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     options = parser()
     args = options.parse_args(argv)
+    if args.stored_only:
+        from nbrdf_tools.pages.scenes.page import write_stored
+
+        write_stored(args.out)
+        return 0
     train_args = args.train_args.split()
     progress.set_enabled(not args.no_progress)
     _strategies(args, options)
