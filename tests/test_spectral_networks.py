@@ -371,7 +371,9 @@ def test_spectral_report_quick(tmp_path, restore_variant):
     argv = ["--quick", "--materials", "Cu", "--out", str(out), "--figure", str(figure), "--work", str(tmp_path)]
     assert spectral_report.main(argv) == 0
     text = out.read_text()
-    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools spectral-networks --quick")
+    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools spectral-networks --stored-only "
+                           f"--data {out.with_suffix('.json')} --out {out}   #")
+    assert "\npython -m nbrdf_tools spectral-networks --quick" in text
     assert "961 (6-21-21-16)" in text and "675 (6-21-21-3): 1.42x" in text
     assert text.count("| Cu | `llvm_ad_") == 4
     assert figure.stat().st_size > 10_000

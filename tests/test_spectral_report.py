@@ -123,7 +123,9 @@ def test_report_runs_and_resumes(tmp_path, monkeypatch, restore_variant):
             "--threads", "1", "--no-progress"]
     assert spectral_report.main(argv) == 0
     text = out.read_text()
-    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools spectral-networks --quick")
+    assert text.startswith("# Spectral networks\n\n```sh\npython -m nbrdf_tools spectral-networks --stored-only "
+                           f"--data {out.with_suffix('.json')} --out {out}   #")
+    assert "\npython -m nbrdf_tools spectral-networks --quick" in text
     assert "961 (6-21-21-16)" in text and "675 (6-21-21-3): 1.42x" in text
     for section in ("## Log error per wavelength", "## Sphere images", "## Sampling the source's spectrum",
                     "## Training"):

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -34,6 +35,7 @@ import numpy as np
 from nbrdf_tools.common import cli, metrics, progress
 from nbrdf_tools.common.network import Layers, forward, lerp, network_input, read_document, read_layers
 from nbrdf_tools.common.paths import MissingDataError, default_cli, default_out, require_shared, shared_path
+from nbrdf_tools.pages.latent_page import files_of_run, write_measured, write_stored
 
 
 def run(cmd: list) -> str:
@@ -239,7 +241,15 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--nbrdfs", type=Path, help="the networks (default: OUT/nbrdfs)")
     p.add_argument("--train-missing", action="store_true", help="train the networks not yet in --nbrdfs")
     p.add_argument("--samples", type=int, default=800_000)
-    p.add_argument("--out", type=Path, help="output folder of everything (default: out/latent/SOURCE)")
+    p.add_argument("--out", type=Path, help="output folder of everything (default: out/latent/SOURCE); with "
+                                            "--stored-only, the page")
+    p.add_argument("--stored-only", action="store_true",
+                   help="measure nothing: write docs/results/latent.md (or --out) from its stored data, "
+                        "docs/results/data/latent.json")
+    p.add_argument("--data", type=Path,
+                   help="the page's data a full run updates, its page written beside it (default: "
+                        "docs/results/data/latent.json and docs/results/latent.md with the default --out, else "
+                        "OUT/latent.json and OUT/latent.md)")
     p.add_argument("--ae", type=Path, help="an existing AE.json (default: OUT/ae.json, trained if missing)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ae-seeds", type=int, default=3,
@@ -384,7 +394,11 @@ def predictor_variance(args, ae: Path) -> None:
 
 def report(argv: list[str] | None) -> int:
     args = parser().parse_args(argv)
+    if args.stored_only:
+        write_stored(args.out, args.data)
+        return 0
     progress.set_enabled(not args.no_progress)
+    out_given = args.out
     args.out = args.out or default_out("latent", args.source)
     args.nbrdfs = args.nbrdfs or args.out / "nbrdfs"
     args.pca_tables = args.pca_tables or ("sgd" if args.source == "sgd" else "nbrdf")
@@ -427,6 +441,11 @@ def report(argv: list[str] | None) -> int:
     predictor_variance(args, ae)
     if args.veach:
         veach(args, split)
+    given = sys.argv[1:] if argv is None else argv
+    write_measured(json.loads((args.out / f"ae_vs_pca_{args.pca_tables}.json").read_text()),
+                   json.loads(ae.read_text()).get("provenance", {}), args.source,
+                   f"python -m nbrdf_tools latent {shlex.join(str(a) for a in given)}".strip(), args.refine,
+                   *files_of_run(args.data, out_given, args.out))
     return 0
 
 

@@ -2,7 +2,8 @@
 on measured-like spectra, and what each costs in output weights (issue 31; the choice and its
 reason are in docs/design.md, "Spectral networks").
 
-    python -m nbrdf_tools spectral-basis [--output docs/results/spectral-basis.md] [--quick]
+    python -m nbrdf_tools spectral-basis --stored-only --out docs/results/spectral-basis.md  # from its data
+    python -m nbrdf_tools spectral-basis [--out docs/results/spectral-basis.md] [--quick]
 
 Candidates, each fitted per spectrum by least squares over 360-830 nm (Mitsuba's sampled range)
 on a 2 nm grid, i.e. the best a network with that output layer could do:
@@ -21,7 +22,9 @@ at 60 degrees in ``scalar_spectral``). Errors, per spectrum ``s`` and fit ``g``:
 ``rms(g - s) / rms(s)``, relative max ``max |g - s| / max |s|``, and the error of the linear sRGB
 projection ``|P g - P s| / |P s|`` (Euclidean, under D65, :func:`srgb_weights`); the tables give
 the mean and the worst over each set. Output weights: the RGB network is 6-21-21-3 (675
-weights); K outputs make it ``675 - 66 + 22 K``.
+weights); K outputs make it ``675 - 66 + 22 K``. With ``--out`` the page is written and what it
+reports stored in ``--data`` (``docs/results/data/spectral-basis.json``), from which
+``--stored-only`` writes the page again without fitting anything.
 """
 
 from __future__ import annotations
@@ -232,7 +235,10 @@ def measure(shared: Path | None, quick: bool = False, seed: int = 1) -> list[dic
     return rows
 
 
-def markdown(rows: list[dict]) -> str:
+PAGE = "spectral-basis"
+
+
+def tables(rows: list[dict]) -> list[str]:
     sets = [k for k in rows[0] if k not in ("representation", "outputs", "weights")]
     lines = []
     for metric, label in (("rms", "relative RMS error"), ("max", "relative max error"),
@@ -244,27 +250,78 @@ def markdown(rows: list[dict]) -> str:
             cells = " | ".join(f"{r[s][metric][0]:.2%} / {r[s][metric][1]:.2%}" for s in sets)
             lines.append(f"| {r['representation']} | {r['outputs']} | {r['weights']} | {cells} |")
         lines.append("")
-    return "\n".join(lines)
+    return lines
+
+
+def page(data: dict, opening: str | None = None) -> str:
+    """The whole page from its stored data, ``{"run": {...}, "rows": measure()}``; ``opening``: the
+    command that writes it from that data (default: the results page's own)."""
+    from nbrdf_tools.common import stored_page
+
+    opening = opening or stored_page.opening_command(PAGE)
+    run = data["run"]
+    lines = ["# Spectral output representations: error and cost", "",
+             "```sh", f"{opening}   # this page, from its stored data",
+             f"{run['command']}   # to measure anew (minutes; rewrites the data and the page)", "```", "",
+             "How well each candidate output layer of a spectral network can represent spectra, as least-squares "
+             "fits over 360-830 nm on a 2 nm grid (the best a network with that output could do; no network is "
+             "trained here), and what it costs in weights. The sets: "
+             f"{run['spectra']} spectra of the test files (RGB cells of the four shared RGL measurements times the "
+             "Gaussian basis of `nbrdf_tools.data.spectral_rgl`: peaks 35-45 nm wide, the hardest set), "
+             f"{run['spectra']} smooth reflectance-like random spectra (broad bumps and sigmoid edges), and `f cos` "
+             "of Mitsuba's `roughconductor` (alpha 0.1) with the measured index of refraction of gold and copper "
+             "at normal incidence and at 60 degrees (2 spectra each). Errors per spectrum: relative RMS "
+             "`rms(g - s) / rms(s)`, relative max `max |g - s| / max |s|`, and the error of the linear sRGB "
+             "projection under D65 `|Pg - Ps| / |Ps|`; each cell is the mean / the worst over the set. "
+             f"\"network weights\" is the 6-21-21-K network ({RGB_WEIGHTS} for RGB; the budget is 2x, "
+             f"{2 * RGB_WEIGHTS}). Run of {run['date']} on {run['machine']}: {run['cpu_seconds']:.0f} s CPU, "
+             f"{run['wall_seconds'] / 60:.0f} min wall, nearly all of it the sigmoid fits.", "",
+             "The choice and its reason: [design.md section 9](../design.md#9-real-measured-data-rgl-materials), "
+             "\"Spectral networks\".", "",
+             "## Tables", "", *tables(data["rows"])]
+    return "\n".join(lines).rstrip("\n") + "\n"
 
 
 def main(argv=None) -> int:
+    import os
+    import time
+
+    from nbrdf_tools.common import stored_page
+
     parser = argparse.ArgumentParser(prog="python -m nbrdf_tools spectral-basis",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--shared", type=Path, default=None,
                         help="the shared data folder (default: $NBRDF_SHARED or ../shared)")
-    parser.add_argument("--output", type=Path, help="also write the tables (Markdown) here")
+    parser.add_argument("--out", "--output", type=Path,
+                        help="write the page here (and its data to --data)")
+    stored_page.add_arguments(parser, PAGE, out=False)
     parser.add_argument("--quick", action="store_true", help="fewer spectra and candidates")
     args = parser.parse_args(argv)
+    if args.stored_only:
+        out = args.out or stored_page.page_path(PAGE)
+        stored_page.write(out, page(stored_page.load(stored_page.data_for(args, PAGE))))
+        print(f"wrote {out} from {stored_page.data_for(args, PAGE)}")
+        return 0
     shared = args.shared
     if shared is None:
         from nbrdf_tools.common.paths import shared_dir
 
         shared = shared_dir()
+    wall, cpu = time.perf_counter(), time.process_time()
     rows = measure(shared, quick=args.quick)
-    text = markdown(rows)
+    command = "python -m nbrdf_tools spectral-basis" + (" --quick" if args.quick else "") + \
+        (f" --out {args.out}" if args.out else "")
+    data = {"run": {"command": command, "date": time.strftime("%Y-%m-%d"), "spectra": 40 if args.quick else 100,
+                    "machine": f"{os.cpu_count()} cores (load average {os.getloadavg()[0]:.1f} at the end)",
+                    "cpu_seconds": time.process_time() - cpu, "wall_seconds": time.perf_counter() - wall},
+            "rows": rows}
+    if not args.out:
+        print(page(data))
+        return 0
+    data_file = stored_page.save(stored_page.data_for(args, PAGE), data)
+    text = page(data, stored_page.opening_command(PAGE, args.out, data_file))
     print(text)
-    if args.output:
-        args.output.write_text(text)
+    stored_page.write(args.out, text)
     return 0
 
 

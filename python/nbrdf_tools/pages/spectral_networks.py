@@ -53,12 +53,11 @@ import nbrdf_mitsuba  # noqa: F401  (first: finds a libLLVM for Dr.Jit before Mi
 import mitsuba as mi
 import numpy as np
 
-from nbrdf_tools.common import metrics, progress
+from nbrdf_tools.common import metrics, progress, stored_page
 from nbrdf_tools.common.compare_materials import sample_directions, splitmix_uniforms
 from nbrdf_tools.common.paths import REPO, default_cli, default_out
 from nbrdf_tools.common.render import read_exr, timed_render, warm_up, write_exr
 
-DEFAULT_OUT = REPO / "docs" / "results" / "spectral-networks.md"
 DEFAULT_FIGURE = REPO / "docs" / "images" / "spectral-networks.png"
 SPECTRAL, RGB = "llvm_ad_spectral", "llvm_ad_rgb"
 VARIANTS = (SPECTRAL, RGB)
@@ -366,25 +365,70 @@ def figure(results: list[dict], path: Path) -> Path:
     return path
 
 
-def _introduction(args, results: list[dict], figure_path: Path, out: Path) -> list[str]:
+PAGE = "spectral-networks"
+AT_NM = (400, 500, 600, 700)
+
+
+def _round(value: float) -> float:
+    return float(f"{value:.6g}")
+
+
+def page_data(command: str, args, results: list[dict], figure_path: Path) -> dict:
+    """What the page reports of ``results`` (:func:`measure`), as stored in its data file."""
     from nbrdf_mitsuba import distill
 
-    materials = [r for r in results if not r["source"].rgl]
-    first = results[0]["runs"]
-    provenance = first["spectral"]["provenance"]
-    rgl = [r["source"] for r in results if r["source"].rgl]
+    w = distill.WAVELENGTHS
+    sources = []
+    for r in results:
+        source = r["source"]
+        log = {}
+        for name in NETWORKS:
+            e = r["log_errors"][name]
+            log[name] = {"mean": _round(e.mean()), "max": _round(e.max()), "worst_nm": float(w[int(np.argmax(e))]),
+                         "at": [_round(e[int(np.argmin(np.abs(w - nm)))]) for nm in AT_NM]}
+        images = {}
+        for variant in VARIANTS:
+            found = r["image_errors"][variant]
+            images[variant] = {name: {"errors": {k: _round(v) for k, v in found[name].items()} if name in found else None,
+                                      "noise": ({k: _round(found[NOISE][k]) for k in ("flip_hdr", "ssim")}
+                                                if NOISE in found else None),
+                                      "wall": _round(r["renders"][variant][name][1]),
+                                      "cpu": _round(r["renders"][variant][name][2])}
+                               for name in NETWORKS}
+        training = {name: {"version": run["version"], "how": run["how"], "epochs": run["provenance"].get("epochs"),
+                           "best_validation_loss": run["provenance"].get("best_validation_loss"),
+                           "seconds": _round(run["seconds"]), "cpu_seconds": _round(run["cpu_seconds"]),
+                           "parameters": run["parameters"], "sampling": run.get("sampling", {}).get("default")}
+                    for name, run in r["runs"].items()}
+        sources.append({"label": source.label, "rgl": source.rgl, "file": source.path.name, "note": source.note,
+                        "log_errors": log, "images": images, "interpolation": r["interpolation"],
+                        "training": training})
+    provenance = results[0]["runs"]["spectral"]["provenance"]
+    figure = figure_path.resolve()
+    return {"command": command, "quick": args.quick, "alpha": args.alpha, "pairs": args.pairs, "size": args.size,
+            "spp": args.spp, "samples": provenance.get("samples"), "max_epochs": provenance.get("max_epochs"),
+            "wavelength_step": float(w[1] - w[0]),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_average": round(os.getloadavg()[0], 1),
+            "figure": str(figure.relative_to(REPO)) if figure.is_relative_to(REPO) else str(figure_path),
+            "sources": sources}
+
+
+def _introduction(data: dict) -> list[str]:
+    materials = [s for s in data["sources"] if not s["rgl"]]
+    rgl = [s for s in data["sources"] if s["rgl"]]
+    first = data["sources"][0]["training"]
     lines = [
         *(["**Quick run** (`--quick`: tiny training budget and images, for tests; not the figures of record).", ""]
-          if args.quick else []),
-        *([f"Sources: Mitsuba's `roughconductor` with `alpha` {args.alpha} and `material` "
-           f"{', '.join(r['source'].label for r in materials)} (indices of refraction from measured spectral data). "
+          if data["quick"] else []),
+        *([f"Sources: Mitsuba's `roughconductor` with `alpha` {data['alpha']} and `material` "
+           f"{', '.join(s['label'] for s in materials)} (indices of refraction from measured spectral data). "
            "Each is distilled twice by `python -m nbrdf_mitsuba.distill`: in `llvm_ad_spectral` into a **spectral "
            "network** (file format version 3: 16 cubic B-spline coefficients over 360-830 nm; Mitsuba evaluates the "
-           f"source every {distill.WAVELENGTHS[1] - distill.WAVELENGTHS[0]:g} nm) and in `llvm_ad_rgb` into an **RGB "
-           f"network**; {provenance.get('samples', '?')} training pairs, at most {provenance.get('max_epochs', '?')} "
+           f"source every {data['wavelength_step']:g} nm) and in `llvm_ad_rgb` into an **RGB "
+           f"network**; {data['samples'] or '?'} training pairs, at most {data['max_epochs'] or '?'} "
            "epochs, the same seed.", ""] if materials else []),
-        *[f"RGL measurement `{s.path.name}`{f' ({s.note})' if s.note else ''}: the spectral network distilled from "
-          "Mitsuba's `measured` in `llvm_ad_spectral`, the RGB network by `nbrdf train` (the measurement's sRGB "
+        *[f"RGL measurement `{s['file']}`{' (' + s['note'] + ')' if s['note'] else ''}: the spectral network distilled "
+          "from Mitsuba's `measured` in `llvm_ad_spectral`, the RGB network by `nbrdf train` (the measurement's sRGB "
           "projection under D65). Mitsuba's `measured` refuses spectral files in RGB variants, so there is no "
           "`llvm_ad_rgb` reference for it." for s in rgl],
         *([""] if rgl else ["No spectral RGL measurement was at hand: the four shared RGL files (`../shared/data/rgl`) "
@@ -393,9 +437,9 @@ def _introduction(args, results: list[dict], figure_path: Path, out: Path) -> li
         f"Weights: the spectral network has {first['spectral']['parameters']} (6-21-21-16), the RGB one "
         f"{first['rgb']['parameters']} (6-21-21-3): {first['spectral']['parameters'] / first['rgb']['parameters']:.2f}x.",
         "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores, shared with other jobs (load average "
-        f"{os.getloadavg()[0]:.1f} at the end; times indicative).", "",
-        f"![spheres and per-wavelength errors]({os.path.relpath(figure_path, out.parent)})", "",
+        f"Machine: {data['machine']}, shared with other jobs (load average {data['load_average']:.1f} at the end; "
+        "times indicative).", "",
+        f"![spheres and per-wavelength errors]({stored_page.link(data['figure'], PAGE)})", "",
         "Reading the tables: the per-wavelength log error compares the BSDFs themselves, without noise. The "
         "sphere images hold Monte Carlo noise on both sides (the networks sample with their fitted lobes or "
         "tables, the source with its own distribution): compare each error with the noise floor. "
@@ -409,97 +453,97 @@ def _introduction(args, results: list[dict], figure_path: Path, out: Path) -> li
     return lines
 
 
-def _log_error_table(args, results: list[dict]) -> list[str]:
-    from nbrdf_mitsuba import distill
-
-    w = distill.WAVELENGTHS
+def _log_error_table(data: dict) -> list[str]:
     lines = ["## Log error per wavelength", "",
-             f"`mean |ln(1 + f cos) - ln(1 + f_net cos)|` over {args.pairs} uniform pairs of directions, in "
+             f"`mean |ln(1 + f cos) - ln(1 + f_net cos)|` over {data['pairs']} uniform pairs of directions, in "
              "`llvm_ad_spectral`: the spectral network's own spectrum, and the RGB network's value uplifted by "
              "Mitsuba per wavelength (how a spectral render sees it).", "",
-             "| source | network | mean over wavelengths | worst wavelength | 400 nm | 500 nm | 600 nm | 700 nm |",
-             "|---|---|---:|---:|---:|---:|---:|---:|"]
-    for r in results:
+             "| source | network | mean over wavelengths | worst wavelength | "
+             + " | ".join(f"{nm} nm" for nm in AT_NM) + " |",
+             "|---|---|---:|---:|" + "---:|" * len(AT_NM)]
+    for s in data["sources"]:
         for name, label in (("spectral", "spectral"), ("rgb", "RGB, uplifted")):
-            e = r["log_errors"][name]
-            at = [f"{e[int(np.argmin(np.abs(w - nm)))]:.2e}" for nm in (400, 500, 600, 700)]
-            lines.append(f"| {r['source'].label} | {label} | {e.mean():.2e} | {e.max():.2e} "
-                         f"({w[int(np.argmax(e))]:g} nm) | " + " | ".join(at) + " |")
+            e = s["log_errors"][name]
+            lines.append(f"| {s['label']} | {label} | {e['mean']:.2e} | {e['max']:.2e} ({e['worst_nm']:g} nm) | "
+                         + " | ".join(f"{v:.2e}" for v in e["at"]) + " |")
     return lines
 
 
-def _sampling_summary(results: list[dict]) -> str:
-    chosen = [f"{r['source'].label} {LABELS[kind]}: {run['sampling']['default']}"
-              for r in results for kind, run in r["runs"].items() if "sampling" in run]
+def _sampling_summary(data: dict) -> str:
+    chosen = [f"{s['label']} {LABELS[kind]}: {run['sampling']}"
+              for s in data["sources"] for kind, run in s["training"].items() if run.get("sampling")]
     return ", ".join(chosen) or "none fitted"
 
 
-def _image_table(args, results: list[dict]) -> list[str]:
+def _image_table(data: dict) -> list[str]:
     lines = ["", "## Sphere images", "",
-             f"{args.size} x {args.size} pixels, {args.spp} spp, a directional light (D65) and a dim constant "
+             f"{data['size']} x {data['size']} pixels, {data['spp']} spp, a directional light (D65) and a dim constant "
              "environment; errors against the source rendered in the same variant at the same seed "
              "(`nbrdf_tools.common.metrics`: RMSE of the tone-mapped images, SSIM, HDR-FLIP, relative RMSE of the linear "
              "images); render seconds after a 1-spp render that compiles the kernels (wall / CPU). Each network "
              "samples with what `nbrdf fit-phong` stored for it (lowest variance: "
-             f"{_sampling_summary(results)}), the source its own distribution, so "
+             f"{_sampling_summary(data)}), the source its own distribution, so "
              "their noise differs: *noise floor* is the source against itself rendered at another seed "
              "(HDR-FLIP / SSIM), the part of each error that is Monte Carlo noise.", "",
              "| source | variant | network | RMSE (tone-mapped) | SSIM | HDR-FLIP | relative RMSE | noise floor | "
              "render s |",
              "|---|---|---|---:|---:|---:|---:|---:|---:|"]
-    for r in results:
+    for s in data["sources"]:
         for variant in VARIANTS:
             for name, label in (("spectral", "spectral"), ("rgb", "RGB")):
-                e = r["image_errors"][variant].get(name)
-                _, wall, cpu = r["renders"][variant][name]
-                noise = r["image_errors"][variant].get(NOISE)
+                found = s["images"][variant][name]
+                e, noise = found["errors"], found["noise"]
                 cells = ([f"{e['rmse_tonemapped']:.4f}", f"{e['ssim']:.4f}", f"{e['flip_hdr']:.4f}",
                           f"{e['relative_rmse']:.4f}", f"{noise['flip_hdr']:.4f} / {noise['ssim']:.4f}"]
                          if e else ["-"] * 5)
-                lines.append(f"| {r['source'].label} | `{variant}` | {label} | " + " | ".join(cells)
-                             + f" | {wall:.2f} / {cpu:.2f} |")
+                lines.append(f"| {s['label']} | `{variant}` | {label} | " + " | ".join(cells)
+                             + f" | {found['wall']:.2f} / {found['cpu']:.2f} |")
     return lines
 
 
-def _interpolation_table(results: list[dict]) -> list[str]:
-    found = [r for r in results if r["interpolation"]]
+def _interpolation_table(data: dict) -> list[str]:
+    found = [s for s in data["sources"] if s["interpolation"]]
     if not found:
         return []
     lines = ["", "## Sampling the source's spectrum", "",
              "Linear interpolation between samples every 5-40 nm against the source's spectrum every 1 nm "
              "(relative RMS over the wavelengths, mean and worst over pairs of directions):", "",
              "| source | " + " | ".join(f"{s:g} nm" for s in STEPS_NM) + " |", "|---|" + "---:|" * len(STEPS_NM)]
-    for r in found:
-        lines.append(f"| {r['source'].label} | " + " | ".join(
-            f"{100 * m:.3f} % (worst {100 * x:.3f} %)" for m, x in (r["interpolation"][f"{s:g}"] for s in STEPS_NM))
+    for s in found:
+        lines.append(f"| {s['label']} | " + " | ".join(
+            f"{100 * m:.3f} % (worst {100 * x:.3f} %)" for m, x in (s["interpolation"][f"{step:g}"] for step in STEPS_NM))
             + " |")
     return lines
 
 
-def _training_table(results: list[dict]) -> list[str]:
+def _training_table(data: dict) -> list[str]:
     lines = ["", "## Training", "",
              "| source | network | made by | epochs | best validation loss | wall s | CPU s |",
              "|---|---|---|---:|---:|---:|---:|"]
-    for r in results:
+    for s in data["sources"]:
         for name in NETWORKS:
-            run = r["runs"][name]
-            lines.append(f"| {r['source'].label} | {name} (version {run['version']}) | {run['how']} | "
-                         f"{run['provenance'].get('epochs')} | "
-                         f"{run['provenance'].get('best_validation_loss', float('nan')):.3e} | {run['seconds']:.1f} | "
+            run = s["training"][name]
+            loss = run["best_validation_loss"]
+            lines.append(f"| {s['label']} | {name} (version {run['version']}) | {run['how']} | {run['epochs']} | "
+                         f"{float('nan') if loss is None else loss:.3e} | {run['seconds']:.1f} | "
                          f"{run['cpu_seconds']:.1f} |")
     return lines
 
 
-def markdown(command: str, args, results: list[dict], figure_path: Path, out: Path) -> str:
-    lines = ["# Spectral networks", "", "```sh", command, "```", "",
-             *_introduction(args, results, figure_path, out), *_log_error_table(args, results),
-             *_image_table(args, results), *_interpolation_table(results), *_training_table(results)]
+def page(data: dict, opening: str | None = None) -> str:
+    """The whole page from its stored data (:func:`page_data`); ``opening``: the command that writes
+    it from that data (default: the results page's own)."""
+    opening = opening or stored_page.opening_command(PAGE)
+    lines = ["# Spectral networks", "", "```sh", f"{opening}   # this page, from its stored data",
+             f"{data['command']}   # to measure anew (rewrites the data, page and figure)", "```", "",
+             *_introduction(data), *_log_error_table(data), *_image_table(data), *_interpolation_table(data),
+             *_training_table(data)]
     return "\n".join(lines) + "\n"
 
 
 def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m nbrdf_tools spectral-networks", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="the Markdown report (default: %(default)s)")
+    stored_page.add_arguments(parser, PAGE)
     parser.add_argument("--figure", type=Path, default=DEFAULT_FIGURE, help="the figure (default: %(default)s)")
     parser.add_argument("--work", type=Path, default=default_out("spectral-networks"),
                         help="sources, networks, EXR images and step records (default: %(default)s)")
@@ -540,6 +584,10 @@ def settings_of(args) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_arguments(argv)
+    if args.stored_only:
+        stored_page.write(args.out, page(stored_page.load(stored_page.data_for(args, PAGE))))
+        print(f"wrote {args.out} from {stored_page.data_for(args, PAGE)}")
+        return 0
     progress.set_enabled(not args.no_progress)
     args.work.mkdir(parents=True, exist_ok=True)
     steps = Steps(args.work / "steps", settings_of(args), args.resume)
@@ -551,9 +599,10 @@ def main(argv: list[str] | None = None) -> int:
     results = [measure(source, args, steps) for source in progress.bar(sources, desc="sources", unit="source")]
     figure(results, args.figure)
     words = ["python -m nbrdf_tools spectral-networks", *(argv if argv is not None else sys.argv[1:])]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(markdown(" ".join(words), args, results, args.figure, args.out), encoding="utf-8")
-    print(f"wrote {args.out} and {args.figure}")
+    data = page_data(" ".join(words), args, results, args.figure)
+    data_file = stored_page.save(stored_page.data_for(args, PAGE), data)
+    stored_page.write(args.out, page(data, stored_page.opening_command(PAGE, args.out, data_file)))
+    print(f"wrote {args.out}, {data_file} and {args.figure}")
     return 0
 
 

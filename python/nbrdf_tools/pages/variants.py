@@ -2,7 +2,9 @@
 and Mitsuba's own ``roughconductor`` and ``diffuse`` (RGB parameters) as the yardstick of what
 Mitsuba's spectral uplift does to RGB data (issue 31).
 
+    python -m nbrdf_tools variants --stored-only --out docs/results/variants.md   # the page from its data
     python -m nbrdf_tools variants [--out docs/results/variants.md] [--figure docs/images/variants.png]
+        [--data docs/results/data/variants.json]
         [--width 192] [--spp 256] [--scalar-width 72] [--scalar-spp 16] [--timing-repeats 5] [--work out/variants]
 
 Renders ``scalar_rgb``, ``scalar_spectral``, ``llvm_ad_rgb``, ``llvm_ad_mono``, ``llvm_ad_spectral``
@@ -20,7 +22,8 @@ in LLVM ones), counts non-finite pixels and compares each image with the one it 
 The materials: the MERL-format table of ``--material`` made from its published fit (``nbrdf
 synth``) and its network (``nbrdf train`` + ``fit-phong``), as :mod:`nbrdf_tools.demo` makes them
 (reused from WORK when present). Writes the Markdown table (``--out``), the figure (one row per
-BSDF, one column per variant) and the EXR renders under WORK.
+BSDF, one column per variant) and the EXR renders under WORK; what the page reports is stored in
+``--data``, from which ``--stored-only`` writes the page again without rendering.
 """
 
 from __future__ import annotations
@@ -36,11 +39,14 @@ import nbrdf_mitsuba  # noqa: F401  (first: finds a libLLVM for Dr.Jit before Mi
 import mitsuba as mi
 import numpy as np
 
-from nbrdf_tools.common import cli, metrics, progress
+from nbrdf_tools.common import cli, metrics, progress, stored_page
 from nbrdf_tools.demo import DEFAULT_MATERIAL, srgb, synthesise, train
 from nbrdf_tools.common.paths import REPO, MissingDataError, default_cli, default_out
 from nbrdf_tools.common.render import render, write_exr
 from nbrdf_tools.common.scenes.veach import veach_scene_dict
+
+PAGE = "variants"
+MACHINE = "a shared 2-core machine"
 
 VARIANTS = ("scalar_rgb", "scalar_spectral", "llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral",
             "llvm_ad_spectral_polarized")
@@ -55,7 +61,6 @@ MATCHES = {
 # Mitsuba's luminance of linear Rec. 709 RGB (include/mitsuba/core/spectrum.h).
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 YARDSTICK_RGB = [0.8, 0.5, 0.2]
-DEFAULT_OUT = REPO / "docs" / "results" / "variants.md"
 DEFAULT_FIGURE = REPO / "docs" / "images" / "variants.png"
 
 
@@ -154,15 +159,20 @@ def small_png(png, path: Path) -> None:
     Image.open(png).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
 
 
-def markdown(command: str, settings: dict, results: dict, comparisons: dict, figure_path: Path,
-             timing: list[str]) -> str:
+def page(data: dict, opening: str | None = None) -> str:
+    """The whole page from its stored data (:func:`page_data`); ``opening``: the command that writes
+    it from that data (default: the results page's own)."""
+    opening = opening or stored_page.opening_command(PAGE)
+    s = data["settings"]
     lines = ["# Every variant: the Veach scene in RGB, mono, spectral and polarized variants", "",
-             "```sh", command, "```", "",
-             f"Mitsuba {mi.__version__}. LLVM variants: {settings['width']} x {settings['height']} pixels, "
-             f"{settings['spp']} spp; scalar variants: {settings['scalar_width']} x {settings['scalar_height']}, "
-             f"{settings['scalar_spp']} spp (they call the nbrdf and merl BSDFs one direction at a time through "
+             "```sh", f"{opening}   # this page, from its stored data",
+             f"{data['command']}   # to measure anew: renders every variant, rewrites the data, page and figure",
+             "```", "",
+             f"Mitsuba {data['mitsuba']}. LLVM variants: {s['width']} x {s['height']} pixels, "
+             f"{s['spp']} spp; scalar variants: {s['scalar_width']} x {s['scalar_height']}, "
+             f"{s['scalar_spp']} spp (they call the nbrdf and merl BSDFs one direction at a time through "
              "Python). Mitsuba's `direct` integrator with MIS; each BSDF's default backend (`rust` in scalar "
-             f"variants, `jit` in LLVM ones). Material: {settings['material']} (`nbrdf synth` table and its "
+             f"variants, `jit` in LLVM ones). Material: {s['material']} (`nbrdf synth` table and its "
              f"network); yardsticks: Mitsuba's `roughconductor` (alpha 0.15) and `diffuse` with the RGB "
              f"colour {YARDSTICK_RGB}.", "",
              "Spectral variants uplift the nbrdf/merl RGB value per evaluation as Mitsuba uplifts "
@@ -175,27 +185,40 @@ def markdown(command: str, settings: dict, results: dict, comparisons: dict, fig
              "taken on display values (`metrics.tone_map`: gamma 2.2, clipped to [0, 1]) besides the linear "
              "MAE: the lights' own pixels (radiance up to 900) would otherwise make most of a linear "
              "average, and their pixel-coverage noise with it.", "",
-             f"![one row per BSDF, one column per variant]({Path('..') / figure_path.relative_to(REPO / 'docs')})"
-             if figure_path.is_relative_to(REPO / "docs") else f"Figure: `{figure_path}`", "",
+             f"![one row per BSDF, one column per variant]({stored_page.link(data['figure'], PAGE)})", "",
              "| BSDF | variant | render (s) | non-finite pixels | mean display value (R, G, B) | compared with | "
              f"MAE, linear | MAE, display | MAE of {BLOCK}x{BLOCK} means, display | noise: MAE, display | "
              f"noise: MAE of {BLOCK}x{BLOCK} means, display |",
              "|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|"]
-    for name, per_variant in results.items():
-        for variant, r in per_variant.items():
-            c = comparisons[name].get(variant)
-            mean = ", ".join(f"{v:.4f}" for v in r["mean"])
-            cells = [name, f"`{variant}`", f"{r['seconds']:.1f}", str(r["nonfinite"]), mean]
-            if c:
-                cells += [c["against"]] + [f"{c[k]:.2e}" if k in c else "" for k in (
-                    "mae", "display_mae", "block_mae", "noise_display_mae", "noise_block_mae")]
-            else:
-                cells += ["(reference)", "", "", "", "", ""]
-            lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", summary(comparisons)]
+    for r in data["rows"]:
+        c = r["comparison"]
+        mean = ", ".join(f"{v:.4f}" for v in r["mean"])
+        cells = [r["bsdf"], f"`{r['variant']}`", f"{r['seconds']:.1f}", str(r["nonfinite"]), mean]
+        if c:
+            cells += [c["against"]] + [f"{c[k]:.2e}" if k in c else "" for k in (
+                "mae", "display_mae", "block_mae", "noise_display_mae", "noise_block_mae")]
+        else:
+            cells += ["(reference)", "", "", "", "", ""]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", summary(data["uplift_ratios"])]
     lines += ["", "MAE: `nbrdf_tools.common.metrics.mae` (all pixels and channels). Times "
-              "include loading the scene and compiling its kernels, on a shared 2-core machine."]
-    return "\n".join(lines + timing) + "\n"
+              f"include loading the scene and compiling its kernels, on {data['machine']}."]
+    return "\n".join(lines + timing_lines(data.get("timing"), data["machine"])) + "\n"
+
+
+def page_data(command: str, settings: dict, results: dict, comparisons: dict, figure_path: Path,
+              timing: dict | None) -> dict:
+    """What the page reports, as stored in its data file."""
+    rows = [{"bsdf": name, "variant": variant, "seconds": r["seconds"], "nonfinite": r["nonfinite"],
+             "mean": [float(v) for v in r["mean"]], "comparison": comparisons[name].get(variant)}
+            for name, per_variant in results.items() for variant, r in per_variant.items()]
+    for row in rows:
+        if row["comparison"]:
+            row["comparison"] = {k: (float(v) if isinstance(v, (float, np.floating)) else v)
+                                 for k, v in row["comparison"].items() if k != "kind"}
+    return {"mitsuba": mi.__version__, "machine": MACHINE, "command": command, "settings": settings,
+            "figure": str(figure_path.resolve().relative_to(REPO)) if figure_path.resolve().is_relative_to(REPO)
+            else str(figure_path), "rows": rows, "uplift_ratios": uplift_ratios(comparisons), "timing": timing}
 
 
 TIMED_VARIANTS = ("llvm_ad_rgb", "llvm_ad_spectral")
@@ -225,32 +248,50 @@ def timings(materials: dict, resolution: tuple[int, int], spp: int, repeats: int
     return {key: np.median(np.asarray(value), axis=0) for key, value in samples.items()}
 
 
-def timing_lines(times: dict, resolution: tuple[int, int], spp: int, repeats: int) -> list[str]:
+def timing_data(times: dict, resolution: tuple[int, int], spp: int, repeats: int) -> dict:
+    """The stored form of :func:`timings`, with the machine's load at the end."""
+    rows = []
+    for name in dict.fromkeys(name for name, _ in times):
+        seconds = {v: [float(x) for x in times[name, v]] for v in TIMED_VARIANTS}
+        rows.append({"bsdf": name, "seconds": seconds,
+                     "cpu_ratio": seconds[TIMED_VARIANTS[1]][1] / seconds[TIMED_VARIANTS[0]][1]})
+    return {"width": resolution[0], "height": resolution[1], "spp": spp, "repeats": repeats,
+            "load_average": os.getloadavg()[0], "rows": rows}
+
+
+def timing_lines(timing: dict | None, machine: str) -> list[str]:
+    if not timing:
+        return []
     lines = ["", "## Cost of the uplift", "",
-             f"Warm renders (kernels compiled), {resolution[0]} x {resolution[1]} pixels, {spp} spp, median of "
-             f"{repeats} interleaved rounds; wall and CPU seconds of the whole process, on the shared 2-core "
-             f"machine (load average {os.getloadavg()[0]:.1f} at the end):", "",
+             f"Warm renders (kernels compiled), {timing['width']} x {timing['height']} pixels, {timing['spp']} spp, "
+             f"median of {timing['repeats']} interleaved rounds; wall and CPU seconds of the whole process, on "
+             f"{machine} (load average {timing['load_average']:.1f} at the end):", "",
              "| BSDF | " + " | ".join(f"`{v}` wall / CPU (s)" for v in TIMED_VARIANTS) + " | spectral / RGB, CPU |",
              "|---|" + "---:|" * (len(TIMED_VARIANTS) + 1)]
-    for name in dict.fromkeys(name for name, _ in times):
-        cells = [f"{times[name, v][0]:.2f} / {times[name, v][1]:.2f}" for v in TIMED_VARIANTS]
-        ratio = times[name, TIMED_VARIANTS[1]][1] / times[name, TIMED_VARIANTS[0]][1]
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {ratio:.2f} |")
+    for row in timing["rows"]:
+        cells = [f"{row['seconds'][v][0]:.2f} / {row['seconds'][v][1]:.2f}" for v in TIMED_VARIANTS]
+        lines.append(f"| {row['bsdf']} | " + " | ".join(cells) + f" | {row['cpu_ratio']:.2f} |")
     return lines
 
 
-def summary(comparisons: dict) -> str:
+def uplift_ratios(comparisons: dict) -> dict[str, dict[str, float]]:
     """The spectral-RGB difference of the tile means as a multiple of the spectral render's own
-    noise there, per BSDF: about 1 where the uplift's effect is below the Monte Carlo noise."""
-    parts = []
+    noise there, per spectral variant and BSDF: about 1 where the uplift's effect is below the
+    Monte Carlo noise."""
+    ratios = {}
     for variant in ("llvm_ad_spectral", "scalar_spectral"):
-        ratios = [f"{name} {c[variant]['block_mae'] / c[variant]['noise_block_mae']:.2f}"
-                  for name, c in comparisons.items()
-                  if c.get(variant) and c[variant].get("noise_block_mae")]
-        if ratios:
-            parts.append(f"`{variant}`: " + ", ".join(ratios))
-    if not parts:
+        found = {name: float(c[variant]["block_mae"] / c[variant]["noise_block_mae"])
+                 for name, c in comparisons.items() if c.get(variant) and c[variant].get("noise_block_mae")}
+        if found:
+            ratios[variant] = found
+    return ratios
+
+
+def summary(ratios: dict[str, dict[str, float]]) -> str:
+    if not ratios:
         return ""
+    parts = [f"`{variant}`: " + ", ".join(f"{name} {ratio:.2f}" for name, ratio in found.items())
+             for variant, found in ratios.items()]
     return ("Spectral against RGB, MAE of the tile means divided by the same variant's noise MAE of the tile "
             "means (about 1: the difference is the Monte Carlo noise; the yardsticks show Mitsuba's own "
             "uplift on the same scale): " + "; ".join(parts) + ".")
@@ -268,7 +309,7 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
                         help="interleaved warm renders timed per BSDF in llvm_ad_rgb and llvm_ad_spectral (0: none)")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS, help="variants to render")
     parser.add_argument("--work", type=Path, default=default_out("variants"), help="materials and EXR renders")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="the Markdown page (default: %(default)s)")
+    stored_page.add_arguments(parser, PAGE)
     parser.add_argument("--figure", type=Path, default=DEFAULT_FIGURE, help="the figure (default: %(default)s)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="nbrdf CLI (default: %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
@@ -309,6 +350,10 @@ def command_line(args: argparse.Namespace) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_arguments(argv)
+    if args.stored_only:
+        stored_page.write(args.out, page(stored_page.load(stored_page.data_for(args, PAGE))))
+        print(f"wrote {args.out} from {stored_page.data_for(args, PAGE)}")
+        return 0
     progress.set_enabled(not args.no_progress)
     missing = [v for v in args.variants if v not in mi.variants()]
     if missing:
@@ -330,17 +375,18 @@ def main(argv: list[str] | None = None) -> int:
     results, images, noise = render_all(materials, args)
     comparisons = {name: {v: compare(v, images[name], noise[name]) for v in args.variants} for name in materials}
     figure_path = figure(images, args.figure)
-    timing = []
+    timing = None
     if args.timing_repeats > 0 and all(v in mi.variants() for v in TIMED_VARIANTS):
         timed = {name: materials[name] for name in ("nbrdf", "merl", "roughconductor")}
         resolution, spp = (args.width, args.width * 2 // 3), max(1, args.spp // 8)
-        timing = timing_lines(timings(timed, resolution, spp, args.timing_repeats), resolution, spp,
-                              args.timing_repeats)
-    page = markdown(command_line(args), settings, results, comparisons, figure_path, timing)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(page)
-    print(page)
-    print(f"figure: {figure_path}\nrenders: {args.work}")
+        timing = timing_data(timings(timed, resolution, spp, args.timing_repeats), resolution, spp,
+                             args.timing_repeats)
+    data = page_data(command_line(args), settings, results, comparisons, figure_path, timing)
+    data_file = stored_page.save(stored_page.data_for(args, PAGE), data)
+    text = page(data, stored_page.opening_command(PAGE, args.out, data_file))
+    stored_page.write(args.out, text)
+    print(text)
+    print(f"data: {data_file}\nfigure: {figure_path}\nrenders: {args.work}")
     failed = any(r["nonfinite"] for per_variant in results.values() for r in per_variant.values())
     return 1 if failed else 0
 

@@ -13,6 +13,7 @@ import nbrdf_mitsuba  # first: finds a libLLVM for Dr.Jit before Mitsuba starts 
 import mitsuba as mi
 
 from nbrdf_tools.common import cli, progress
+from nbrdf_tools.pages.scenes.page import files_of_run, write_measured, write_stored
 from nbrdf_tools.pages.scenes.report import markdown, replot, write_csv
 from nbrdf_tools.pages.scenes.run import QUICK_TRAIN_ARGS, KitchenSetup, VeachSetup, material_specs, run_kitchen, run_veach
 from nbrdf_tools.pages.scenes.strategies import DEFAULT_STRATEGIES, STRATEGIES, kitchen_skip_reason
@@ -61,6 +62,13 @@ def parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path,
                         help="output folder of everything, caches included (default: out/convergence with the "
                              "materials and references cached in out/; quick: out/convergence-quick)")
+    parser.add_argument("--stored-only", action="store_true",
+                        help="measure nothing: write docs/results/scenes.md (or --out, here the page) from its stored "
+                             "data, docs/results/data/scenes.json")
+    parser.add_argument("--data", type=Path,
+                        help="the page's data a measuring run updates, its page written beside it (default: "
+                             "docs/results/data/scenes.json and docs/results/scenes.md for a full run with the "
+                             "default --out, else OUT/scenes.json and OUT/scenes.md)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs)")
     parser.add_argument("--cli", type=Path, default=default_cli(), help="the nbrdf command-line tool")
     parser.add_argument("--force", action="store_true", help="re-render cached references")
@@ -198,6 +206,9 @@ def _replot(scene_out: Path, suffix: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     options = parser()
     args = options.parse_args(argv)
+    if args.stored_only:
+        write_stored(args.out, args.data)
+        return 0
     train_args = args.train_args.split()
     progress.set_enabled(not args.no_progress)
     _strategies(args, options)
@@ -232,6 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     report["notes"] = notes
     report["settings"] = _settings(args, resolution, integrator_label, train_args, time.perf_counter() - start, cache)
     _write(report, args, scene_out, suffix)
+    write_measured(report, *files_of_run(args, out))
     bad = sum(r["nonfinite"] for r in report["results"])
     if bad:
         print(f"error: {bad} non-finite pixel values in the renders", file=sys.stderr)
