@@ -1,5 +1,5 @@
 """The data-driven sampler ``sampling = "tabulated"`` (``nbrdf-core/src/sampling/tabulated.rs``, its
-Dr.Jit twin ``jit.py`` ``TracedTable``): Mitsuba's chi^2 test in both backends on a glossy
+Dr.Jit twin ``jit/sampling.py`` ``TracedTable``): Mitsuba's chi^2 test in both backends on a glossy
 network, a near-diffuse one, a stiff (very peaked) table and grazing views; the pdf against a
 NumPy float64 oracle over the library's exported table; pdf(sample) == the returned pdf; the
 backends against each other; the file's ``sampling.default`` as the plugin's default."""
