@@ -108,7 +108,7 @@ def test_traced_expm1_is_relatively_exact(jit_variant):
     error within a few float32 roundings, and it is 0 at 0."""
     from nbrdf_mitsuba import jit
 
-    z = np.concatenate([np.linspace(jit.EXP_ARGUMENT_MIN, jit.EXP_ARGUMENT_MAX, 200_001),
+    z = np.concatenate([np.linspace(jit.EXP_ARG_MIN, jit.EXP_ARG_MAX, 200_001),
                         np.geomspace(1e-30, 1e-1, 2001), -np.geomspace(1e-30, 1e-1, 2001)]).astype(np.float32)
     got = np.array(jit.expm1(mi.Float(z)), dtype=np.float64)
     want = np.expm1(z.astype(np.float64))

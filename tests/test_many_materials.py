@@ -1,5 +1,5 @@
 """Scenes with many distinct networks (issue 31, "Many materials"): the kernel shared by every
-network of a shape (``jit_weights`` ``auto`` beyond ``jit.AUTO_LITERAL_MAX`` live networks, and
+network of a shape (``jit_weights`` ``auto`` beyond ``jit.network.AUTO_LITERAL_MAX`` live networks, and
 ``opaque``) evaluates each network as its own literal kernel does and as the float64 NumPy
 oracle and the Rust library do; a scene of distinct networks renders each sphere like the same
 network alone; a broken file among many is named."""
@@ -46,9 +46,9 @@ def networks(tmp_path):
 @pytest.fixture
 def shared_kernel(monkeypatch):
     """``auto`` traces the shared kernel whatever the number of live networks."""
-    from nbrdf_mitsuba import jit
+    from nbrdf_mitsuba.jit import network
 
-    monkeypatch.setattr(jit, "AUTO_LITERAL_MAX", 0)
+    monkeypatch.setattr(network, "AUTO_LITERAL_MAX", 0)
 
 
 def _dispatch_eval(bsdfs, view, light):
@@ -91,12 +91,12 @@ def test_shared_kernel_equals_each_literal_kernel_the_oracle_and_the_library(llv
 
 
 def test_auto_chooses_by_the_number_of_live_networks(llvm, networks, monkeypatch):
-    from nbrdf_mitsuba import jit
+    from nbrdf_mitsuba.jit import network
 
     bsdfs = [mi.load_dict({"type": "nbrdf", "filename": str(f), "backend": "jit"}) for f in networks]
-    monkeypatch.setattr(jit, "AUTO_LITERAL_MAX", jit.live_networks())
+    monkeypatch.setattr(network, "AUTO_LITERAL_MAX", network.live_networks())
     assert {b._traced.kernel() for b in bsdfs} == {"literal"}
-    monkeypatch.setattr(jit, "AUTO_LITERAL_MAX", jit.live_networks() - 1)
+    monkeypatch.setattr(network, "AUTO_LITERAL_MAX", network.live_networks() - 1)
     assert {b._traced.kernel() for b in bsdfs} == {"parameters"}
     assert "kernel = parameters" in str(bsdfs[0])
     # Explicit modes are kept whatever the count; only opaque weights are differentiable.

@@ -131,6 +131,10 @@ def test_wheel_is_manylinux_and_complete(wheel):
     assert "nbrdf_mitsuba/libnbrdf_ffi.so" in names and "nbrdf_mitsuba/nbrdf.h" in names
     assert "nbrdf_mitsuba/libnbrdf_train.so" in names and "nbrdf_mitsuba/nbrdf_train.h" in names
     assert "nbrdf_mitsuba/autoencoder.json" in names  # the decoder of nbrdf_mitsuba.latent
+    package = REPO / "mitsuba-plugin"
+    modules = [p.relative_to(package).as_posix() for p in (package / "nbrdf_mitsuba").rglob("*.py")]
+    assert "nbrdf_mitsuba/jit/__init__.py" in modules  # subpackages are listed in pyproject.toml
+    assert not [m for m in modules if m not in names], "modules missing from the wheel"
     assert f"nbrdf_mitsuba-{VERSION}.data/scripts/nbrdf" in names
     assert "License-Expression: MIT" in metadata
     assert "Project-URL: " in metadata and "Keywords: " in metadata

@@ -1,5 +1,5 @@
 """The data-driven sampler ``sampling = "tabulated"`` (``nbrdf-core/src/sampling/tabulated.rs``, its
-Dr.Jit twin ``jit.py`` ``TracedTable``): Mitsuba's chi^2 test in both backends on a glossy
+Dr.Jit twin ``jit/sampling.py`` ``TracedTable``): Mitsuba's chi^2 test in both backends on a glossy
 network, a near-diffuse one, a stiff (very peaked) table and grazing views; the pdf against a
 NumPy float64 oracle over the library's exported table; pdf(sample) == the returned pdf; the
 backends against each other; the file's ``sampling.default`` as the plugin's default."""
@@ -201,4 +201,4 @@ def test_fit_phong_stores_the_lowest_variance_strategy(llvm_variant, tmp_path, n
     assert weight in (0.1, 0.05, 0.02) and stored["table_cosine_weight"] == pytest.approx(weight)
     assert _native.Sampler("tabulated", material=_native.Material(out)).cosine_weight == pytest.approx(weight)
     bsdf = mi.load_dict({"type": "nbrdf", "filename": str(out), "backend": "jit", "sampling": "tabulated"})
-    assert bsdf._traced_table.cosine_weight == pytest.approx(weight)
+    assert bsdf._backend.table.cosine_weight == pytest.approx(weight)

@@ -127,10 +127,10 @@ def test_every_twin_in_the_table_exists():
 
 def test_a_renamed_name_in_the_table_is_named():
     markdown = DESIGN.read_text(encoding="utf-8")
-    renamed = markdown.replace("jit.py::TracedNetwork.eval_input", "jit.py::TracedNetwork.eval_inputs", 1)
+    renamed = markdown.replace("jit/network.py::TracedNetwork.eval_input", "jit/network.py::TracedNetwork.eval_inputs", 1)
     assert renamed != markdown
     assert problems(renamed, REPO) == [
-        "forward pass: mitsuba-plugin/nbrdf_mitsuba/jit.py::TracedNetwork.eval_inputs: TracedNetwork.eval_inputs "
+        "forward pass: mitsuba-plugin/nbrdf_mitsuba/jit/network.py::TracedNetwork.eval_inputs: TracedNetwork.eval_inputs "
         "not defined"]
     moved = markdown.replace("nbrdf-core/src/merl/lookup.rs::", "nbrdf-core/src/merl.rs::", 1)
     assert problems(moved, REPO) == ["MERL trilinear lookup: nbrdf-core/src/merl.rs::MerlTable::trilinear: "
@@ -149,11 +149,12 @@ def test_a_twin_renamed_in_the_code_is_named(tmp_path):
     assert problems(only_row, tmp_path) == []
     kernel = tmp_path / "nbrdf-core/src/network/kernel.rs"
     kernel.write_text(kernel.read_text().replace("fn eval_chunks<", "fn eval_lanes<"))
-    jit = tmp_path / "mitsuba-plugin/nbrdf_mitsuba/jit.py"
-    jit.write_text(jit.read_text().replace("def eval_input(", "def evaluate_input("))
+    network = tmp_path / "mitsuba-plugin/nbrdf_mitsuba/jit/network.py"
+    network.write_text(network.read_text().replace("def eval_input(", "def evaluate_input("))
     assert problems(only_row, tmp_path) == [
         "forward pass: nbrdf-core/src/network/kernel.rs::eval_chunks: eval_chunks not defined",
-        "forward pass: mitsuba-plugin/nbrdf_mitsuba/jit.py::TracedNetwork.eval_input: TracedNetwork.eval_input "
+        "forward pass: mitsuba-plugin/nbrdf_mitsuba/jit/network.py::TracedNetwork.eval_input: "
+        "TracedNetwork.eval_input "
         "not defined"]
 
 

@@ -226,7 +226,7 @@ def _material_memory(scene) -> dict:
 
     bsdf = scene.shapes()[0].bsdf()
     figures = {"weights_bytes": 4 * bsdf._traced.parameter_count, "kernel": bsdf._traced.kernel()}
-    table = getattr(bsdf, "_traced_table", None)
+    table = bsdf._backend.table
     if table is not None:
         figures["sampler_bytes"] = 4 * sum(dr.width(a) for a in (table.mass, table.alias_probability, table.alias))
     return figures

@@ -170,7 +170,7 @@ def sampler_memory(bsdf: dict) -> dict:
     its file; empty for every other BSDF."""
     if bsdf["type"] not in ("nbrdf", "merl"):
         return {}
-    table = getattr(mi.load_dict(bsdf), "_traced_table", None)
+    table = mi.load_dict(bsdf)._backend.table
     if table is None:
         return {}
     count = sum(dr.width(a) for a in (table.mass, table.alias_probability, table.alias))

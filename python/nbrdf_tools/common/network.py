@@ -19,8 +19,8 @@ import numpy as np
 Layers = list[tuple[np.ndarray, np.ndarray]]
 
 #: The largest argument of the output's ``exp`` (docs/design.md section 4): ``e^80`` stays far
-#: below float32's maximum; the Rust kernel clamps there too.
-EXP_ARGUMENT_MAX = 80.0
+#: below float32's maximum; the Rust kernel clamps there too (fastmath.rs, same name).
+EXP_ARG_MAX = 80.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -129,13 +129,13 @@ def network_input(view: np.ndarray, light: np.ndarray, anisotropic: bool = False
 
 def forward(layers: Layers, inputs: np.ndarray) -> np.ndarray:
     """f_r (..., 3) of network inputs (..., 6): ReLU hidden layers, ``max(exp(x) - 1, 0)`` output
-    (the argument clamped at :data:`EXP_ARGUMENT_MAX`, as in the Rust kernel)."""
+    (the argument clamped at :data:`EXP_ARG_MAX`, as in the Rust kernel)."""
     a = inputs.reshape(-1, inputs.shape[-1])
     for i, (w, b) in enumerate(layers):
         a = a @ w + b
         if i < len(layers) - 1:
             a = np.maximum(a, 0)
-    return np.maximum(np.exp(np.minimum(a, EXP_ARGUMENT_MAX)) - 1, 0).reshape(*inputs.shape[:-1], -1)
+    return np.maximum(np.exp(np.minimum(a, EXP_ARG_MAX)) - 1, 0).reshape(*inputs.shape[:-1], -1)
 
 
 def evaluate(layers: Layers, view: np.ndarray, light: np.ndarray, anisotropic: bool = False) -> np.ndarray:
