@@ -74,7 +74,7 @@ light at a random direction), not a render: the Veach scene's equal-time compari
 ## The data-driven sampler `tabulated` and the per-material default
 
 `sampling = "tabulated"` ([nbrdf-core/src/sampling/tabulated.rs](../../nbrdf-core/src/sampling/tabulated.rs), Dr.Jit
-twin `jit.py` `TracedTable`): built from the material when it loads, for 16 bands of view
+twin `jit/sampling.py` `TracedTable`): built from the material when it loads, for 16 bands of view
 elevation the mass of `f_r cos` over 48 x 16 half-vector bins (`t = (1 - cos theta_h)^(1/4)` by
 `|phi_h - phi_v|` over `[0, pi]`: the material is isotropic, so a bin stands for itself and its
 mirror image across the plane of incidence, and one bit of a uniform picks the side; each band
