@@ -695,8 +695,8 @@ pub fn draw_sets(target: &TargetFn<'_>, config: &TrainConfig) -> Result<(DataSet
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::phong::PhongParams;
     use crate::merl::{self, cell_coordinates, CELLS, SCALE};
-    use crate::phong_fit::PhongParams;
 
     /// The plateau rule as `TrainConfig` documents it: `patience` epochs without a relative
     /// improvement of `min_improvement` decay the rate, `lr_decays` times, then stop; nothing
@@ -901,14 +901,13 @@ mod tests {
         // The trained network's sampling lobe is anisotropic the oracle's way: its peak is
         // narrow along x (tangent width 0.15 vs 0.5, i.e. n_u ~ 44, n_v ~ 4), and the lobe
         // samples it better than the best isotropic one.
-        let mut lobe_config = crate::anisotropic_lobe_fit::AnisotropicLobeFitConfig::default();
+        let mut lobe_config = crate::fit::anisotropic::AnisotropicLobeFitConfig::default();
         lobe_config.base.s_bins = 60;
         lobe_config.base.phi_bins = 48;
         lobe_config.base.view_thetas = vec![0.3, 0.8, 1.2];
         lobe_config.refine_levels = 3;
-        let target = crate::target::network_target(&aniso);
-        let lobe =
-            crate::anisotropic_lobe_fit::fit_anisotropic_lobe(&target, &lobe_config).unwrap();
+        let target = crate::fit::target::network_target(&aniso);
+        let lobe = crate::fit::anisotropic::fit_anisotropic_lobe(&target, &lobe_config).unwrap();
         assert!(lobe.exponent_u > 2.0 * lobe.exponent_v, "{lobe:?}");
         assert!(
             lobe.relative_variance < lobe.isotropic_relative_variance,
