@@ -57,8 +57,8 @@ pub struct TrainConfig {
     pub adam: AdamConfig,
     /// Stop after this many epochs without a relative validation improvement of
     /// `min_improvement` over the best so far, but not before `min_epochs` epochs: stiff
-    /// materials can sit on a plateau for 10-15 epochs before the network finds the specular
-    /// peak (alumina-oxide does), which a bare patience would take for convergence.
+    /// materials can sit on a plateau before the network finds the specular peak, which a bare
+    /// patience would take for convergence (docs/design.md section 5).
     pub patience: usize,
     pub min_improvement: f64,
     pub min_epochs: usize,
@@ -71,8 +71,8 @@ pub struct TrainConfig {
     pub lr_schedule: LrSchedule,
     /// Stop (after `min_epochs`) once the validation loss is at most this: the mean absolute
     /// error of `ln(1 + f cos)` below which a fit is far from visible (2e-4: 0.1 % of a bright
-    /// diffuse reflectance). Simple materials reach it within tens of epochs; glossy measured
-    /// ones sit at 1e-3 to 1e-2 and train until the patience and decays end. 0 turns it off.
+    /// diffuse reflectance). Simple materials reach it; glossy measured ones stay above it and
+    /// train until the patience and decays end (docs/design.md section 5). 0 turns it off.
     pub target_loss: f64,
     pub seed: u64,
 }
@@ -311,7 +311,7 @@ pub fn train_on_samples<S: TrainingSample>(
     for epoch in 1..=config.max_epochs {
         // On a pool thread: from outside the pool each batch's parallel loop would put the
         // caller to sleep and wake it again (two context switches and futex calls per batch,
-        // 17 % of the CPU time as system time); inside it, it is a work-stealing join.
+        // docs/results/training.md); inside it, it is a work-stealing join.
         let (train_loss, validation_loss) = rayon::scope(|_| {
             let train_loss = trainer.scheduled_epoch(
                 train_samples,

@@ -101,8 +101,8 @@ fn a_glossy_lobe_is_found_and_beats_cosine_sampling() {
 
 #[test]
 fn a_weak_sharp_spike_still_gets_a_useful_lobe() {
-    // The case where the model fit gives n ~ 7e4, w ~ 0.005 (gray-plastic-like): most of the
-    // reflected energy towards a small light is in the spike, so the lobe must carry weight.
+    // A weak sharp spike over a diffuse base, where the model fit's weight is near 0: most of
+    // the reflected energy towards a small light is in the spike, so the lobe must carry weight.
     let fit = fit_lobe(&blinn_phong(0.3, 0.2, 20_000.0), &LobeFitConfig::default()).unwrap();
     assert!(fit.specular_weight >= 0.2, "{fit:?}");
     assert!(
