@@ -5,7 +5,7 @@
 
 /// The ABI's major version: raised whenever a program built against the previous header could
 /// no longer run (functions removed or changed), independently of the crate version. The
-/// Makefile reads it from here. 1: one material and one sampler handle (issue 30).
+/// Makefile reads it from here. 1: one material and one sampler handle.
 const SOVERSION: &str = "1";
 
 fn main() {

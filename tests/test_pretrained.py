@@ -189,7 +189,7 @@ VIEW_THETAS = np.radians(5.0 + 10.0 * np.arange(9))
 def relative_variance(layers, exponent: float, weight: float, s_bins: int = 160, phi_bins: int = 64) -> float:
     """Mean over 9 view elevations of R - 1, R = int g^2 / p / (int g)^2 with g = mean_RGB(f_r) cos
     and p the Blinn-Phong mixture density, by quadrature over the half vector (theta_h = pi/2 s^2).
-    The NumPy twin of nbrdf-core/src/lobe_fit.rs (second_moment, quadrature), held to it by
+    The NumPy twin of nbrdf-core/src/fit/lobes/one_lobe.rs (second_moment, quadrature), held to it by
     test_oracle_agrees_with_fit_phong below."""
     s = (np.arange(s_bins) + 0.5) / s_bins
     phi = (np.arange(phi_bins) + 0.5) * np.pi / phi_bins

@@ -1,4 +1,4 @@
-//! MERL trilinear lookups per second on a synthesised table (SGD fit of gold-metallic-paint),
+//! MERL trilinear lookups per second on a synthesised table (an SGD fit of the catalogue),
 //! for random light/view pairs over the upper hemisphere: one at a time on one thread
 //! (`Brdf::eval`), and batched (`Brdf::eval_cos_batch`) on one rayon thread and on all of them.
 

@@ -3,7 +3,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nbrdf_core::coords::RusinkiewiczAngles;
-use nbrdf_core::phong_fit::PhongParams;
+use nbrdf_core::fit::phong::PhongParams;
 use nbrdf_core::train::adam::AdamConfig;
 use nbrdf_core::train::dataset::{self, AngularSampling};
 use nbrdf_core::train::rng::Stream;

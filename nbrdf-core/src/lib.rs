@@ -1,10 +1,9 @@
 //! Neural BRDFs (Sztrajman et al., CGF 2021) for Mitsuba 3: the math and learning core.
 //!
 //! Two layers. Rendering, always built and all that `nbrdf-ffi` links: [`brdf`], [`coords`],
-//! [`merl`], [`network`], [`textured`] (spatially varying materials), [`rgl`], [`spectrum`],
-//! [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
-//! Training and analysis (feature `train`, on by default): [`train`], [`analytic`], [`target`],
-//! [`phong_fit`], [`lobe_fit`], [`anisotropic_lobe_fit`], [`metrics`], [`latent`] and [`ops`],
+//! [`merl`], [`network`], [`textured`] (spatially varying materials), [`rgl`], [`spectrum`], [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
+//! Training and analysis (feature `train`, on by default): [`train`], [`analytic`], [`fit`] (the
+//! Blinn-Phong model fit and the sampling lobe searches), [`metrics`], [`latent`] and [`ops`],
 //! what each `nbrdf` command does (the CLI, feature `cli`, only parses and prints). Arrows run
 //! from training to rendering only, and no two modules depend on each other (`tests/layers.rs`).
 //!
@@ -31,21 +30,13 @@ pub mod textured;
 #[cfg(feature = "train")]
 pub mod analytic;
 #[cfg(feature = "train")]
-pub mod anisotropic_lobe_fit;
+pub mod fit;
 #[cfg(feature = "train")]
 pub mod latent;
-#[cfg(feature = "train")]
-pub mod lobe_fit;
 #[cfg(feature = "train")]
 pub mod metrics;
 #[cfg(feature = "train")]
 pub mod ops;
-#[cfg(feature = "train")]
-mod pattern_search;
-#[cfg(feature = "train")]
-pub mod phong_fit;
-#[cfg(feature = "train")]
-pub mod target;
 #[cfg(feature = "train")]
 pub mod train;
 

@@ -11,7 +11,7 @@
 //! into RGB (`spectrum_list_to_srgb` with `d65 = true`, what `Properties` does for spectral
 //! reflectance in RGB variants) and what a spectral render of that reflectance under Mitsuba's
 //! white emitters (D65 in spectral variants) converges to. Unlike `spectrum_list_to_srgb`, whose
-//! 1000-point sum is off by about 0.1 %, the integral here is exact: on each interval between the
+//! 1000-point sum approximates it, the integral here is exact: on each interval between the
 //! 5 nm grid and the sample wavelengths the integrand is a cubic, which Simpson's rule integrates
 //! exactly. A constant spectrum of 1 over the whole range projects to white, (1, 1, 1) within
 //! 3e-4 (the rounding of the constants in the tables).

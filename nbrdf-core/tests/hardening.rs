@@ -1,4 +1,4 @@
-//! Issue 16 (hardening), the library side: what is refused (docs/hardening.md) and property
+//! Hardening, the library side: what is refused (docs/hardening.md) and property
 //! tests over degenerate directions. Each refusal is checked by its message, which names the
 //! file, the position or the limit; each acceptance next to it by a value just inside.
 

@@ -14,17 +14,20 @@
 //! `wo`). Output arrays must not overlap the inputs.
 //!
 //! Modules: [`status`] (status codes, last error, version), [`vocabulary`] (the sampling
-//! strategy codes and their names), [`material`] (`NbrdfMaterial`), [`sampler`]
-//! (`NbrdfSampler`); `args` holds the argument checks they share.
+//! strategy codes and their names), [`handles`] (what `NbrdfMaterial` and `NbrdfSampler` hold
+//! and how each is made), [`material`] and [`sampler`] (the functions of each handle, which
+//! build on `handles`, not on each other); `args` holds the argument checks they share.
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
 mod args;
+pub mod handles;
 pub mod material;
 pub mod sampler;
 pub mod status;
 pub mod vocabulary;
 
+pub use handles::*;
 pub use material::*;
 pub use sampler::*;
 pub use status::*;

@@ -1,23 +1,17 @@
-//! `NbrdfMaterial`: a neural BRDF or a MERL table behind one handle, told apart on load, with
-//! one entry point per operation (load, free, info, eval, sample; a network's parameters and
-//! active units).
+//! The functions of `NbrdfMaterial`, a neural BRDF or a MERL table behind one handle (what it
+//! holds: [`crate::handles`]): one entry point per operation (load, free, info, eval, sample; a
+//! network's parameters and active units).
 
 use crate::args::{directions, exact_len, free_boxed, read_path, write};
-use crate::sampler::{NbrdfSampler, NbrdfSamplerParams};
+use crate::handles::{LoadedNetwork, NbrdfMaterial, NbrdfSampler, NbrdfSamplerParams};
 use crate::status::guard;
 use crate::vocabulary::NbrdfSamplingKind;
-use nbrdf_core::brdf::{Brdf, DirectionsMut, RgbMut};
-use nbrdf_core::error::regular_file_size;
-use nbrdf_core::merl::{N_PHI_D, N_THETA_D, N_THETA_H};
+use nbrdf_core::brdf::{DirectionsMut, RgbMut};
 use nbrdf_core::network::ActiveUnits;
 use nbrdf_core::sampling;
-use nbrdf_core::sampling::tabulated::TableConfig;
-use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
+use nbrdf_core::Nbrdf;
 use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference, Failure, FfiResult};
-use std::ffi::{c_char, CString};
-use std::io::Read;
-use std::path::Path;
-use std::sync::OnceLock;
+use std::ffi::c_char;
 
 /// What an `NbrdfMaterial` holds (the `kind` of `NbrdfMaterialInfo`).
 #[repr(C)]
@@ -28,43 +22,6 @@ pub enum NbrdfMaterialKind {
     NBRDF_MATERIAL_NETWORK = 0,
     /// A MERL-format table from a `.binary` file.
     NBRDF_MATERIAL_MERL = 1,
-}
-
-/// A material: a neural BRDF (`*.nbrdf.json`) or a MERL-format table (`.binary`), loaded by
-/// `nbrdf_material_load`. Immutable: one handle may be used by many threads at once.
-pub struct NbrdfMaterial {
-    source: Source,
-    /// The network's name (empty for a table), for `NbrdfMaterialInfo::name`.
-    name: CString,
-}
-
-enum Source {
-    Network(Box<LoadedNetwork>),
-    Merl(MerlTable),
-}
-
-/// A network as the file stores it and, made on first use, the proof of which hidden units can
-/// fire and the network without the others (what eval, sample and tables evaluate). Lazy
-/// because the proof is most of a load's time (tens of milliseconds) and an evaluator that
-/// keeps every unit (the plugin's kernel shared by many materials) never asks for it.
-struct LoadedNetwork {
-    network: Nbrdf,
-    proved: OnceLock<Proved>,
-}
-
-struct Proved {
-    active: ActiveUnits,
-    renderer: Nbrdf,
-}
-
-impl LoadedNetwork {
-    fn proved(&self) -> &Proved {
-        self.proved.get_or_init(|| {
-            let active = self.network.active_units();
-            let renderer = self.network.with_units(&active);
-            Proved { active, renderer }
-        })
-    }
 }
 
 /// Summary of a material (`nbrdf_material_info`).
@@ -108,69 +65,7 @@ pub struct NbrdfMaterialInfo {
 /// `default_sampling` of a material whose file names no default.
 const NO_DEFAULT_SAMPLING: i32 = -1;
 
-/// Whether the file at `path` starts with a MERL table's header (resolutions 90, 90, 180 as
-/// little-endian int32), the rule that tells tables from networks. Files that cannot be
-/// inspected (missing, special, unreadable) are not: the network reader reports them.
-fn starts_like_merl(path: &Path) -> bool {
-    if regular_file_size(path, u64::MAX, "a material").is_err() {
-        return false; // before opening: a FIFO would block
-    }
-    let header: Vec<u8> = [N_THETA_H, N_THETA_D, N_PHI_D]
-        .iter()
-        .flat_map(|&n| (n as i32).to_le_bytes())
-        .collect();
-    let mut head = Vec::with_capacity(header.len());
-    std::fs::File::open(path)
-        .and_then(|file| file.take(header.len() as u64).read_to_end(&mut head))
-        .is_ok_and(|_| head == header)
-}
-
 impl NbrdfMaterial {
-    fn load(path: &Path) -> Result<Self, NbrdfError> {
-        if starts_like_merl(path) {
-            return Ok(NbrdfMaterial {
-                source: Source::Merl(MerlTable::read(path)?),
-                name: CString::default(),
-            });
-        }
-        let network = Nbrdf::load(path)?;
-        let name = CString::new(network.name.replace('\0', "")).unwrap_or_default();
-        Ok(NbrdfMaterial {
-            source: Source::Network(Box::new(LoadedNetwork {
-                network,
-                proved: OnceLock::new(),
-            })),
-            name,
-        })
-    }
-
-    /// What eval, sample and the tabulated sampler evaluate.
-    pub(crate) fn brdf(&self) -> &dyn Brdf {
-        match &self.source {
-            Source::Network(loaded) => &loaded.proved().renderer,
-            Source::Merl(table) => table,
-        }
-    }
-
-    /// How to tabulate the material for `NBRDF_SAMPLING_TABULATED`: with the cosine weight a
-    /// network file stores (`nbrdf fit-phong`), if any.
-    pub(crate) fn table_config(&self) -> TableConfig {
-        match &self.source {
-            Source::Network(loaded) => loaded.network.table_config(),
-            Source::Merl(_) => TableConfig::default(),
-        }
-    }
-
-    /// The network, or an error for a table.
-    fn loaded_network(&self) -> FfiResult<&LoadedNetwork> {
-        match &self.source {
-            Source::Network(loaded) => Ok(loaded),
-            Source::Merl(_) => Err(Failure::invalid(
-                "the material is a MERL table, not a network",
-            )),
-        }
-    }
-
     fn info(&self) -> NbrdfMaterialInfo {
         let to_u32 = |value: usize| u32::try_from(value).unwrap_or(u32::MAX);
         let mut info = NbrdfMaterialInfo {
@@ -180,13 +75,13 @@ impl NbrdfMaterial {
             parameter_count: 0,
             layer_inputs: [0; 3],
             layer_outputs: [0; 3],
-            name: self.name.as_ptr(),
+            name: self.name().as_ptr(),
             stored_sampling: NbrdfSamplerParams::cosine(),
             default_sampling: NO_DEFAULT_SAMPLING,
             spectral_count: 0,
             spectral_range_nm: [0.0; 2],
         };
-        if let Source::Network(loaded) = &self.source {
+        if let Some(loaded) = self.network() {
             let network = &loaded.network;
             info.kind = NbrdfMaterialKind::NBRDF_MATERIAL_NETWORK as i32;
             info.anisotropic = u32::from(network.anisotropic);

@@ -1,97 +1,13 @@
-//! `NbrdfSampler`: any importance-sampling strategy (the data-driven table included) behind one
-//! handle, built from a parameter struct and a material; its pdf, shape and table arrays.
+//! The functions of `NbrdfSampler`, any importance-sampling strategy (the data-driven table
+//! included) behind one handle (what it holds: [`crate::handles`]): created from a parameter
+//! struct and a material; its pdf, shape and table arrays.
 
 use crate::args::{directions, exact_len, free_boxed, write};
-use crate::material::NbrdfMaterial;
+use crate::handles::{NbrdfMaterial, NbrdfSampler, NbrdfSamplerParams};
 use crate::status::guard;
-use crate::vocabulary::{unknown_kind, NbrdfSamplingKind};
-use nbrdf_core::sampling::{self, SamplingStrategy, TabulatedSampler};
-use nbrdf_ffi_common::{
-    array_len, check_pointer, input, output, reference, Failure, FailureKind, FfiResult,
-};
-use std::sync::Arc;
-
-/// The parameters of an importance-sampling strategy (`nbrdf_sampler_create`). Each kind reads
-/// only its own fields: `NBRDF_SAMPLING_PHONG` `exponent` and `specular_weight`;
-/// `NBRDF_SAMPLING_TWO_LOBE` those and `exponent2`, `specular_weight2`
-/// (`specular_weight + specular_weight2 <= 1`); `NBRDF_SAMPLING_ANISOTROPIC_PHONG` `exponent`
-/// (`n_u`), `exponent_v` (`n_v`) and `specular_weight`; the others none. Exponents are finite in
-/// [0, 1e6] (`MAX_EXPONENT`), weights in [0, 1].
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NbrdfSamplerParams {
-    /// An `NbrdfSamplingKind` value.
-    pub kind: i32,
-    pub exponent: f32,
-    pub specular_weight: f32,
-    pub exponent2: f32,
-    pub specular_weight2: f32,
-    pub exponent_v: f32,
-}
-
-impl NbrdfSamplerParams {
-    /// Cosine sampling, every parameter zero.
-    pub fn cosine() -> Self {
-        NbrdfSamplerParams {
-            kind: NbrdfSamplingKind::NBRDF_SAMPLING_COSINE as i32,
-            exponent: 0.0,
-            specular_weight: 0.0,
-            exponent2: 0.0,
-            specular_weight2: 0.0,
-            exponent_v: 0.0,
-        }
-    }
-
-    /// The strategy the parameters describe, validated by the core; `material` is tabulated
-    /// for `NBRDF_SAMPLING_TABULATED` (and read by no other kind).
-    fn strategy(&self, material: Option<&NbrdfMaterial>) -> FfiResult<SamplingStrategy> {
-        let kind =
-            NbrdfSamplingKind::from_code(self.kind).ok_or_else(|| unknown_kind(self.kind))?;
-        let f = f64::from;
-        let strategy = match kind {
-            NbrdfSamplingKind::NBRDF_SAMPLING_UNIFORM => SamplingStrategy::Uniform,
-            NbrdfSamplingKind::NBRDF_SAMPLING_COSINE => SamplingStrategy::Cosine,
-            NbrdfSamplingKind::NBRDF_SAMPLING_PHONG => SamplingStrategy::Phong {
-                exponent: f(self.exponent),
-                specular_weight: f(self.specular_weight),
-            },
-            NbrdfSamplingKind::NBRDF_SAMPLING_TWO_LOBE => SamplingStrategy::TwoLobe {
-                exponent1: f(self.exponent),
-                weight1: f(self.specular_weight),
-                exponent2: f(self.exponent2),
-                weight2: f(self.specular_weight2),
-            },
-            NbrdfSamplingKind::NBRDF_SAMPLING_ANISOTROPIC_PHONG => SamplingStrategy::anisotropic(
-                f(self.exponent),
-                f(self.exponent_v),
-                f(self.specular_weight),
-            ),
-            NbrdfSamplingKind::NBRDF_SAMPLING_TABULATED => {
-                let material = material.ok_or_else(|| Failure {
-                    kind: FailureKind::NullPointer,
-                    message: "argument `material` is a null pointer (a tabulated sampler is \
-                              tabulated from its material)"
-                        .into(),
-                })?;
-                let table = TabulatedSampler::from_brdf(material.brdf(), &material.table_config())?;
-                SamplingStrategy::Tabulated(Arc::new(table))
-            }
-        };
-        Ok(strategy.validated()?)
-    }
-}
-
-/// An importance sampler (`nbrdf_sampler_create`): for `nbrdf_material_sample` with any
-/// material, and `nbrdf_sampler_pdf`. Immutable: one handle may be used by many threads at once.
-pub struct NbrdfSampler {
-    strategy: SamplingStrategy,
-}
-
-impl NbrdfSampler {
-    pub(crate) fn strategy(&self) -> &SamplingStrategy {
-        &self.strategy
-    }
-}
+use crate::vocabulary::NbrdfSamplingKind;
+use nbrdf_core::sampling::{self, SamplingStrategy};
+use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference, Failure};
 
 /// Shape of a sampler (`nbrdf_sampler_info`). For `NBRDF_SAMPLING_TABULATED`, the per-band
 /// half-vector table: `nbrdf_sampler_table` gives `mass` (each bin's probability, row-major
@@ -141,9 +57,7 @@ pub unsafe extern "C" fn nbrdf_sampler_create(
             // SAFETY: forwarded contract.
             Some(unsafe { reference(material, "material")? })
         };
-        let sampler = NbrdfSampler {
-            strategy: params.strategy(material)?,
-        };
+        let sampler = NbrdfSampler::new(params, material)?;
         // SAFETY: as above.
         unsafe { write(out, "out", Box::into_raw(Box::new(sampler))) }
     })
@@ -173,10 +87,10 @@ pub unsafe extern "C" fn nbrdf_sampler_info(
         // SAFETY: forwarded contract.
         let sampler = unsafe { reference(sampler, "sampler")? };
         let mut info = NbrdfSamplerInfo {
-            kind: NbrdfSamplingKind::of(sampler.strategy.kind()) as i32,
+            kind: NbrdfSamplingKind::of(sampler.strategy().kind()) as i32,
             ..NbrdfSamplerInfo::default()
         };
-        if let SamplingStrategy::Tabulated(table) = &sampler.strategy {
+        if let SamplingStrategy::Tabulated(table) = sampler.strategy() {
             let arrays = table.tables();
             let to_u32 = |value: usize| u32::try_from(value).unwrap_or(u32::MAX);
             info.rows = to_u32(arrays.rows);
@@ -207,10 +121,10 @@ pub unsafe extern "C" fn nbrdf_sampler_table(
     guard("nbrdf_sampler_table", || {
         // SAFETY: forwarded contract.
         let sampler = unsafe { reference(sampler, "sampler")? };
-        let SamplingStrategy::Tabulated(table) = &sampler.strategy else {
+        let SamplingStrategy::Tabulated(table) = sampler.strategy() else {
             return Err(Failure::invalid(format!(
                 "the sampler is {}, which has no table (NBRDF_SAMPLING_TABULATED has)",
-                sampler.strategy.kind()
+                sampler.strategy().kind()
             )));
         };
         check_pointer(out_mass, "out_mass")?;
@@ -267,7 +181,7 @@ pub unsafe extern "C" fn nbrdf_sampler_pdf(
         // SAFETY: checked above; sizes and aliasing are the caller's contract.
         let (view, light, pdf) =
             unsafe { (input(view, len), input(light, len), output(out_pdf, n)) };
-        sampling::pdf_batch(&sampler.strategy, directions(view), directions(light), pdf);
+        sampling::pdf_batch(sampler.strategy(), directions(view), directions(light), pdf);
         Ok(())
     })
 }

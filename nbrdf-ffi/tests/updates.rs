@@ -1,4 +1,4 @@
-//! Property test of the C ABI's sampler updates (issue 16): a caller that keeps the last sampler
+//! Property test of the C ABI's sampler updates: a caller that keeps the last sampler
 //! `nbrdf_sampler_create` accepted, through random sequences of valid and invalid parameters,
 //! always evaluates pdfs with that sampler; rejected parameters fail with
 //! `NBRDF_ERROR_INVALID_ARGUMENT`, give no handle, and do not disturb later calls.

@@ -7,7 +7,7 @@
 //! output is a valid lobe. Loss (full-batch Adam), one of:
 //! * labels: `(o0 - ln max(n, 1e-3))^2 + 25 (w_pred - w)^2` (a weight error of 0.2 costs as
 //!   much as a factor e in the exponent);
-//! * variance (the CLI's default): the lobe search's objective ([`crate::lobe_fit`]) at the
+//! * variance (the CLI's default): the lobe search's objective ([`crate::fit::lobes`]) at the
 //!   predicted lobe, `ln(R - 1)` interpolated on its grid minus its value at the label, plus
 //!   0.05 x the label loss. It tells a material whose variance barely depends on the exponent
 //!   from a sharp metal, which the label loss cannot.
@@ -15,10 +15,10 @@
 use super::mlp::Mlp;
 use crate::coords::{network_input_from_angles, RusinkiewiczAngles};
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{choose_lobe, LobeChoice, LobeFitConfig};
+use crate::fit::lobes::{choose_lobe, LobeChoice, LobeFitConfig};
+use crate::fit::phong::{FitConfig, MAX_EXPONENT};
+use crate::fit::target::network_target;
 use crate::network::Nbrdf;
-use crate::phong_fit::{FitConfig, MAX_EXPONENT};
-use crate::target::network_target;
 use crate::train::adam::{Adam, AdamConfig};
 use serde::{Deserialize, Serialize};
 
@@ -103,7 +103,7 @@ pub fn highlight_profile(net: &Nbrdf) -> Vec<f32> {
 /// the latent-space report all carry fit-phong's lowest-variance lobe, so there the labels are
 /// that lobe. The labels are the regression target of `--loss labels`, the small pull towards
 /// the label of `--loss variance` (whose main term is the variance objective of
-/// [`crate::lobe_fit`] itself, through a [`VarianceGrid`], whatever the label), the reference
+/// [`crate::fit::lobes`] itself, through a [`VarianceGrid`], whatever the label), the reference
 /// lobe of the RMSE ratios of `predictor eval` and the cross-validation, and the targets of the
 /// autoencoder's auxiliary lobe loss (`ae train --lobe-weight`).
 pub fn lobe_label(net: &Nbrdf, refit: bool) -> Result<(f64, f64)> {
@@ -167,7 +167,7 @@ pub const WEIGHT_STEPS: usize = 20;
 /// Share of the label loss in the variance loss.
 const LABEL_SHARE: f32 = 0.05;
 
-/// The sampling objective of one material, `ln(R - 1)` of [`crate::lobe_fit`], on the grid of
+/// The sampling objective of one material, `ln(R - 1)` of [`crate::fit::lobes`], on the grid of
 /// exponents and weights above, and its minimum.
 #[derive(Clone, Debug, PartialEq)]
 pub struct VarianceGrid {
@@ -177,7 +177,7 @@ pub struct VarianceGrid {
 
 impl VarianceGrid {
     /// Builds the grid from `relative_variance(n, w)` (`R - 1`, e.g.
-    /// [`crate::lobe_fit::LobeQuadrature::relative_variance`]).
+    /// [`crate::fit::lobes::LobeQuadrature::relative_variance`]).
     pub fn new(relative_variance: impl Fn(f64, f64) -> f64 + Sync) -> Self {
         use rayon::prelude::*;
         let ln_variance: Vec<f32> = (0..(EXPONENT_STEPS + 1) * (WEIGHT_STEPS + 1))

@@ -427,7 +427,7 @@ fn rescale_out_of_range(dirs: &mut [Row; 6]) {
 
 /// `y = relu(W x + b)` over a chunk; `w` is `outputs x inputs`. The lane loop is innermost and
 /// the accumulator row (8 AVX registers) stays in registers across the input loop. (Computing
-/// three outputs per pass, 12 accumulators on 32 lanes, measured slower on the Zen 3 target.)
+/// three outputs per pass, 12 accumulators on 32 lanes, was slower.)
 #[inline(always)]
 fn dense_relu_chunk<M: MulAdd>(w: &[f32], b: &[f32], x: &[Row], y: &mut [Row]) {
     for ((w_row, &bias), y_row) in w.chunks_exact(x.len()).zip(b).zip(y.iter_mut()) {

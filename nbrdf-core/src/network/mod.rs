@@ -146,7 +146,7 @@ pub struct SecondLobe {
     pub specular_weight: f32,
 }
 
-/// Mean relative variance `R - 1` of BSDF sampling ([`crate::lobe_fit`]) of each strategy the
+/// Mean relative variance `R - 1` of BSDF sampling ([`crate::fit::lobes`]) of each strategy the
 /// fit compared; `nbrdf fit-phong` stores the lowest.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SamplingVariances {

@@ -1,18 +1,18 @@
-//! `nbrdf fit-phong`: the Blinn-Phong sampling lobe of a table or a network.
+//! `nbrdf fit-phong`: the Blinn-Phong sampling lobe of a table or a network. The fits and
+//! searches are [`crate::fit`]'s; this is the command: which of them to run, which lobes and
+//! default strategy to store, the file written and the report.
 
 use super::with_threads;
-use crate::anisotropic_lobe_fit::{
-    fit_anisotropic_lobe, AnisotropicLobeFit, AnisotropicLobeFitConfig,
-};
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{LobeAnalysis, LobeChoice, LobeFitConfig, LobeQuadrature, TwoLobeFit};
+use crate::fit::anisotropic::{fit_anisotropic_lobe, AnisotropicLobeFit, AnisotropicLobeFitConfig};
+use crate::fit::lobes::{LobeAnalysis, LobeChoice, LobeFitConfig, LobeQuadrature, TwoLobeFit};
+use crate::fit::phong::FitConfig;
+use crate::fit::target::material_target;
 use crate::merl::PhiFold;
 use crate::metrics::Material;
 use crate::network::{SamplingParams, SamplingVariances, SecondLobe, SAMPLING_MODEL_BLINN_PHONG};
-use crate::phong_fit::FitConfig;
 use crate::sampling::tabulated::{TableConfig, TabulatedSampler, COSINE_WEIGHT_CANDIDATES};
 use crate::sampling::{SamplingKind, SamplingStrategy};
-use crate::target::material_target;
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
 use serde::Serialize;
@@ -474,7 +474,7 @@ fn report(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lobe_fit::tests::blinn_phong;
+    use crate::fit::lobes::tests::blinn_phong;
     use crate::train::dataset::TargetFn;
 
     /// A sharp lobe wastes the cosine share (the smallest weight wins); for a Lambertian

@@ -4,13 +4,13 @@
 use super::autoencoder::Encoding;
 use super::{read_nbrdf_dir, with_threads};
 use crate::error::{NbrdfError, Result};
+use crate::fit::lobes::{LobeFitConfig, LobeQuadrature};
+use crate::fit::target::network_target;
 use crate::latent::autoencoder::{permute_outputs, AutoEncoder, PERMUTATIONS};
 use crate::latent::predictor::{
     highlight_profile, lobe_label, Example, PhongPredictor, PredictorConfig, VarianceGrid,
 };
-use crate::lobe_fit::{LobeFitConfig, LobeQuadrature};
 use crate::network::{Nbrdf, SamplingParams, SAMPLING_MODEL_BLINN_PHONG};
-use crate::target::network_target;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;

@@ -479,12 +479,12 @@ mod tests {
         second / (integral * integral) - 1.0
     }
 
-    /// The SGD fit of MERL gray-plastic, whose reflectance grows by three orders of magnitude
+    /// A synthesised plastic (an SGD fit of the catalogue) whose reflectance grows steeply
     /// towards grazing `theta_d` over a diffuse base: every view of the grazing band, its lower
-    /// edge included, samples better than the material's best single lobe (`nbrdf fit-phong`
-    /// on the synthesised table: n 562, w 0.35). Summed over the band unnormalised and without
-    /// the lower edge, the table left views at 84-85 degrees at a relative variance of 14-85
-    /// against the lobe's 1.6-1.7 (docs/results/sampling.md).
+    /// edge included, samples better than the material's best single lobe (the one `nbrdf
+    /// fit-phong` stores for the synthesised table). The band is normalised and includes its
+    /// lower edge because, without either, its lowest views sampled worse than the lobe
+    /// (docs/results/sampling.md).
     #[cfg(feature = "train")]
     #[test]
     fn every_view_of_the_grazing_band_samples_better_than_one_lobe() {

@@ -237,7 +237,7 @@ pub fn train_arrays(
 mod tests {
     use super::*;
     use crate::coords::RusinkiewiczAngles;
-    use crate::phong_fit::PhongParams;
+    use crate::fit::phong::PhongParams;
     use crate::source::GRAZING_COS;
     use crate::train::adam::AdamConfig;
     use crate::train::dataset::AngularSampling;

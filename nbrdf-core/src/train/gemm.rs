@@ -77,8 +77,8 @@ pub fn gemm<M: MulAdd>(
 /// full blocks and a remainder: a block of one or two rows has too few independent accumulators
 /// to hide the latency of the multiply-adds, and with the 64-deep sums of the weight gradients
 /// such a remainder cost as much as a full block. Four rows of three vectors (12 accumulators,
-/// 3 rows of `B` and a broadcast) needed all 16 registers and spilled: 3 rows ran an epoch 16 %
-/// faster (perf, Zen 3).
+/// 3 rows of `B` and a broadcast) needed all 16 registers and spilled, so three vectors take at
+/// most 3 rows (docs/results/training.md).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn block_rows<M: MulAdd, const NB: usize>(

@@ -57,8 +57,8 @@ pub struct TrainConfig {
     pub adam: AdamConfig,
     /// Stop after this many epochs without a relative validation improvement of
     /// `min_improvement` over the best so far, but not before `min_epochs` epochs: stiff
-    /// materials can sit on a plateau for 10-15 epochs before the network finds the specular
-    /// peak (alumina-oxide does), which a bare patience would take for convergence.
+    /// materials can sit on a plateau before the network finds the specular peak, which a bare
+    /// patience would take for convergence (docs/design.md section 5).
     pub patience: usize,
     pub min_improvement: f64,
     pub min_epochs: usize,
@@ -71,8 +71,8 @@ pub struct TrainConfig {
     pub lr_schedule: LrSchedule,
     /// Stop (after `min_epochs`) once the validation loss is at most this: the mean absolute
     /// error of `ln(1 + f cos)` below which a fit is far from visible (2e-4: 0.1 % of a bright
-    /// diffuse reflectance). Simple materials reach it within tens of epochs; glossy measured
-    /// ones sit at 1e-3 to 1e-2 and train until the patience and decays end. 0 turns it off.
+    /// diffuse reflectance). Simple materials reach it; glossy measured ones stay above it and
+    /// train until the patience and decays end (docs/design.md section 5). 0 turns it off.
     pub target_loss: f64,
     pub seed: u64,
 }
@@ -311,7 +311,7 @@ pub fn train_on_samples<S: TrainingSample>(
     for epoch in 1..=config.max_epochs {
         // On a pool thread: from outside the pool each batch's parallel loop would put the
         // caller to sleep and wake it again (two context switches and futex calls per batch,
-        // 17 % of the CPU time as system time); inside it, it is a work-stealing join.
+        // docs/results/training.md); inside it, it is a work-stealing join.
         let (train_loss, validation_loss) = rayon::scope(|_| {
             let train_loss = trainer.scheduled_epoch(
                 train_samples,
@@ -695,8 +695,8 @@ pub fn draw_sets(target: &TargetFn<'_>, config: &TrainConfig) -> Result<(DataSet
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::phong::PhongParams;
     use crate::merl::{self, cell_coordinates, CELLS, SCALE};
-    use crate::phong_fit::PhongParams;
 
     /// The plateau rule as `TrainConfig` documents it: `patience` epochs without a relative
     /// improvement of `min_improvement` decay the rate, `lr_decays` times, then stop; nothing
@@ -901,14 +901,13 @@ mod tests {
         // The trained network's sampling lobe is anisotropic the oracle's way: its peak is
         // narrow along x (tangent width 0.15 vs 0.5, i.e. n_u ~ 44, n_v ~ 4), and the lobe
         // samples it better than the best isotropic one.
-        let mut lobe_config = crate::anisotropic_lobe_fit::AnisotropicLobeFitConfig::default();
+        let mut lobe_config = crate::fit::anisotropic::AnisotropicLobeFitConfig::default();
         lobe_config.base.s_bins = 60;
         lobe_config.base.phi_bins = 48;
         lobe_config.base.view_thetas = vec![0.3, 0.8, 1.2];
         lobe_config.refine_levels = 3;
-        let target = crate::target::network_target(&aniso);
-        let lobe =
-            crate::anisotropic_lobe_fit::fit_anisotropic_lobe(&target, &lobe_config).unwrap();
+        let target = crate::fit::target::network_target(&aniso);
+        let lobe = crate::fit::anisotropic::fit_anisotropic_lobe(&target, &lobe_config).unwrap();
         assert!(lobe.exponent_u > 2.0 * lobe.exponent_v, "{lobe:?}");
         assert!(
             lobe.relative_variance < lobe.isotropic_relative_variance,

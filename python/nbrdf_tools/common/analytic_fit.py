@@ -18,7 +18,7 @@ forms); each names its twin and the test holding them together (tests/test_fidel
 * :func:`ggx_aniso_conductor_eval_cos`: the same with ``alpha_u``, ``alpha_v`` (Mitsuba's
   ``MicrofacetDistribution`` ``eval`` and ``smith_g1``),
   ``test_numpy_anisotropic_ggx_matches_mitsuba_roughconductor``;
-* :func:`blinn_phong_eval_cos`: ``nbrdf-core/src/phong_fit.rs`` ``PhongParams::eval``
+* :func:`blinn_phong_eval_cos`: ``nbrdf-core/src/fit/phong.rs`` ``PhongParams::eval``
   (``f = kd / pi + ks (n + 2) / (2 pi) cos(theta_h)^n``), closed form checked in
   ``test_fit_recovers_blinn_phong``;
 * :func:`abc_eval_cos`: ``nbrdf-core/src/analytic/abc.rs``, ``test_numpy_abc_sgd_match_rust_tables``

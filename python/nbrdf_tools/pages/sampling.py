@@ -1,7 +1,7 @@
 """Relative variance of BSDF sampling with cosine, one Blinn-Phong lobe and two lobes, per
 material: synthesise the MERL material's table (``nbrdf synth --model sgd``), train its network
 (``nbrdf train``), then ``nbrdf fit-phong --lobes 2 --json`` on the table and on the network,
-which searches both on the same quadrature (``nbrdf-core/src/lobe_fit.rs``). Prints a Markdown table, stores
+which searches both on the same quadrature (``nbrdf-core/src/fit/lobes/``). Prints a Markdown table, stores
 the rows in ``--data`` and writes the page ``--out``.
 
     python -m nbrdf_tools sampling --stored-only --out docs/results/sampling.md
@@ -49,7 +49,7 @@ anew ({cost} on {machine}; it rewrites the quadrature's rows in that file and th
 ## The quadrature: relative variance per material
 
 Mean relative variance `R - 1` of BSDF sampling (the objective of `nbrdf fit-phong`,
-[nbrdf-core/src/lobe_fit.rs](../../nbrdf-core/src/lobe_fit.rs): `int g^2/p / (int g)^2 - 1` with
+[nbrdf-core/src/fit/lobes/](../../nbrdf-core/src/fit/lobes/): `int g^2/p / (int g)^2 - 1` with
 `g = f_r cos`, quadrature over the half vector, averaged over 9 view elevations; lower is better,
 0 is perfect). One lobe: `w phong(n) + (1 - w) cosine`, the grid search of `(n, w)`. Two lobes:
 `w1 phong(n1) + w2 phong(n2) + (1 - w1 - w2) cosine`, found on the same quadrature by a coarse
@@ -163,7 +163,7 @@ quadrature, `sqrt(R_table / R_lobe)` with `R` = relative variance + 1 of the net
   within the seeds' spread (0.89-1.00 at equal time, steel at the larger settings).
 * **Why the scene gains 5-15 %, not the several-fold of the quadrature.** The quadrature ranks
   by the relative variance `R - 1`, the variance under a uniformly bright sky; a small light at a
-  random direction sees the second moment `R` (lobe_fit.rs: the estimate hits the light with
+  random direction sees the second moment `R` (fit/lobes: the estimate hits the light with
   probability `p Omega` and its variance is `L^2 Omega int g^2 / p`, the mean's square being
   `O(Omega^2)`). `R` of the lobes and the table differ little (steel 1.24 against 1.02), and
   `sqrt(R_table / R_lobe)` predicts the scene's equal-spp ratio within 10 % on all six

@@ -9,10 +9,10 @@
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use nbrdf_core::analytic::ModelKind;
-use nbrdf_core::lobe_fit::LobeChoice;
+use nbrdf_core::fit::lobes::LobeChoice;
+use nbrdf_core::fit::phong::FitConfig;
 use nbrdf_core::merl::PhiFold;
 use nbrdf_core::ops::{self, catalogue, compare, fit_phong, limits, table};
-use nbrdf_core::phong_fit::FitConfig;
 use nbrdf_core::{NbrdfError, Result};
 use std::io::Write;
 use std::path::PathBuf;

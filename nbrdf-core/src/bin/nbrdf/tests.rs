@@ -221,7 +221,7 @@ fn info_of_a_missing_file_names_it() {
 }
 
 /// The built-in models are what `python -m nbrdf_tools.pretrained` packages: an autoencoder that
-/// records the family of its training networks (`nbrdf train`, seed 0, the default width), which
+/// records the family of its training networks (`nbrdf train`'s default seed and width), which
 /// decides what is re-learnt, and a predictor of its codes.
 #[test]
 fn builtin_models_record_their_family() {

@@ -1,6 +1,6 @@
 use super::*;
 use crate::brdf::Directions;
-use crate::phong_fit::PhongParams;
+use crate::fit::phong::PhongParams;
 use crate::train::arrays::sample_directions;
 use crate::train::tests::{log_error_on_fresh_directions, small_config};
 use crate::train::{dataset::AngularSampling, TrainConfig};

@@ -1,5 +1,5 @@
 //! Pattern search with halving steps: the refinement after the grids of the lobe fits
-//! ([`crate::lobe_fit`]'s two lobes, [`crate::anisotropic_lobe_fit`]), generic over the lobe
+//! ([`crate::fit::lobes`]'s two lobes, [`crate::fit::anisotropic`]), generic over the lobe
 //! parameters.
 
 use rayon::prelude::*;

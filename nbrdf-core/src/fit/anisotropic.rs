@@ -1,6 +1,6 @@
 //! Choosing the anisotropic Blinn-Phong sampling lobe `(n_u, n_v, w)` of an anisotropic
 //! material ([`SamplingStrategy::AnisotropicPhong`]) for the lowest variance of BSDF
-//! sampling: the objective of [`crate::lobe_fit`] (mean relative second moment `R` of `g / p`,
+//! sampling: the objective of [`crate::fit::lobes`] (mean relative second moment `R` of `g / p`,
 //! `g = f_r cos(theta_l)`), on a quadrature that no longer assumes isotropy: views at several
 //! azimuths as well as elevations, half vectors over the whole circle of `phi_h`.
 //!
@@ -11,8 +11,8 @@
 //! quadrature.
 
 use crate::error::{NbrdfError, Result};
-use crate::lobe_fit::{LobeFitConfig, LobeTerms};
-use crate::pattern_search::{PatternSearch, SearchPoint};
+use crate::fit::lobes::{LobeFitConfig, LobeTerms};
+use crate::fit::pattern_search::{PatternSearch, SearchPoint};
 use crate::sampling::{SamplingStrategy, MAX_EXPONENT};
 use crate::train::dataset::TargetFn;
 use glam::DVec3;
@@ -96,7 +96,7 @@ fn view_quadrature(
         theta_v.cos(),
     );
     let mut cos2_phi_h = Vec::new();
-    // That of crate::lobe_fit, without the isotropic fold of phi_h.
+    // That of crate::fit::lobes, without the isotropic fold of phi_h.
     let bins = (config.s_bins, config.phi_bins);
     let terms = LobeTerms::collect(target, view, bins, TAU, 1.0, |p| {
         cos2_phi_h.push(p.cos_phi_h * p.cos_phi_h);
