@@ -132,7 +132,7 @@ pub fn network_input_components(vx: f32, vy: f32, vz: f32, lx: f32, ly: f32, lz:
 /// half vector and the difference vector, `[sin th cos ph, sin th sin ph, cos th, d.x, d.y, d.z]`
 /// (docs/design.md section 4); the isotropic one is the same with `phi_h = 0`. The difference
 /// vector is the same in both (it is measured in the half vector's own frame). Twin:
-/// `jit.py` `network_input` (held together by `tests/test_backends.py`).
+/// `jit/network.py` `network_input` (held together by `tests/test_backends.py`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn network_input_components_for(

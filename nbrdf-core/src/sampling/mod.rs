@@ -36,7 +36,7 @@ pub use two_lobe::two_lobe_density;
 const TASK_LANES: usize = 4096;
 
 /// The largest Blinn-Phong exponent accepted (docs/design.md promises stable sampling up to
-/// here; docs/hardening.md). The plugin's `jit.py`/`bsdf.py` use the same figure.
+/// here; docs/hardening.md). The plugin's `jit/sampling.py` and `validation.py` use the same figure.
 pub const MAX_EXPONENT: f64 = 1e6;
 
 /// Whether `n` is a usable Blinn-Phong exponent: finite, in `[0, MAX_EXPONENT]`.

@@ -67,7 +67,7 @@ pub fn phong_half_vector(exponent: f64, u1: f64, u2: f64) -> DVec3 {
 /// `cos^n` from `1 - cos` in `[0, 1]`, with `cos^0 = 1` (also for `cos = 0`) and no NaN for any
 /// `n >= 0`. Taking `1 - cos` rather than `cos` keeps sharp lobes exact: near the mirror
 /// direction `cos` rounds to 1 while `1 - cos` (from `|h_xy|^2`) keeps its relative precision.
-/// Twin: `jit.py` `_cos_power_from_one_minus` (held together by `tests/test_backends.py`).
+/// Twin: `jit/sampling.py` `_cos_power_from_one_minus` (held together by `tests/test_backends.py`).
 pub(super) fn cos_power_from_one_minus(one_minus_cos: f64, n: f64) -> f64 {
     if n == 0.0 {
         1.0

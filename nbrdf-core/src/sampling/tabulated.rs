@@ -12,7 +12,7 @@
 //! of views from its band's lower edge, which reaches every bin a view of the band can. A bin is
 //! drawn through its row's alias table, the half vector uniform in solid angle within it.
 //!
-//! Twin: `mitsuba-plugin/nbrdf_mitsuba/jit.py` `TracedTable` (from the exported
+//! Twin: `mitsuba-plugin/nbrdf_mitsuba/jit/sampling.py` `TracedTable` (from the exported
 //! [`TabulatedSampler::tables`]); held together by `tests/test_tabulated.py`.
 
 use super::hemisphere::cosine_hemisphere;
@@ -325,7 +325,7 @@ impl TabulatedSampler {
     }
 
     /// The bin (index within row `r`) of the rescaled uniform `u`, through the row's alias table.
-    /// The Dr.Jit twin (`jit.py` `TracedTable.pick`) does the same in float32.
+    /// The Dr.Jit twin (`jit/sampling.py` `TracedTable.pick`) does the same in float32.
     fn pick(&self, r: usize, u: f64) -> usize {
         let n = self.theta_bins * self.phi_bins;
         let scaled = u * n as f64;
