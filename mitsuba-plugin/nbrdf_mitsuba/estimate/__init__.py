@@ -1,0 +1,60 @@
+"""``python -m nbrdf_mitsuba.estimate SCENE.xml --images IMG... --bsdf-id ID -o OUT``: a material
+estimated from images of a known scene by differentiable rendering (Mitsuba's ``prb``).
+
+The scene holds the object whose BSDF (the one with id ``ID``, whatever its type) is to be
+estimated, its sensors and emitters; image ``i`` (EXR, linear RGB) is the scene seen by its
+``i``-th sensor. That BSDF is replaced by the model (``--model``) and the model's parameters
+are optimised by Adam on the images' error relative to ``1 + radiance`` (:func:`image_loss`), every
+view each step:
+
+* ``nbrdf`` (default): first the 32-value latent code through the pretrained decoder
+  (:mod:`nbrdf_mitsuba.latent`: the gradient of the weights, which ``jit_weights="opaque"``
+  makes scene parameters, chained to the code), starting from the best of 49 training codes,
+  with a Gaussian penalty on the code (the training codes' mean and spread); then the 675
+  weights themselves, held near the decoded network by a pull in function space (the squared
+  difference of the two networks' log-space outputs at fixed direction pairs over the whole
+  hemisphere, so that where no image constrains the BRDF it stays the decoded one). Both
+  penalties' strengths are chosen together by a held-out training view (``--prior-weight`` and
+  ``--code-prior`` fix them instead): the code is fitted on every view once per strength of
+  ``CODE_PRIOR_STRENGTHS`` (the screening of the starts shared); from each decoded code every
+  strength of ``PRIOR_STRENGTHS`` fits the weights on all views but the last (the held-out one)
+  for a share of the steps; the pair with the lowest loss on the held-out view is kept, and its
+  fit goes on over every view for the rest of the weight phase's steps. A candidate or final
+  network whose directional albedo exceeds its bound (:func:`albedo_bound`: 1, or the network's
+  own albedo where the lights fall square if higher, plus ``ALBEDO_MARGIN``; at most
+  ``ALBEDO_BOUND``) is no material and is not kept; the prior is then attempted again with
+  other render seeds, up to ``PRIOR_ATTEMPTS`` times, before the estimate falls back to the
+  ``nbrdf-no-prior`` estimate itself. A fixed ``--prior-weight`` holds no view out: the
+  code's strength is then ``--code-prior``, else 0. Writes an ``*.nbrdf.json`` with ``nbrdf
+  fit-phong``'s sampling.
+* ``nbrdf-no-prior``: the weights alone, from the common initialisation (the trainer's seed-0
+  start, twin of ``network/mod.rs`` ``paper_init``).
+* ``principled``, ``roughconductor``, ``roughplastic``: Mitsuba's BSDFs' parameters (colours and
+  roughness through a sigmoid into their ranges). Writes the fitted BSDF as a ``mi.load_dict``
+  JSON dictionary.
+
+Robust: images of the wrong count or size, non-finite pixels, no BSDF with the id, a variant
+without automatic differentiation or images that do not depend on the BSDF are errors (exit
+status 2, one line naming the problem). A step whose loss or gradient is not finite (or whose
+weights the BSDF rejects), or whose loss has run away to ten times the phase's lowest, is taken
+back and the step size halved; no non-finite result is ever written. Deterministic for a seed
+(each render's seed derives from it).
+"""
+
+from __future__ import annotations
+
+from .. import _llvm
+
+_llvm.configure()  # must precede the first import of drjit
+
+from .cli import main, parser  # noqa: E402
+from .errors import EstimateError  # noqa: E402
+from .estimator import Estimator, estimate  # noqa: E402
+from .models import MODELS, Analytic, Network, common_initialisation, fit_sampling, write_network  # noqa: E402
+from .plan import CODE_PRIOR_STRENGTHS, PRIOR_STRENGTHS, Plan, schedule  # noqa: E402
+from .priors import ALBEDO_BOUND, ALBEDO_LIT_INCIDENCE, ALBEDO_MARGIN  # noqa: E402
+from .scene import Scene  # noqa: E402
+
+__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "CODE_PRIOR_STRENGTHS", "MODELS",
+           "PRIOR_STRENGTHS", "Analytic", "EstimateError", "Estimator", "Network", "Plan", "Scene",
+           "common_initialisation", "estimate", "fit_sampling", "main", "parser", "schedule", "write_network"]
