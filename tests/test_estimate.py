@@ -255,12 +255,12 @@ def test_snapshots_of_a_long_run_are_the_shorter_runs(setup, tmp_path):
 
 
 def test_prior_schedule_holds_out_a_view_only_where_it_can():
-    from nbrdf_mitsuba.estimate.plan import FALLBACK_STRENGTH, PRIOR_STRENGTHS, schedule
+    from nbrdf_mitsuba.estimate.plan import FALLBACK_PULL_STRENGTH, PULL_STRENGTHS, schedule
 
     plan = schedule(100, 3, None)
-    assert (plan.code_steps, plan.weight_steps, plan.pull_strengths, plan.candidate_steps) == (40, 60, PRIOR_STRENGTHS, 30)
-    assert schedule(100, 1, None).pull_strengths == (FALLBACK_STRENGTH,)  # nothing to hold out
-    assert schedule(1, 3, None).pull_strengths == (FALLBACK_STRENGTH,)  # no weight step to judge
+    assert (plan.code_steps, plan.weight_steps, plan.pull_strengths, plan.candidate_steps) == (40, 60, PULL_STRENGTHS, 30)
+    assert schedule(100, 1, None).pull_strengths == (FALLBACK_PULL_STRENGTH,)  # nothing to hold out
+    assert schedule(1, 3, None).pull_strengths == (FALLBACK_PULL_STRENGTH,)  # no weight step to judge
     fixed = schedule(100, 3, 0.5)
     assert fixed.pull_strengths == (0.5,) and fixed.candidate_steps == 0
 
@@ -286,7 +286,7 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
     return rendered, judged
 
 
-def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """The code sees every training view; the candidates (each pull strength from the decoded
     start) see all but the last, the last alone judges them, the lowest held-out loss wins, its
     fit goes on over every view for the rest of the weight phase, and a seed repeats it (the code
@@ -307,25 +307,25 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
     for out in outs:
         rendered.clear()
         runs.clear()
-        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
+        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    assert set(losses) == {str(s) for s in plan.PRIOR_STRENGTHS}
+    assert set(losses) == {str(s) for s in plan.PULL_STRENGTHS}
     assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
     assert len(set(losses.values())) > 1, losses
     best = min(losses, key=losses.get)
-    assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
+    assert provenance["start"] == "decoded" and provenance["pull_strength"] == float(best)
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < priors.ALBEDO_BOUND
-    assert judged == [1] * 2 * len(plan.PRIOR_STRENGTHS)  # the last training view, once per candidate and run
+    assert judged == [1] * 2 * len(plan.PULL_STRENGTHS)  # the last training view, once per candidate and run
     # Screening (49 starts) and code (2 steps) on both views; candidates (2 steps per strength
     # from the decoded start) on view 0; the chosen one's fit on both (the weight phase's other 2).
-    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(plan.PRIOR_STRENGTHS)) + [(0, 1)] * 2, rendered
+    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(plan.PULL_STRENGTHS)) + [(0, 1)] * 2, rendered
     # The last run starts where the chosen candidate's fit ended (the runs: code, candidates, final).
     candidates = runs[1:-1]
-    assert [kind for kind, _, _ in runs] == ["code"] + ["weights"] * (len(plan.PRIOR_STRENGTHS) + 1)
-    chosen = candidates[list(plan.PRIOR_STRENGTHS).index(float(best))]
+    assert [kind for kind, _, _ in runs] == ["code"] + ["weights"] * (len(plan.PULL_STRENGTHS) + 1)
+    chosen = candidates[list(plan.PULL_STRENGTHS).index(float(best))]
     np.testing.assert_array_equal(runs[-1][1], chosen[2])
     assert all(np.array_equal(candidates[0][1], start) for _, start, _ in candidates)  # all from the decoded start
     first, second = (json.loads(out.read_text()) for out in outs)
@@ -356,7 +356,7 @@ def test_image_loss_is_linear_in_the_render(llvm_variant):
         dr.backward(loss([image], [mi.TensorXf(reference)]))
         return np.asarray(dr.grad(image).numpy(), np.float64)
 
-    def log_loss(images, references):  # the loss before round 22
+    def log_loss(images, references):  # the squared error of ln(1 + x), of which image_loss is the first-order twin
         d = dr.log(1.0 + images[0]) - dr.log(1.0 + references[0])
         return dr.mean(dr.square(d), axis=None)
 
@@ -374,7 +374,7 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
     """The code phase's penalty, ``s mean(((z - m) / sd)^2)`` with ``m``, ``sd`` the training
     codes' mean and spread, equals a NumPy float64 oracle from the autoencoder file's anchors,
     and its gradient equals central differences of that oracle."""
-    from nbrdf_mitsuba.estimate.priors import prior_penalty
+    from nbrdf_mitsuba.estimate.priors import code_penalty
     from nbrdf_mitsuba.latent import Decoder
 
     anchors = np.asarray(json.loads(AE_FILE.read_text())["anchors"], dtype=np.float64)
@@ -384,7 +384,7 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
     def oracle(z):
         return strength * np.mean(((z - m) / sd) ** 2)
 
-    penalty = prior_penalty(*Decoder(AE_FILE).code_distribution(), strength)
+    penalty = code_penalty(*Decoder(AE_FILE).code_distribution(), strength)
     rng = np.random.default_rng(7)
     for z in (m + 2.5 * sd * rng.standard_normal(m.size), anchors[3] + 0.1):
         value, grad = penalty(z)
@@ -395,10 +395,10 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
             numeric = np.array([(f(z + h * e) - f(z - h * e)) / (2 * h) for e in np.eye(z.size)])
             assert np.abs(grad).max() > 0
             np.testing.assert_allclose(grad, numeric, rtol=1e-6, atol=1e-9 * np.abs(numeric).max())
-    assert prior_penalty(m, sd * sd, 0.0) is None  # strength 0: no penalty at all, not a zero one
+    assert code_penalty(m, sd * sd, 0.0) is None  # strength 0: no penalty at all, not a zero one
 
 
-def test_output_pull_against_a_float64_oracle(llvm_variant):
+def test_pull_penalty_against_a_float64_oracle(llvm_variant):
     """The weight phase's pull, ``s mean((z(x) - z(c))^2)`` over the pull's direction pairs and the
     three channels, ``z = ln(1 + f)`` of the network: its value equals an oracle built from
     ``nbrdf_tools.network`` (the float64 forward pass and network input, at the same uniform
@@ -430,7 +430,7 @@ def test_output_pull_against_a_float64_oracle(llvm_variant):
         z, z_center = (np.log1p(N.forward(layers(w), inputs)) for w in (x, center))
         return strength * np.mean((z - z_center) ** 2)
 
-    pull = priors.output_pull(center, strength)
+    pull = priors.pull_penalty(center, strength)
     x = center + 0.05 * rng.standard_normal(675)
     value, grad = pull(x)
     assert value > 0 and value == pytest.approx(oracle(x), rel=1e-3)  # float32 directions in the pull
@@ -440,23 +440,23 @@ def test_output_pull_against_a_float64_oracle(llvm_variant):
     numeric = np.array([(pull(x + h * e)[0] - pull(x - h * e)[0]) / (2 * h) for e in np.eye(675)[picks]])
     assert np.abs(grad[picks]).max() > 0
     np.testing.assert_allclose(grad[picks], numeric, rtol=1e-5, atol=1e-7 * np.abs(numeric).max())
-    assert priors.output_pull(center, 0.0) is None  # strength 0: no pull at all, not a zero one
+    assert priors.pull_penalty(center, 0.0) is None  # strength 0: no pull at all, not a zero one
 
 
-def test_code_prior_schedule():
-    from nbrdf_mitsuba.estimate.plan import CODE_PRIOR_STRENGTHS, FALLBACK_CODE_PRIOR, schedule
+def test_code_strength_schedule():
+    from nbrdf_mitsuba.estimate.plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, schedule
 
-    assert 0.0 in CODE_PRIOR_STRENGTHS and len(CODE_PRIOR_STRENGTHS) > 1
+    assert 0.0 in CODE_STRENGTHS and len(CODE_STRENGTHS) > 1
     plan = schedule(100, 3, None)
-    assert plan.code_strengths == CODE_PRIOR_STRENGTHS and plan.candidate_steps == 30
+    assert plan.code_strengths == CODE_STRENGTHS and plan.candidate_steps == 30
     assert schedule(100, 3, None, 0.0).code_strengths == (0.0,)
-    assert schedule(100, 1, None).code_strengths == (FALLBACK_CODE_PRIOR,)  # nothing to hold out
-    assert schedule(100, 3, 0.5).code_strengths == (FALLBACK_CODE_PRIOR,)  # a fixed pull fixes both
+    assert schedule(100, 1, None).code_strengths == (FALLBACK_CODE_STRENGTH,)  # nothing to hold out
+    assert schedule(100, 3, 0.5).code_strengths == (FALLBACK_CODE_STRENGTH,)  # a fixed pull fixes both
     both = schedule(100, 3, 0.5, 0.25)
     assert both.code_strengths == (0.25,) and both.candidate_steps == 0
 
 
-def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+def test_code_strength_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """By default each code strength gets its own code phase and the pull's three candidates;
     the code phases see every training view, the candidates all but the last, the last alone
     judges them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
@@ -471,54 +471,74 @@ def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup,
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    pairs = [(c, w) for c in plan.CODE_PRIOR_STRENGTHS for w in plan.PRIOR_STRENGTHS]
+    pairs = [(c, w) for c in plan.CODE_STRENGTHS for w in plan.PULL_STRENGTHS]
     names = [f"code {c}, pull {w}" for c, w in pairs]
     assert set(losses) == set(names)  # fit-phong's rewrite sorts the keys
     assert all(math.isfinite(v) for v in losses.values())
     best = min(losses, key=losses.get)
     c, w = pairs[names.index(best)]
-    assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
+    assert (provenance["code_strength"], provenance["pull_strength"]) == (c, w)
     assert judged == [1] * (2 * len(pairs))  # the last training view, once per candidate and run
     # Screening (49) and a code phase per strength (2 steps each) on both views, the pull's
     # candidates (2 steps each) on view 0; the chosen one's fit on both views (2 more steps).
-    assert rendered == [(0, 1)] * (49 + 2 * len(plan.CODE_PRIOR_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
+    assert rendered == [(0, 1)] * (49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
         [(0, 1)] * 2
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 
 
-def test_code_prior_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, monkeypatch):
-    """Where the held-out view picks code strength 0, the estimate is the one of ``--code-prior 0``
+def test_code_strength_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, monkeypatch):
+    """Where the held-out view picks code strength 0, the estimate is the one of ``--code-strength 0``
     (the code phase without the penalty, as before it existed) weight for weight; its candidates'
     held-out losses are that run's bit for bit, and those from code strength 1e-3 differ."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import plan
 
     scene, images = setup
-    picked = plan.PRIOR_STRENGTHS[0]  # judged in order: the pull's strengths from code strength 0 first
+    picked = plan.PULL_STRENGTHS[0]  # judged in order: the pull's strengths from code strength 0 first
     _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
     nets = {}
-    for name, extra in (("fixed", ("--code-prior", "0")), ("chosen", ())):
+    for name, extra in (("fixed", ("--code-strength", "0")), ("chosen", ())):
         judged.clear()
         nets[name] = tmp_path / f"{name}.nbrdf.json"
         assert run(scene, images, nets[name], "--steps", "6", "--spp", "2", "--threads", "1", *extra) == 0
     fixed, chosen = (json.loads(nets[k].read_text()) for k in ("fixed", "chosen"))
-    assert chosen["provenance"]["code_prior"] == fixed["provenance"]["code_prior"] == 0.0
-    assert chosen["provenance"]["prior_weight"] == fixed["provenance"]["prior_weight"] == picked
+    assert chosen["provenance"]["code_strength"] == fixed["provenance"]["code_strength"] == 0.0
+    assert chosen["provenance"]["pull_strength"] == fixed["provenance"]["pull_strength"] == picked
     assert chosen["layers"] == fixed["layers"] and chosen["provenance"]["code"] == fixed["provenance"]["code"]
     losses = chosen["provenance"]["held_out_losses"]
-    for strength in plan.PRIOR_STRENGTHS:
+    for strength in plan.PULL_STRENGTHS:
         assert losses[f"code 0.0, pull {strength}"] == fixed["provenance"]["held_out_losses"][str(strength)]
         if strength != picked:
             assert losses[f"code 0.001, pull {strength}"] != losses[f"code 0.0, pull {strength}"]
 
 
-def test_code_prior_must_be_finite_and_non_negative(setup, tmp_path, capsys):
+def test_code_strength_must_be_finite_and_non_negative(setup, tmp_path, capsys):
     scene, images = setup
     out = tmp_path / "out.nbrdf.json"
     for value in ("-1", "nan"):
-        expect_error(capsys, run(scene, images, out, "--code-prior", value), out, "--code-prior must be")
+        expect_error(capsys, run(scene, images, out, "--code-strength", value), out, "--code-strength must be")
 
+
+def test_former_flag_names_still_work_with_a_note_and_are_not_listed(capsys):
+    """``--prior-weight`` and ``--code-prior`` set the pull strength and the code strength as
+    ``--pull-strength`` and ``--code-strength`` do, with a note on stderr naming the new flag;
+    ``--help`` lists only the new names."""
+    from nbrdf_mitsuba.estimate.cli import parser
+
+    base = ["scene.xml", "--images", "a.exr", "--bsdf-id", "mat", "-o", "out.nbrdf.json"]
+    former = parser().parse_args([*base, "--prior-weight", "0.25", "--code-prior", "0.5"])
+    notes = capsys.readouterr().err
+    current = parser().parse_args([*base, "--pull-strength", "0.25", "--code-strength", "0.5"])
+    assert vars(former) == vars(current) and (current.pull_strength, current.code_strength) == (0.25, 0.5)
+    assert "--prior-weight is deprecated: use --pull-strength" in notes
+    assert "--code-prior is deprecated: use --code-strength" in notes
+    assert capsys.readouterr().err == ""  # the new names: no note
+    with pytest.raises(SystemExit):
+        parser().parse_args(["--help"])
+    usage = capsys.readouterr().out
+    assert "--pull-strength" in usage and "--code-strength" in usage
+    assert "--prior-weight" not in usage and "--code-prior" not in usage
 
 def constant_network(value: float) -> np.ndarray:
     """Flat width-21 weights of ``f = value`` everywhere (every weight 0, the output bias ln(1 + f))."""
@@ -580,7 +600,7 @@ def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_va
     margin = 1 + priors.ALBEDO_MARGIN
     assert priors.albedo_bound(profile(0.4, 0.6)) == pytest.approx(margin)  # under 1: energy conservation
     assert priors.albedo_bound(profile(1.14, 1.2)) == pytest.approx(1.14 * margin)  # the images ask for it
-    assert priors.albedo_bound(profile(0.46, 1.42)) == pytest.approx(margin)  # ibiza_sunset's grazing lobe: over it
+    assert priors.albedo_bound(profile(0.46, 1.42)) == pytest.approx(margin)  # a bright grazing lobe alone: over it
     assert priors.albedo_bound(profile(2.0, 2.0)) == priors.ALBEDO_BOUND
 
     for c, passes in [(0.3, True), (1.2, True), (priors.ALBEDO_BOUND * 1.05, False)]:
@@ -600,13 +620,13 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
     spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
     monkeypatch.setattr(priors, "ALBEDO_BOUND", 0.0)
     prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
-    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
-    assert provenance["start"] == estimator.COMMON_START and provenance["prior_weight"] is None
-    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PRIOR_STRENGTHS}  # the last attempt's
+    assert provenance["start"] == estimator.COMMON_START and provenance["pull_strength"] is None
+    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PULL_STRENGTHS}  # the last attempt's
     # Every attempt's candidates rejected, each attempt with its own seeds.
     prefixes = ["", "attempt 1: ", "attempt 2: "][:estimator.PRIOR_ATTEMPTS]
-    assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in prefixes for s in plan.PRIOR_STRENGTHS}
+    assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in prefixes for s in plan.PULL_STRENGTHS}
     assert all(v > 0 for v in provenance["albedo_rejected"].values())
     assert provenance["attempts"] == estimator.PRIOR_ATTEMPTS
     assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
@@ -630,14 +650,14 @@ def test_every_network_estimate_records_its_albedo_and_warns_over_the_bound(setu
 
 
 def test_a_final_network_over_the_bound_falls_back_to_the_common_start(setup, tmp_path, monkeypatch):
-    """Without a held-out choice (a fixed ``--prior-weight``) the decoded start's final network is
+    """Without a held-out choice (a fixed ``--pull-strength``) the decoded start's final network is
     checked too: over the bound, the written network is the nbrdf-no-prior estimate."""
     from nbrdf_mitsuba.estimate import estimator, priors
 
     scene, images = setup
     monkeypatch.setattr(priors, "ALBEDO_BOUND", 0.0)
     prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
-    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--prior-weight", "0.1") == 0
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--pull-strength", "0.1") == 0
     provenance = json.loads(prior.read_text())["provenance"]
     assert provenance["start"] == estimator.COMMON_START
     attempts = range(1, estimator.PRIOR_ATTEMPTS)
@@ -674,6 +694,6 @@ def test_a_rejected_attempt_of_the_prior_is_tried_again_with_other_seeds(setup, 
     assert seeds == [0, estimator.ATTEMPT_SEED_STRIDE] * 2
     provenance = json.loads(outs[0].read_text())["provenance"]
     assert provenance["start"] == "decoded" and provenance["attempts"] == 2
-    assert set(provenance["albedo_rejected"]) == {f"code {c}, pull {w}" for c in plan.CODE_PRIOR_STRENGTHS
-                                                  for w in plan.PRIOR_STRENGTHS}
+    assert set(provenance["albedo_rejected"]) == {f"code {c}, pull {w}" for c in plan.CODE_STRENGTHS
+                                                  for w in plan.PULL_STRENGTHS}
     assert json.loads(outs[0].read_text())["layers"] == json.loads(outs[1].read_text())["layers"]

@@ -11,21 +11,21 @@ view each step:
   (:mod:`nbrdf_mitsuba.latent`: the gradient of the weights, which ``jit_weights="opaque"``
   makes scene parameters, chained to the code), starting from the best of 49 training codes,
   with a Gaussian penalty on the code (the training codes' mean and spread); then the 675
-  weights themselves, held near the decoded network by a pull in function space (the squared
+  weights themselves, with a pull toward the decoded network in function space (the squared
   difference of the two networks' log-space outputs at fixed direction pairs over the whole
-  hemisphere, so that where no image constrains the BRDF it stays the decoded one). Both
-  penalties' strengths are chosen together by a held-out training view (``--prior-weight`` and
-  ``--code-prior`` fix them instead): the code is fitted on every view once per strength of
-  ``CODE_PRIOR_STRENGTHS`` (the screening of the starts shared); from each decoded code every
-  strength of ``PRIOR_STRENGTHS`` fits the weights on all views but the last (the held-out one)
-  for a share of the steps; the pair with the lowest loss on the held-out view is kept, and its
-  fit goes on over every view for the rest of the weight phase's steps. A candidate or final
-  network whose directional albedo exceeds its bound (:func:`albedo_bound`: 1, or the network's
-  own albedo where the lights fall square if higher, plus ``ALBEDO_MARGIN``; at most
-  ``ALBEDO_BOUND``) is no material and is not kept; the prior is then attempted again with
-  other render seeds, up to ``PRIOR_ATTEMPTS`` times, before the estimate falls back to the
-  ``nbrdf-no-prior`` estimate itself. A fixed ``--prior-weight`` holds no view out: the
-  code's strength is then ``--code-prior``, else 0. Writes an ``*.nbrdf.json`` with ``nbrdf
+  hemisphere, so that where no image constrains the BRDF it stays the decoded one). The code
+  strength and the pull strength are chosen together by a held-out training view
+  (``--code-strength`` and ``--pull-strength`` fix them instead): the code is fitted on every
+  view once per strength of ``CODE_STRENGTHS`` (the screening of the starts shared); from each
+  decoded code every strength of ``PULL_STRENGTHS`` fits the weights on all views but the last
+  (the held-out one) for a share of the steps; the pair with the lowest loss on the held-out
+  view is kept, and its fit goes on over every view for the rest of the weight phase's steps.
+  A candidate or final network whose directional albedo exceeds its bound (:func:`albedo_bound`:
+  1, or the network's own albedo where the lights fall square if higher, plus ``ALBEDO_MARGIN``;
+  at most ``ALBEDO_BOUND``) is no material and is not kept; the prior is then attempted again
+  with other render seeds, up to ``PRIOR_ATTEMPTS`` times, before the estimate falls back to the
+  ``nbrdf-no-prior`` estimate itself. A fixed ``--pull-strength`` holds no view out: the
+  code strength is then ``--code-strength``, else 0. Writes an ``*.nbrdf.json`` with ``nbrdf
   fit-phong``'s sampling.
 * ``nbrdf-no-prior``: the weights alone, from the common initialisation (the trainer's seed-0
   start, twin of ``network/mod.rs`` ``paper_init``).
@@ -51,10 +51,10 @@ from .cli import main, parser  # noqa: E402
 from .errors import EstimateError  # noqa: E402
 from .estimator import Estimator, estimate  # noqa: E402
 from .models import MODELS, Analytic, Network, common_initialisation, fit_sampling, write_network  # noqa: E402
-from .plan import CODE_PRIOR_STRENGTHS, PRIOR_STRENGTHS, Plan, schedule  # noqa: E402
+from .plan import CODE_STRENGTHS, PULL_STRENGTHS, Plan, schedule  # noqa: E402
 from .priors import ALBEDO_BOUND, ALBEDO_LIT_INCIDENCE, ALBEDO_MARGIN  # noqa: E402
 from .scene import Scene  # noqa: E402
 
-__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "CODE_PRIOR_STRENGTHS", "MODELS",
-           "PRIOR_STRENGTHS", "Analytic", "EstimateError", "Estimator", "Network", "Plan", "Scene",
+__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "CODE_STRENGTHS", "MODELS",
+           "PULL_STRENGTHS", "Analytic", "EstimateError", "Estimator", "Network", "Plan", "Scene",
            "common_initialisation", "estimate", "fit_sampling", "main", "parser", "schedule", "write_network"]

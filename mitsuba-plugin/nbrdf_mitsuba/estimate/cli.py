@@ -9,7 +9,18 @@ from pathlib import Path
 from .errors import EstimateError
 from .estimator import estimate
 from .models import MODELS
-from .plan import CODE_PRIOR_STRENGTHS, FALLBACK_CODE_PRIOR, FALLBACK_STRENGTH, PRIOR_STRENGTHS
+from .plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, FALLBACK_PULL_STRENGTH, PULL_STRENGTHS
+
+#: Former names of flags, still accepted (with a note on stderr) but no longer listed by --help.
+DEPRECATED_FLAGS = {"--prior-weight": "--pull-strength", "--code-prior": "--code-strength"}
+
+
+class _Deprecated(argparse.Action):
+    """A former flag name: stores into its new name's destination, with a note on stderr."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"warning: {option_string} is deprecated: use {DEPRECATED_FLAGS[option_string]}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -29,16 +40,19 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed of the renders (default: 0)")
     p.add_argument("--max-depth", type=int, default=3, help="prb's path depth (default: 3, direct light and one "
                                                             "bounce)")
-    p.add_argument("--prior-weight", type=float,
-                   help="strength of the pull holding the network's BRDF near the decoded one's (default: chosen among "
-                        f"{', '.join(map(str, PRIOR_STRENGTHS))} by the last training view, held out; the common start "
+    p.add_argument("--pull-strength", type=float,
+                   help="strength of the pull toward the decoded network's BRDF (default: chosen among "
+                        f"{', '.join(map(str, PULL_STRENGTHS))} by the last training view, held out; the common start "
                         f"without the prior only where the albedo check rejects every network of the prior; "
-                        f"{FALLBACK_STRENGTH} with one image)")
-    p.add_argument("--code-prior", type=float,
-                   help="strength of the Gaussian penalty holding the latent code near the training codes (default: "
-                        f"chosen among {', '.join(map(str, CODE_PRIOR_STRENGTHS))} together with the weights' "
-                        f"strength, by the same held-out view; {FALLBACK_CODE_PRIOR} with one image or a fixed "
-                        "--prior-weight)")
+                        f"{FALLBACK_PULL_STRENGTH} with one image)")
+    p.add_argument("--code-strength", type=float,
+                   help="strength of the Gaussian penalty keeping the latent code near the training codes (default: "
+                        f"chosen among {', '.join(map(str, CODE_STRENGTHS))} together with the pull's "
+                        f"strength, by the same held-out view; {FALLBACK_CODE_STRENGTH} with one image or a fixed "
+                        "--pull-strength)")
+    for former, current in DEPRECATED_FLAGS.items():
+        p.add_argument(former, dest=current[2:].replace("-", "_"), type=float, action=_Deprecated,
+                       help=argparse.SUPPRESS)
     p.add_argument("--ae", type=Path, help="the autoencoder (default: the pretrained one)")
     p.add_argument("-D", dest="define", action="append", default=[], metavar="KEY=VALUE",
                    help="set a scene parameter ($KEY in the XML), as for rendering")

@@ -19,28 +19,27 @@ from .errors import EstimateError
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network
 from .optimiser import Descent, Phase
 from .plan import Plan, schedule
-from .priors import albedo_check, output_pull, prior_penalty
+from .priors import albedo_check, pull_penalty, code_penalty
 from .scene import Scene, load_images, parse_defines, require_differentiable_variant
 
-#: Training codes tried as starts of the latent phase (evenly spaced through the anchors), each
-#: judged by one render per view at a quarter of the samples (a few steps' cost in all): on a
-#: MERL truth the best of 49 started 15 % lower in loss than the best of 9, a gap the code phase
-#: took its whole length to close (docs/experiments.md, issue 33).
+#: Training codes tried as starts of the latent phase (evenly spaced through the anchors, besides
+#: their mean), each judged by one render per view at a quarter of the samples (a few steps' cost
+#: in all): a wider screening starts lower than the code phase would bring a narrower one
+#: (docs/experiments.md, Estimation: the first entry, on the code phase's step, share and starts).
 SCREENED_STARTS = 48
 #: The start the estimate falls back to where the prior's network is no material (its albedo above
-#: :func:`albedo_bound`): the common initialisation, no pull, the ``nbrdf-no-prior`` estimate. It was a
-#: candidate of the held-out choice until round 13; where the view chose it, the decoded network
-#: was either better on the novel views (iris_purple_gem, 0.0401 against 0.0484) or no material
-#: (albedo 1.6-227), which the albedo check catches (docs/experiments.md, issue 33, round 13).
+#: :func:`albedo_bound`): the common initialisation, no pull, the ``nbrdf-no-prior`` estimate. No
+#: candidate of the held-out choice: where the view chose it, the decoded network was better on the
+#: novel views or no material, which the albedo check catches (docs/experiments.md, Estimation: "The albedo check instead
+#: of the common candidate").
 COMMON_START = "common"
 #: The held-out view is judged with this many times the samples of a training render (one render
 #: per candidate, the same seed for all: the candidates' differences are not Monte Carlo noise).
 HELD_OUT_SPP_FACTOR = 4
 #: Attempts of the prior (code phases, candidates, final fit) before the fallback to the common
-#: start, each with its own render seeds: which code the code phase reaches is decided by the
-#: renders' noise (the same screened start at every seed), and on ibiza_sunset a second or third
-#: attempt gave a material where the first had not (novel-view RMSE 0.0278 and 0.0248 against the
-#: fallback's 0.0367 and 0.0427; docs/experiments.md, issue 33, round 13).
+#: start, each with its own render seeds: the renders' noise decides which code the code phase
+#: reaches, and a later attempt can give a material where the first did not (docs/experiments.md, Estimation: "Attempts of
+#: the prior with other render seeds").
 PRIOR_ATTEMPTS = 3
 #: Offset of the estimate's seed from one attempt to the next.
 ATTEMPT_SEED_STRIDE = 7919
@@ -54,9 +53,9 @@ def image_loss(images: list, references: list):
     is the loss's derivative at the noisy render times an independent derivative of the render;
     linear in the render, that derivative's mean is its value at the mean render, and the fit
     settles where the mean render is the reference. The log's was biased bright where renders
-    are noisy, most around a highlight narrower than a pixel, which it fitted 2-3 pixels wide
-    (docs/experiments.md, issue 33, round 22). Held to a float64 oracle and to that property by
-    tests/test_estimate.py::test_image_loss_is_linear_in_the_render."""
+    are noisy, most around a highlight narrower than a pixel, which it fitted too wide
+    (docs/experiments.md, Estimation: "The image loss linear in the render"). Held to a float64
+    oracle and to that property by tests/test_estimate.py::test_image_loss_is_linear_in_the_render."""
     total = 0.0
     for image, reference in zip(images, references):
         d = (image - reference) / (1.0 + reference)
@@ -156,11 +155,11 @@ def estimate(args, on_step=None) -> dict:
 def _estimate(args, on_step=None) -> dict:
     if args.steps < 1 or args.spp < 1:
         raise EstimateError("--steps and --spp must be at least 1")
-    for name, value in (("--prior-weight", args.prior_weight), ("--code-prior", args.code_prior)):
+    for name, value in (("--pull-strength", args.pull_strength), ("--code-strength", args.code_strength)):
         if value is not None and not (value >= 0 and math.isfinite(value)):
             raise EstimateError(f"{name} must be a finite number >= 0")
     scene_file = Scene(args.scene, args.bsdf_id, parse_defines(args.define))
-    model = Network(args.model == "nbrdf", args.prior_weight) if args.model.startswith("nbrdf") else Analytic(args.model)
+    model = Network(args.model == "nbrdf") if args.model.startswith("nbrdf") else Analytic(args.model)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="nbrdf-estimate-") as workdir:
         est = Estimator(scene_file, model, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
@@ -171,8 +170,8 @@ def _estimate(args, on_step=None) -> dict:
             dr.set_thread_count(args.threads)
         from tqdm import tqdm
 
-        plan = schedule(args.steps, len(est.references), args.prior_weight if model_has_prior(model) else 0.0,
-                        args.code_prior)
+        plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
+                        args.code_strength)
         with tqdm(total=plan.total_steps(), unit="step", desc=f"estimate {args.model}", disable=args.quiet,
                   file=sys.stderr) as bar:
             result = _optimise(est, model, args, bar, plan)
@@ -207,7 +206,7 @@ def choose_start(est: Estimator, decoded: dict, plan: Plan, bar) -> tuple:
         for code_strength, start in decoded.items():
             for strength in plan.pull_strengths:
                 phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
-                              output_pull(start, strength))
+                              pull_penalty(start, strength))
                 fitted = fits[code_strength, strength] = est.run(phase, bar, plan.code_steps)
                 losses[code_strength, strength] = est.held_out_loss(fitted, held_out)
                 albedo, material = albedo_check(fitted)
@@ -231,19 +230,19 @@ def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
     def apply(params, bsdf_id, code):
         params[f"{bsdf_id}.weights"] = decoder.decode(code)
 
-    return {strength: est.run(Phase("code", code0, plan.code_steps, apply, prior_penalty(*spread, strength)), bar, 0)
+    return {strength: est.run(Phase("code", code0, plan.code_steps, apply, code_penalty(*spread, strength)), bar, 0)
             for strength in plan.code_strengths}
 
 
 def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
     """One attempt of the prior at the estimator's seed: the code through the decoder, then the
-    weights held near the decoded ones by the chosen strengths. Returns the weights (``None``
+    weights pulled toward the decoded ones by the chosen strengths. Returns the weights (``None``
     where the albedo check rejected every candidate or the final network), the summary's
     additions, and the rejected albedos by candidate name (``final``: the final network)."""
     # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
-    # view's noise, and the view's light often decided which code was reached (on iris_purple_gem
-    # a material at every seed where without it two of three seeds fell back; docs/experiments.md,
-    # issue 33, round 15). The candidates' weights, which can fit noise, are fitted without it.
+    # view's noise, and the view's light often decides which code is reached (docs/experiments.md, Estimation: "The
+    # code phase on every training view"). The candidates' weights, which can fit noise, are
+    # fitted without it.
     codes = fit_codes(est, decoder, plan, bar)
     decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
     choice, losses, rejected, fitted = (plan.code_strengths[0], plan.pull_strengths[0]), {}, {}, None
@@ -258,15 +257,14 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
     if choice == COMMON_START:
         return None, extra, rejected
     strength = choice[1]
-    extra.update({"start": "decoded", "prior_weight": strength, "code_prior": code_strength})
+    extra.update({"start": "decoded", "pull_strength": strength, "code_strength": code_strength})
     # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
     # from the decoded start had): refitted from the decoded start instead, the network lost
-    # what the held-out view had judged (iris_purple_gem at seed 0: 0.0310 against 0.0247;
-    # docs/experiments.md, issue 33, round 16).
+    # what the held-out view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit goes on").
     center = decoded[code_strength]
     weights, steps = (center, plan.weight_steps) if fitted is None else (fitted, plan.weight_steps - plan.candidate_steps)
     if steps > 0:
-        phase = Phase("weights", weights, steps, Network._set_weights, output_pull(center, strength))
+        phase = Phase("weights", weights, steps, Network._set_weights, pull_penalty(center, strength))
         weights = est.run(phase, bar, plan.code_steps)
     albedo, material = albedo_check(weights)
     if not material:
@@ -307,7 +305,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar) -> tuple[np.ndarray, d
             # kept for the record.
             est.seed = seed
             bar.total += plan.code_steps + plan.weight_steps
-            extra.update({"start": COMMON_START, "prior_weight": None, "code_prior": None,
+            extra.update({"start": COMMON_START, "pull_strength": None, "code_strength": None,
                           "attempts": PRIOR_ATTEMPTS})
             weights = est.run(Phase("weights", common_initialisation(), plan.code_steps + plan.weight_steps,
                                     Network._set_weights, None), bar, 0)
@@ -343,7 +341,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan) -> dict:
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
-    for key in ("code", "start", "prior_weight", "code_prior", "held_out_losses", "albedo_rejected", "attempts",
+    for key in ("code", "start", "pull_strength", "code_strength", "held_out_losses", "albedo_rejected", "attempts",
                 "albedo_max"):
         if key in summary:
             provenance[key] = summary[key]

@@ -122,8 +122,8 @@ class Analytic:
 class Network:
     """``nbrdf`` (latent code, then weights near the decoded ones) or ``nbrdf-no-prior``."""
 
-    def __init__(self, prior: bool, prior_weight: float):
-        self.prior, self.prior_weight = prior, prior_weight
+    def __init__(self, prior: bool):
+        self.prior = prior
         self.start = common_initialisation()
 
     def element(self, workdir: Path) -> ET.Element:

@@ -9,17 +9,17 @@ import numpy as np
 
 from .errors import EstimateError
 
-#: Adam step sizes per kind of variable. The code's is a fraction of its training spread (about
-#: 1.6 per value): at 0.05 the code moved less than one spread in a whole phase and its loss
-#: hardly fell (docs/experiments.md, issue 33). The analytic models' 0.1 settled higher than 0.05
-#: (principled on colodur_napoli_4f: novel-view RMSE 0.015 against 0.009 at 100 steps).
+#: Adam step sizes per kind of variable. The code's is a fraction of the training codes' spread,
+#: large enough for the code to cross that spread within its phase; the analytic models' settles
+#: lower than twice it (docs/experiments.md, Estimation: the first entry, on the code phase's step,
+#: share and starts, and "Analytic models' step").
 LEARNING_RATES = {"code": 0.2, "weights": 0.003, "analytic": 0.05}
 #: Times the step may halve after non-finite or run-away losses before the estimate gives up.
 MAX_HALVINGS = 12
-#: A step whose loss is this many times the phase's lowest so far has run away: at 2 spp on
-#: 128x128 images a network's loss grew 1.5x a step from 0.009 to 10, a finite loss the
-#: non-finite check let through (docs/experiments.md, issue 33, round 20). A step's Monte Carlo
-#: noise stays far below this factor.
+#: A step whose loss is this many times the phase's lowest so far has run away: a finite loss
+#: growing step after step, which the non-finite check lets through; a step's Monte Carlo noise
+#: stays far below this factor (docs/experiments.md, Estimation: the entry on larger training
+#: images over three seeds, where a network's loss ran away).
 RUNAWAY_FACTOR = 10.0
 
 

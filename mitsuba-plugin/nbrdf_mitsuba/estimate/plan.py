@@ -5,26 +5,26 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: Share of the steps spent on the latent code before the weights (model ``nbrdf``). The weight
-#: phase still lowered the loss steeply at its end with 0.6 (docs/experiments.md, issue 33).
+#: Share of the steps spent on the latent code before the weights (model ``nbrdf``): the weight
+#: phase needs the larger share, its loss still falling steeply at the end of a shorter one
+#: (docs/experiments.md, Estimation: the first entry, on the code phase's step, share and starts).
 CODE_SHARE = 0.4
-#: Strengths of the weight phase's pull toward the decoded network (:func:`output_pull`), one
-#: picked per estimate by the held-out training view: a hold, and none at all (the decoded start
-#: only). A pull in weight space (the autoencoder's standardised weights) held the weights, not
-#: the BRDF, and lost to the network without the prior on a MERL truth by more than this one
-#: does; the held-out view never chose a strength of 1 (docs/experiments.md, issue 33, round 10).
-PRIOR_STRENGTHS = (1e-1, 0.0)
-#: The strength where no view can be held out (one image) or no weight step is left to judge.
-FALLBACK_STRENGTH = 1e-1
+#: Strengths of the weight phase's pull toward the decoded network (:func:`pull_penalty`), one
+#: picked per estimate by the held-out training view: a pull, and none at all (the decoded start
+#: only). In function space because a pull on the weights kept the weights, not the BRDF, and a
+#: stronger pull was never chosen (docs/experiments.md, Estimation: "A pull in function space instead of weight space").
+PULL_STRENGTHS = (1e-1, 0.0)
+#: The pull strength where no view can be held out (one image) or no weight step is left to judge.
+FALLBACK_PULL_STRENGTH = 1e-1
 #: Strengths of the code phase's Gaussian penalty (the training codes' mean and spread), each a
 #: code phase of its own whose decoded start runs every candidate of the weight phase; the held-out
-#: view judges the pairs together. 0 is the code phase without the penalty; 1e-3 kept the codes
-#: near the training codes and lowered the novel-view error on five of the seven report materials,
-#: raised it on two (docs/experiments.md, issue 33).
-CODE_PRIOR_STRENGTHS = (0.0, 1e-3)
-#: The code penalty's strength where nothing is chosen (one image, no weight step, or a fixed
-#: ``--prior-weight``): none, the code phase as it was before the penalty.
-FALLBACK_CODE_PRIOR = 0.0
+#: view judges the pairs together: 0 is no penalty; the other keeps the code near the training
+#: codes, which helps most materials but not all, hence the choice (docs/experiments.md, Estimation: "The code penalty's
+#: strength chosen by the held-out view").
+CODE_STRENGTHS = (0.0, 1e-3)
+#: The code strength where nothing is chosen (one image, no weight step, or a fixed
+#: ``--pull-strength``): no penalty.
+FALLBACK_CODE_STRENGTH = 0.0
 #: Share of the weight phase's steps each candidate strength is fitted for before it is judged.
 CANDIDATE_SHARE = 0.5
 
@@ -55,19 +55,19 @@ class Plan:
                 + (codes * len(self.pull_strengths) - 1) * self.candidate_steps)
 
 
-def schedule(steps: int, views: int, prior_weight: float | None, code_prior: float | None = None) -> Plan:
-    """The plan of an estimate of ``steps`` steps on ``views`` images. A fixed ``prior_weight``
-    fixes the code's strength too (``code_prior``, else none)."""
+def schedule(steps: int, views: int, pull_strength: float | None, code_strength: float | None = None) -> Plan:
+    """The plan of an estimate of ``steps`` steps on ``views`` images. A fixed ``pull_strength``
+    fixes the code's strength too (``code_strength``, else none)."""
     code = max(1, round(CODE_SHARE * steps)) if steps > 1 else 1
     weights = steps - code
-    fixed_code = (code_prior if code_prior is not None else FALLBACK_CODE_PRIOR,)
-    if prior_weight is not None:
-        strengths, code_strengths = (prior_weight,), fixed_code
+    fixed_code = (code_strength if code_strength is not None else FALLBACK_CODE_STRENGTH,)
+    if pull_strength is not None:
+        strengths, code_strengths = (pull_strength,), fixed_code
     elif views < 2 or weights < 1:
-        strengths, code_strengths = (FALLBACK_STRENGTH,), fixed_code
+        strengths, code_strengths = (FALLBACK_PULL_STRENGTH,), fixed_code
     else:
-        strengths = PRIOR_STRENGTHS
-        code_strengths = fixed_code if code_prior is not None else CODE_PRIOR_STRENGTHS
+        strengths = PULL_STRENGTHS
+        code_strengths = fixed_code if code_strength is not None else CODE_STRENGTHS
     selecting = len(strengths) * len(code_strengths) > 1
     candidate = max(1, round(CANDIDATE_SHARE * weights)) if selecting else 0
     return Plan(code, weights, strengths, code_strengths, candidate)

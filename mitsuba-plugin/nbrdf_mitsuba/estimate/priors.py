@@ -1,4 +1,4 @@
-"""What holds an estimate to the prior: the latent code's Gaussian penalty, the weight phase's
+"""What ties an estimate to the prior: the latent code's Gaussian penalty, the weight phase's
 pull toward the decoded network (float64, its gradient backpropagated by hand), and the albedo
 check that tells a material from a network that reflects more light than it receives."""
 
@@ -18,16 +18,14 @@ PULL_SEED = 7
 #: A decoded candidate whose network reflects more than this share of the light it receives (its
 #: directional albedo, at some incidence angle and channel) is not a material: it is never chosen,
 #: nor kept as the final network. The held-out view cannot see it, because the excess lies where no
-#: training light fell: a decoded candidate chosen by the view gave a final network with an albedo
-#: of 15 and 5x the novel-view error. Above 1 because an estimate carries the
-#: images' noise: paper_white's estimates reach 1.16 (its truth's network 0.98), while the 432
-#: decoded training codes stay below 0.73 (docs/experiments.md, issue 33, round 13). The ceiling
-#: of :func:`albedo_bound`.
+#: training light fell, and such a network renders the novel views far worse. Above 1 because an
+#: estimate carries the images' noise, while the decoded training codes stay well below 1
+#: (docs/experiments.md, Estimation: "The albedo check instead of the common candidate"). The ceiling of
+#: :func:`albedo_bound`.
 ALBEDO_BOUND = 1.5
 #: Incidence angles (degrees, at most) where the lights fall square onto the object: there the
-#: images constrain the albedo best, and an estimate's albedo above 1 is what they ask for (paper_white's
-#: 1.14 at normal incidence), not light where no image shows it (ibiza_sunset at seed 2: 0.46 up to
-#: 45 degrees, 1.42 at 80; docs/experiments.md, issue 33, round 16).
+#: images constrain the albedo best, and an estimate's albedo above 1 is what they ask for, not
+#: light where no image shows it (docs/experiments.md, Estimation: "The albedo bound from the lit incidence angles").
 ALBEDO_LIT_INCIDENCE = 45
 #: Share above 1 (or above the network's own albedo up to ``ALBEDO_LIT_INCIDENCE``) that the bound
 #: allows at any incidence angle: the quadrature's error and the images' noise.
@@ -38,7 +36,7 @@ ALBEDO_INCIDENCE = (0, 15, 30, 45, 60, 70, 80, 87)
 ALBEDO_GRID = (96, 48)
 
 
-def prior_penalty(center: np.ndarray, variance: np.ndarray, strength: float):
+def code_penalty(center: np.ndarray, variance: np.ndarray, strength: float):
     """``strength`` times the mean squared standardised distance to ``center``, and its gradient:
     the code's Gaussian penalty (the training codes' mean and variance)."""
     if strength == 0:
@@ -66,19 +64,19 @@ def _pull_inputs() -> np.ndarray:
 def _hidden_and_output(layers: list, x: np.ndarray):
     """The hidden layers' pre-activations and the output's log-space value ``z`` (``f = max(e^z - 1,
     0)``). Float64 twin of ``jit.TracedNetwork.eval_input`` before its output's ``expm1``; held to
-    ``nbrdf_tools.network.forward`` by tests/test_estimate.py::test_output_pull_against_a_float64_oracle."""
+    ``nbrdf_tools.network.forward`` by tests/test_estimate.py::test_pull_penalty_against_a_float64_oracle."""
     (W1, b1), (W2, b2), (W3, b3) = layers
     z1 = x @ W1 + b1
     z2 = np.maximum(z1, 0) @ W2 + b2
     return z1, z2, np.maximum(z2, 0) @ W3 + b3
 
 
-def output_pull(center: np.ndarray, strength: float):
+def pull_penalty(center: np.ndarray, strength: float):
     """The weight phase's pull toward the decoded network ``center`` (flat weights): ``strength``
     times the mean squared difference of the two networks' log-space outputs (the ``z`` of ``f =
     e^z - 1``, every channel) at ``PULL_PAIRS`` fixed uniform direction pairs, and its gradient
     (backpropagated by hand, float64 like the optimiser). A pull in function space, not in weight
-    space: weights far apart can be the same BRDF and near ones different, while this holds the
+    space: weights far apart can be the same BRDF and near ones different, while this keeps the
     BRDF itself where no image constrains it. ``None`` for strength 0."""
     if strength == 0:
         return None

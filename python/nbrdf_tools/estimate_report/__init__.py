@@ -431,9 +431,12 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         provenance = json.loads(path.read_text()).get("provenance", {})
         losses = provenance.get("held_out_losses") or {}
         text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
+        # Networks estimated before the rename record prior_weight and code_prior.
+        pull, code = (provenance.get(new, provenance.get(old)) for new, old in
+                      (("pull_strength", "prior_weight"), ("code_strength", "code_prior")))
         chosen = ("the common start, no prior (the result is the no-prior estimate)"
-                  if provenance.get("start") == "common" else f"prior strength {provenance.get('prior_weight')}"
-                  + (f", code penalty {provenance['code_prior']}" if provenance.get("code_prior") is not None else ""))
+                  if provenance.get("start") == "common" else f"prior strength {pull}"
+                  + (f", code penalty {code}" if code is not None else ""))
         rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
                      + (f"; albedo over the bound, rejected: {rejected}" if rejected else ""))
@@ -577,8 +580,8 @@ def main(argv: list[str] | None = None) -> int:
                  "optimisation leave.", ""]),
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
              "The `nbrdf` estimates' start and prior strengths (the code phase's Gaussian penalty toward the "
-             f"training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the weight phase's pull toward the "
-             f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code), chosen per estimate "
+             f"training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the weight phase's pull toward the "
+             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code), chosen per estimate "
              "by its last training view, held out; where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
              f"incidence if higher, by more than {estimate.ALBEDO_MARGIN:.0%}, or above {estimate.ALBEDO_BOUND:g}), "
