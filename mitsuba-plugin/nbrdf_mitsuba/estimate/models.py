@@ -19,21 +19,31 @@ from .errors import EstimateError
 from .optimiser import Phase
 
 MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
-INIT_RANGE = 0.05  # network/mod.rs INIT_RANGE
+#: Hidden width of the decoder's networks and of the common initialisation (network/mod.rs
+#: DEFAULT_HIDDEN).
 HIDDEN = 21
 
 
 # -- the common initialisation (twin of network/mod.rs paper_init) --------------------------------
+# Each constant is the Rust one's twin, held to the Rust source by tests/test_estimate_constants.py.
 
+#: Half-width of the uniform initial weights (network/mod.rs INIT_RANGE).
+INIT_RANGE = 0.05
+#: SplitMix64's increment (rng.rs GOLDEN_GAMMA), and its output function's shifts and
+#: multipliers (rng.rs mix64).
 _GAMMA = 0x9E3779B97F4A7C15
+_MIX_SHIFTS = (30, 27, 31)
+_MIX_MULTIPLIERS = (0xBF58476D1CE4E5B9, 0x94D049BB133111EB)
+#: The stream of the initial weights (rng.rs Stream::Init).
+_INIT_STREAM = 3
 _MASK = (1 << 64) - 1
-_INIT_STREAM = 3  # rng.rs Stream::Init
 
 
 def _mix64(z: int) -> int:
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK
-    return z ^ (z >> 31)
+    (first, second, last), (m1, m2) = _MIX_SHIFTS, _MIX_MULTIPLIERS
+    z = ((z ^ (z >> first)) * m1) & _MASK
+    z = ((z ^ (z >> second)) * m2) & _MASK
+    return z ^ (z >> last)
 
 
 def common_initialisation(hidden: int = HIDDEN, seed: int = 0) -> np.ndarray:
