@@ -113,6 +113,20 @@ def test_images_that_do_not_see_the_object_are_an_error(llvm_variant, tmp_path, 
                  "do not depend on BSDF 'mat'")
 
 
+def test_an_unexpected_error_is_one_line_and_a_hint_not_a_traceback(setup, tmp_path, monkeypatch, capsys):
+    from nbrdf_mitsuba.estimate import estimator
+
+    def broken(self, phase, theta, step):
+        raise KeyError("a key the estimate lost")
+
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", broken)
+    scene, images = setup
+    out = tmp_path / "out.json"
+    assert run(scene, images, out, "--model", "roughplastic", "--steps", "1") == 1
+    message = capsys.readouterr().err
+    assert message.startswith("error: unexpected KeyError: 'a key the estimate lost'\nhint: "), message
+    assert "Traceback" not in message and not out.exists()
+
 def test_analytic_recovery(setup, tmp_path):
     scene, images = setup
     out = tmp_path / "fit.json"
@@ -125,6 +139,61 @@ def test_analytic_recovery(setup, tmp_path):
     assert error < 0.5 * start_error, (fitted, error, start_error)
     mi.load_dict(fitted)  # a dictionary Mitsuba loads
 
+
+SHAPE = '<shape type="sphere"><ref id="mat"/></shape>'
+#: A second, smaller sphere in front of the first, seen by both views.
+SECOND_SHAPE = ('<shape type="sphere"><point name="center" x="0.6" y="-0.6" z="1.2"/>'
+                '<float name="radius" value="0.25"/><ref id="mat"/></shape>')
+
+
+def layout_scene(path: Path, layout: str) -> Path:
+    """The tests' scene with its BSDF ``mat`` nested in the sphere (``nested``), inside a
+    ``twosided`` nested in it (``twosided``), or declared at the top and referenced by two
+    spheres (``shared``)."""
+    text = write_scene(path).read_text()
+    start, stop = text.index('<bsdf type="roughplastic"'), text.index("</bsdf>") + len("</bsdf>")
+    bsdf, without = text[start:stop], text[:start] + text[stop:]
+    if layout == "nested":
+        text = without.replace(SHAPE, f'<shape type="sphere">{bsdf}</shape>')
+    elif layout == "twosided":
+        text = without.replace(SHAPE, f'<shape type="sphere"><bsdf type="twosided">{bsdf}</bsdf></shape>')
+    else:
+        text = text.replace(SHAPE, SHAPE + SECOND_SHAPE)
+    assert text.count('<bsdf type="roughplastic" id="mat">') == 1 and text != path.read_text()
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("layout", ["nested", "twosided", "shared"])
+def test_the_bsdf_is_found_by_the_object_wherever_it_is_declared(llvm_variant, tmp_path, layout):
+    """``mi.traverse`` names a BSDF nested in its shape (or in a ``twosided``) by its path in the
+    scene, not by its id: the estimate finds the marked BSDF by the object. For an analytic model
+    and for a network, the estimate moves every parameter from its start and writes a file Mitsuba
+    loads; the analytic one equals the estimate of the same BSDF declared at the top of the scene
+    (the same images, seeds and steps)."""
+    from nbrdf_mitsuba.estimate.models import Analytic, common_initialisation
+
+    scene = layout_scene(tmp_path / f"{layout}.xml", layout)
+    images = render_views(scene, tmp_path, spp=32)
+    common = ("--steps", "2", "--spp", "2", "--threads", "1")
+    fitted = tmp_path / "principled.json"
+    assert run(scene, images, fitted, "--model", "principled", *common) == 0
+    bsdf = json.loads(fitted.read_text())
+    for key, size, _, _, start in Analytic.PARAMETERS["principled"]:
+        value = bsdf[key.split(".")[0]]
+        values = np.array(value["value"] if size == 3 else [value])
+        assert np.all(np.abs(values - start) > 1e-3), (key, values, start)
+    mi.load_dict(bsdf)
+    if layout != "shared":  # the same scene but for where the BSDF is declared
+        reference = tmp_path / "top.json"
+        assert run(write_scene(tmp_path / "top.xml"), images, reference, "--model", "principled", *common) == 0
+        assert bsdf == json.loads(reference.read_text())
+    network = tmp_path / "network.nbrdf.json"
+    assert run(scene, images, network, "--model", "nbrdf-no-prior", *common) == 0
+    layers = json.loads(network.read_text())["layers"]
+    flat = np.concatenate([np.r_[layer["weights"], layer["bias"]] for layer in layers]).astype(np.float32)
+    assert np.all(np.isfinite(flat)) and np.abs(flat - common_initialisation()).max() > 1e-3
+    mi.load_dict({"type": "nbrdf", "filename": str(network)})
 
 def novel_error(tmp_path, network: Path, reference: np.ndarray) -> float:
     scene = write_scene(tmp_path / "novel.xml", [NOVEL])

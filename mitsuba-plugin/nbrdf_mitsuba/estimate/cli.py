@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import traceback
 from pathlib import Path
 
 from .errors import EstimateError
@@ -11,6 +13,8 @@ from .estimator import estimate
 from .models import MODELS
 from .plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, FALLBACK_PULL_STRENGTH, PULL_STRENGTHS
 
+#: Set (to anything), an unexpected error's traceback is printed after its one-line message.
+TRACEBACK_VARIABLE = "NBRDF_TRACEBACK"
 #: Former names of flags, still accepted (with a note on stderr) but no longer listed by --help.
 DEPRECATED_FLAGS = {"--prior-weight": "--pull-strength", "--code-prior": "--code-strength"}
 
@@ -74,6 +78,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("error: interrupted; nothing written", file=sys.stderr)
         return 130
+    except Exception as error:  # a bug, not the input: one line and a hint, no traceback
+        message = next(iter(str(error).strip().splitlines()), "")
+        print(f"error: unexpected {type(error).__name__}{': ' + message if message else ''}", file=sys.stderr)
+        print(f"hint: a bug in the estimate, not a problem of its input: please report it with the command "
+              f"line ({TRACEBACK_VARIABLE}=1 prints the traceback)", file=sys.stderr)
+        if os.environ.get(TRACEBACK_VARIABLE):
+            traceback.print_exc()
+        return 1
     print(f"wrote {summary['output']} ({summary['model']}): loss {summary['loss_first']:.4g} -> "
           f"{summary['loss_last']:.4g} in {summary['steps']} steps, {summary['seconds']:.1f} s")
     return 0

@@ -20,7 +20,7 @@ from .models import Analytic, Network, _mix64, common_initialisation, fit_sampli
 from .optimiser import Descent, Phase
 from .plan import Plan, schedule
 from .priors import albedo_check, pull_penalty, code_penalty
-from .scene import Scene, load_images, parse_defines, require_differentiable_variant
+from .scene import Scene, bsdf_key_prefix, load_images, parse_defines, require_differentiable_variant
 
 #: Training codes tried as starts of the latent phase (evenly spaced through the anchors, besides
 #: their mean), each judged by one render per view at a quarter of the samples (a few steps' cost
@@ -81,6 +81,8 @@ class Estimator(Descent):
         self.views = list(range(len(self.references)))
         self.integrator = mi.load_dict({"type": "prb", "max_depth": max_depth})
         self.params = mi.traverse(self.scene)
+        #: What the model's parameters are called in ``params``: ``PREFIX.weights`` and so on.
+        self.prefix = bsdf_key_prefix(self.params, self.bsdf_id)
 
     def render_all(self, step: int, spp: int | None = None) -> list:
         return [mi.render(self.scene, self.params, sensor=i, integrator=self.integrator, spp=spp or self.spp,
@@ -92,7 +94,7 @@ class Estimator(Descent):
     def held_out_loss(self, weights: np.ndarray, view: int) -> float:
         """The image loss of ``weights`` on the training view ``view`` (one render, a fixed seed)."""
         with dr.suspend_grad():
-            Network._set_weights(self.params, self.bsdf_id, mi.Float(np.asarray(weights, np.float32)))
+            Network._set_weights(self.params, self.prefix, mi.Float(np.asarray(weights, np.float32)))
             self.params.update()
             image = mi.render(self.scene, self.params, sensor=view, integrator=self.integrator,
                               spp=HELD_OUT_SPP_FACTOR * self.spp, seed=render_seed(self.seed, 1 << 20, view))
@@ -105,7 +107,7 @@ class Estimator(Descent):
         variable = mi.Float(theta.astype(np.float32))
         dr.enable_grad(variable)
         try:
-            phase.apply(self.params, self.bsdf_id, variable)
+            phase.apply(self.params, self.prefix, variable)
             self.params.update()
         except ValueError:
             return math.nan, None
@@ -130,7 +132,7 @@ class Estimator(Descent):
         best, best_loss = candidates[0], math.inf
         for code in candidates:
             with dr.suspend_grad():
-                self.params[f"{self.bsdf_id}.weights"] = decoder.decode(mi.Float(code.astype(np.float32)))
+                self.params[f"{self.prefix}.weights"] = decoder.decode(mi.Float(code.astype(np.float32)))
                 self.params.update()
                 loss = image_loss(self.render_all(-1, max(1, self.spp // 4)), self.view_references())
             value = float(np.asarray(loss.numpy()).reshape(-1)[0])
@@ -227,8 +229,8 @@ def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
     code0 = est.screen_codes(decoder, candidates)
     spread = decoder.code_distribution() if any(plan.code_strengths) else (None, None)
 
-    def apply(params, bsdf_id, code):
-        params[f"{bsdf_id}.weights"] = decoder.decode(code)
+    def apply(params, prefix, code):
+        params[f"{prefix}.weights"] = decoder.decode(code)
 
     return {strength: est.run(Phase("code", code0, plan.code_steps, apply, code_penalty(*spread, strength)), bar, 0)
             for strength in plan.code_strengths}

@@ -79,7 +79,7 @@ def _rgb(value) -> dict:
 
 class Analytic:
     """A Mitsuba BSDF's parameters, each ``lo + (hi - lo) sigmoid(theta)``: ``(key, size, lo,
-    hi, start)`` per parameter, ``key`` the traversed name below the BSDF's id."""
+    hi, start)`` per parameter, ``key`` the traversed name below the BSDF's own."""
 
     PARAMETERS = {
         "principled": [("base_color.value", 3, 0.0, 1.0, 0.5), ("roughness.value", 1, 0.01, 1.0, 0.4),
@@ -115,9 +115,9 @@ class Analytic:
             at += size
         return out
 
-    def _apply(self, params, bsdf_id: str, theta) -> None:
+    def _apply(self, params, prefix: str, theta) -> None:
         for key, value in self._values(theta).items():
-            params[f"{bsdf_id}.{key}"] = value
+            params[f"{prefix}.{key}"] = value
 
     def result(self, theta: np.ndarray) -> dict:
         values = {k: np.asarray(dr.detach(v).numpy(), dtype=np.float64).reshape(-1)
@@ -146,8 +146,8 @@ class Network:
         return element
 
     @staticmethod
-    def _set_weights(params, bsdf_id, weights):
-        params[f"{bsdf_id}.weights"] = weights
+    def _set_weights(params, prefix, weights):
+        params[f"{prefix}.weights"] = weights
 
 
 def _layers(flat: np.ndarray) -> list:

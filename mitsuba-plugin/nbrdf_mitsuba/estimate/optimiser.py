@@ -24,8 +24,8 @@ RUNAWAY_FACTOR = 10.0
 
 
 class Phase:
-    """One optimisation: ``theta`` (NumPy) set into the scene by ``apply(params, id, theta_ad)``,
-    or, for weights, the gradient of ``weights`` chained by ``chain``; ``penalty(theta)``:
+    """One optimisation of ``steps`` steps: ``theta`` (NumPy) set into the scene by ``apply(params,
+    prefix, theta_ad)`` (``prefix``: the model's BSDF in ``params``); ``penalty(theta)``, if any:
     ``(value, gradient)`` added to the image loss."""
 
     def __init__(self, kind, theta, steps, apply, penalty):

@@ -80,6 +80,24 @@ class Scene:
             parent[index] = element
 
 
+def bsdf_key_prefix(params, bsdf_id: str) -> str:
+    """The prefix of the BSDF ``bsdf_id``'s parameters in ``params`` (``mi.traverse`` of the
+    scene), found by the object, not by its name: ``mi.traverse`` names a BSDF by its path in
+    the scene graph, which is its id only where the BSDF is declared at the top of the scene (a
+    BSDF nested in its shape or in a ``twosided`` is ``<shape>.bsdf`` or ``<shape>.bsdf.brdf_0``).
+    The BSDF is the traversed object with that id; its own traversal's keys, matched to the
+    scene's by the object that holds each parameter, give the prefix."""
+    # SceneParameters keeps, per key, the object holding it (properties) and every traversed
+    # object (hierarchy): the only link from an object to its keys.
+    bsdf = next((node for node in params.hierarchy if isinstance(node, mi.BSDF) and node.id() == bsdf_id), None)
+    if bsdf is None:
+        raise EstimateError(f"the scene holds no BSDF with id '{bsdf_id}' once loaded: is it used by a shape?")
+    for key, (_, _, node, _) in mi.traverse(bsdf).properties.items():
+        for scene_key, (_, _, scene_node, _) in params.properties.items():
+            if scene_node is node and scene_key.endswith("." + key):
+                return scene_key[:-len(key) - 1]
+    raise EstimateError(f"BSDF '{bsdf_id}' has no parameters in the loaded scene")
+
 def load_images(paths: list[Path], scene) -> list:
     """The reference images as ``mi.TensorXf`` (h, w, 3), checked against the scene's sensors."""
     sensors = scene.sensors()
