@@ -113,6 +113,19 @@ def test_images_that_do_not_see_the_object_are_an_error(llvm_variant, tmp_path, 
                  "do not depend on BSDF 'mat'")
 
 
+def test_a_diverging_estimate_is_failed_work(setup, tmp_path, monkeypatch, capsys):
+    """An estimate whose loss stays non-finite through every halving of the step has failed (exit
+    status 1, not the input's 2), and writes nothing."""
+    from nbrdf_mitsuba.estimate import estimator, optimiser
+
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", lambda self, phase, theta, step: (math.nan, None))
+    scene, images = setup
+    out = tmp_path / "out.json"
+    assert run(scene, images, out, "--model", "roughplastic", "--steps", "2") == 1
+    message = capsys.readouterr().err
+    assert message.startswith("error: the optimisation diverged") and f"{optimiser.MAX_HALVINGS} halvings" in message
+    assert not out.exists()
+
 def test_an_unexpected_error_is_one_line_and_a_hint_not_a_traceback(setup, tmp_path, monkeypatch, capsys):
     from nbrdf_mitsuba.estimate import estimator
 

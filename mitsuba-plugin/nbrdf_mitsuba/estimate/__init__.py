@@ -33,12 +33,23 @@ view each step:
   roughness through a sigmoid into their ranges). Writes the fitted BSDF as a ``mi.load_dict``
   JSON dictionary.
 
-Robust: images of the wrong count or size, non-finite pixels, no BSDF with the id, a variant
-without automatic differentiation or images that do not depend on the BSDF are errors (exit
-status 2, one line naming the problem). A step whose loss or gradient is not finite (or whose
-weights the BSDF rejects), or whose loss has run away to ten times the phase's lowest, is taken
-back and the step size halved; no non-finite result is ever written. Deterministic for a seed
-(each render's seed derives from it).
+The marked BSDF may be declared anywhere: at the top of the scene (and shared by shapes), nested
+in its shape or in a ``twosided``; it is found by the object (:func:`scene.bsdf_key_prefix`).
+
+Robust, with ``python -m nbrdf_mitsuba``'s exit statuses: images of the wrong count or size,
+non-finite pixels, no BSDF with the id, a variant without automatic differentiation or images that
+do not depend on the BSDF are usage or input errors (exit status 2, one line naming the
+problem). A step whose loss or gradient is not finite (or whose weights the BSDF rejects), or
+whose loss has run away to ten times the phase's lowest, is taken back and the step size halved;
+an estimate that still diverges, or whose result cannot be written, has failed (exit status 1);
+no non-finite result is ever written. An unexpected error is one line and a hint (exit status 1),
+not a traceback. Deterministic for a seed (each render's seed derives from it).
+
+The package: :mod:`.cli` (the command line), :mod:`.scene` (the scene file, variant and images),
+:mod:`.models` (the fitted models and the files written), :mod:`.plan` (how the steps and the
+candidate strengths are laid out), :mod:`.optimiser` (Adam and the descent that takes back a
+diverging step), :mod:`.priors` (the code penalty, the pull and the albedo check) and
+:mod:`.estimator` (the loss, its gradient and the estimate's course).
 """
 
 from __future__ import annotations
@@ -48,7 +59,7 @@ from .. import _llvm
 _llvm.configure()  # must precede the first import of drjit
 
 from .cli import main, parser  # noqa: E402
-from .errors import EstimateError  # noqa: E402
+from .errors import EstimateError, EstimateFailed  # noqa: E402
 from .estimator import Estimator, estimate  # noqa: E402
 from .models import MODELS, Analytic, Network, common_initialisation, fit_sampling, write_network  # noqa: E402
 from .plan import CODE_STRENGTHS, PULL_STRENGTHS, Plan, schedule  # noqa: E402
@@ -56,5 +67,5 @@ from .priors import ALBEDO_BOUND, ALBEDO_LIT_INCIDENCE, ALBEDO_MARGIN  # noqa: E
 from .scene import Scene  # noqa: E402
 
 __all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "CODE_STRENGTHS", "MODELS",
-           "PULL_STRENGTHS", "Analytic", "EstimateError", "Estimator", "Network", "Plan", "Scene",
+           "PULL_STRENGTHS", "Analytic", "EstimateError", "EstimateFailed", "Estimator", "Network", "Plan", "Scene",
            "common_initialisation", "estimate", "fit_sampling", "main", "parser", "schedule", "write_network"]

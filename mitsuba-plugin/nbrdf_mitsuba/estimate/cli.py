@@ -8,6 +8,7 @@ import sys
 import traceback
 from pathlib import Path
 
+from .. import _exit
 from .errors import EstimateError
 from .estimator import estimate
 from .models import MODELS
@@ -72,9 +73,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         summary = estimate(args)
-    except EstimateError as error:
+    except EstimateError as error:  # the input's (2), or the estimate's own failure (1)
         print(f"error: {error}", file=sys.stderr)
-        return 2
+        return error.exit_status
     except KeyboardInterrupt:
         print("error: interrupted; nothing written", file=sys.stderr)
         return 130
@@ -85,8 +86,8 @@ def main(argv: list[str] | None = None) -> int:
               f"line ({TRACEBACK_VARIABLE}=1 prints the traceback)", file=sys.stderr)
         if os.environ.get(TRACEBACK_VARIABLE):
             traceback.print_exc()
-        return 1
+        return _exit.FAILED
     print(f"wrote {summary['output']} ({summary['model']}): loss {summary['loss_first']:.4g} -> "
           f"{summary['loss_last']:.4g} in {summary['steps']} steps, {summary['seconds']:.1f} s")
-    return 0
+    return _exit.SUCCESS
 

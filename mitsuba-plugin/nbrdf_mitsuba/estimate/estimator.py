@@ -16,11 +16,11 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import EstimateError
-from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network
+from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
 from .optimiser import Descent, Phase
 from .plan import Plan, schedule
 from .priors import albedo_check, pull_penalty, code_penalty
-from .scene import Scene, bsdf_key_prefix, load_images, parse_defines, require_differentiable_variant
+from .scene import Scene, bsdf_key_prefix, check_paths, load_images, parse_defines, require_differentiable_variant
 
 #: Training codes tried as starts of the latent phase (evenly spaced through the anchors, besides
 #: their mean), each judged by one render per view at a quarter of the samples (a few steps' cost
@@ -144,6 +144,7 @@ class Estimator(Descent):
 def estimate(args, on_step=None) -> dict:
     """Runs the estimate of the parsed ``args``, writes ``args.output``; a summary.
     ``on_step(kind, steps_done, theta)``, if given, is called after every step."""
+    check_paths(args.scene, args.output)
     require_differentiable_variant(args.variant)
     if args.threads is not None and args.threads < 1:
         raise EstimateError("--threads must be at least 1")
@@ -324,7 +325,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan) -> dict:
         (phase,) = model.phases(args.steps)
         theta = est.run(phase, bar, 0)
         fitted = model.result(theta)
-        args.output.write_text(json.dumps(fitted, indent=2) + "\n")
+        write_text(args.output, json.dumps(fitted, indent=2) + "\n")
         summary["bsdf"] = fitted
         return summary
     if model.prior:

@@ -15,7 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .errors import EstimateError
+from .errors import EstimateFailed
 from .optimiser import Phase
 
 MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
@@ -167,11 +167,19 @@ def write_network(path: Path, flat: np.ndarray, name: str, provenance: dict) -> 
     non-finite weights."""
     flat = np.asarray(flat, dtype=np.float32)
     if flat.size != HIDDEN * HIDDEN + 11 * HIDDEN + 3 or not np.all(np.isfinite(flat)):
-        raise EstimateError("internal: refusing to write a network with non-finite or missing weights")
+        raise EstimateFailed("internal: refusing to write a network with non-finite or missing weights")
     layers = [{"inputs": W.shape[0], "outputs": W.shape[1], "weights": [float(v) for v in W.ravel()],
                "bias": [float(v) for v in b]} for W, b in _layers(flat)]
     document = {"format": "nbrdf", "version": 1, "name": name, "layers": layers, "provenance": provenance}
-    path.write_text(json.dumps(document))
+    write_text(path, json.dumps(document))
+
+
+def write_text(path: Path, text: str) -> None:
+    """Writes a result; a failure is the estimate's (its work is lost), not the user's."""
+    try:
+        path.write_text(text)
+    except OSError as error:
+        raise EstimateFailed(f"{path}: cannot write the result: {error.strerror or error}") from None
 
 
 def nbrdf_command() -> str | None:
@@ -186,5 +194,5 @@ def fit_sampling(path: Path) -> str:
         return "not fitted: the nbrdf command is not installed (the file samples the cosine lobe)"
     done = subprocess.run([command, "fit-phong", str(path)], capture_output=True, text=True)
     if done.returncode != 0:
-        raise EstimateError(f"nbrdf fit-phong {path} failed: {done.stderr.strip().splitlines()[-1:]}")
+        raise EstimateFailed(f"nbrdf fit-phong {path} failed: {done.stderr.strip().splitlines()[-1:]}")
     return "fit-phong"

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from .errors import EstimateError
+from .errors import EstimateFailed
 
 #: Adam step sizes per kind of variable. The code's is a fraction of the training codes' spread,
 #: large enough for the code to cross that spread within its phase; the analytic models' settles
@@ -87,7 +87,7 @@ class Descent:
                 # half the step.
                 self.halvings += 1
                 if self.halvings > MAX_HALVINGS:
-                    raise EstimateError(f"the optimisation diverged: the loss stayed non-finite or ran away after "
+                    raise EstimateFailed(f"the optimisation diverged: the loss stayed non-finite or ran away after "
                                         f"{MAX_HALVINGS} halvings of the step")
                 back = best[1] if runaway else accepted
                 theta = back[0].copy()

@@ -23,6 +23,16 @@ def parse_defines(items: list[str]) -> dict:
     return defines
 
 
+def check_paths(scene: Path, output: Path) -> None:
+    """The scene file and the output's folder, checked before the variant and anything else."""
+    if not scene.is_file():
+        raise EstimateError(f"{scene}: no such file")
+    if output.is_dir():
+        raise EstimateError(f"-o {output}: is a directory; name the result's file, e.g. {output / 'out.json'}")
+    if not output.parent.is_dir():
+        raise EstimateError(f"-o {output}: cannot write there (the folder {output.parent} does not exist)")
+
+
 def require_differentiable_variant(variant: str | None) -> str:
     """``variant`` or llvm_ad_rgb; an error where the variant cannot differentiate."""
     variant = variant or "llvm_ad_rgb"
