@@ -30,16 +30,16 @@ SCREENED_STARTS = 48
 #: The start the estimate falls back to where the prior's network is no material (its albedo above
 #: :func:`albedo_bound`): the common initialisation, no pull, the ``nbrdf-no-prior`` estimate. No
 #: candidate of the held-out choice: where the view chose it, the decoded network was better on the
-#: novel views or no material, which the albedo check catches (docs/experiments.md, Estimation: "The albedo check instead
-#: of the common candidate").
+#: novel views or no material, which the albedo check catches (docs/experiments.md, Estimation: "The
+#: albedo check instead of the common candidate").
 COMMON_START = "common"
 #: The held-out view is judged with this many times the samples of a training render (one render
 #: per candidate, the same seed for all: the candidates' differences are not Monte Carlo noise).
 HELD_OUT_SPP_FACTOR = 4
 #: Attempts of the prior (code phases, candidates, final fit) before the fallback to the common
 #: start, each with its own render seeds: the renders' noise decides which code the code phase
-#: reaches, and a later attempt can give a material where the first did not (docs/experiments.md, Estimation: "Attempts of
-#: the prior with other render seeds").
+#: reaches, and a later attempt can give a material where the first did not (docs/experiments.md,
+#: Estimation: "Attempts of the prior with other render seeds").
 PRIOR_ATTEMPTS = 3
 #: Offset of the estimate's seed from one attempt to the next.
 ATTEMPT_SEED_STRIDE = 7919
@@ -243,9 +243,9 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
     where the albedo check rejected every candidate or the final network), the summary's
     additions, and the rejected albedos by candidate name (``final``: the final network)."""
     # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
-    # view's noise, and the view's light often decides which code is reached (docs/experiments.md, Estimation: "The
-    # code phase on every training view"). The candidates' weights, which can fit noise, are
-    # fitted without it.
+    # view's noise, and the view's light often decides which code is reached (docs/experiments.md,
+    # Estimation: "The code phase on every training view"). The candidates' weights, which can fit
+    # noise, are fitted without it.
     codes = fit_codes(est, decoder, plan, bar)
     decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
     choice, losses, rejected, fitted = (plan.code_strengths[0], plan.pull_strengths[0]), {}, {}, None
@@ -262,8 +262,9 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
     strength = choice[1]
     extra.update({"start": "decoded", "pull_strength": strength, "code_strength": code_strength})
     # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
-    # from the decoded start had): refitted from the decoded start instead, the network lost
-    # what the held-out view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit goes on").
+    # from the decoded start had): refitted from the decoded start instead, the network lost what
+    # the held-out view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit
+    # goes on").
     center = decoded[code_strength]
     weights, steps = (center, plan.weight_steps) if fitted is None else (fitted, plan.weight_steps - plan.candidate_steps)
     if steps > 0:

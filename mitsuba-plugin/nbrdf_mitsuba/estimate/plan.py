@@ -12,15 +12,16 @@ CODE_SHARE = 0.4
 #: Strengths of the weight phase's pull toward the decoded network (:func:`pull_penalty`), one
 #: picked per estimate by the held-out training view: a pull, and none at all (the decoded start
 #: only). In function space because a pull on the weights kept the weights, not the BRDF, and a
-#: stronger pull was never chosen (docs/experiments.md, Estimation: "A pull in function space instead of weight space").
+#: stronger pull was never chosen (docs/experiments.md, Estimation: "A pull in function space
+#: instead of weight space").
 PULL_STRENGTHS = (1e-1, 0.0)
 #: The pull strength where no view can be held out (one image) or no weight step is left to judge.
 FALLBACK_PULL_STRENGTH = 1e-1
-#: Strengths of the code phase's Gaussian penalty (the training codes' mean and spread), each a
-#: code phase of its own whose decoded start runs every candidate of the weight phase; the held-out
-#: view judges the pairs together: 0 is no penalty; the other keeps the code near the training
-#: codes, which helps most materials but not all, hence the choice (docs/experiments.md, Estimation: "The code penalty's
-#: strength chosen by the held-out view").
+#: Strengths of the code phase's Gaussian penalty (the training codes' mean and spread), each a code
+#: phase of its own whose decoded start runs every candidate of the weight phase; the held-out view
+#: judges the pairs together: 0 is no penalty; the other keeps the code near the training codes,
+#: which helps most materials but not all, hence the choice (docs/experiments.md, Estimation: "The
+#: code penalty's strength chosen by the held-out view").
 CODE_STRENGTHS = (0.0, 1e-3)
 #: The code strength where nothing is chosen (one image, no weight step, or a fixed
 #: ``--pull-strength``): no penalty.

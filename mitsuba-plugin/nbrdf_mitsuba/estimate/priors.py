@@ -20,12 +20,13 @@ PULL_SEED = 7
 #: nor kept as the final network. The held-out view cannot see it, because the excess lies where no
 #: training light fell, and such a network renders the novel views far worse. Above 1 because an
 #: estimate carries the images' noise, while the decoded training codes stay well below 1
-#: (docs/experiments.md, Estimation: "The albedo check instead of the common candidate"). The ceiling of
-#: :func:`albedo_bound`.
+#: (docs/experiments.md, Estimation: "The albedo check instead of the common candidate"). The
+#: ceiling of :func:`albedo_bound`.
 ALBEDO_BOUND = 1.5
 #: Incidence angles (degrees, at most) where the lights fall square onto the object: there the
 #: images constrain the albedo best, and an estimate's albedo above 1 is what they ask for, not
-#: light where no image shows it (docs/experiments.md, Estimation: "The albedo bound from the lit incidence angles").
+#: light where no image shows it (docs/experiments.md, Estimation: "The albedo bound from the lit
+#: incidence angles").
 ALBEDO_LIT_INCIDENCE = 45
 #: Share above 1 (or above the network's own albedo up to ``ALBEDO_LIT_INCIDENCE``) that the bound
 #: allows at any incidence angle: the quadrature's error and the images' noise.
