@@ -173,7 +173,7 @@ def test_a_reciprocal_distillation_trains_on_every_requested_pair(llvm_variant, 
     assert provenance["dropped_invalid"] == 0 and provenance["dropped_below_horizon"] == 0, provenance
 
 
-# -- errors: one line on stderr, exit status 1, no traceback -------------------------------------
+# -- errors: one line on stderr, exit status 2 (usage or input) or 1 (failed work), no traceback -
 
 
 def test_user_errors_are_one_line_messages(tmp_path, capsys):
@@ -203,10 +203,26 @@ def test_user_errors_are_one_line_messages(tmp_path, capsys):
     for args, needle in cases:
         status, err = run_main(capsys, *args, "--variant", "scalar_rgb") if "--variant" not in args \
             else run_main(capsys, *args)
-        assert status == 1, (args, err)
+        assert status == 2, (args, err)
         assert err.startswith("error: ") and needle in err and "Traceback" not in err, (args, err)
     assert not out.exists()
 
+
+def test_a_training_that_fails_is_failed_work(tmp_path, capsys, monkeypatch):
+    """The trainer's failure once the settings passed (a training that diverged) is the work's,
+    not the user's: one line, exit status 1, nothing written."""
+    from nbrdf_mitsuba import _train_native as native
+
+    def diverged(*args, **kwargs):
+        raise native.TrainError("training diverged in epoch 3 (loss NaN)", 2)
+
+    monkeypatch.setattr(native, "train_from_arrays", diverged)
+    mi.set_variant("scalar_rgb")
+    source, out = tmp_path / "ok.json", tmp_path / "out.nbrdf.json"
+    source.write_text(json.dumps(ROUGHPLASTIC))
+    status, err = run_main(capsys, source, "-o", out, "--variant", "scalar_rgb", "--samples", "1000", "-q")
+    assert status == 1 and err == "error: training diverged in epoch 3 (loss NaN)\n", err
+    assert not out.exists()
 
 def test_a_bsdf_returning_nan_is_an_error(llvm_variant, tmp_path, capsys):
     spec = python_bsdf("nbrdf_test_nan", lambda cos_view, _: dr.nan * cos_view)
@@ -214,13 +230,13 @@ def test_a_bsdf_returning_nan_is_an_error(llvm_variant, tmp_path, capsys):
     source.write_text(json.dumps(spec))
     out = tmp_path / "nan.nbrdf.json"
     status, err = run_main(capsys, source, "-o", out, "--variant", "llvm_ad_rgb", "--samples", "1000")
-    assert status == 1 and "not finite" in err and "at view [" in err, err
+    assert status == 2 and "not finite" in err and "at view [" in err, err
     assert not out.exists()
 
 
 def test_the_command_line_exits_non_zero_without_a_traceback(tmp_path):
     result = distill(tmp_path / "missing.xml", "-o", tmp_path / "out.nbrdf.json")
-    assert result.returncode == 1
+    assert result.returncode == 2
     assert result.stderr.startswith("error: ") and "Traceback" not in result.stderr
 
 

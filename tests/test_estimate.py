@@ -113,6 +113,33 @@ def test_images_that_do_not_see_the_object_are_an_error(llvm_variant, tmp_path, 
                  "do not depend on BSDF 'mat'")
 
 
+def test_a_diverging_estimate_is_failed_work(setup, tmp_path, monkeypatch, capsys):
+    """An estimate whose loss stays non-finite through every halving of the step has failed (exit
+    status 1, not the input's 2), and writes nothing."""
+    from nbrdf_mitsuba.estimate import estimator, optimiser
+
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", lambda self, phase, theta, step: (math.nan, None))
+    scene, images = setup
+    out = tmp_path / "out.json"
+    assert run(scene, images, out, "--model", "roughplastic", "--steps", "2") == 1
+    message = capsys.readouterr().err
+    assert message.startswith("error: the optimisation diverged") and f"{optimiser.MAX_HALVINGS} halvings" in message
+    assert not out.exists()
+
+def test_an_unexpected_error_is_one_line_and_a_hint_not_a_traceback(setup, tmp_path, monkeypatch, capsys):
+    from nbrdf_mitsuba.estimate import estimator
+
+    def broken(self, phase, theta, step):
+        raise KeyError("a key the estimate lost")
+
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", broken)
+    scene, images = setup
+    out = tmp_path / "out.json"
+    assert run(scene, images, out, "--model", "roughplastic", "--steps", "1") == 1
+    message = capsys.readouterr().err
+    assert message.startswith("error: unexpected KeyError: 'a key the estimate lost'\nhint: "), message
+    assert "Traceback" not in message and not out.exists()
+
 def test_analytic_recovery(setup, tmp_path):
     scene, images = setup
     out = tmp_path / "fit.json"
@@ -125,6 +152,61 @@ def test_analytic_recovery(setup, tmp_path):
     assert error < 0.5 * start_error, (fitted, error, start_error)
     mi.load_dict(fitted)  # a dictionary Mitsuba loads
 
+
+SHAPE = '<shape type="sphere"><ref id="mat"/></shape>'
+#: A second, smaller sphere in front of the first, seen by both views.
+SECOND_SHAPE = ('<shape type="sphere"><point name="center" x="0.6" y="-0.6" z="1.2"/>'
+                '<float name="radius" value="0.25"/><ref id="mat"/></shape>')
+
+
+def layout_scene(path: Path, layout: str) -> Path:
+    """The tests' scene with its BSDF ``mat`` nested in the sphere (``nested``), inside a
+    ``twosided`` nested in it (``twosided``), or declared at the top and referenced by two
+    spheres (``shared``)."""
+    text = write_scene(path).read_text()
+    start, stop = text.index('<bsdf type="roughplastic"'), text.index("</bsdf>") + len("</bsdf>")
+    bsdf, without = text[start:stop], text[:start] + text[stop:]
+    if layout == "nested":
+        text = without.replace(SHAPE, f'<shape type="sphere">{bsdf}</shape>')
+    elif layout == "twosided":
+        text = without.replace(SHAPE, f'<shape type="sphere"><bsdf type="twosided">{bsdf}</bsdf></shape>')
+    else:
+        text = text.replace(SHAPE, SHAPE + SECOND_SHAPE)
+    assert text.count('<bsdf type="roughplastic" id="mat">') == 1 and text != path.read_text()
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("layout", ["nested", "twosided", "shared"])
+def test_the_bsdf_is_found_by_the_object_wherever_it_is_declared(llvm_variant, tmp_path, layout):
+    """``mi.traverse`` names a BSDF nested in its shape (or in a ``twosided``) by its path in the
+    scene, not by its id: the estimate finds the marked BSDF by the object. For an analytic model
+    and for a network, the estimate moves every parameter from its start and writes a file Mitsuba
+    loads; the analytic one equals the estimate of the same BSDF declared at the top of the scene
+    (the same images, seeds and steps)."""
+    from nbrdf_mitsuba.estimate.models import Analytic, common_initialisation
+
+    scene = layout_scene(tmp_path / f"{layout}.xml", layout)
+    images = render_views(scene, tmp_path, spp=32)
+    common = ("--steps", "2", "--spp", "2", "--threads", "1")
+    fitted = tmp_path / "principled.json"
+    assert run(scene, images, fitted, "--model", "principled", *common) == 0
+    bsdf = json.loads(fitted.read_text())
+    for key, size, _, _, start in Analytic.PARAMETERS["principled"]:
+        value = bsdf[key.split(".")[0]]
+        values = np.array(value["value"] if size == 3 else [value])
+        assert np.all(np.abs(values - start) > 1e-3), (key, values, start)
+    mi.load_dict(bsdf)
+    if layout != "shared":  # the same scene but for where the BSDF is declared
+        reference = tmp_path / "top.json"
+        assert run(write_scene(tmp_path / "top.xml"), images, reference, "--model", "principled", *common) == 0
+        assert bsdf == json.loads(reference.read_text())
+    network = tmp_path / "network.nbrdf.json"
+    assert run(scene, images, network, "--model", "nbrdf-no-prior", *common) == 0
+    layers = json.loads(network.read_text())["layers"]
+    flat = np.concatenate([np.r_[layer["weights"], layer["bias"]] for layer in layers]).astype(np.float32)
+    assert np.all(np.isfinite(flat)) and np.abs(flat - common_initialisation()).max() > 1e-3
+    mi.load_dict({"type": "nbrdf", "filename": str(network)})
 
 def novel_error(tmp_path, network: Path, reference: np.ndarray) -> float:
     scene = write_scene(tmp_path / "novel.xml", [NOVEL])
@@ -220,7 +302,7 @@ def test_a_run_away_loss_steps_back_to_the_phases_best(setup, tmp_path):
 
 
 def test_common_initialisation_is_the_trainers_seed_0_start():
-    from nbrdf_mitsuba.estimate import common_initialisation
+    from nbrdf_mitsuba.estimate.models import common_initialisation
     from nbrdf_tools.common.compare_materials import splitmix_uniforms
 
     flat = common_initialisation()
@@ -255,14 +337,14 @@ def test_snapshots_of_a_long_run_are_the_shorter_runs(setup, tmp_path):
 
 
 def test_prior_schedule_holds_out_a_view_only_where_it_can():
-    from nbrdf_mitsuba.estimate import FALLBACK_STRENGTH, PRIOR_STRENGTHS, schedule
+    from nbrdf_mitsuba.estimate.plan import FALLBACK_PULL_STRENGTH, PULL_STRENGTHS, schedule
 
     plan = schedule(100, 3, None)
-    assert (plan["code"], plan["weights"], plan["strengths"], plan["candidate"]) == (40, 60, PRIOR_STRENGTHS, 30)
-    assert schedule(100, 1, None)["strengths"] == (FALLBACK_STRENGTH,)  # nothing to hold out
-    assert schedule(1, 3, None)["strengths"] == (FALLBACK_STRENGTH,)  # no weight step to judge
+    assert (plan.code_steps, plan.weight_steps, plan.pull_strengths, plan.candidate_steps) == (40, 60, PULL_STRENGTHS, 30)
+    assert schedule(100, 1, None).pull_strengths == (FALLBACK_PULL_STRENGTH,)  # nothing to hold out
+    assert schedule(1, 3, None).pull_strengths == (FALLBACK_PULL_STRENGTH,)  # no weight step to judge
     fixed = schedule(100, 3, 0.5)
-    assert fixed["strengths"] == (0.5,) and fixed["candidate"] == 0
+    assert fixed.pull_strengths == (0.5,) and fixed.candidate_steps == 0
 
 
 def spy_on_views(monkeypatch, estimate_module, judge=None):
@@ -286,12 +368,13 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
     return rendered, judged
 
 
-def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """The code sees every training view; the candidates (each pull strength from the decoded
     start) see all but the last, the last alone judges them, the lowest held-out loss wins, its
     fit goes on over every view for the rest of the weight phase, and a seed repeats it (the code
     penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import plan, priors
 
     scene, images = setup
     rendered, judged = spy_on_views(monkeypatch, E)
@@ -306,25 +389,25 @@ def test_prior_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path,
     for out in outs:
         rendered.clear()
         runs.clear()
-        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
+        assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    assert set(losses) == {str(s) for s in E.PRIOR_STRENGTHS}
+    assert set(losses) == {str(s) for s in plan.PULL_STRENGTHS}
     assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
     assert len(set(losses.values())) > 1, losses
     best = min(losses, key=losses.get)
-    assert provenance["start"] == "decoded" and provenance["prior_weight"] == float(best)
-    assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < E.ALBEDO_BOUND
-    assert judged == [1] * 2 * len(E.PRIOR_STRENGTHS)  # the last training view, once per candidate and run
+    assert provenance["start"] == "decoded" and provenance["pull_strength"] == float(best)
+    assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < priors.ALBEDO_BOUND
+    assert judged == [1] * 2 * len(plan.PULL_STRENGTHS)  # the last training view, once per candidate and run
     # Screening (49 starts) and code (2 steps) on both views; candidates (2 steps per strength
     # from the decoded start) on view 0; the chosen one's fit on both (the weight phase's other 2).
-    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(E.PRIOR_STRENGTHS)) + [(0, 1)] * 2, rendered
+    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(plan.PULL_STRENGTHS)) + [(0, 1)] * 2, rendered
     # The last run starts where the chosen candidate's fit ended (the runs: code, candidates, final).
     candidates = runs[1:-1]
-    assert [kind for kind, _, _ in runs] == ["code"] + ["weights"] * (len(E.PRIOR_STRENGTHS) + 1)
-    chosen = candidates[list(E.PRIOR_STRENGTHS).index(float(best))]
+    assert [kind for kind, _, _ in runs] == ["code"] + ["weights"] * (len(plan.PULL_STRENGTHS) + 1)
+    chosen = candidates[list(plan.PULL_STRENGTHS).index(float(best))]
     np.testing.assert_array_equal(runs[-1][1], chosen[2])
     assert all(np.array_equal(candidates[0][1], start) for _, start, _ in candidates)  # all from the decoded start
     first, second = (json.loads(out.read_text()) for out in outs)
@@ -340,13 +423,13 @@ def test_image_loss_is_linear_in_the_render(llvm_variant):
     samples miss, a few are bright) the squared error of ``ln(1 + x)`` has no such property."""
     import drjit as dr
 
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import estimator
 
     rng = np.random.default_rng(3)
     references = [rng.uniform(0.0, 4.0, (4, 5, 3)) for _ in range(2)]
     images = [r * rng.uniform(0.5, 1.5, r.shape) for r in references]
     oracle = np.mean([np.mean(((x - r) / (1 + r)) ** 2) for x, r in zip(images, references)])
-    value = E.image_loss([mi.TensorXf(x) for x in images], [mi.TensorXf(r) for r in references])
+    value = estimator.image_loss([mi.TensorXf(x) for x in images], [mi.TensorXf(r) for r in references])
     assert float(np.asarray(value.numpy()).reshape(-1)[0]) == pytest.approx(oracle, rel=1e-5)
 
     def gradient(loss, x, reference):
@@ -355,14 +438,14 @@ def test_image_loss_is_linear_in_the_render(llvm_variant):
         dr.backward(loss([image], [mi.TensorXf(reference)]))
         return np.asarray(dr.grad(image).numpy(), np.float64)
 
-    def log_loss(images, references):  # the loss before round 22
+    def log_loss(images, references):  # the squared error of ln(1 + x), of which image_loss is the first-order twin
         d = dr.log(1.0 + images[0]) - dr.log(1.0 + references[0])
         return dr.mean(dr.square(d), axis=None)
 
     reference = references[0]
     renders = [reference * np.where(rng.random(reference.shape) < 0.125, 6.6, 0.2) for _ in range(64)]
     mean = np.mean(renders, axis=0)
-    for loss, linear in ((E.image_loss, True), (log_loss, False)):
+    for loss, linear in ((estimator.image_loss, True), (log_loss, False)):
         at_mean = gradient(loss, mean, reference)
         mean_of = np.mean([gradient(loss, x, reference) for x in renders], axis=0)
         close = np.allclose(mean_of, at_mean, rtol=1e-4, atol=1e-6 * np.abs(at_mean).max())
@@ -373,7 +456,7 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
     """The code phase's penalty, ``s mean(((z - m) / sd)^2)`` with ``m``, ``sd`` the training
     codes' mean and spread, equals a NumPy float64 oracle from the autoencoder file's anchors,
     and its gradient equals central differences of that oracle."""
-    from nbrdf_mitsuba.estimate import prior_penalty
+    from nbrdf_mitsuba.estimate.priors import code_penalty
     from nbrdf_mitsuba.latent import Decoder
 
     anchors = np.asarray(json.loads(AE_FILE.read_text())["anchors"], dtype=np.float64)
@@ -383,7 +466,7 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
     def oracle(z):
         return strength * np.mean(((z - m) / sd) ** 2)
 
-    penalty = prior_penalty(*Decoder(AE_FILE).code_distribution(), strength)
+    penalty = code_penalty(*Decoder(AE_FILE).code_distribution(), strength)
     rng = np.random.default_rng(7)
     for z in (m + 2.5 * sd * rng.standard_normal(m.size), anchors[3] + 0.1):
         value, grad = penalty(z)
@@ -394,29 +477,29 @@ def test_code_penalty_and_its_gradient_against_a_float64_oracle():
             numeric = np.array([(f(z + h * e) - f(z - h * e)) / (2 * h) for e in np.eye(z.size)])
             assert np.abs(grad).max() > 0
             np.testing.assert_allclose(grad, numeric, rtol=1e-6, atol=1e-9 * np.abs(numeric).max())
-    assert prior_penalty(m, sd * sd, 0.0) is None  # strength 0: no penalty at all, not a zero one
+    assert code_penalty(m, sd * sd, 0.0) is None  # strength 0: no penalty at all, not a zero one
 
 
-def test_output_pull_against_a_float64_oracle(llvm_variant):
+def test_pull_penalty_against_a_float64_oracle(llvm_variant):
     """The weight phase's pull, ``s mean((z(x) - z(c))^2)`` over the pull's direction pairs and the
     three channels, ``z = ln(1 + f)`` of the network: its value equals an oracle built from
     ``nbrdf_tools.common.network`` (the float64 forward pass and network input, at the same uniform
     hemisphere warp in NumPy), and its hand-written gradient equals central differences."""
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import priors
     from nbrdf_tools.common import network as N
 
     rng = np.random.default_rng(3)
     center = 0.3 * rng.standard_normal(675)
     center[-3:] += 3.0  # every output positive, so that ln(1 + f) is the output layer's value
     strength = 0.1
-    u = np.random.default_rng(E.PULL_SEED).random((4, E.PULL_PAIRS)).astype(np.float32).astype(np.float64)
+    u = np.random.default_rng(priors.PULL_SEED).random((4, priors.PULL_PAIRS)).astype(np.float32).astype(np.float64)
 
     def hemisphere(u1, u2):
         r = np.sqrt(1 - u1 * u1)
         return np.stack([r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2), u1], axis=1)
 
     inputs = N.network_input(hemisphere(u[0], u[1]), hemisphere(u[2], u[3]))
-    np.testing.assert_allclose(E._pull_inputs(), inputs, atol=2e-5)
+    np.testing.assert_allclose(priors._pull_inputs(), inputs, atol=2e-5)
 
     def layers(flat):  # docs/design.md section 4: per layer W (inputs x outputs, row-major), then b
         out, at = [], 0
@@ -429,7 +512,7 @@ def test_output_pull_against_a_float64_oracle(llvm_variant):
         z, z_center = (np.log1p(N.forward(layers(w), inputs)) for w in (x, center))
         return strength * np.mean((z - z_center) ** 2)
 
-    pull = E.output_pull(center, strength)
+    pull = priors.pull_penalty(center, strength)
     x = center + 0.05 * rng.standard_normal(675)
     value, grad = pull(x)
     assert value > 0 and value == pytest.approx(oracle(x), rel=1e-3)  # float32 directions in the pull
@@ -439,27 +522,28 @@ def test_output_pull_against_a_float64_oracle(llvm_variant):
     numeric = np.array([(pull(x + h * e)[0] - pull(x - h * e)[0]) / (2 * h) for e in np.eye(675)[picks]])
     assert np.abs(grad[picks]).max() > 0
     np.testing.assert_allclose(grad[picks], numeric, rtol=1e-5, atol=1e-7 * np.abs(numeric).max())
-    assert E.output_pull(center, 0.0) is None  # strength 0: no pull at all, not a zero one
+    assert priors.pull_penalty(center, 0.0) is None  # strength 0: no pull at all, not a zero one
 
 
-def test_code_prior_schedule():
-    from nbrdf_mitsuba.estimate import CODE_PRIOR_STRENGTHS, FALLBACK_CODE_PRIOR, schedule
+def test_code_strength_schedule():
+    from nbrdf_mitsuba.estimate.plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, schedule
 
-    assert 0.0 in CODE_PRIOR_STRENGTHS and len(CODE_PRIOR_STRENGTHS) > 1
+    assert 0.0 in CODE_STRENGTHS and len(CODE_STRENGTHS) > 1
     plan = schedule(100, 3, None)
-    assert plan["code_strengths"] == CODE_PRIOR_STRENGTHS and plan["candidate"] == 30
-    assert schedule(100, 3, None, 0.0)["code_strengths"] == (0.0,)
-    assert schedule(100, 1, None)["code_strengths"] == (FALLBACK_CODE_PRIOR,)  # nothing to hold out
-    assert schedule(100, 3, 0.5)["code_strengths"] == (FALLBACK_CODE_PRIOR,)  # a fixed pull fixes both
+    assert plan.code_strengths == CODE_STRENGTHS and plan.candidate_steps == 30
+    assert schedule(100, 3, None, 0.0).code_strengths == (0.0,)
+    assert schedule(100, 1, None).code_strengths == (FALLBACK_CODE_STRENGTH,)  # nothing to hold out
+    assert schedule(100, 3, 0.5).code_strengths == (FALLBACK_CODE_STRENGTH,)  # a fixed pull fixes both
     both = schedule(100, 3, 0.5, 0.25)
-    assert both["code_strengths"] == (0.25,) and both["candidate"] == 0
+    assert both.code_strengths == (0.25,) and both.candidate_steps == 0
 
 
-def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+def test_code_strength_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
     """By default each code strength gets its own code phase and the pull's three candidates;
     the code phases see every training view, the candidates all but the last, the last alone
     judges them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
     from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import plan
 
     scene, images = setup
     rendered, judged = spy_on_views(monkeypatch, E)
@@ -469,53 +553,74 @@ def test_code_prior_is_chosen_with_the_pull_by_the_held_out_training_view(setup,
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    pairs = [(c, w) for c in E.CODE_PRIOR_STRENGTHS for w in E.PRIOR_STRENGTHS]
+    pairs = [(c, w) for c in plan.CODE_STRENGTHS for w in plan.PULL_STRENGTHS]
     names = [f"code {c}, pull {w}" for c, w in pairs]
     assert set(losses) == set(names)  # fit-phong's rewrite sorts the keys
     assert all(math.isfinite(v) for v in losses.values())
     best = min(losses, key=losses.get)
     c, w = pairs[names.index(best)]
-    assert (provenance["code_prior"], provenance["prior_weight"]) == (c, w)
+    assert (provenance["code_strength"], provenance["pull_strength"]) == (c, w)
     assert judged == [1] * (2 * len(pairs))  # the last training view, once per candidate and run
     # Screening (49) and a code phase per strength (2 steps each) on both views, the pull's
     # candidates (2 steps each) on view 0; the chosen one's fit on both views (2 more steps).
-    assert rendered == [(0, 1)] * (49 + 2 * len(E.CODE_PRIOR_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
+    assert rendered == [(0, 1)] * (49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
         [(0, 1)] * 2
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 
 
-def test_code_prior_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, monkeypatch):
-    """Where the held-out view picks code strength 0, the estimate is the one of ``--code-prior 0``
+def test_code_strength_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, monkeypatch):
+    """Where the held-out view picks code strength 0, the estimate is the one of ``--code-strength 0``
     (the code phase without the penalty, as before it existed) weight for weight; its candidates'
     held-out losses are that run's bit for bit, and those from code strength 1e-3 differ."""
     from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import plan
 
     scene, images = setup
-    picked = E.PRIOR_STRENGTHS[0]  # judged in order: the pull's strengths from code strength 0 first
+    picked = plan.PULL_STRENGTHS[0]  # judged in order: the pull's strengths from code strength 0 first
     _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
     nets = {}
-    for name, extra in (("fixed", ("--code-prior", "0")), ("chosen", ())):
+    for name, extra in (("fixed", ("--code-strength", "0")), ("chosen", ())):
         judged.clear()
         nets[name] = tmp_path / f"{name}.nbrdf.json"
         assert run(scene, images, nets[name], "--steps", "6", "--spp", "2", "--threads", "1", *extra) == 0
     fixed, chosen = (json.loads(nets[k].read_text()) for k in ("fixed", "chosen"))
-    assert chosen["provenance"]["code_prior"] == fixed["provenance"]["code_prior"] == 0.0
-    assert chosen["provenance"]["prior_weight"] == fixed["provenance"]["prior_weight"] == picked
+    assert chosen["provenance"]["code_strength"] == fixed["provenance"]["code_strength"] == 0.0
+    assert chosen["provenance"]["pull_strength"] == fixed["provenance"]["pull_strength"] == picked
     assert chosen["layers"] == fixed["layers"] and chosen["provenance"]["code"] == fixed["provenance"]["code"]
     losses = chosen["provenance"]["held_out_losses"]
-    for strength in E.PRIOR_STRENGTHS:
+    for strength in plan.PULL_STRENGTHS:
         assert losses[f"code 0.0, pull {strength}"] == fixed["provenance"]["held_out_losses"][str(strength)]
         if strength != picked:
             assert losses[f"code 0.001, pull {strength}"] != losses[f"code 0.0, pull {strength}"]
 
 
-def test_code_prior_must_be_finite_and_non_negative(setup, tmp_path, capsys):
+def test_code_strength_must_be_finite_and_non_negative(setup, tmp_path, capsys):
     scene, images = setup
     out = tmp_path / "out.nbrdf.json"
     for value in ("-1", "nan"):
-        expect_error(capsys, run(scene, images, out, "--code-prior", value), out, "--code-prior must be")
+        expect_error(capsys, run(scene, images, out, "--code-strength", value), out, "--code-strength must be")
 
+
+def test_former_flag_names_still_work_with_a_note_and_are_not_listed(capsys):
+    """``--prior-weight`` and ``--code-prior`` set the pull strength and the code strength as
+    ``--pull-strength`` and ``--code-strength`` do, with a note on stderr naming the new flag;
+    ``--help`` lists only the new names."""
+    from nbrdf_mitsuba.estimate.cli import parser
+
+    base = ["scene.xml", "--images", "a.exr", "--bsdf-id", "mat", "-o", "out.nbrdf.json"]
+    former = parser().parse_args([*base, "--prior-weight", "0.25", "--code-prior", "0.5"])
+    notes = capsys.readouterr().err
+    current = parser().parse_args([*base, "--pull-strength", "0.25", "--code-strength", "0.5"])
+    assert vars(former) == vars(current) and (current.pull_strength, current.code_strength) == (0.25, 0.5)
+    assert "--prior-weight is deprecated: use --pull-strength" in notes
+    assert "--code-prior is deprecated: use --code-strength" in notes
+    assert capsys.readouterr().err == ""  # the new names: no note
+    with pytest.raises(SystemExit):
+        parser().parse_args(["--help"])
+    usage = capsys.readouterr().out
+    assert "--pull-strength" in usage and "--code-strength" in usage
+    assert "--prior-weight" not in usage and "--code-prior" not in usage
 
 def constant_network(value: float) -> np.ndarray:
     """Flat width-21 weights of ``f = value`` everywhere (every weight 0, the output bias ln(1 + f))."""
@@ -529,10 +634,10 @@ def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_varia
     incidence angle; a network with a narrow peak at the half vector, ``f = e^(k max(cos th_h - t,
     0)) - 1``, matches a direct float64 integral over the view directions (``nbrdf_tools.common.network``'s
     forward pass and input, a fine grid in ``cos theta_v`` and ``phi_v``)."""
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import priors
     from nbrdf_tools.common import network as N
 
-    albedo = E.directional_albedo(constant_network(0.2))
+    albedo = priors.directional_albedo(constant_network(0.2))
     np.testing.assert_allclose(albedo, np.pi * 0.2, rtol=2e-4)
 
     k, t = 60.0, 0.95  # 18 degrees wide in theta_h at its base, f = e^3 - 1 at its top
@@ -542,7 +647,7 @@ def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_varia
     W2[0, 0] = 1.0
     W3[0] = k * np.array([1.0, 0.5, 0.2])
     peaked = np.concatenate([W1.ravel(), b1, W2.ravel(), np.zeros(21), W3.ravel(), np.zeros(3)])
-    albedo = E.directional_albedo(peaked)
+    albedo = priors.directional_albedo(peaked)
 
     n = 500
     mu = (np.arange(n) + 0.5) / n  # cos theta_v, so that d v = d mu d phi
@@ -551,13 +656,13 @@ def test_directional_albedo_against_closed_form_and_a_direct_integral(llvm_varia
     r = np.sqrt(1 - mu * mu)
     view = np.stack([r * np.cos(phi), r * np.sin(phi), mu], axis=1)
     layers = [(W1, b1), (W2, np.zeros(21)), (W3, np.zeros(3))]
-    for row, degrees in enumerate(E.ALBEDO_INCIDENCE):
+    for row, degrees in enumerate(priors.ALBEDO_INCIDENCE):
         a = np.radians(degrees)
         light = np.tile([np.sin(a), 0.0, np.cos(a)], (len(mu), 1))
         f = N.forward(layers, N.network_input(view, light))
         direct = (f * mu[:, None]).sum(axis=0) * (1.0 / n) * (2 * np.pi / (2 * n))
         np.testing.assert_allclose(albedo[row], direct, rtol=2e-3, err_msg=f"{degrees} degrees")
-    assert albedo[0, 0] > E.ALBEDO_BOUND  # the peak is bright enough to matter for the bound
+    assert albedo[0, 0] > priors.ALBEDO_BOUND  # the peak is bright enough to matter for the bound
 
 
 def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_variant):
@@ -565,23 +670,23 @@ def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_va
     never above ``ALBEDO_BOUND``: a uniformly bright network passes where a dim one with a bright
     grazing lobe (light where no training light falls square) does not. Constant networks reflect
     ``pi c`` at every angle (closed form), so the check's verdict follows from the bound alone."""
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import priors
 
-    angles = np.asarray(E.ALBEDO_INCIDENCE)
-    lit = angles <= E.ALBEDO_LIT_INCIDENCE
+    angles = np.asarray(priors.ALBEDO_INCIDENCE)
+    lit = angles <= priors.ALBEDO_LIT_INCIDENCE
     assert lit.any() and not lit.all()
 
     def profile(square: float, grazing: float) -> np.ndarray:
         return np.where(lit, square, grazing)[:, None] * np.array([1.0, 0.5, 0.25])
 
-    margin = 1 + E.ALBEDO_MARGIN
-    assert E.albedo_bound(profile(0.4, 0.6)) == pytest.approx(margin)  # under 1: energy conservation
-    assert E.albedo_bound(profile(1.14, 1.2)) == pytest.approx(1.14 * margin)  # the images ask for it
-    assert E.albedo_bound(profile(0.46, 1.42)) == pytest.approx(margin)  # ibiza_sunset's grazing lobe: over it
-    assert E.albedo_bound(profile(2.0, 2.0)) == E.ALBEDO_BOUND
+    margin = 1 + priors.ALBEDO_MARGIN
+    assert priors.albedo_bound(profile(0.4, 0.6)) == pytest.approx(margin)  # under 1: energy conservation
+    assert priors.albedo_bound(profile(1.14, 1.2)) == pytest.approx(1.14 * margin)  # the images ask for it
+    assert priors.albedo_bound(profile(0.46, 1.42)) == pytest.approx(margin)  # a bright grazing lobe alone: over it
+    assert priors.albedo_bound(profile(2.0, 2.0)) == priors.ALBEDO_BOUND
 
-    for c, passes in [(0.3, True), (1.2, True), (E.ALBEDO_BOUND * 1.05, False)]:
-        albedo, material = E.albedo_check(constant_network(c / np.pi))
+    for c, passes in [(0.3, True), (1.2, True), (priors.ALBEDO_BOUND * 1.05, False)]:
+        albedo, material = priors.albedo_check(constant_network(c / np.pi))
         assert albedo == pytest.approx(c, rel=1e-3) and material == passes, c
 
 
@@ -590,20 +695,22 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
     held-out view prefers it: the estimate falls back to the common start, the nbrdf-no-prior
     estimate, and the provenance names the rejected candidates with their albedo."""
     from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import estimator, plan, priors
 
     scene, images = setup
     # The held-out view prefers the first decoded candidate by far.
     spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
-    monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
+    monkeypatch.setattr(priors, "ALBEDO_BOUND", 0.0)
     prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
-    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-prior", "0") == 0
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
-    assert provenance["start"] == E.COMMON_START and provenance["prior_weight"] is None
-    assert set(provenance["held_out_losses"]) == {str(s) for s in E.PRIOR_STRENGTHS}  # the last attempt's
+    assert provenance["start"] == estimator.COMMON_START and provenance["pull_strength"] is None
+    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PULL_STRENGTHS}  # the last attempt's
     # Every attempt's candidates rejected, each attempt with its own seeds.
-    assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in ["", "attempt 1: ", "attempt 2: "][:E.PRIOR_ATTEMPTS]
-                                                  for s in E.PRIOR_STRENGTHS}
-    assert all(v > 0 for v in provenance["albedo_rejected"].values()) and provenance["attempts"] == E.PRIOR_ATTEMPTS
+    prefixes = ["", "attempt 1: ", "attempt 2: "][:estimator.PRIOR_ATTEMPTS]
+    assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in prefixes for s in plan.PULL_STRENGTHS}
+    assert all(v > 0 for v in provenance["albedo_rejected"].values())
+    assert provenance["attempts"] == estimator.PRIOR_ATTEMPTS
     assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
                "--threads", "1") == 0
     assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]
@@ -612,30 +719,31 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
 def test_every_network_estimate_records_its_albedo_and_warns_over_the_bound(setup, tmp_path, monkeypatch, capsys):
     """The written network's largest directional albedo is in its provenance; over the bound (here
     0, so any network) the estimate still writes it, with a warning on stderr."""
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import priors
 
     scene, images = setup
     out = tmp_path / "no-prior.nbrdf.json"
     assert run(scene, images, out, "--model", "nbrdf-no-prior", "--steps", "3", "--spp", "2") == 0
     albedo = json.loads(out.read_text())["provenance"]["albedo_max"]
-    assert 0 < albedo < E.ALBEDO_BOUND and "warning: the estimated network" not in capsys.readouterr().err
-    monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
+    assert 0 < albedo < priors.ALBEDO_BOUND and "warning: the estimated network" not in capsys.readouterr().err
+    monkeypatch.setattr(priors, "ALBEDO_BOUND", 0.0)
     assert run(scene, images, out, "--model", "nbrdf-no-prior", "--steps", "3", "--spp", "2") == 0
     assert "reflects up to" in capsys.readouterr().err and out.is_file()
 
 
 def test_a_final_network_over_the_bound_falls_back_to_the_common_start(setup, tmp_path, monkeypatch):
-    """Without a held-out choice (a fixed ``--prior-weight``) the decoded start's final network is
+    """Without a held-out choice (a fixed ``--pull-strength``) the decoded start's final network is
     checked too: over the bound, the written network is the nbrdf-no-prior estimate."""
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import estimator, priors
 
     scene, images = setup
-    monkeypatch.setattr(E, "ALBEDO_BOUND", 0.0)
+    monkeypatch.setattr(priors, "ALBEDO_BOUND", 0.0)
     prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
-    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--prior-weight", "0.1") == 0
+    assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--pull-strength", "0.1") == 0
     provenance = json.loads(prior.read_text())["provenance"]
-    assert provenance["start"] == E.COMMON_START
-    assert set(provenance["albedo_rejected"]) == {"final"} | {f"attempt {k}: final" for k in range(1, E.PRIOR_ATTEMPTS)}
+    assert provenance["start"] == estimator.COMMON_START
+    attempts = range(1, estimator.PRIOR_ATTEMPTS)
+    assert set(provenance["albedo_rejected"]) == {"final"} | {f"attempt {k}: final" for k in attempts}
     assert "held_out_losses" not in provenance
     assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
                "--threads", "1") == 0
@@ -646,28 +754,28 @@ def test_a_rejected_attempt_of_the_prior_is_tried_again_with_other_seeds(setup, 
     """Where the albedo check rejects the first attempt's networks (made to, here), the prior is
     tried again with other render seeds, and a network that passes is the estimate (``attempts``
     2); the first attempt's rejections are recorded, and a seed repeats it all."""
-    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import estimator, plan, priors
 
     scene, images = setup
-    seeds, albedo = [], E.directional_albedo
+    seeds, albedo = [], priors.directional_albedo
 
     def spy_albedo(flat):  # over the bound while the first attempt's seed is in use
         return albedo(flat) + (10.0 if seeds[-1] == 0 else 0.0)
 
-    fit_codes = E.fit_codes
+    fit_codes = estimator.fit_codes
 
     def spy_fit_codes(est, decoder, plan, bar):
         seeds.append(est.seed)
         return fit_codes(est, decoder, plan, bar)
 
-    monkeypatch.setattr(E, "directional_albedo", spy_albedo)
-    monkeypatch.setattr(E, "fit_codes", spy_fit_codes)
+    monkeypatch.setattr(priors, "directional_albedo", spy_albedo)
+    monkeypatch.setattr(estimator, "fit_codes", spy_fit_codes)
     outs = [tmp_path / f"retry{k}.nbrdf.json" for k in range(2)]
     for out in outs:
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--seed", "0") == 0
-    assert seeds == [0, E.ATTEMPT_SEED_STRIDE] * 2
+    assert seeds == [0, estimator.ATTEMPT_SEED_STRIDE] * 2
     provenance = json.loads(outs[0].read_text())["provenance"]
     assert provenance["start"] == "decoded" and provenance["attempts"] == 2
-    assert set(provenance["albedo_rejected"]) == {f"code {c}, pull {w}" for c in E.CODE_PRIOR_STRENGTHS
-                                                  for w in E.PRIOR_STRENGTHS}
+    assert set(provenance["albedo_rejected"]) == {f"code {c}, pull {w}" for c in plan.CODE_STRENGTHS
+                                                  for w in plan.PULL_STRENGTHS}
     assert json.loads(outs[0].read_text())["layers"] == json.loads(outs[1].read_text())["layers"]

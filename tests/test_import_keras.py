@@ -47,12 +47,12 @@ def test_errors_name_the_file(tmp_path):
     bad = tmp_path / "bad.h5"
     bad.write_bytes(b"not hdf5 at all")
     result = run(bad, "-o", tmp_path / "bad.nbrdf.json")
-    assert result.returncode == 1 and "bad.h5" in result.stderr
+    assert result.returncode == 2 and "bad.h5" in result.stderr
     result = run(tmp_path / "missing.h5", "-o", tmp_path / "x.json")
-    assert result.returncode != 0 and "missing.h5" in result.stderr
+    assert result.returncode == 2 and "missing.h5" in result.stderr
     (tmp_path / "empty").mkdir()
     result = run(tmp_path / "empty", "-o", tmp_path / "out")
-    assert result.returncode == 1 and "no *.h5 files" in result.stderr
+    assert result.returncode == 2 and "no *.h5 files" in result.stderr
 
 
 def test_wrong_layout_is_rejected(tmp_path):
@@ -64,4 +64,4 @@ def test_wrong_layout_is_rejected(tmp_path):
             f[f"dense_{k}/dense_{k}/kernel:0"] = np.zeros((i, o), np.float32)
             f[f"dense_{k}/dense_{k}/bias:0"] = np.zeros(o, np.float32)
     result = run(path, "-o", tmp_path / "wide.nbrdf.json")
-    assert result.returncode == 1 and "wide.h5" in result.stderr and "dense_2" in result.stderr
+    assert result.returncode == 2 and "wide.h5" in result.stderr and "dense_2" in result.stderr

@@ -2,7 +2,7 @@
 
 Its images are checked against Mitsuba's own `mi.load_file` + `mi.render` of the same scene and
 parameters (the reference), its PNG against a NumPy sRGB encoding of the EXR, and its user errors
-for being one line with a non-zero exit status and no traceback.
+for being one line with exit status 2 (usage or input) and no traceback.
 """
 
 from __future__ import annotations
@@ -133,7 +133,7 @@ def test_default_variant_and_output(tmp_path):
 ])
 def test_user_errors_are_one_line(tmp_path, args, message):
     result = run_cli(*args, cwd=tmp_path)
-    assert result.returncode == 1
+    assert result.returncode == 2
     assert "Traceback" not in result.stderr and 'File "' not in result.stderr
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     errors = [line for line in lines if "error:" in line]

@@ -52,4 +52,4 @@ def test_missing_input_is_a_clear_error(tmp_path):
     missing = tmp_path / "nothing.bsdf"
     done = subprocess.run([sys.executable, "-m", "nbrdf_mitsuba.tabulate_rgl", str(missing)],
                           capture_output=True, text=True)
-    assert done.returncode == 1 and "nothing.bsdf" in done.stderr
+    assert done.returncode == 2 and "nothing.bsdf" in done.stderr

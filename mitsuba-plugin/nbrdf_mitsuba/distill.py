@@ -28,6 +28,10 @@ exactly as ``nbrdf train`` does (same sampling, loss, validation split and early
   trainer's anisotropic directions with 5x the default samples. ``auto`` makes one when the
   BSDF's flags say ``Anisotropic`` or when its values change as view and light turn together
   about the normal (:func:`rotation_difference`): a Python BSDF may not set the flag.
+
+Errors are one line on stderr: a usage or input error (a missing or invalid source, an invalid
+setting or output path, a BSDF that is not finite) exits with status 2, a training that fails or
+a network that cannot be written once trained with 1.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _llvm
+from . import _exit, _llvm
 
 _llvm.configure()  # must precede the first import of drjit
 
@@ -54,7 +58,15 @@ CHUNK = 1 << 20
 
 
 class DistillError(Exception):
-    """A user error: printed as one line, exit status 1."""
+    """A usage or input error: printed as one line, exit status 2."""
+
+    exit_status = _exit.USAGE
+
+
+class DistillFailed(DistillError):
+    """The training, or the writing of its network, failed: one line, exit status 1."""
+
+    exit_status = _exit.FAILED
 
 
 # -- the source ----------------------------------------------------------------------------------
@@ -332,14 +344,14 @@ def distill(args) -> dict:
             config, view, light, values, n_validation, name=args.name or network_name(output),
             source=f"Mitsuba BSDF {args.source}", details=details, swapped_eval_cos=swapped,
             fold=fold, on_epoch=progress.update)
-    except native.TrainError as error:
-        raise DistillError(str(error)) from None
+    except native.TrainError as error:  # the settings passed sample_directions: the training failed
+        raise DistillFailed(str(error)) from None
     finally:
         progress.close()
     try:
         output.write_text(text, encoding="utf-8")
     except OSError as error:
-        raise DistillError(f"{output}: cannot write the network: {error.strerror or error}") from None
+        raise DistillFailed(f"{output}: cannot write the network: {error.strerror or error}") from None
     provenance = json.loads(text)["provenance"]
     return {
         "output": output, "pairs": view.shape[1], "validation": n_validation, "variant": variant,
@@ -413,10 +425,10 @@ def main(argv: list[str] | None = None) -> int:
         summary = distill(args)
     except DistillError as error:
         print(f"error: {error}", file=sys.stderr)
-        return 1
-    except ImportError as error:  # the training library is missing
+        return error.exit_status
+    except ImportError as error:  # the training library is missing: nothing can be trained
         print(f"error: {error}", file=sys.stderr)
-        return 1
+        return _exit.FAILED
     except KeyboardInterrupt:  # delivered once the running Mitsuba or trainer call returns
         print("error: interrupted; no network written", file=sys.stderr)
         return 130
@@ -425,7 +437,7 @@ def main(argv: list[str] | None = None) -> int:
           f"(+{summary['validation']} validation) evaluated by Mitsuba ({summary['variant']}) in "
           f"{summary['evaluation_seconds']:.1f} s; {summary['epochs']} epochs, best validation loss "
           f"{summary['loss']:.4e}; {summary['seconds']:.1f} s in all")
-    return 0
+    return _exit.SUCCESS
 
 
 if __name__ == "__main__":

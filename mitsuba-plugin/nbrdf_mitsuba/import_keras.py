@@ -8,7 +8,8 @@ Dense(h -> 3) -> Lambda(exp(x) - 1); the datasets ``dense_k/dense_k/kernel:0`` (
 outputs, ``y = x W + b``) and ``dense_k/dense_k/bias:0`` for k = 1, 2, 3. The kernels are
 written row-major as they are, which is the layout of the JSON format (docs/design.md section 4).
 Weights are written as the exact decimal value of each float32, so a round trip is lossless.
-Needs h5py (``pip install 'nbrdf-mitsuba[keras]'``).
+Needs h5py (``pip install 'nbrdf-mitsuba[keras]'``). A missing or malformed input, or flags that
+do not go together, exit with status 2; an output that cannot be written, 1.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from . import _exit
 
 LAYERS = 3
 INPUTS, OUTPUTS = 6, 3
@@ -171,10 +174,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"wrote {output}")
         else:
             parser.error(f"{args.input}: no such file or directory")
-    except (KerasImportError, ValueError, OSError) as error:
+    except (KerasImportError, ValueError) as error:  # the input, or flags that do not go together
         print(f"error: {error}", file=sys.stderr)
-        return 1
-    return 0
+        return _exit.USAGE
+    except OSError as error:  # writing the output (reading errors are KerasImportError)
+        print(f"error: {error}", file=sys.stderr)
+        return _exit.FAILED
+    return _exit.SUCCESS
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ The ``--spp`` samples per pixel (default: the sensor's sampler) are drawn in ``-
 independently seeded passes, weighted by their sample counts, so that a progress bar can follow
 a JIT render (one kernel launch per pass) as well as a scalar one. A user error (missing file,
 malformed ``-D``, unknown variant, a scene Mitsuba rejects) is one line on stderr and exit
-status 1, as with ``mitsuba``.
+status 2; a render that fails, or images that cannot be written, exit status 1 (the policy of
+``python -m nbrdf_mitsuba``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import re
 import sys
 from pathlib import Path
 
+from . import _exit
+
 PROGRAM = "python -m nbrdf_mitsuba render"
 DEFAULT_VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
 # Keyword arguments of mi.load_file itself: a scene parameter cannot be called so.
@@ -34,7 +37,11 @@ _PARAMETER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 
 
 class UsageError(Exception):
-    """A mistake of the user's (reported as one line, no traceback)."""
+    """A mistake of the user's (reported as one line, no traceback; exit status 2)."""
+
+
+class RenderFailed(Exception):
+    """The render, or the writing of its images, failed (one line; exit status 1)."""
 
 
 def parse_defines(defines: list[str]) -> dict[str, str]:
@@ -216,11 +223,11 @@ def run(args) -> tuple[Path, Path]:
         image, reference = _render(mi, scene, sensor, sizes, args.seed, not args.no_progress)
     except Exception as error:
         # A BSDF or integrator that fails mid-render reports through Mitsuba as a RuntimeError.
-        raise UsageError(f"rendering '{scene_path}' failed: {_one_line(error)}") from error
+        raise RenderFailed(f"rendering '{scene_path}' failed: {_one_line(error)}") from error
     try:
         write_outputs(mi, image, reference, exr, png)
     except Exception as error:
-        raise UsageError(f"cannot write '{exr}': {_one_line(error)}") from error
+        raise RenderFailed(f"cannot write '{exr}': {_one_line(error)}") from error
     print(f"{PROGRAM}: wrote {exr} and {png}", file=sys.stderr)
     return exr, png
 
@@ -231,11 +238,14 @@ def main(argv: list[str] | None = None) -> int:
         run(args)
     except UsageError as error:
         print(f"{PROGRAM}: error: {error}", file=sys.stderr)
-        return 1
+        return _exit.USAGE
+    except RenderFailed as error:
+        print(f"{PROGRAM}: error: {error}", file=sys.stderr)
+        return _exit.FAILED
     except KeyboardInterrupt:
         print(f"{PROGRAM}: interrupted", file=sys.stderr)
         return 130
-    return 0
+    return _exit.SUCCESS
 
 
 if __name__ == "__main__":

@@ -31,6 +31,8 @@ measurement's non-reciprocity. Readers must fold ``phi_d`` by mirror symmetry
 light's cosine is below ``GRAZING_COS`` (0.02, about the cosine step of one 1-degree cell at the
 horizon) the reciprocal estimate is stored instead, since ``e / l.z`` there is unbounded and the
 trilinear lookup would spread it to neighbouring directions with larger cosines.
+
+A missing or unreadable input exits with status 2; a table that cannot be written, 1.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import llvm  # noqa: F401  (sets DRJIT_LIBLLVM_PATH before Mitsuba starts its JIT)
+from . import _exit, llvm  # noqa: F401  (llvm sets DRJIT_LIBLLVM_PATH before Mitsuba starts its JIT)
 
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
 SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
@@ -148,19 +150,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not args.input.is_file():
         print(f"error: {args.input}: no such file", file=sys.stderr)
-        return 1
+        return _exit.USAGE
     output = args.output or args.input.with_suffix(".binary")
     start = time.perf_counter()
     try:
         stored = tabulate(args.input, args.variant, args.phi_fold)
-    except Exception as error:  # Mitsuba reports malformed files as plain exceptions
+    except Exception as error:  # Mitsuba reports malformed files (and unknown variants) as plain exceptions
         print(f"error: {args.input}: {error}", file=sys.stderr)
-        return 1
-    write_merl(output, stored)
+        return _exit.USAGE
+    try:
+        write_merl(output, stored)
+    except OSError as error:
+        print(f"error: {output}: cannot write the table: {error.strerror or error}", file=sys.stderr)
+        return _exit.FAILED
     invalid = int(np.sum(stored[0] < 0))
     print(f"{output}: {stored.shape[1]} cells ({invalid} not measured, phi_d folded by {args.phi_fold}) "
           f"in {time.perf_counter() - start:.1f} s")
-    return 0
+    return _exit.SUCCESS
 
 
 if __name__ == "__main__":

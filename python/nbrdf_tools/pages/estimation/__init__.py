@@ -598,9 +598,9 @@ def main(argv: list[str] | None = None) -> int:
                  "optimisation leave.", ""]),
              *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
              "The `nbrdf` estimates' start and strengths (the code strength, the code phase's Gaussian penalty "
-             f"toward the training codes, `code` {_or(estimate.CODE_PRIOR_STRENGTHS)}; the pull strength, the weight "
+             f"toward the training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the pull strength, the weight "
              "phase's pull toward the "
-             f"decoded network's BRDF, `pull` {_or(estimate.PRIOR_STRENGTHS)}, from each code), chosen per estimate "
+             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code), chosen per estimate "
              "by its last training view, held out; where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
              f"incidence if higher, by more than {estimate.ALBEDO_MARGIN:.0%}, or above {estimate.ALBEDO_BOUND:g}), "

@@ -1,0 +1,355 @@
+"""The estimator (the scene with the model in place of the marked BSDF, its loss and gradient)
+and the estimate's course: the model's phases, the prior's held-out choice, its attempts and
+fallback, the written result."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .errors import EstimateError
+from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
+from .optimiser import Descent, Phase
+from .plan import Plan, schedule
+from .priors import albedo_check, pull_penalty, code_penalty
+from .scene import Scene, bsdf_key_prefix, check_paths, load_images, parse_defines, require_differentiable_variant
+
+#: Training codes tried as starts of the latent phase (evenly spaced through the anchors, besides
+#: their mean), each judged by one render per view at a quarter of the samples (a few steps' cost
+#: in all): a wider screening starts lower than the code phase would bring a narrower one
+#: (docs/experiments.md, Estimation: the first entry, on the code phase's step, share and starts).
+SCREENED_STARTS = 48
+#: The start the estimate falls back to where the prior's network is no material (its albedo above
+#: :func:`albedo_bound`): the common initialisation, no pull, the ``nbrdf-no-prior`` estimate. No
+#: candidate of the held-out choice: where the view chose it, the decoded network was better on the
+#: novel views or no material, which the albedo check catches (docs/experiments.md, Estimation: "The
+#: albedo check instead of the common candidate").
+COMMON_START = "common"
+#: The held-out view is judged with this many times the samples of a training render (one render
+#: per candidate, the same seed for all: the candidates' differences are not Monte Carlo noise).
+HELD_OUT_SPP_FACTOR = 4
+#: Attempts of the prior (code phases, candidates, final fit) before the fallback to the common
+#: start, each with its own render seeds: the renders' noise decides which code the code phase
+#: reaches, and a later attempt can give a material where the first did not (docs/experiments.md,
+#: Estimation: "Attempts of the prior with other render seeds").
+PRIOR_ATTEMPTS = 3
+#: Offset of the estimate's seed from one attempt to the next.
+ATTEMPT_SEED_STRIDE = 7919
+
+
+def image_loss(images: list, references: list):
+    """Mean squared error relative to ``1 + reference``, ``((x - r) / (1 + r))^2``, over every
+    view, pixel and channel: the first-order twin of the squared error of ``ln(1 + x)`` (the
+    weight keeps highlights from swamping the rest of the object), but linear in the render.
+    ``mi.render`` draws the adjoint pass's samples apart from the primal's, so a step's gradient
+    is the loss's derivative at the noisy render times an independent derivative of the render;
+    linear in the render, that derivative's mean is its value at the mean render, and the fit
+    settles where the mean render is the reference. The log's was biased bright where renders
+    are noisy, most around a highlight narrower than a pixel, which it fitted too wide
+    (docs/experiments.md, Estimation: "The image loss linear in the render"). Held to a float64
+    oracle and to that property by tests/test_estimate.py::test_image_loss_is_linear_in_the_render."""
+    total = 0.0
+    for image, reference in zip(images, references):
+        d = (image - reference) / (1.0 + reference)
+        total = total + dr.mean(dr.square(d), axis=None)
+    return total / len(images)
+
+
+def render_seed(seed: int, step: int, view: int) -> int:
+    return (_mix64((seed << 32) ^ (step << 8) ^ view) >> 33) & 0x7FFFFFFF
+
+
+class Estimator(Descent):
+    """The loaded scene with the model in place of the marked BSDF, and its optimiser."""
+
+    def __init__(self, scene_file: Scene, model, images: list[Path], spp: int, seed: int, max_depth: int,
+                 workdir: Path):
+        super().__init__()
+        self.model, self.spp, self.seed = model, spp, seed
+        self.bsdf_id = scene_file.bsdf_id
+        self.scene = scene_file.load(model.element(workdir))
+        self.references = load_images(images, self.scene)
+        #: The views the loss sums over (all but the held-out one while a prior strength is chosen).
+        self.views = list(range(len(self.references)))
+        self.integrator = mi.load_dict({"type": "prb", "max_depth": max_depth})
+        self.params = mi.traverse(self.scene)
+        #: What the model's parameters are called in ``params``: ``PREFIX.weights`` and so on.
+        self.prefix = bsdf_key_prefix(self.params, self.bsdf_id)
+
+    def render_all(self, step: int, spp: int | None = None) -> list:
+        return [mi.render(self.scene, self.params, sensor=i, integrator=self.integrator, spp=spp or self.spp,
+                          seed=render_seed(self.seed, step, i)) for i in self.views]
+
+    def view_references(self) -> list:
+        return [self.references[i] for i in self.views]
+
+    def held_out_loss(self, weights: np.ndarray, view: int) -> float:
+        """The image loss of ``weights`` on the training view ``view`` (one render, a fixed seed)."""
+        with dr.suspend_grad():
+            Network._set_weights(self.params, self.prefix, mi.Float(np.asarray(weights, np.float32)))
+            self.params.update()
+            image = mi.render(self.scene, self.params, sensor=view, integrator=self.integrator,
+                              spp=HELD_OUT_SPP_FACTOR * self.spp, seed=render_seed(self.seed, 1 << 20, view))
+            loss = image_loss([image], [self.references[view]])
+        return float(np.asarray(loss.numpy()).reshape(-1)[0])
+
+    def loss_and_grad(self, phase: Phase, theta: np.ndarray, step: int):
+        """(loss, gradient) at ``theta``, or ``(nan, None)`` where either is not finite or the
+        BSDF rejects the values."""
+        variable = mi.Float(theta.astype(np.float32))
+        dr.enable_grad(variable)
+        try:
+            phase.apply(self.params, self.prefix, variable)
+            self.params.update()
+        except ValueError:
+            return math.nan, None
+        loss = image_loss(self.render_all(step), self.view_references())
+        dr.backward(loss)
+        grad = np.asarray(dr.grad(variable).numpy(), dtype=np.float64)
+        value = float(loss.array[0]) if hasattr(loss, "array") else float(np.asarray(loss.numpy()).reshape(-1)[0])
+        if phase.penalty is not None:
+            extra, extra_grad = phase.penalty(theta)
+            value, grad = value + extra, grad + extra_grad
+        if not (math.isfinite(value) and np.all(np.isfinite(grad))):
+            return math.nan, None
+        return value, grad
+
+    def check_first_gradient(self, grad: np.ndarray) -> None:
+        if not np.any(grad != 0):
+            raise EstimateError(f"the images do not depend on BSDF '{self.bsdf_id}' (zero gradient at the "
+                                "start): is the object visible to the sensors and lit?")
+
+    def screen_codes(self, decoder, candidates: np.ndarray) -> np.ndarray:
+        """The candidate code whose renders (a quarter of the samples) fit the images best."""
+        best, best_loss = candidates[0], math.inf
+        for code in candidates:
+            with dr.suspend_grad():
+                self.params[f"{self.prefix}.weights"] = decoder.decode(mi.Float(code.astype(np.float32)))
+                self.params.update()
+                loss = image_loss(self.render_all(-1, max(1, self.spp // 4)), self.view_references())
+            value = float(np.asarray(loss.numpy()).reshape(-1)[0])
+            if value < best_loss:
+                best, best_loss = code, value
+        return best
+
+
+def estimate(args, on_step=None) -> dict:
+    """Runs the estimate of the parsed ``args``, writes ``args.output``; a summary.
+    ``on_step(kind, steps_done, theta)``, if given, is called after every step."""
+    check_paths(args.scene, args.output)
+    require_differentiable_variant(args.variant)
+    if args.threads is not None and args.threads < 1:
+        raise EstimateError("--threads must be at least 1")
+    previous = dr.thread_count()
+    try:
+        return _estimate(args, on_step)
+    finally:
+        dr.set_thread_count(previous)
+
+
+def _estimate(args, on_step=None) -> dict:
+    if args.steps < 1 or args.spp < 1:
+        raise EstimateError("--steps and --spp must be at least 1")
+    for name, value in (("--pull-strength", args.pull_strength), ("--code-strength", args.code_strength)):
+        if value is not None and not (value >= 0 and math.isfinite(value)):
+            raise EstimateError(f"{name} must be a finite number >= 0")
+    scene_file = Scene(args.scene, args.bsdf_id, parse_defines(args.define))
+    model = Network(args.model == "nbrdf") if args.model.startswith("nbrdf") else Analytic(args.model)
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="nbrdf-estimate-") as workdir:
+        est = Estimator(scene_file, model, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
+        est.on_step = on_step
+        if args.threads is not None:
+            # One thread fixes the order of the gradients' float sums (bit-identical reruns). Set
+            # after loading: Mitsuba builds the Python plugins on its worker threads.
+            dr.set_thread_count(args.threads)
+        from tqdm import tqdm
+
+        plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
+                        args.code_strength)
+        with tqdm(total=plan.total_steps(), unit="step", desc=f"estimate {args.model}", disable=args.quiet,
+                  file=sys.stderr) as bar:
+            result = _optimise(est, model, args, bar, plan)
+    result["seconds"] = time.perf_counter() - start
+    result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
+    result["halvings"] = est.halvings
+    return result
+
+
+def model_has_prior(model) -> bool:
+    return isinstance(model, Network) and model.prior
+
+def candidate_name(candidate, several_codes: bool) -> str:
+    """A candidate's key in ``held_out_losses``: the pull's strength, prefixed with the code
+    penalty's where several are candidates."""
+    code_strength, strength = candidate
+    return f"code {code_strength}, pull {strength}" if several_codes else str(strength)
+
+
+def choose_start(est: Estimator, decoded: dict, plan: Plan, bar) -> tuple:
+    """The candidate whose short fit on the training views but the held-out one (the last) has
+    the lowest loss on the held-out view: a pair (code penalty's strength, strength of the pull
+    toward ``decoded[code strength]``); ties go to the first (no code penalty, the tightest pull).
+    A candidate whose fit fails the albedo check (:func:`albedo_check`) is not chosen; where none
+    is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
+    rejected ones and the chosen candidate's fitted weights (``None`` for ``COMMON_START``)."""
+    held_out = len(est.references) - 1
+    on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
+    views, est.views = est.views, list(range(held_out))
+    losses, rejected, fits = {}, {}, {}
+    try:
+        for code_strength, start in decoded.items():
+            for strength in plan.pull_strengths:
+                phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
+                              pull_penalty(start, strength))
+                fitted = fits[code_strength, strength] = est.run(phase, bar, plan.code_steps)
+                losses[code_strength, strength] = est.held_out_loss(fitted, held_out)
+                albedo, material = albedo_check(fitted)
+                if not material:
+                    rejected[code_strength, strength] = albedo
+    finally:
+        est.on_step, est.views = on_step, views
+    allowed = [k for k in losses if k not in rejected]
+    choice = min(allowed, key=losses.__getitem__) if allowed else COMMON_START
+    return choice, losses, rejected, fits.get(choice)
+
+
+def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
+    """Per strength of the code penalty: the code fitted through the decoder from the best
+    screened training code (the screening shared), each phase with the same render seeds."""
+    picks = np.linspace(0, len(decoder.anchors) - 1, SCREENED_STARTS).round().astype(int)
+    candidates = np.concatenate([decoder.anchors.mean(axis=0, keepdims=True), decoder.anchors[picks]])
+    code0 = est.screen_codes(decoder, candidates)
+    spread = decoder.code_distribution() if any(plan.code_strengths) else (None, None)
+
+    def apply(params, prefix, code):
+        params[f"{prefix}.weights"] = decoder.decode(code)
+
+    return {strength: est.run(Phase("code", code0, plan.code_steps, apply, code_penalty(*spread, strength)), bar, 0)
+            for strength in plan.code_strengths}
+
+
+def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
+    """One attempt of the prior at the estimator's seed: the code through the decoder, then the
+    weights pulled toward the decoded ones by the chosen strengths. Returns the weights (``None``
+    where the albedo check rejected every candidate or the final network), the summary's
+    additions, and the rejected albedos by candidate name (``final``: the final network)."""
+    # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
+    # view's noise, and the view's light often decides which code is reached (docs/experiments.md,
+    # Estimation: "The code phase on every training view"). The candidates' weights, which can fit
+    # noise, are fitted without it.
+    codes = fit_codes(est, decoder, plan, bar)
+    decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
+    choice, losses, rejected, fitted = (plan.code_strengths[0], plan.pull_strengths[0]), {}, {}, None
+    if plan.selecting:
+        choice, losses, rejected, fitted = choose_start(est, decoded, plan, bar)
+    several_codes = len(codes) > 1
+    extra = {"held_out_losses": {candidate_name(k, several_codes): v for k, v in losses.items()}} if losses else {}
+    rejected = {candidate_name(k, several_codes): v for k, v in rejected.items()}
+    # The common start keeps the best decoded candidate's code for the record.
+    code_strength = min(losses, key=losses.__getitem__)[0] if choice == COMMON_START else choice[0]
+    extra["code"] = [float(c) for c in codes[code_strength]]
+    if choice == COMMON_START:
+        return None, extra, rejected
+    strength = choice[1]
+    extra.update({"start": "decoded", "pull_strength": strength, "code_strength": code_strength})
+    # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
+    # from the decoded start had): refitted from the decoded start instead, the network lost what
+    # the held-out view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit
+    # goes on").
+    center = decoded[code_strength]
+    weights, steps = (center, plan.weight_steps) if fitted is None else (fitted, plan.weight_steps - plan.candidate_steps)
+    if steps > 0:
+        phase = Phase("weights", weights, steps, Network._set_weights, pull_penalty(center, strength))
+        weights = est.run(phase, bar, plan.code_steps)
+    albedo, material = albedo_check(weights)
+    if not material:
+        rejected["final"] = albedo
+        return None, extra, rejected
+    extra["albedo_max"] = albedo
+    return weights, extra, rejected
+
+
+def fit_with_prior(est: Estimator, args, plan: Plan, bar) -> tuple[np.ndarray, dict]:
+    """Up to ``PRIOR_ATTEMPTS`` attempts of the prior, each with its own render seeds, until the
+    albedo check keeps a network; else the common start, the nbrdf-no-prior estimate (its start,
+    steps and seeds, so the same network). The weights and the summary's additions."""
+    from ..latent import Decoder, LatentError
+
+    try:
+        decoder = Decoder(args.ae)
+    except LatentError as error:
+        raise EstimateError(str(error)) from None
+    # An attempt costs what the progress bar was sized for (code and weight steps add up to --steps).
+    seed, rejected_all, attempt_steps = est.seed, {}, bar.total
+    try:
+        for attempt in range(PRIOR_ATTEMPTS):
+            est.seed = seed + ATTEMPT_SEED_STRIDE * attempt
+            if attempt > 0:
+                bar.total += attempt_steps
+            try:
+                weights, extra, rejected = prior_attempt(est, decoder, plan, bar)
+            except LatentError as error:
+                raise EstimateError(str(error)) from None
+            prefix = f"attempt {attempt}: " if attempt else ""
+            rejected_all.update({prefix + k: v for k, v in rejected.items()})
+            if weights is not None:
+                extra["attempts"] = attempt + 1
+                break
+        else:
+            # No attempt gave a material: the nbrdf-no-prior estimate; the last attempt's best code is
+            # kept for the record.
+            est.seed = seed
+            bar.total += plan.code_steps + plan.weight_steps
+            extra.update({"start": COMMON_START, "pull_strength": None, "code_strength": None,
+                          "attempts": PRIOR_ATTEMPTS})
+            weights = est.run(Phase("weights", common_initialisation(), plan.code_steps + plan.weight_steps,
+                                    Network._set_weights, None), bar, 0)
+    finally:
+        est.seed = seed
+    if rejected_all:
+        extra["albedo_rejected"] = rejected_all
+    return weights, extra
+
+
+def _optimise(est: Estimator, model, args, bar, plan: Plan) -> dict:
+    summary = {"output": str(args.output), "model": args.model, "steps": args.steps}
+    if isinstance(model, Analytic):
+        (phase,) = model.phases(args.steps)
+        theta = est.run(phase, bar, 0)
+        fitted = model.result(theta)
+        write_text(args.output, json.dumps(fitted, indent=2) + "\n")
+        summary["bsdf"] = fitted
+        return summary
+    if model.prior:
+        weights, extra = fit_with_prior(est, args, plan, bar)
+        summary.update(extra)
+    else:
+        weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
+    material = "albedo_max" in summary  # the prior's kept network has passed already
+    if not material:
+        summary["albedo_max"], material = albedo_check(weights)
+    if not material:
+        # Nothing to fall back to (the common start, or no prior asked): written, but not silently.
+        print(f"warning: the estimated network reflects up to {summary['albedo_max']:.3g} times the light it "
+              "receives (directional albedo; a material reflects at most 1): the images do not constrain it "
+              "where their lights do not reach", file=sys.stderr)
+    provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
+                  "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
+                  "scene": str(args.scene), "bsdf_id": args.bsdf_id}
+    for key in ("code", "start", "pull_strength", "code_strength", "held_out_losses", "albedo_rejected", "attempts",
+                "albedo_max"):
+        if key in summary:
+            provenance[key] = summary[key]
+    name = args.output.name.split(".")[0]
+    write_network(args.output, weights, name, provenance)
+    summary["sampling"] = fit_sampling(args.output)
+    return summary
