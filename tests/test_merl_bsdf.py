@@ -42,7 +42,7 @@ def test_trilinear_matches_numpy_reference(variant, merl_table):
     n = 500 if is_jit() else 60
     rng = np.random.default_rng(5)
     # Points between cell centres near the borders: theta_h below the first centre (clamped),
-    # phi_d around 0 and pi (wrapped), theta_d close to 90 degrees.
+    # phi_d near 0 and near pi (wrapped), theta_d close to 90 degrees.
     u = rng.uniform(0, 1, n)
     special_th = np.where(u < 0.5, rng.uniform(0, 0.8, n), rng.uniform(0, 90, n))
     special = from_angles((special_th / 90) ** 2 * np.pi / 2, rng.uniform(-np.pi, np.pi, n),
