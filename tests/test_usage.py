@@ -307,7 +307,7 @@ def test_native_layer_takes_the_vocabulary_from_the_library():
 
     names = ["uniform", "cosine", "phong", "two_lobe", "tabulated", "anisotropic_phong"]
     assert _native.SAMPLING_KINDS == {name: code for code, name in enumerate(names)}
-    assert _native.MATERIAL_KINDS == {"network": 0, "merl": 1}
+    assert _native.MATERIAL_KINDS == {"network": 0, "merl": 1, "textured": 2}
     assert set(jit.STRATEGIES) == set(names)
     assert _native.STATUS_NAMES[2] == "NBRDF_ERROR_INVALID_ARGUMENT"
 

@@ -3,7 +3,7 @@
  *
  * Arrays are planar (structure of arrays): a batch of n directions is 3n floats
  * [x0..x(n-1), y0..y(n-1), z0..z(n-1)]; uniforms are [u0.., u1.., u2..]; colours [r.., g.., b..];
- * pdfs n floats. Local shading frame, z = normal; `view` points towards the viewer (Mitsuba's
+ * pdfs n floats; texture coordinates (the _uv functions) [u0.., v0..]. Local shading frame, z = normal; `view` points towards the viewer (Mitsuba's
  * si.wi), `light` towards the light (Mitsuba's wo). Every fallible function returns an
  * NbrdfStatus as int32_t; nbrdf_last_error() then holds a message. No function lets a panic
  * escape, and handles are immutable, so they may be shared between threads.
@@ -24,6 +24,9 @@ typedef enum NbrdfMaterialKind {
   NBRDF_MATERIAL_NETWORK = 0,
   // A MERL-format table from a `.binary` file.
   NBRDF_MATERIAL_MERL = 1,
+  // A spatially varying neural material from an `*.nbrdf.json` file of format version 4 and
+  // its latent texture (`nbrdf_material_eval_uv`, `nbrdf_material_sample_uv`).
+  NBRDF_MATERIAL_TEXTURED = 2,
 } NbrdfMaterialKind;
 
 // Importance-sampling strategy of an `NbrdfSampler` (the `kind` of `NbrdfSamplerParams`); the
@@ -65,8 +68,9 @@ typedef enum NbrdfStatus {
   NBRDF_ERROR_PANIC = 5,
 } NbrdfStatus;
 
-// A material: a neural BRDF (`*.nbrdf.json`) or a MERL-format table (`.binary`), loaded by
-// `nbrdf_material_load`. Immutable: one handle may be used by many threads at once.
+// A material: a neural BRDF or a spatially varying neural material (`*.nbrdf.json`, the latter
+// with its latent texture) or a MERL-format table (`.binary`), loaded by `nbrdf_material_load`.
+// Immutable: one handle may be used by many threads at once.
 typedef struct NbrdfMaterial NbrdfMaterial;
 
 // An importance sampler (`nbrdf_sampler_create`): for `nbrdf_material_sample` with any
@@ -93,29 +97,34 @@ typedef struct NbrdfSamplerParams {
 typedef struct NbrdfMaterialInfo {
   // An `NbrdfMaterialKind` value.
   int32_t kind;
-  // 1 for an anisotropic network (file format version 2: its input carries the half vector's
-  // azimuth `phi_h` in the local frame whose x axis is the tangent), else 0.
+  // 1 for an anisotropic network or textured material (file format version 2, or an
+  // `anisotropic` decoder: its input carries the half vector's azimuth `phi_h` in the local
+  // frame whose x axis is the tangent), else 0.
   uint32_t anisotropic;
-  // Width of a network's two hidden layers (21 for the paper's networks); 0 for a table.
+  // Width of a network's two hidden layers (21 for the paper's networks); 0 for a table and
+  // a textured material.
   uint32_t hidden_width;
-  // Number of a network's weights and biases (675 for width 21); 0 for a table.
+  // Number of a network's weights and biases (675 for width 21); 0 for a table and a
+  // textured material.
   uint32_t parameter_count;
   // Inputs and outputs of a network's three dense layers (`y = x W + b`, `W` row-major
   // inputs x outputs): `6 -> hidden -> hidden -> 3`, or `-> spectral_count` for a spectral
-  // network; zeros for a table.
+  // network; zeros for a table and a textured material.
   uint32_t layer_inputs[3];
   uint32_t layer_outputs[3];
-  // The network's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
+  // The material's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
   // the handle: valid until `nbrdf_material_free`.
   const char *name;
   // The sampling lobes the network file stores: `NBRDF_SAMPLING_PHONG`,
   // `NBRDF_SAMPLING_TWO_LOBE` (second lobe in `exponent2`, `specular_weight2`) or
   // `NBRDF_SAMPLING_ANISOTROPIC_PHONG` (`exponent_v`), or `NBRDF_SAMPLING_COSINE` with zero
-  // parameters when it stores none (and for a table).
+  // parameters when it stores none (and for a table and a textured material, whose lobes
+  // vary over its texture).
   struct NbrdfSamplerParams stored_sampling;
   // The strategy the file names as the material's best (`sampling.default`, chosen by
   // `nbrdf fit-phong` for the lowest measured variance), an `NbrdfSamplingKind` value
-  // (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table).
+  // (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table and a
+  // textured material).
   int32_t default_sampling;
   // The number of spectral coefficients a spectral network (file format version 3) outputs,
   // `f_r(lambda) = sum_k c_k B_k(lambda)` with the clamped uniform cubic B-spline basis over
@@ -123,6 +132,12 @@ typedef struct NbrdfMaterialInfo {
   uint32_t spectral_count;
   // The wavelength range of the spectral basis in nm; (0, 0) when not spectral.
   float spectral_range_nm[2];
+  // The channels `C` of a textured material's latent code (its decoder reads `6 + C`
+  // inputs); 0 for the other kinds.
+  uint32_t latent_channels;
+  // A textured material's latent texture size in texels, (width, height); (0, 0) for the
+  // other kinds.
+  uint32_t texture_size[2];
 } NbrdfMaterialInfo;
 
 // Shape of a sampler (`nbrdf_sampler_info`). For `NBRDF_SAMPLING_TABULATED`, the per-band
@@ -149,10 +164,13 @@ extern "C" {
 
 // Loads a material and stores a new handle in `*out` (NULL on failure): a MERL-format table
 // (`.binary`, 34,992,012 bytes) when the file starts with a table's header (90, 90, 180 as
-// little-endian int32), else a neural BRDF (`*.nbrdf.json`), validated, and proved once which
-// of its hidden units can fire above the horizon (`nbrdf_material_network`; the proof is made
-// on the first call that needs it: evaluation, sampling or `nbrdf_material_network`). Free it with
-// `nbrdf_material_free`; `nbrdf_material_info` says which kind it is.
+// little-endian int32); a spatially varying material when the file is an `*.nbrdf.json` of
+// format version 4, with the latent texture it names (a missing or unreadable texture is an
+// error naming the file and the texture); else a neural BRDF (`*.nbrdf.json`), validated, and
+// proved once which of its hidden units can fire above the horizon (`nbrdf_material_network`;
+// the proof is made on the first call that needs it: evaluation, sampling or
+// `nbrdf_material_network`). Free it with `nbrdf_material_free`; `nbrdf_material_info` says
+// which kind it is.
 //
 // # Safety
 // `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
@@ -165,7 +183,8 @@ int32_t nbrdf_material_load(const char *path,
 // `material` is NULL or a handle from `nbrdf_material_load` that was not freed yet.
 void nbrdf_material_free(struct NbrdfMaterial *material);
 
-// Fills `*out` with the material's kind, shape, name and stored sampling.
+// Fills `*out` with the material's kind, shape, name and stored sampling (a textured
+// material's latent channels and texture size).
 //
 // # Safety
 // `material` is a live handle; `out` points to a writable `NbrdfMaterialInfo`.
@@ -177,7 +196,8 @@ int32_t nbrdf_material_info(const struct NbrdfMaterial *material,
 // `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A
 // network is evaluated without its hidden units that cannot fire (the same values); a table
 // by trilinear lookup. A spectral network gives the linear sRGB projection of its spectrum
-// under D65 (`nbrdf_material_spectral_srgb`).
+// under D65 (`nbrdf_material_spectral_srgb`). `NBRDF_ERROR_INVALID_ARGUMENT` for a textured
+// material, which varies over its surface (`nbrdf_material_eval_uv`).
 //
 // # Safety
 // `material` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
@@ -193,7 +213,8 @@ int32_t nbrdf_material_eval(const struct NbrdfMaterial *material,
 // Writes the planar light directions `out_light` (3 n), the weights
 // `f_r * cos(theta_light) / pdf` of the material as planar RGB `out_weight` (3 n) and the
 // solid-angle pdfs `out_pdf` (n), those `nbrdf_sampler_pdf` gives. Invalid samples (below the
-// horizon) have pdf 0 and weight 0.
+// horizon) have pdf 0 and weight 0. `NBRDF_ERROR_INVALID_ARGUMENT` for a textured material
+// (`nbrdf_material_sample_uv`).
 //
 // # Safety
 // `material` and `sampler` are live handles; the arrays have the sizes above and the outputs
@@ -335,6 +356,50 @@ const char *nbrdf_last_error(void);
 
 // Version of the library (the crate version, e.g. "0.1.0"); a static string.
 const char *nbrdf_version(void);
+
+// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) at `n`
+// hits: `uv` holds planar `2 n` floats `[u0.., v0..]` (Mitsuba's `si.uv`), `view` and `light`
+// planar `3 n` floats; `out_rgb` receives planar `3 n` floats `[r.., g.., b..]` and, unless
+// NULL, `out_pdf` the `n` solid-angle pdfs with which `nbrdf_material_sample_uv` draws each
+// `light` (Mitsuba's `BSDF.eval_pdf`). A textured material reads its texture at each UV, mapped
+// and wrapped as its file says (UVs far outside [0, 1] wrap); a UV that is not finite gives 0
+// and the cosine lobe's pdf, texels holding a non-finite value give 0 (and the cosine lobe
+// where the value is a lobe's). A network or a table ignores the UVs: the values of
+// `nbrdf_material_eval` and the pdfs of its stored lobes (`NbrdfMaterialInfo::stored_sampling`,
+// cosine without). Zero when either direction is at or below the horizon.
+//
+// # Safety
+// `material` is a live handle; `uv` holds `2 n` floats, the other arrays the sizes above, and
+// the outputs overlap neither each other nor the inputs.
+int32_t nbrdf_material_eval_uv(const struct NbrdfMaterial *material,
+                               const float *uv,
+                               const float *view,
+                               const float *light,
+                               size_t n,
+                               float *out_rgb,
+                               float *out_pdf);
+
+// Importance-samples `n` light directions at `n` hits (`uv` planar `2 n` floats
+// `[u0.., v0..]`) for the planar `view` directions from the planar uniforms
+// `u = [u0.., u1.., u2..]` (in [0, 1]; `u0` picks the lobe of a mixture), with the material's
+// own sampling: a textured material's lobes at each UV (cosine where the texture stores none,
+// at non-finite UVs and where a lobe's value is not finite), a network's stored lobes (`NbrdfMaterialInfo::stored_sampling`,
+// cosine without; the UVs ignored), cosine for a table. Writes the planar light directions
+// `out_light` (3 n), the weights `f_r * cos(theta_light) / pdf` as planar RGB `out_weight`
+// (3 n) and the solid-angle pdfs `out_pdf` (n), those `nbrdf_material_eval_uv` gives. Invalid
+// samples (below the horizon) have pdf 0 and weight 0.
+//
+// # Safety
+// `material` is a live handle; the arrays have the sizes above and the outputs overlap neither
+// each other nor the inputs.
+int32_t nbrdf_material_sample_uv(const struct NbrdfMaterial *material,
+                                 const float *uv,
+                                 const float *view,
+                                 const float *u,
+                                 size_t n,
+                                 float *out_light,
+                                 float *out_weight,
+                                 float *out_pdf);
 
 // Stores in `*out_name` the canonical name of the sampling strategy `kind` (an
 // `NbrdfSamplingKind` value): "uniform", "cosine", "phong", "two_lobe", "tabulated",

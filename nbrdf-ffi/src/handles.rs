@@ -1,5 +1,5 @@
-//! What the two handles hold, and how each is made: an `NbrdfMaterial` (a network or a table,
-//! told apart on load) and an `NbrdfSampler` (a strategy validated from `NbrdfSamplerParams`,
+//! What the two handles hold, and how each is made: an `NbrdfMaterial` (a network, a spatially
+//! varying material or a table, told apart on load) and an `NbrdfSampler` (a strategy validated from `NbrdfSamplerParams`,
 //! tabulated from a material for `NBRDF_SAMPLING_TABULATED`). The exported functions of each
 //! are in [`crate::material`] and [`crate::sampler`], which build on this module and not on
 //! each other.
@@ -11,6 +11,7 @@ use nbrdf_core::merl::{N_PHI_D, N_THETA_D, N_THETA_H};
 use nbrdf_core::network::ActiveUnits;
 use nbrdf_core::sampling::tabulated::TableConfig;
 use nbrdf_core::sampling::{SamplingStrategy, TabulatedSampler};
+use nbrdf_core::textured::{NeuralMaterial, TexturedNbrdf};
 use nbrdf_core::{MerlTable, Nbrdf, NbrdfError};
 use nbrdf_ffi_common::{Failure, FailureKind, FfiResult};
 use std::ffi::{CStr, CString};
@@ -18,17 +19,30 @@ use std::io::Read;
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
-/// A material: a neural BRDF (`*.nbrdf.json`) or a MERL-format table (`.binary`), loaded by
-/// `nbrdf_material_load`. Immutable: one handle may be used by many threads at once.
+/// A material: a neural BRDF or a spatially varying neural material (`*.nbrdf.json`, the latter
+/// with its latent texture) or a MERL-format table (`.binary`), loaded by `nbrdf_material_load`.
+/// Immutable: one handle may be used by many threads at once.
 pub struct NbrdfMaterial {
     source: Source,
-    /// The network's name (empty for a table), for `NbrdfMaterialInfo::name`.
+    /// The material's name (empty for a table), for `NbrdfMaterialInfo::name`.
     name: CString,
 }
 
 enum Source {
     Network(Box<LoadedNetwork>),
     Merl(MerlTable),
+    Textured(Box<TexturedNbrdf>),
+}
+
+/// How the functions taking texture coordinates see a material: a textured one reads its
+/// texture at each hit; a homogeneous one is the same at every hit and samples the lobes its
+/// file stores (cosine without, and for a table).
+pub(crate) enum AtHits<'a> {
+    Textured(&'a TexturedNbrdf),
+    Everywhere {
+        brdf: &'a dyn Brdf,
+        sampling: SamplingStrategy,
+    },
 }
 
 /// A network as the file stores it and, made on first use, the proof of which hidden units can
@@ -80,22 +94,51 @@ impl NbrdfMaterial {
                 name: CString::default(),
             });
         }
-        let network = Nbrdf::load(path)?;
-        let name = CString::new(network.name.replace('\0', "")).unwrap_or_default();
-        Ok(NbrdfMaterial {
-            source: Source::Network(Box::new(LoadedNetwork {
-                network,
-                proved: OnceLock::new(),
-            })),
-            name,
+        let c_name = |name: &str| CString::new(name.replace('\0', "")).unwrap_or_default();
+        Ok(match NeuralMaterial::load(path)? {
+            NeuralMaterial::Homogeneous(network) => NbrdfMaterial {
+                name: c_name(&network.name),
+                source: Source::Network(Box::new(LoadedNetwork {
+                    network,
+                    proved: OnceLock::new(),
+                })),
+            },
+            NeuralMaterial::Textured(textured) => NbrdfMaterial {
+                name: c_name(textured.name()),
+                source: Source::Textured(Box::new(textured)),
+            },
         })
     }
 
-    /// What eval, sample and the tabulated sampler evaluate.
-    pub(crate) fn brdf(&self) -> &dyn Brdf {
+    /// What eval, sample and the tabulated sampler evaluate; an error for a textured material,
+    /// which has no value without texture coordinates.
+    pub(crate) fn brdf(&self) -> FfiResult<&dyn Brdf> {
         match &self.source {
-            Source::Network(loaded) => &loaded.proved().renderer,
-            Source::Merl(table) => table,
+            Source::Network(loaded) => Ok(&loaded.proved().renderer),
+            Source::Merl(table) => Ok(table),
+            Source::Textured(_) => Err(Failure::invalid(
+                "the material is spatially varying (file format version 4): evaluate and \
+                 sample it at texture coordinates with nbrdf_material_eval_uv and \
+                 nbrdf_material_sample_uv",
+            )),
+        }
+    }
+
+    /// What `nbrdf_material_eval_uv` and `nbrdf_material_sample_uv` evaluate and sample.
+    pub(crate) fn at_hits(&self) -> AtHits<'_> {
+        match &self.source {
+            Source::Textured(textured) => AtHits::Textured(textured),
+            Source::Network(loaded) => AtHits::Everywhere {
+                brdf: &loaded.proved().renderer,
+                sampling: loaded
+                    .network
+                    .sampling_strategy()
+                    .unwrap_or(SamplingStrategy::Cosine),
+            },
+            Source::Merl(table) => AtHits::Everywhere {
+                brdf: table,
+                sampling: SamplingStrategy::Cosine,
+            },
         }
     }
 
@@ -104,27 +147,43 @@ impl NbrdfMaterial {
     pub(crate) fn table_config(&self) -> TableConfig {
         match &self.source {
             Source::Network(loaded) => loaded.network.table_config(),
-            Source::Merl(_) => TableConfig::default(),
+            Source::Merl(_) | Source::Textured(_) => TableConfig::default(),
         }
     }
 
-    /// The network's name (empty for a table), NUL-terminated.
+    /// The material's name (empty for a table), NUL-terminated.
     pub(crate) fn name(&self) -> &CStr {
         &self.name
     }
 
-    /// The network, or `None` for a table.
+    /// The network, or `None` for a table or a textured material.
     pub(crate) fn network(&self) -> Option<&LoadedNetwork> {
         match &self.source {
             Source::Network(loaded) => Some(loaded),
-            Source::Merl(_) => None,
+            Source::Merl(_) | Source::Textured(_) => None,
         }
     }
 
-    /// The network, or an error for a table.
+    /// The spatially varying material, or `None` for the other kinds.
+    pub(crate) fn textured(&self) -> Option<&TexturedNbrdf> {
+        match &self.source {
+            Source::Textured(textured) => Some(textured),
+            Source::Network(_) | Source::Merl(_) => None,
+        }
+    }
+
+    /// The network, or an error naming what the material is instead.
     pub(crate) fn loaded_network(&self) -> FfiResult<&LoadedNetwork> {
-        self.network()
-            .ok_or_else(|| Failure::invalid("the material is a MERL table, not a network"))
+        match &self.source {
+            Source::Network(loaded) => Ok(loaded),
+            Source::Merl(_) => Err(Failure::invalid(
+                "the material is a MERL table, not a network",
+            )),
+            Source::Textured(_) => Err(Failure::invalid(
+                "the material is spatially varying (file format version 4), not a homogeneous \
+                 network",
+            )),
+        }
     }
 }
 
@@ -190,7 +249,8 @@ impl NbrdfSamplerParams {
                               tabulated from its material)"
                         .into(),
                 })?;
-                let table = TabulatedSampler::from_brdf(material.brdf(), &material.table_config())?;
+                let table =
+                    TabulatedSampler::from_brdf(material.brdf()?, &material.table_config())?;
                 SamplingStrategy::Tabulated(Arc::new(table))
             }
         };

@@ -1,6 +1,7 @@
-//! The functions of `NbrdfMaterial`, a neural BRDF or a MERL table behind one handle (what it
-//! holds: [`crate::handles`]): one entry point per operation (load, free, info, eval, sample; a
-//! network's parameters and active units).
+//! The functions of `NbrdfMaterial`, a neural BRDF, a spatially varying neural material or a
+//! MERL table behind one handle (what it holds: [`crate::handles`]): one entry point per
+//! operation (load, free, info, eval, sample; a network's parameters and active units). Eval
+//! and sample at texture coordinates, for every kind: [`crate::uv`].
 
 use crate::args::{directions, exact_len, free_boxed, read_path, write};
 use crate::handles::{LoadedNetwork, NbrdfMaterial, NbrdfSampler, NbrdfSamplerParams};
@@ -22,6 +23,9 @@ pub enum NbrdfMaterialKind {
     NBRDF_MATERIAL_NETWORK = 0,
     /// A MERL-format table from a `.binary` file.
     NBRDF_MATERIAL_MERL = 1,
+    /// A spatially varying neural material from an `*.nbrdf.json` file of format version 4 and
+    /// its latent texture (`nbrdf_material_eval_uv`, `nbrdf_material_sample_uv`).
+    NBRDF_MATERIAL_TEXTURED = 2,
 }
 
 /// Summary of a material (`nbrdf_material_info`).
@@ -30,29 +34,34 @@ pub enum NbrdfMaterialKind {
 pub struct NbrdfMaterialInfo {
     /// An `NbrdfMaterialKind` value.
     pub kind: i32,
-    /// 1 for an anisotropic network (file format version 2: its input carries the half vector's
-    /// azimuth `phi_h` in the local frame whose x axis is the tangent), else 0.
+    /// 1 for an anisotropic network or textured material (file format version 2, or an
+    /// `anisotropic` decoder: its input carries the half vector's azimuth `phi_h` in the local
+    /// frame whose x axis is the tangent), else 0.
     pub anisotropic: u32,
-    /// Width of a network's two hidden layers (21 for the paper's networks); 0 for a table.
+    /// Width of a network's two hidden layers (21 for the paper's networks); 0 for a table and
+    /// a textured material.
     pub hidden_width: u32,
-    /// Number of a network's weights and biases (675 for width 21); 0 for a table.
+    /// Number of a network's weights and biases (675 for width 21); 0 for a table and a
+    /// textured material.
     pub parameter_count: u32,
     /// Inputs and outputs of a network's three dense layers (`y = x W + b`, `W` row-major
     /// inputs x outputs): `6 -> hidden -> hidden -> 3`, or `-> spectral_count` for a spectral
-    /// network; zeros for a table.
+    /// network; zeros for a table and a textured material.
     pub layer_inputs: [u32; 3],
     pub layer_outputs: [u32; 3],
-    /// The network's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
+    /// The material's name (UTF-8, NUL-terminated, possibly empty; empty for a table), owned by
     /// the handle: valid until `nbrdf_material_free`.
     pub name: *const c_char,
     /// The sampling lobes the network file stores: `NBRDF_SAMPLING_PHONG`,
     /// `NBRDF_SAMPLING_TWO_LOBE` (second lobe in `exponent2`, `specular_weight2`) or
     /// `NBRDF_SAMPLING_ANISOTROPIC_PHONG` (`exponent_v`), or `NBRDF_SAMPLING_COSINE` with zero
-    /// parameters when it stores none (and for a table).
+    /// parameters when it stores none (and for a table and a textured material, whose lobes
+    /// vary over its texture).
     pub stored_sampling: NbrdfSamplerParams,
     /// The strategy the file names as the material's best (`sampling.default`, chosen by
     /// `nbrdf fit-phong` for the lowest measured variance), an `NbrdfSamplingKind` value
-    /// (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table).
+    /// (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table and a
+    /// textured material).
     pub default_sampling: i32,
     /// The number of spectral coefficients a spectral network (file format version 3) outputs,
     /// `f_r(lambda) = sum_k c_k B_k(lambda)` with the clamped uniform cubic B-spline basis over
@@ -60,6 +69,12 @@ pub struct NbrdfMaterialInfo {
     pub spectral_count: u32,
     /// The wavelength range of the spectral basis in nm; (0, 0) when not spectral.
     pub spectral_range_nm: [f32; 2],
+    /// The channels `C` of a textured material's latent code (its decoder reads `6 + C`
+    /// inputs); 0 for the other kinds.
+    pub latent_channels: u32,
+    /// A textured material's latent texture size in texels, (width, height); (0, 0) for the
+    /// other kinds.
+    pub texture_size: [u32; 2],
 }
 
 /// `default_sampling` of a material whose file names no default.
@@ -80,7 +95,16 @@ impl NbrdfMaterial {
             default_sampling: NO_DEFAULT_SAMPLING,
             spectral_count: 0,
             spectral_range_nm: [0.0; 2],
+            latent_channels: 0,
+            texture_size: [0; 2],
         };
+        if let Some(textured) = self.textured() {
+            info.kind = NbrdfMaterialKind::NBRDF_MATERIAL_TEXTURED as i32;
+            info.anisotropic = u32::from(textured.decoder().anisotropic());
+            info.latent_channels = to_u32(textured.decoder().latent_channels());
+            let texture = textured.texture();
+            info.texture_size = [to_u32(texture.width()), to_u32(texture.height())];
+        }
         if let Some(loaded) = self.network() {
             let network = &loaded.network;
             info.kind = NbrdfMaterialKind::NBRDF_MATERIAL_NETWORK as i32;
@@ -139,10 +163,13 @@ fn write_flags(active: &ActiveUnits, out: &mut [u8]) {
 
 /// Loads a material and stores a new handle in `*out` (NULL on failure): a MERL-format table
 /// (`.binary`, 34,992,012 bytes) when the file starts with a table's header (90, 90, 180 as
-/// little-endian int32), else a neural BRDF (`*.nbrdf.json`), validated, and proved once which
-/// of its hidden units can fire above the horizon (`nbrdf_material_network`; the proof is made
-/// on the first call that needs it: evaluation, sampling or `nbrdf_material_network`). Free it with
-/// `nbrdf_material_free`; `nbrdf_material_info` says which kind it is.
+/// little-endian int32); a spatially varying material when the file is an `*.nbrdf.json` of
+/// format version 4, with the latent texture it names (a missing or unreadable texture is an
+/// error naming the file and the texture); else a neural BRDF (`*.nbrdf.json`), validated, and
+/// proved once which of its hidden units can fire above the horizon (`nbrdf_material_network`;
+/// the proof is made on the first call that needs it: evaluation, sampling or
+/// `nbrdf_material_network`). Free it with `nbrdf_material_free`; `nbrdf_material_info` says
+/// which kind it is.
 ///
 /// # Safety
 /// `path` is a NUL-terminated string; `out` points to writable storage for one pointer.
@@ -173,7 +200,8 @@ pub unsafe extern "C" fn nbrdf_material_free(material: *mut NbrdfMaterial) {
     unsafe { free_boxed(material) }
 }
 
-/// Fills `*out` with the material's kind, shape, name and stored sampling.
+/// Fills `*out` with the material's kind, shape, name and stored sampling (a textured
+/// material's latent channels and texture size).
 ///
 /// # Safety
 /// `material` is a live handle; `out` points to a writable `NbrdfMaterialInfo`.
@@ -195,7 +223,8 @@ pub unsafe extern "C" fn nbrdf_material_info(
 /// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A
 /// network is evaluated without its hidden units that cannot fire (the same values); a table
 /// by trilinear lookup. A spectral network gives the linear sRGB projection of its spectrum
-/// under D65 (`nbrdf_material_spectral_srgb`).
+/// under D65 (`nbrdf_material_spectral_srgb`). `NBRDF_ERROR_INVALID_ARGUMENT` for a textured
+/// material, which varies over its surface (`nbrdf_material_eval_uv`).
 ///
 /// # Safety
 /// `material` is a live handle; the arrays hold `3 n` floats each and `out_rgb` overlaps neither
@@ -211,6 +240,7 @@ pub unsafe extern "C" fn nbrdf_material_eval(
     guard("nbrdf_material_eval", || {
         // SAFETY: forwarded contract.
         let material = unsafe { reference(material, "material")? };
+        let brdf = material.brdf()?;
         check_pointer(view, "view")?;
         check_pointer(light, "light")?;
         check_pointer(out_rgb, "out_rgb")?;
@@ -222,9 +252,7 @@ pub unsafe extern "C" fn nbrdf_material_eval(
         let (view, light, rgb) =
             unsafe { (input(view, len), input(light, len), output(out_rgb, len)) };
         let rgb = RgbMut::from_planar(rgb).expect("planar buffers have length 3 n");
-        material
-            .brdf()
-            .eval_cos_batch(directions(view), directions(light), rgb);
+        brdf.eval_cos_batch(directions(view), directions(light), rgb);
         Ok(())
     })
 }
@@ -234,7 +262,8 @@ pub unsafe extern "C" fn nbrdf_material_eval(
 /// Writes the planar light directions `out_light` (3 n), the weights
 /// `f_r * cos(theta_light) / pdf` of the material as planar RGB `out_weight` (3 n) and the
 /// solid-angle pdfs `out_pdf` (n), those `nbrdf_sampler_pdf` gives. Invalid samples (below the
-/// horizon) have pdf 0 and weight 0.
+/// horizon) have pdf 0 and weight 0. `NBRDF_ERROR_INVALID_ARGUMENT` for a textured material
+/// (`nbrdf_material_sample_uv`).
 ///
 /// # Safety
 /// `material` and `sampler` are live handles; the arrays have the sizes above and the outputs
@@ -253,6 +282,7 @@ pub unsafe extern "C" fn nbrdf_material_sample(
     guard("nbrdf_material_sample", || {
         // SAFETY: forwarded contract.
         let material = unsafe { reference(material, "material")? };
+        let brdf = material.brdf()?;
         // SAFETY: forwarded contract.
         let sampler = unsafe { reference(sampler, "sampler")? };
         check_pointer(view, "view")?;
@@ -276,7 +306,7 @@ pub unsafe extern "C" fn nbrdf_material_sample(
         };
         sampling::sample_batch(
             sampler.strategy(),
-            material.brdf(),
+            brdf,
             directions(view),
             directions(u),
             DirectionsMut::from_planar(light).expect("planar buffers have length 3 n"),
