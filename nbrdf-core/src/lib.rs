@@ -3,7 +3,8 @@
 //! Two layers. Rendering, always built and all that `nbrdf-ffi` links: [`brdf`], [`coords`],
 //! [`merl`], [`network`], [`textured`] (spatially varying materials), [`rgl`], [`spectrum`],
 //! [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
-//! Training and analysis (feature `train`, on by default): [`train`], [`analytic`], [`target`],
+//! Training and analysis (feature `train`, on by default): [`train`], [`distillation`] (spatially
+//! varying materials from textured sources), [`analytic`], [`target`],
 //! [`phong_fit`], [`lobe_fit`], [`anisotropic_lobe_fit`], [`metrics`], [`latent`] and [`ops`],
 //! what each `nbrdf` command does (the CLI, feature `cli`, only parses and prints). Arrows run
 //! from training to rendering only, and no two modules depend on each other (`tests/layers.rs`).
@@ -32,6 +33,8 @@ pub mod textured;
 pub mod analytic;
 #[cfg(feature = "train")]
 pub mod anisotropic_lobe_fit;
+#[cfg(feature = "train")]
+pub mod distillation;
 #[cfg(feature = "train")]
 pub mod latent;
 #[cfg(feature = "train")]

@@ -16,7 +16,6 @@ pub(crate) mod gemm;
 pub mod lr_schedule;
 pub mod mlp_grad;
 pub mod spectral;
-pub mod textured;
 /// Kept under `train` for existing callers: the RNG and fast math are crate-wide modules now.
 pub use crate::{fastmath, rng};
 
