@@ -1,9 +1,11 @@
 //! Neural BRDFs (Sztrajman et al., CGF 2021) for Mitsuba 3: the math and learning core.
 //!
 //! Two layers. Rendering, always built and all that `nbrdf-ffi` links: [`brdf`], [`coords`],
-//! [`merl`], [`network`], [`textured`] (spatially varying materials), [`rgl`], [`spectrum`], [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
-//! Training and analysis (feature `train`, on by default): [`train`], [`analytic`], [`fit`] (the
-//! Blinn-Phong model fit and the sampling lobe searches), [`metrics`], [`latent`] and [`ops`],
+//! [`merl`], [`network`], [`textured`] (spatially varying materials), [`rgl`], [`spectrum`],
+//! [`sampling`], [`source`], [`rng`], [`fastmath`], [`error`].
+//! Training and analysis (feature `train`, on by default): [`train`], [`distillation`] (spatially
+//! varying materials from textured sources), [`analytic`], [`fit`] (the Blinn-Phong model fit and
+//! the sampling lobe searches), [`metrics`], [`latent`] and [`ops`],
 //! what each `nbrdf` command does (the CLI, feature `cli`, only parses and prints). Arrows run
 //! from training to rendering only, and no two modules depend on each other (`tests/layers.rs`).
 //!
@@ -31,6 +33,8 @@ pub mod textured;
 pub mod analytic;
 #[cfg(feature = "train")]
 pub mod fit;
+#[cfg(feature = "train")]
+pub mod distillation;
 #[cfg(feature = "train")]
 pub mod latent;
 #[cfg(feature = "train")]

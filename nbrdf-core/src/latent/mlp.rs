@@ -4,7 +4,7 @@
 //! The layers are the NBRDF's [`Layer`], evaluated by its [`Layer::affine_into`].
 
 use crate::fastmath::Unfused;
-use crate::network::Layer;
+use crate::network::{glorot_uniform, Layer};
 use crate::rng::{SplitMix64, Stream};
 use serde::{Deserialize, Serialize};
 
@@ -21,21 +21,9 @@ impl Mlp {
     /// Glorot-uniform weights, zero biases, deterministic for `(seed, counter)`.
     pub fn new(widths: &[usize], seed: u64, counter: u64) -> Self {
         let mut rng = SplitMix64::new(seed, Stream::Latent, counter);
-        let layers = widths
-            .windows(2)
-            .map(|w| {
-                let a = (6.0 / (w[0] + w[1]) as f64).sqrt();
-                Layer {
-                    inputs: w[0],
-                    outputs: w[1],
-                    weights: (0..w[0] * w[1])
-                        .map(|_| ((rng.next_f64() * 2.0 - 1.0) * a) as f32)
-                        .collect(),
-                    bias: vec![0.0; w[1]],
-                }
-            })
-            .collect();
-        Mlp { layers }
+        Mlp {
+            layers: glorot_uniform(widths, &mut rng),
+        }
     }
 
     pub fn inputs(&self) -> usize {

@@ -289,6 +289,26 @@ const INIT_RANGE: f32 = 0.05;
 pub const INITIALISATION: &str =
     "uniform(-0.05, 0.05) weights in file order, zero biases, splitmix64 stream Init";
 
+/// Dense layers of the given widths (`widths[k]` inputs to layer `k`) with Glorot-uniform
+/// weights `U(-a, a)`, `a = sqrt(6 / (inputs + outputs))`, drawn in file order from `rng`, and
+/// zero biases: the latent-space MLPs' and the spatially varying trainer's initialisation.
+pub fn glorot_uniform(widths: &[usize], rng: &mut SplitMix64) -> Vec<Layer> {
+    widths
+        .windows(2)
+        .map(|w| {
+            let a = (6.0 / (w[0] + w[1]) as f64).sqrt();
+            Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weights: (0..w[0] * w[1])
+                    .map(|_| ((rng.next_f64() * 2.0 - 1.0) * a) as f32)
+                    .collect(),
+                bias: vec![0.0; w[1]],
+            }
+        })
+        .collect()
+}
+
 /// The paper's initialisation of a `6 -> hidden -> hidden -> 3` network: weights
 /// `U(-0.05, 0.05)` drawn in file order from the seed's [`Stream::Init`] stream, biases 0. The
 /// one initialisation of the crate: `nbrdf train` starts from it, so a seed names the weights.

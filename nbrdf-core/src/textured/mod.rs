@@ -26,7 +26,7 @@ mod file_tests;
 mod format;
 mod lobes;
 #[cfg(test)]
-mod sampling_tests;
+pub(crate) mod sampling_tests;
 #[cfg(test)]
 mod tests;
 mod texture;

@@ -47,7 +47,7 @@ fn oracle_lobes(m: &TexturedNbrdf, uv: [f32; 2]) -> Vec<(f64, f64)> {
 }
 
 /// The lobes `(exponent, weight)` of a strategy.
-fn lobes_of(strategy: &SamplingStrategy) -> Vec<(f64, f64)> {
+pub(crate) fn lobes_of(strategy: &SamplingStrategy) -> Vec<(f64, f64)> {
     match *strategy {
         SamplingStrategy::Phong {
             exponent,
@@ -88,7 +88,7 @@ fn the_strategy_is_that_of_the_filtered_lobe_parameters() {
 
 /// Integral of `f` over the upper hemisphere on a polar grid about the normal, `theta =
 /// (pi/2) s^2` (dense near the normal), midpoint rule in `s` and azimuth.
-fn hemisphere_integral(ns: usize, nb: usize, f: impl Fn(Vec3) -> f64) -> f64 {
+pub(crate) fn hemisphere_integral(ns: usize, nb: usize, f: impl Fn(Vec3) -> f64) -> f64 {
     let mut total = 0.0;
     for i in 0..ns {
         let s = (i as f64 + 0.5) / ns as f64;
@@ -138,7 +138,7 @@ fn chi2_quantile(dof: f64, z: f64) -> f64 {
 /// Pearson's chi-square of samples drawn at `uv` and `view` against the pdf, over bins of equal
 /// solid angle (10 in `cos theta`, 16 in azimuth) and one bin for invalid samples; bins expecting
 /// fewer than 5 samples are pooled. The expected counts come from quadrature of the pdf.
-fn chi2_test(m: &TexturedNbrdf, uv: [f32; 2], view: Vec3, samples: usize, seed: u64) {
+pub(crate) fn chi2_test(m: &TexturedNbrdf, uv: [f32; 2], view: Vec3, samples: usize, seed: u64) {
     const NZ: usize = 10;
     const NP: usize = 16;
     const SUB: usize = 12;

@@ -512,18 +512,10 @@ fn loss_and_output_gradient(
         );
         let (err, g) = (&mut s.err[range.clone()], &mut s.g_out[range]);
         for lane in 0..LANES {
-            let (z, t, c) = (z[lane], t[lane], c[lane]);
-            // The evaluator's activation, so that the loss measures the network as saved.
-            let y_raw = fastmath::fast_expm1(z);
-            let y = if clamp_output { y_raw.max(0.0) } else { y_raw };
-            let u = y * c;
-            let d = fastmath::ln_1p(u) - t;
-            err[lane] = d.abs();
+            let (error, slope) = log_space_loss(z[lane], t[lane], c[lane], clamp_output);
+            err[lane] = error;
             if with_gradient {
-                let sign = (d > 0.0) as i32 as f32 - (d < 0.0) as i32 as f32;
-                let slope = (c * (y_raw + 1.0) / (1.0 + u).max(1e-30)).min(1.0);
-                let live = z > fastmath::EXP_ARG_MIN && z < fastmath::EXP_ARG_MAX;
-                g[lane] = if live { sign * slope * scale } else { 0.0 };
+                g[lane] = slope * scale;
             }
         }
     }
@@ -537,6 +529,22 @@ fn loss_and_output_gradient(
         }
     }
     sums.iter().map(|&v| v as f64).sum()
+}
+
+/// The loss of one output, `|ln(1 + y cos) - target|` with `y = e^z - 1` (clamped at 0 with
+/// `clamp_output`), and its derivative in `z` (see [`loss_and_output_gradient`]): the one
+/// definition of the log-space loss, shared by every trainer.
+#[inline(always)]
+pub(crate) fn log_space_loss(z: f32, target: f32, cos: f32, clamp_output: bool) -> (f32, f32) {
+    // The evaluator's activation, so that the loss measures the network as saved.
+    let y_raw = fastmath::fast_expm1(z);
+    let y = if clamp_output { y_raw.max(0.0) } else { y_raw };
+    let u = y * cos;
+    let d = fastmath::ln_1p(u) - target;
+    let sign = (d > 0.0) as i32 as f32 - (d < 0.0) as i32 as f32;
+    let slope = (cos * (y_raw + 1.0) / (1.0 + u).max(1e-30)).min(1.0);
+    let live = z > fastmath::EXP_ARG_MIN && z < fastmath::EXP_ARG_MAX;
+    (d.abs(), if live { sign * slope } else { 0.0 })
 }
 
 /// Channel-major copies of the used output columns, so that the transcendental work runs on
