@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from nbrdf_tools.common import cli
 from nbrdf_tools.common import network as nbrdf_network
 from nbrdf_tools.common.ground_truth import file_hash
-from nbrdf_tools.common.paths import MissingDataError, shared_dir
+from nbrdf_tools.common.paths import MissingDataError, require_shared, shared_dir, shared_path
 
 # The 100 MERL names in alphabetical order are `nbrdf list-materials`; the test set is
 # names[2::5] (fixed here so that scripts need not run the CLI to know it).
@@ -320,3 +321,47 @@ class Artefacts:
 
 
 __all__ = ["MERL_TEST_SET", "VEACH_MERL", "VEACH_RGL", "Material", "Artefacts", "test_split"]
+
+
+def authors_merl() -> Path:
+    """The authors' Keras networks of the MERL materials, in the shared data."""
+    return shared_path("data", "reference-nbrdf", "merl")
+
+
+def train_missing(nbrdf: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
+    """Trains `OUT/NAME.nbrdf.json` for every MERL material not yet there, with `nbrdf train`
+    from the common initialisation (seed 0), then fits its sampling lobe.
+
+    source "sgd": on the table synthesised from the material's SGD fit (runs anywhere).
+    source "authors": on the tabulation of the authors' network of the material (trained by them
+    on the real MERL measurement): the authors' networks are independently initialised, so
+    re-learning them from the common initialisation gives aligned networks of the real
+    materials (needs ../shared/data/reference-nbrdf/merl/).
+    """
+    names = json.loads(cli.run([nbrdf, "list-materials", "--json"]).stdout)
+    if only is not None:
+        names = [e for e in names if e["name"] in only]
+    out.mkdir(parents=True, exist_ok=True)
+    tables = out / "tables"
+    tables.mkdir(exist_ok=True)
+    if source == "authors":
+        require_shared("data", "reference-nbrdf", "merl", what="--source authors: the authors' MERL networks")
+        from nbrdf_mitsuba.import_keras import convert
+    for k, entry in enumerate(names):
+        name = entry["name"]
+        net = out / f"{name}.nbrdf.json"
+        if net.exists():
+            continue
+        table = tables / f"{name}.binary"
+        start = time.perf_counter()
+        if source == "sgd":
+            cli.run([nbrdf, "synth", "--model", "sgd", "--material", name, "-o", table])
+        else:
+            keras = tables / f"{name}.authors.nbrdf.json"
+            convert(authors_merl() / f"{name}.h5", keras)
+            cli.run([nbrdf, "tabulate", keras, "-o", table])
+            keras.unlink()
+        cli.run([nbrdf, "train", table, "-o", net, "--samples", samples, "--name", name])
+        cli.run([nbrdf, "fit-phong", net, "--lobes", "1"])  # one-lobe labels for the predictor
+        table.unlink()  # 35 MB each; the source regenerates it
+        print(f"[{k + 1}/{len(names)}] {name}: {time.perf_counter() - start:.1f} s", flush=True)

@@ -32,7 +32,7 @@ import sys
 from pathlib import Path
 
 from nbrdf_tools.common import cli
-from nbrdf_tools.pages.latent import authors_merl, train_missing
+from nbrdf_tools.common.materials import authors_merl, train_missing
 from nbrdf_tools.common.paths import REPO, MissingDataError, default_cli, default_out, require_shared
 
 MODELS = REPO / "nbrdf-core" / "data" / "models"

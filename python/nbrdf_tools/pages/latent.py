@@ -26,7 +26,6 @@ import argparse
 import json
 import shlex
 import sys
-import time
 from pathlib import Path
 from typing import NamedTuple
 
@@ -34,57 +33,14 @@ import numpy as np
 
 from nbrdf_tools.common import cli, metrics, progress
 from nbrdf_tools.common.network import Layers, forward, lerp, network_input, read_document, read_layers
-from nbrdf_tools.common.paths import MissingDataError, default_cli, default_out, require_shared, shared_path
+from nbrdf_tools.common.materials import authors_merl, train_missing
+from nbrdf_tools.common.paths import MissingDataError, default_cli, default_out, require_shared
 from nbrdf_tools.pages.latent_page import files_of_run, write_measured, write_stored
 
 
 def run(cmd: list) -> str:
     """stdout of a command; a failure raises cli.CommandError with the command's stderr."""
     return cli.run(cmd).stdout
-
-
-def authors_merl() -> Path:
-    """The authors' Keras networks of the MERL materials, in the shared data."""
-    return shared_path("data", "reference-nbrdf", "merl")
-
-
-def train_missing(nbrdf: Path, out: Path, samples: int, source: str = "sgd", only: list[str] | None = None) -> None:
-    """Trains `OUT/NAME.nbrdf.json` for every MERL material not yet there, with `nbrdf train`
-    from the common initialisation (seed 0), then fits its sampling lobe.
-
-    source "sgd": on the table synthesised from the material's SGD fit (runs anywhere).
-    source "authors": on the tabulation of the authors' network of the material (trained by them
-    on the real MERL measurement): the authors' networks are independently initialised, so
-    re-learning them from the common initialisation gives aligned networks of the real
-    materials (needs ../shared/data/reference-nbrdf/merl/).
-    """
-    names = json.loads(run([nbrdf, "list-materials", "--json"]))
-    if only is not None:
-        names = [e for e in names if e["name"] in only]
-    out.mkdir(parents=True, exist_ok=True)
-    tables = out / "tables"
-    tables.mkdir(exist_ok=True)
-    if source == "authors":
-        require_shared("data", "reference-nbrdf", "merl", what="--source authors: the authors' MERL networks")
-        from nbrdf_mitsuba.import_keras import convert
-    for k, entry in enumerate(names):
-        name = entry["name"]
-        net = out / f"{name}.nbrdf.json"
-        if net.exists():
-            continue
-        table = tables / f"{name}.binary"
-        start = time.perf_counter()
-        if source == "sgd":
-            run([nbrdf, "synth", "--model", "sgd", "--material", name, "-o", table])
-        else:
-            keras = tables / f"{name}.authors.nbrdf.json"
-            convert(authors_merl() / f"{name}.h5", keras)
-            run([nbrdf, "tabulate", keras, "-o", table])
-            keras.unlink()
-        run([nbrdf, "train", table, "-o", net, "--samples", samples, "--name", name])
-        run([nbrdf, "fit-phong", net, "--lobes", "1"])  # one-lobe labels for the predictor
-        table.unlink()  # 35 MB each; the source regenerates it
-        print(f"[{k + 1}/{len(names)}] {name}: {time.perf_counter() - start:.1f} s", flush=True)
 
 
 # --- sphere images of networks (the geometry of metrics::render_sphere / latent::sphere) ------
