@@ -111,6 +111,11 @@ def _scene(sensors: str, objects: str, lights) -> str:
 TRAINING_DEFINES = {"fov": "30"}
 
 
+def training_defines() -> list[str]:
+    """The estimate command's ``-D`` arguments for a training scene (:data:`TRAINING_DEFINES`)."""
+    return [arg for key, value in TRAINING_DEFINES.items() for arg in ("-D", f"{key}={value}")]
+
+
 def training_scene_xml(bsdf: str, form: str, views: list[str], lights, resolution: int) -> str:
     """The scene of :func:`scene_xml` with its BSDF ``mat`` where ``form`` puts it
     (:data:`truths.FORMS`) and its field of view a ``-D`` parameter (:data:`TRAINING_DEFINES`);
@@ -297,8 +302,8 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     if result is not None:
         return result
     images = training_images(folder, settings["views"])
-    defines = [arg for key, value in TRAINING_DEFINES.items() for arg in ("-D", f"{key}={value}")]
-    argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out), *defines,
+    argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
+            *training_defines(),
             "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]),
             "--seed", str(settings["seed"]), "-q"]
     start, cpu = time.perf_counter(), time.process_time()
