@@ -10,7 +10,7 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     from nbrdf_tools.pages.estimation import main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
-    argv = ["--quick", "--work", str(work), "--models", "nbrdf,roughplastic", "--out", str(out)]
+    argv = ["--quick", "--set", "tuning", "--work", str(work), "--models", "nbrdf,roughplastic", "--out", str(out)]
     assert main(argv) == 0
     text = out.read_text()
     assert text.startswith("```sh\npython -m nbrdf_tools estimation")
@@ -29,7 +29,7 @@ def test_quick_report_runs_and_resumes(llvm_variant, tmp_path):
     assert stored.stat().st_mtime_ns == before  # resumed, not re-estimated
     assert "| mitsuba-roughplastic | nbrdf |" in out.read_text() and "pull strength" in out.read_text()
     # --stored-only estimates nothing: a model never run is listed as missing.
-    assert main(["--quick", "--work", str(work), "--models", "nbrdf,principled", "--out", str(out),
+    assert main(["--quick", "--set", "tuning", "--work", str(work), "--models", "nbrdf,principled", "--out", str(out),
                  "--stored-only"]) == 0
     assert "Not run (missing from this table): mitsuba-roughplastic principled" in out.read_text()
     assert not (work / "mitsuba-roughplastic" / "principled.result.json").exists()
@@ -45,7 +45,8 @@ def test_every_novel_pair_is_measured_and_old_results_are_remeasured(llvm_varian
     from nbrdf_tools.pages.estimation import NOVEL_PAIRS, main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
-    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
+    argv = ["--quick", "--set", "tuning", "--work", str(work), "--models", "roughplastic", "--out", str(out),
+            "--no-ceiling"]
     assert main(argv) == 0
     folder = work / "mitsuba-roughplastic"
     assert len(NOVEL_PAIRS) == 3
@@ -166,7 +167,8 @@ def test_a_work_folder_of_other_settings_is_refused(llvm_variant, tmp_path):
     from nbrdf_tools.pages.estimation import main
 
     work, out = tmp_path / "work", tmp_path / "estimation.md"
-    argv = ["--quick", "--work", str(work), "--models", "roughplastic", "--out", str(out), "--no-ceiling"]
+    argv = ["--quick", "--set", "tuning", "--work", str(work), "--models", "roughplastic", "--out", str(out),
+            "--no-ceiling"]
     assert main(argv) == 0
     folder = work / "mitsuba-roughplastic"
     before = {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in (".exr", ".xml")}

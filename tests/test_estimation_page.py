@@ -34,7 +34,9 @@ def test_the_page_is_what_its_command_writes(tmp_path):
 def test_the_tables_numbers_are_the_stored_figures():
     stored, text = json.loads(STORED.read_text()), PAGE.read_text()
     figures: dict[tuple[str, str], dict] = {}
-    for r in stored["results"]:
+    for r in stored["results"]:  # the per-model table is the tuning set's (the test set has its own)
+        if r["set"] != "tuning":
+            continue
         figures.setdefault((r["material"], r["model"]), {})[r.get("seed")] = r["rmse_tonemapped"]
     assert len(figures) == 42
     for (material, model), by_seed in figures.items():
@@ -105,3 +107,78 @@ def test_stored_goes_with_stored_only_and_without_work(tmp_path):
         main(["--stored", str(STORED), "--out", str(tmp_path / "x.md")])
     with pytest.raises(SystemExit, match="--stored goes with --stored-only"):
         main(["--stored-only", "--stored", str(STORED), "--work", str(tmp_path)])
+
+
+def headline_row(text, which):
+    """The headline table's row of ``which`` (the first table whose rows open with a set)."""
+    line = next(x for x in text.splitlines() if x.startswith(f"| {which} | "))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def prior_ratios(results):
+    """material -> the prior's mean RMSE over the best analytic model's mean (from stored rows)."""
+    means: dict[tuple[str, str], list] = {}
+    for r in results:
+        means.setdefault((r["material"], r["model"]), []).append(r["rmse_tonemapped"])
+    ratios = {}
+    for material in {m for m, _ in means}:
+        analytic = [statistics.fmean(v) for (m, model), v in means.items()
+                    if m == material and model in ("principled", "roughconductor", "roughplastic")]
+        if (material, "nbrdf") in means and analytic:
+            ratios[material] = statistics.fmean(means[material, "nbrdf"]) / min(analytic)
+    return ratios
+
+
+def test_the_headline_leads_with_the_test_set_and_says_it_is_unmeasured():
+    """Every stored figure is the tuning set's: the headline's test row says so and names no
+    number, the tuning row's ratios are the stored figures', and the test set leads."""
+    stored, text = json.loads(STORED.read_text()), PAGE.read_text()
+    assert {r["set"] for r in stored["results"]} == {"tuning"}
+    assert len(text.splitlines()) < 200
+    assert text.index("## The headline: the test set") < text.index("## The tuning set")
+    assert headline_row(text, "test")[3] == "not measured yet"
+    assert "**The test set has not been measured yet**" in text
+    assert text.index("| test |") < text.index("| tuning |")
+    ratios = prior_ratios(stored["results"])
+    cells = headline_row(text, "tuning")
+    assert cells[1] == str(len(ratios)) == "7"
+    assert cells[3] == f"{statistics.fmean(ratios.values()):.2f}x"
+    assert cells[4] == f"{statistics.median(ratios.values()):.2f}x"
+    worst = max(ratios, key=ratios.get)
+    assert cells[5] == f"{ratios[worst]:.2f}x ({worst})"
+    assert cells[6] == f"{sum(v < 1 for v in ratios.values())} of 7"
+    measured = [v for m, v in ratios.items() if not m.startswith("mitsuba-")]
+    assert cells[7] == f"{statistics.fmean(measured):.2f}x (6)"
+
+
+def test_collecting_a_set_keeps_the_others_stored_figures(tmp_path):
+    """``estimation-seeds --stored FILE`` over test-set folders keeps FILE's tuning figures; the
+    page's test table shows the new ones and the headline computes from them."""
+    stored = tmp_path / "stored.json"
+    stored.write_text(STORED.read_text())
+    settings = json.loads(STORED.read_text())["settings"]
+    work = tmp_path / "seed0"
+    for model, rmse in (("nbrdf", 0.02), ("nbrdf-no-prior", 0.05), ("principled", 0.04), ("roughconductor", 0.025)):
+        folder = work / "merl-chrome-abc"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / f"{model}.result.json").write_text(json.dumps({
+            "material": "merl-chrome-abc", "model": model, "set": "test", "rmse_tonemapped": rmse, "seconds": 60.0,
+            "cpu_seconds": 110.0, "cores": 2, "novel": [{"rmse_tonemapped": rmse}] * 3,
+            "novel_pairs": settings["novel_pairs"], "novel_spp": settings["novel_spp"],
+            "truth_spp": settings["truth_spp"],
+            "settings": {"views": settings["views"], "steps": settings["steps"], "spp": settings["spp"], "seed": 0}}))
+    assert seeds.main(["--work", str(work), "--stored", str(stored)]) == 0
+    collected = json.loads(stored.read_text())
+    assert sorted(collected["sets"]) == ["test", "tuning"]
+    assert [r for r in collected["results"] if r["set"] == "tuning"] == json.loads(STORED.read_text())["results"]
+    assert {r["material"] for r in collected["results"] if r["set"] == "test"} == {"merl-chrome-abc"}
+    out = tmp_path / "page.md"
+    assert main(["--stored-only", "--stored", str(stored), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "has not been measured yet" not in text
+    cells = headline_row(text, "test")
+    assert cells[1:7] == ["1", "0", "0.80x", "0.80x", "0.80x (merl-chrome-abc)", "1 of 1"]
+    (line,) = [x for x in text.splitlines() if x.startswith("| merl-chrome-abc |")]
+    assert "0.0250 (roughconductor)" in line and "| 0.80x | 2.00x |" in line
+    assert text.index("| merl-chrome-abc |") < text.index("## The tuning set")
+    assert "| test | nbrdf | 60-60 | 60 |" in text

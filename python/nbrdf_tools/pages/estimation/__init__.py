@@ -36,24 +36,19 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from nbrdf_tools.common.paths import REPO, default_cli, default_out, shared_dir
+from nbrdf_tools.common.paths import REPO, default_out
+from nbrdf_tools.pages.estimation import truths
+from nbrdf_tools.pages.estimation.truths import MERL, MITSUBA_TRUTH, RGL, dict_to_xml, file_bsdf
 
 MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
 #: The network distilled from the truth's BRDF (not an estimate from images): the ceiling.
 CEILING = "nbrdf-from-truth"
-RGL = ("paper_white", "cc_iris_purple_gem", "cc_ibiza_sunset", "colodur_napoli_4f")
-#: From the autoencoder's test split (its JSON's "split"): the prior never saw these materials.
-MERL = ("green-metallic-paint", "red-specular-plastic")
-#: A Mitsuba BSDF as ground truth (the "any Mitsuba BSDF" case, and the --quick one).
-MITSUBA_TRUTH = {"type": "roughplastic", "alpha": 0.15,
-                 "diffuse_reflectance": {"type": "rgb", "value": [0.6, 0.2, 0.1]}}
 #: Training sensors (origins looking at the sphere) and lights; the novel ones differ from all.
 #: The first ``--views`` are used; the later ones add directions no earlier view covers (the
 #: right side grazed by the first light, the top) and stay away from the novel view.
@@ -87,10 +82,10 @@ def _or(values) -> str:
     return text[0] if len(text) == 1 else ", ".join(text[:-1]) + " or " + text[-1]
 
 
-def sensor(origin: str, resolution: int) -> str:
+def sensor(origin: str, resolution: int, fov: str = "30") -> str:
     return f"""
     <sensor type="perspective">
-        <float name="fov" value="30"/>
+        <float name="fov" value="{fov}"/>
         <transform name="to_world"><lookat origin="{origin}" target="0, 0, 0" up="0, 1, 0"/></transform>
         <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
         <film type="hdrfilm"><integer name="width" value="{resolution}"/><integer name="height" value="{resolution}"/>
@@ -100,72 +95,71 @@ def sensor(origin: str, resolution: int) -> str:
 
 def scene_xml(bsdf: str, views: list[str], lights, resolution: int) -> str:
     """A sphere with BSDF ``mat``, a sensor per view, a point light per light, a dim sky."""
+    return _scene(sensors="".join(sensor(v, resolution) for v in views), objects=f"{bsdf}\n"
+                  '    <shape type="sphere"><ref id="mat"/></shape>', lights=lights)
+
+
+def _scene(sensors: str, objects: str, lights) -> str:
     emitters = "".join(f'\n    <emitter type="point"><point name="position" value="{p}"/>'
                        f'<rgb name="intensity" value="{i}"/></emitter>' for p, i in lights)
     return (f'<scene version="3.0.0">\n    <integrator type="path"><integer name="max_depth" value="3"/></integrator>'
-            f'{"".join(sensor(v, resolution) for v in views)}\n    {bsdf}\n'
-            f'    <shape type="sphere"><ref id="mat"/></shape>{emitters}\n'
+            f'{sensors}\n    {objects}{emitters}\n'
             f'    <emitter type="constant"><rgb name="radiance" value="0.05"/></emitter>\n</scene>\n')
 
 
-def _xml_value(value) -> str:
-    if isinstance(value, dict):
-        return ", ".join(str(v) for v in value["value"])
-    return str(value)
+#: The training scenes' ``-D`` parameter: the sensors' field of view has no default in the file.
+TRAINING_DEFINES = {"fov": "30"}
 
 
-def dict_to_xml(spec: dict) -> str:
-    """A ``<bsdf id="mat">`` element of a flat ``mi.load_dict`` dictionary (rgb, float, string)."""
-    parts = []
-    for key, value in spec.items():
-        if key == "type":
-            continue
-        tag = "rgb" if isinstance(value, dict) else "string" if isinstance(value, str) else "float"
-        parts.append(f'<{tag} name="{key}" value="{_xml_value(value)}"/>')
-    return f'<bsdf type="{spec["type"]}" id="mat">{"".join(parts)}</bsdf>'
+def training_defines() -> list[str]:
+    """The estimate command's ``-D`` arguments for a training scene (:data:`TRAINING_DEFINES`)."""
+    return [arg for key, value in TRAINING_DEFINES.items() for arg in ("-D", f"{key}={value}")]
 
 
-def file_bsdf(kind: str, path: Path) -> str:
-    return f'<bsdf type="{kind}" id="mat"><string name="filename" value="{path}"/></bsdf>'
+def training_scene_xml(bsdf: str, form: str, views: list[str], lights, resolution: int) -> str:
+    """The scene of :func:`scene_xml` with its BSDF ``mat`` where ``form`` puts it
+    (:data:`truths.FORMS`) and its field of view a ``-D`` parameter (:data:`TRAINING_DEFINES`);
+    the images are the plain scene's: the ``shared`` form's second sphere lies inside the first."""
+    objects = {
+        "nested": f'<shape type="sphere">{bsdf}</shape>',
+        "twosided": f'<bsdf type="twosided" id="surface">{bsdf}</bsdf>\n'
+                    '    <shape type="sphere"><ref id="surface"/></shape>',
+        "shared": f'{bsdf}\n    <shape type="sphere"><ref id="mat"/></shape>\n'
+                  '    <shape type="sphere"><float name="radius" value="0.5"/><ref id="mat"/></shape>',
+    }
+    if form not in objects:
+        raise ValueError(f"unknown scene form {form!r} (these are: {', '.join(objects)})")
+    return _scene(sensors="".join(sensor(v, resolution, "$fov") for v in views), objects=objects[form],
+                  lights=lights)
 
 
-def materials(work: Path, quick: bool, names: list[str] | None) -> dict[str, dict]:
-    """name -> {"xml": the truth's <bsdf> element, "dict": its mi.load_dict dictionary}."""
-    found: dict[str, dict] = {}
-    found["mitsuba-roughplastic"] = {"xml": dict_to_xml(MITSUBA_TRUTH), "dict": MITSUBA_TRUTH}
-    if not quick:
-        for name in RGL:
-            path = shared_dir() / "data" / "rgl" / f"{name}_rgb.bsdf"
-            if path.is_file():
-                found[f"rgl-{name}"] = {"xml": file_bsdf("measured", path),
-                                        "dict": {"type": "measured", "filename": str(path)}}
-            else:
-                print(f"skipping rgl-{name}: {path} is absent", file=sys.stderr)
-        for name in MERL:
-            table = work / "tables" / f"{name}.binary"
-            if names and f"merl-{name}" not in names:
-                # Not asked for: named so that --materials can list it, its table not made.
-                found[f"merl-{name}"] = {}
-                continue
-            if not table.is_file():
-                table.parent.mkdir(parents=True, exist_ok=True)
-                subprocess.run([str(default_cli()), "synth", "--model", "sgd", "--material", name, "-o", str(table)],
-                               check=True, capture_output=True)
-            found[f"merl-{name}"] = {"xml": file_bsdf("merl", table), "dict": {"type": "merl", "filename": str(table)}}
+def materials(work: Path, quick: bool, names: list[str] | None, which: str = "test",
+              rgl_files: list[Path] = ()) -> dict[str, dict]:
+    """name -> its truth (:func:`truths.truth`): ``names`` from any set, else the set ``which``
+    (``--quick``: its first Mitsuba truth alone). A shared RGL file that is absent is skipped."""
+    truths.check_rgl_files(list(rgl_files))
+    known = truths.names("all", rgl_files)
     if names:
-        unknown = set(names) - set(found)
+        unknown = [n for n in names if n not in known]
         if unknown:
-            raise SystemExit(f"unknown or unavailable materials: {', '.join(sorted(unknown))} "
-                             f"(these are: {', '.join(found)})")
-        found = {k: v for k, v in found.items() if k in names}
-    return found
+            raise SystemExit(f"unknown materials: {', '.join(unknown)} (these are: {', '.join(known)})")
+        chosen = list(names)
+    else:
+        chosen = truths.names(which, rgl_files)
+        if quick:
+            chosen = [next(n for n in chosen if n.startswith("mitsuba-"))]
+    found = {name: truths.truth(name, work, rgl_files) for name in chosen}
+    missing = [name for name, material in found.items() if material is None]
+    if names and missing:
+        raise SystemExit(f"unavailable materials: {', '.join(missing)}")
+    return {name: material for name, material in found.items() if material is not None}
 
 
-def render_scene(text: str, path: Path, spp: int, prefix: Path) -> list[Path]:
+def render_scene(text: str, path: Path, spp: int, prefix: Path, defines: dict | None = None) -> list[Path]:
     import mitsuba as mi
 
     path.write_text(text)
-    scene = mi.load_file(str(path))
+    scene = mi.load_file(str(path), **(defines or {}))
     outs = []
     for i in range(len(scene.sensors())):
         image = mi.render(scene, sensor=i, spp=spp, seed=1000 + i)
@@ -205,7 +199,7 @@ def novel_spp(settings: dict, who: str) -> int:
 def novel_images(bsdf_xml: str, folder: Path, who: str, settings: dict) -> list[Path]:
     """``who``'s render of every novel pair (``who``: ``truth`` or a model)."""
     paths = []
-    for pair, (view, light) in enumerate(NOVEL_PAIRS):
+    for pair, (view, light) in enumerate(novel_pairs(settings)):
         prefix = folder / f"{novel_prefix(pair)}-{who}"
         (path,) = render_scene(scene_xml(bsdf_xml, [view], [light], settings["resolution"]),
                                prefix.with_name(prefix.name + ".xml"), novel_spp(settings, who),
@@ -228,14 +222,19 @@ def measure_estimate(folder: Path, model: str, estimate: Path, settings: dict) -
     return {**means, "novel": per_pair, **novel_record(settings)}
 
 
-def novel_setup() -> list:
+def novel_pairs(settings: dict | None = None) -> list:
+    """The first ``settings["pairs"]`` of :data:`NOVEL_PAIRS` (``--novel-pairs``; all by default)."""
+    return NOVEL_PAIRS[: (settings or {}).get("pairs") or len(NOVEL_PAIRS)]
+
+
+def novel_setup(settings: dict | None = None) -> list:
     """What a stored result's novel metrics were measured on (remeasured where it changed)."""
-    return [[view, light, intensity] for view, (light, intensity) in NOVEL_PAIRS]
+    return [[view, light, intensity] for view, (light, intensity) in novel_pairs(settings)]
 
 
 def novel_record(settings: dict) -> dict:
     """What the novel renders were: the pairs, the estimates' and the truth's samples."""
-    return {"novel_pairs": novel_setup(), "novel_spp": novel_spp(settings, "estimate"),
+    return {"novel_pairs": novel_setup(settings), "novel_spp": novel_spp(settings, "estimate"),
             "truth_spp": novel_spp(settings, "truth")}
 
 
@@ -279,7 +278,10 @@ def store_result(stored: Path, material: dict, model: str, out: Path, settings: 
     from nbrdf_tools.common.compare_materials import log_error
 
     folder = stored.parent
-    result = {"material": folder.name, "model": model, **extra, "seconds": seconds, "cpu_seconds": cpu_seconds,
+    # The set and the form are the truth's; the cores, what the seconds were measured on.
+    result = {"material": folder.name, "model": model, "set": material.get("set", truths.set_of(folder.name)),
+              "scene_form": material.get("form"), **extra, "seconds": seconds, "cpu_seconds": cpu_seconds,
+              "cores": os.cpu_count(),
               **measure_estimate(folder, model, out, settings),
               "log_error": log_error(mi.load_dict(material["dict"]), mi.load_dict(estimate_bsdf_dict(model, out)),
                                      "uniform", settings["log_samples"])}
@@ -301,6 +303,7 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
         return result
     images = training_images(folder, settings["views"])
     argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
+            *training_defines(),
             "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]),
             "--seed", str(settings["seed"]), "-q"]
     start, cpu = time.perf_counter(), time.process_time()
@@ -361,25 +364,27 @@ def image_side(path: Path) -> int:
 
 
 def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
-    """The truth's training and novel images (once per material; view i's image does not depend
-    on how many views there are)."""
+    """The truth's training images, through the truth's scene form, and its novel images, through
+    the plain scene (once per material; view i's image does not depend on how many views there
+    are, nor on the form)."""
     folder = work / name
     folder.mkdir(parents=True, exist_ok=True)
     side = train_resolution(settings)
+    form = material.get("form", truths.FORMS[0])
+    views = VIEWS[: settings["views"]]
     images = training_images(folder, settings["views"])
     if not all(p.is_file() and image_side(p) == side for p in images):
-        views = VIEWS[: settings["views"]]
-        render_scene(scene_xml(material["xml"], views, LIGHTS, side), folder / "truth.xml",
-                     settings["reference_spp"], folder / "train")
+        render_scene(training_scene_xml(material["xml"], form, views, LIGHTS, side), folder / "truth.xml",
+                     settings["reference_spp"], folder / "train", TRAINING_DEFINES)
     record = folder / "novel-truth.json"
     rendered = json.loads(record.read_text()) if record.is_file() else {}
     if not (measured_as_today(rendered, settings)
-            and all((folder / f"{novel_prefix(pair)}-truth-0.exr").is_file() for pair in range(len(NOVEL_PAIRS)))):
+            and all((folder / f"{novel_prefix(pair)}-truth-0.exr").is_file() for pair in range(len(novel_pairs(settings))))):
         novel_images(material["xml"], folder, "truth", settings)
         record.write_text(json.dumps(novel_record(settings)) + "\n")
     # The estimate's scene: the same as the truth's, its BSDF a placeholder the estimate replaces.
     placeholder = dict_to_xml({"type": "diffuse"})
-    (folder / "train.xml").write_text(scene_xml(placeholder, VIEWS[: settings["views"]], LIGHTS, side))
+    (folder / "train.xml").write_text(training_scene_xml(placeholder, form, views, LIGHTS, side))
 
 
 def figure(results: list[dict], work: Path, path: Path, models: list[str]) -> None:
@@ -489,19 +494,44 @@ def summary(results: list[dict]) -> list[str]:
     return lines
 
 
+def run_headline(results: list[dict], chosen: dict[str, dict]) -> list[str]:
+    """A run page's headline (:mod:`headline`): per set, then per material of each set measured."""
+    from nbrdf_tools.pages.estimation import headline, seeds
+
+    by_set = headline.split_by_set(seeds.by_case(results),
+                                   lambda m: next(r["set"] for r in results if r["material"] == m))
+    lines = ["Per set, the prior's (`nbrdf`) novel-view RMSE over the best analytic model's: the test set's "
+             "truths are the judgement (nothing was chosen on them), the tuning set's are what the defaults were "
+             "chosen on.", "", *headline.table(by_set), ""]
+    for which in truths.SETS:
+        if which in by_set:
+            lines += [f"The {which} set, per material:", "", *headline.material_table(by_set[which]), ""]
+    forms = "; ".join(f"{name}: {material['form']}" for name, material in chosen.items())
+    return [*lines, "Each truth's training images were rendered through its scene form (the marked BSDF "
+            f"nested in its shape, inside a `twosided`, or shared by two shapes; the field of view a `-D` "
+            f"parameter): {forms}."]
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m nbrdf_tools estimation", description=__doc__.split("\n")[0])
     p.add_argument("--out", type=Path,
                    help="the Markdown page (default: WORK/estimation.md; with --stored-only alone: "
                         "docs/results/estimation.md)")
     p.add_argument("--work", type=Path, help=f"working folder (resumable; default: {default_out('estimation')})")
-    p.add_argument("--materials", help="comma-separated subset of the materials")
+    p.add_argument("--set", dest="which", choices=(*truths.SETS, "all"), default="test",
+                   help="the truths: test (default; nothing is chosen on them), tuning (the defaults were chosen "
+                        "on them) or all")
+    p.add_argument("--materials", help="comma-separated materials, of any set (default: every truth of --set)")
+    p.add_argument("--rgl", type=Path, nargs="+", default=[], metavar="FILE",
+                   help="RGL measurements (*_rgb.bsdf) added to the test set as rgl-NAME; none the tuning set holds")
     p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
     p.add_argument("--measure-spp", type=int,
                    help=f"samples per pixel of the estimates' novel renders (the truth's: {TRUTH_SPP_FACTOR}x; "
                         f"default: {FULL['measure_spp']})")
+    p.add_argument("--novel-pairs", type=int, choices=range(1, len(NOVEL_PAIRS) + 1),
+                   metavar=f"1..{len(NOVEL_PAIRS)}", help=f"the first N novel pairs (default: all {len(NOVEL_PAIRS)})")
     p.add_argument("--views", type=int, choices=range(2, len(VIEWS) + 1), metavar=f"2..{len(VIEWS)}",
                    help=f"training views, each an image under both lights (default: {FULL['views']})")
     p.add_argument("--train-resolution", type=int, metavar="N",
@@ -512,7 +542,8 @@ def parser() -> argparse.ArgumentParser:
                    help="the estimates' seed (default: 0); the training and novel images do not depend on it")
     p.add_argument("--no-ceiling", action="store_true",
                    help=f"leave out {CEILING}, the network distilled from the truth's BRDF (the estimates' ceiling)")
-    p.add_argument("--quick", action="store_true", help="a tiny run for tests (16x16, 3 steps, one material)")
+    p.add_argument("--quick", action="store_true",
+                   help="a tiny run for tests (16x16, 3 steps, the set's first Mitsuba truth)")
     p.add_argument("--stored-only", action="store_true",
                    help="estimate nothing: without --work, write the results page from the stored figures "
                         "(--stored); with --work, tabulate the results stored there and list the cases missing")
@@ -550,6 +581,8 @@ def main(argv: list[str] | None = None) -> int:
     settings.update(given_counts(args, ("steps", "spp", "measure_spp", "train_resolution")))
     if args.views:
         settings["views"] = args.views
+    if args.novel_pairs:
+        settings["pairs"] = args.novel_pairs
     settings["seed"] = args.seed
     models = [m for m in args.models.split(",") if m]
     bad = set(models) - set(MODELS)
@@ -557,7 +590,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"unknown models: {', '.join(sorted(bad))} (these are: {', '.join(MODELS)})")
     work = args.work or default_out("estimation")
     work.mkdir(parents=True, exist_ok=True)
-    chosen = materials(work, args.quick, args.materials.split(",") if args.materials else None)
+    chosen = materials(work, args.quick, args.materials.split(",") if args.materials else None, args.which,
+                       args.rgl)
     results, missing = [], []
     columns = models + ([] if args.no_ceiling else [CEILING])
     for name, material in chosen.items():
@@ -569,6 +603,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             result = (run_ceiling(name, material, settings, work) if model == CEILING
                       else run_case(name, material, model, settings, work))
+            result.setdefault("set", material["set"])  # stored before results recorded it
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
             results.append(result)
@@ -585,11 +620,12 @@ def main(argv: list[str] | None = None) -> int:
              f"{settings['resolution']}) under {len(LIGHTS)} point lights and a dim sky; every model "
              f"fitted to the same images by `python -m nbrdf_mitsuba.estimate` ({settings['steps']} steps, "
              f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on "
-             f"{len(NOVEL_PAIRS)} novel views, each under its own novel light (the image metrics are means over "
+             f"{len(novel_pairs(settings))} novel views, each under its own novel light (the image metrics are means over "
              "the pairs), and in "
              f"BRDF space (mean |ln(1 + f cos) - ln(1 + f' cos)|, {settings['log_samples']} uniform pairs). "
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
+             *run_headline(results, chosen), "",
              *table(results, models), "", *summary(results), "",
              *([] if args.no_ceiling else [
                  f"`{CEILING}` is no estimate: the same isotropic 675-weight network distilled from the truth's BRDF "
@@ -609,7 +645,7 @@ def main(argv: list[str] | None = None) -> int:
              "Every model gets the same images and the same number of steps; a step of an analytic model costs "
              "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
              "estimate of a run includes compiling Mitsuba's kernels for the network (cached afterwards). Novel "
-             "pairs (view; light): " + "; ".join(f"({v}; {light} at {i:g})" for v, (light, i) in NOVEL_PAIRS)
+             "pairs (view; light): " + "; ".join(f"({v}; {light} at {i:g})" for v, (light, i) in novel_pairs(settings))
              + ", no view and no light any training image used; the estimates' novel renders take "
              f"{novel_spp(settings, 'estimate')} spp, the truth's {novel_spp(settings, 'truth')}, and the errors "
              "hold their Monte Carlo noise.", "",
@@ -619,4 +655,4 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-__all__ = ["main", "MODELS", "REPO"]
+__all__ = ["main", "MODELS", "REPO", "MERL", "MITSUBA_TRUTH", "RGL", "dict_to_xml", "file_bsdf"]

@@ -71,7 +71,8 @@ def run_curve(name: str, model: str, settings: dict, checkpoints: list[int], wor
 
     out = folder / f"convergence-{model}-{steps}{'.nbrdf.json' if model.startswith('nbrdf') else '.json'}"
     argv = [str(folder / "train.xml"), "--images", *map(str, report.training_images(folder, settings["views"])),
-            "--bsdf-id", "mat", "-o", str(out), "--model", model, "--steps", str(steps), "--spp", str(settings["spp"]), "-q"]
+            "--bsdf-id", "mat", "-o", str(out), *report.training_defines(), "--model", model, "--steps", str(steps),
+            "--spp", str(settings["spp"]), "-q"]
     start, cpu = time.perf_counter(), time.process_time()
     estimate.estimate(estimate.parser().parse_args(argv), on_step)
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu

@@ -23,13 +23,13 @@ import numpy as np
 
 from nbrdf_tools.common.paths import REPO
 from nbrdf_tools.pages import estimation as report
-from nbrdf_tools.pages.estimation import seeds
+from nbrdf_tools.pages.estimation import headline, seeds, truths
 
 #: The page and its stored figures, relative to the repository (the page's opening command).
 PAGE = "docs/results/estimation.md"
 STORED = "docs/results/estimation/stored.json"
 #: What a stored result keeps of a work folder's result besides material, model and seed.
-METRICS = ("rmse_tonemapped", "rmse_per_pair", "ssim", "flip_hdr", "log_error", "seconds", "cpu_seconds")
+METRICS = ("rmse_tonemapped", "rmse_per_pair", "ssim", "flip_hdr", "log_error", "seconds", "cpu_seconds", "cores")
 
 
 def default_stored() -> Path:
@@ -38,7 +38,7 @@ def default_stored() -> Path:
 
 def load(path: Path) -> dict:
     stored = json.loads(path.read_text())
-    missing = {"settings", "results"} - set(stored)
+    missing = {"sets", "settings", "results"} - set(stored)
     if missing:
         raise SystemExit(f"{path}: not a stored estimation file (no {', '.join(sorted(missing))})")
     return stored
@@ -94,31 +94,40 @@ def from_results(results: list[dict], works: list[Path]) -> dict:
         if case in seen:  # the ceiling, distilled once without a seed, may be in several folders
             continue
         seen.add(case)
-        row = {"material": r["material"], "model": r["model"]}
+        row = {"material": r["material"], "model": r["model"], "set": r.get("set", truths.set_of(r["material"]))}
         if seeds.seed_of(r) is not None:
             row["seed"] = seeds.seed_of(r)
         if r.get("novel"):
             r = {**r, "rmse_per_pair": [pair["rmse_tonemapped"] for pair in r["novel"]]}
         rows.append({**row, **{k: r[k] for k in METRICS if k in r}})
     first = min((seeds.seed_of(r) for r in results if seeds.seed_of(r) is not None), default=0)
-    return {"about": f"collected by python -m nbrdf_tools estimation-seeds from {', '.join(map(str, works))}.",
-            "date": datetime.date.today().isoformat(), "figure": {"path": "images/estimation.png", "seed": first},
-            "notes": [],
-            "settings": stored_settings, "results": rows}
+    about = {"about": f"collected by python -m nbrdf_tools estimation-seeds from {', '.join(map(str, works))}.",
+             "date": datetime.date.today().isoformat(), "notes": []}
+    return {"sets": {which: dict(about) for which in truths.SETS if any(r["set"] == which for r in rows)},
+            "figure": {"path": "images/estimation.png", "seed": first}, "settings": stored_settings, "results": rows}
+
+
+def merged(earlier: dict, collected: dict) -> dict:
+    """``collected`` (:func:`from_results`) with ``earlier``'s results and record of every set it
+    has none of, so that measuring one set keeps the other's figures; refused where the two were
+    measured under other settings (the page has one setup)."""
+    def same(settings: dict) -> dict:
+        return {k: v for k, v in settings.items() if k != "machine"}
+
+    kept = [which for which in earlier["sets"] if which not in collected["sets"]]
+    if kept and same(earlier["settings"]) != same(collected["settings"]):
+        raise SystemExit(f"the stored {', '.join(kept)} set's figures were measured with {same(earlier['settings'])}, "
+                         f"the folders' with {same(collected['settings'])}: measure every set alike")
+    sets = {which: earlier["sets"][which] if which in kept else collected["sets"][which]
+            for which in truths.SETS if which in kept or which in collected["sets"]}
+    results = [r for r in earlier["results"] if r["set"] in kept] + collected["results"]
+    figure = earlier["figure"] if "tuning" in kept else collected["figure"]
+    return {**collected, "sets": sets, "figure": figure, "results": results}
 
 
 def seed_list(values: dict) -> str:
     """A case's seeds as ranges (``0-5``, ``0-2, 4``); ``-`` for the ceiling, which has none."""
-    found = sorted(s for s in values if s is not None)
-    if not found:
-        return "-"
-    runs: list[list[int]] = []
-    for seed in found:
-        if runs and seed == runs[-1][1] + 1:
-            runs[-1][1] = seed
-        else:
-            runs.append([seed, seed])
-    return ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+    return headline.seed_list(s for s in values if s is not None)
 
 
 def best_analytic(cases: dict, material: str) -> float | None:
@@ -151,34 +160,71 @@ def table(cases: dict) -> list[str]:
 
 
 def seconds(results: list[dict]) -> list[str]:
-    """Per model, the wall and CPU seconds of its estimates (the ceiling: its distillation)."""
+    """Per set and model, the wall and CPU seconds of its estimates (the ceiling: its
+    distillation), and the cores they ran on (where recorded)."""
     timed = [r for r in results if "seconds" in r]
-    lines = ["| model | wall seconds | CPU seconds | runs |", "|---|---|---|---|"]
-    for model in [*report.MODELS, report.CEILING]:
-        rows = [r for r in timed if r["model"] == model]
-        if rows:
-            wall, cpu = [r["seconds"] for r in rows], [r["cpu_seconds"] for r in rows]
-            lines.append(f"| {model} | {min(wall):.0f}-{max(wall):.0f} | {min(cpu):.0f}-{max(cpu):.0f} | {len(rows)} |")
+    lines = ["| set | model | wall seconds | median wall seconds | CPU seconds | runs | cores |",
+             "|---|---|---|---|---|---|---|"]
+    for which in truths.SETS:
+        for model in [*report.MODELS, report.CEILING]:
+            rows = [r for r in timed if r["model"] == model and r["set"] == which]
+            if rows:
+                wall, cpu = [r["seconds"] for r in rows], [r["cpu_seconds"] for r in rows]
+                cores = sorted({r["cores"] for r in rows if "cores" in r})
+                lines.append(f"| {which} | {model} | {min(wall):.0f}-{max(wall):.0f} | {np.median(wall):.0f} | "
+                             f"{min(cpu):.0f}-{max(cpu):.0f} | {len(rows)} | {', '.join(map(str, cores)) or '-'} |")
     return lines
+
+
+def test_set_unmeasured() -> list[str]:
+    """What the page says while no test-set figure is stored: the truths, and how to measure them."""
+    merl = ", ".join(f"{m} ({fit.upper()})" for m, fit, _ in truths.TEST_MERL)
+    mitsuba = ", ".join(f"`{name}`" for name in truths.TEST_MITSUBA)
+    return [f"**The test set has not been measured yet**: every figure on this page is the tuning set's. Its "
+            f"{len(truths.heldout_names())} truths: {mitsuba}; the MERL tables of {merl}; and any RGL "
+            "measurement given with `--rgl`. Measure it with the commands under "
+            "[Measuring again](#measuring-again)."]
 
 
 def render(stored: dict, stored_arg: str | None) -> str:
     s = stored["settings"]
     results = results_of(stored)
     cases = seeds.by_case(results)
-    timed_seeds = sorted({seeds.seed_of(r) for r in results if "seconds" in r} - {None})
+    by_set = headline.split_by_set(cases, lambda m: next(r["set"] for r in results if r["material"] == m))
+    tuning = [r for r in results if r["set"] == "tuning"]
+    tuning_cases = by_set.get("tuning", {})
+    timed_seeds = sorted({seeds.seed_of(r) for r in tuning if "seconds" in r} - {None})
     figure = stored["figure"]
     side = s.get("train_resolution", s["resolution"])
     command = "python -m nbrdf_tools estimation --stored-only" + (f" --stored {stored_arg}" if stored_arg else "")
     pairs = "; ".join(f"({view}; {light} at {intensity:g})" for view, light, intensity in s["novel_pairs"])
+    stored_link = f"[{Path(STORED).relative_to('docs/results')}]({Path(STORED).relative_to('docs/results')})"
+
+    def record(which: str) -> str:
+        found = stored["sets"].get(which)
+        return f"({found['date']}): {found['about']}" if found else "(none)"
+
+    def notes(which: str) -> list[str]:
+        found = [f"* {note}" for note in stored["sets"].get(which, {}).get("notes", [])]
+        return [*found, ""] if found else []
+
+    test = ([f"The test set's figures {record('test')}", "", *headline.material_table(by_set["test"]), "",
+             *notes("test")] if "test" in by_set else [*test_set_unmeasured(), ""])
     lines = [
         "```sh", f"{command} --out {PAGE}", "```", "",
         "# Material estimation from images", "",
         "How well `python -m nbrdf_mitsuba.estimate` ([estimation.md](../estimation.md)) recovers a material "
         "from a few images: every model fitted to the same images of a sphere, each estimate judged on views "
-        "and lights that no image showed. This page is written from the figures stored in "
-        f"[{Path(STORED).relative_to('docs/results')}]({Path(STORED).relative_to('docs/results')}) "
-        f"({stored['date']}): {stored['about']}", "",
+        "and lights that no image showed. The truths are split once "
+        "([how estimation is judged](../estimation.md#how-estimation-is-judged)): the **test set** is the "
+        "judgement, nothing was chosen on it; the **tuning set** is what the estimator's defaults were chosen on, "
+        f"so its figures flatter it. This page is written from the figures stored in {stored_link}.", "",
+        "## The headline: the test set", "",
+        "Per material, the prior's (`nbrdf`) mean novel-view RMSE over its seeds divided by the best analytic "
+        "model's mean; per set, the mean, median and worst of these ratios, the wins (ratios below 1), the "
+        "mean over the measured materials alone (RGL, MERL) and the same mean for the network without the "
+        "prior.", "",
+        *headline.table(by_set), "", *test,
         "## Setup", "",
         f"A sphere, {s['views']} training views ({side}x{side}, {s['reference_spp']} spp references) under "
         f"{len(s['lights'])} point lights and a dim sky. Every model is fitted to the same images: "
@@ -187,41 +233,43 @@ def render(stored: dict, stored_arg: str | None) -> str:
         f"novel (view; light) pairs, {pairs}, {s['resolution']}x{s['resolution']} at {s['novel_spp']} spp against "
         f"the truth's {s['truth_spp']} (at 128 spp the renders' own noise was most of the ceiling's error on the "
         "MERL truths). The error is the RMSE of the tone-mapped images (`x^(1/2.2)`), the mean over the pairs.", "",
-        "The truths: the four shared RGL measurements (`rgl-`), two MERL tables of the autoencoder's test split, "
-        "which the prior never saw (`merl-`), and a `roughplastic` (`mitsuba-`). The models: `nbrdf` (the prior), "
+        "The models: `nbrdf` (the prior), "
         "`nbrdf-no-prior` (the same network from the common initialisation), and the analytic `principled`, "
         f"`roughconductor` and `roughplastic`. `{report.CEILING}` is no estimate: the same network distilled from "
         "the truth's BRDF, not from images; its error is what the network's form leaves. "
         f"Machine: {s['machine']}.", "",
-        "## Results over seeds", "",
+        "## The tuning set: results over seeds", "",
+        "The tuning set's truths: the four shared RGL measurements (`rgl-`), two MERL tables of the "
+        "autoencoder's test split, which the prior never saw (`merl-`), and a `roughplastic` (`mitsuba-`). "
+        f"Its figures {record('tuning')}", "",
         "Novel-view RMSE of each material and model over the seeds it was measured at: the mean, the sample "
         "standard deviation (sd), the range, the mean over the best analytic model's mean, and at how many of "
         "the seeds both were measured at the prior's RMSE is lower than this model's. The stored figures have "
         "four decimals, so ratios of the smallest errors carry a few percent of rounding.", "",
-        *table(cases), "",
-        *[f"* {note}" for note in stored.get("notes", [])], *([""] if stored.get("notes") else []),
+        *table(tuning_cases), "",
+        *notes("tuning"),
         f"![truth and every estimate at seed {figure['seed']}, the first novel pair]({figure['path']})",
         "",
+        "From the means over seeds:", "",
+        *report.summary(seeds.mean_results(tuning_cases)), "",
         "## Seconds per estimate", "",
-        "Wall and CPU seconds of each estimate at seed " + ", ".join(map(str, timed_seeds))
-        + f", over the materials. Every model runs the same {s['steps']} steps; a step of an analytic model "
+        "Wall and CPU seconds of each estimate (the tuning set's at seed " + ", ".join(map(str, timed_seeds))
+        + f"), over the materials. Every model runs the same {s['steps']} steps; a step of an analytic model "
         "costs a fraction of a network's, and the prior runs more phases than the network without it. The first "
         "network estimate of a run includes compiling Mitsuba's kernels (cached afterwards).", "",
         *seconds(results), "",
-        "## What wins where", "",
-        "From the means over seeds:", "",
-        *report.summary(seeds.mean_results(cases)), "",
         "## Measuring again", "",
-        "One report run per seed, each in its own work folder (resumable), the folders collected into the "
-        "stored file, then this page:", "",
+        "One report run per set and seed, each in its own work folder (resumable), the folders collected into "
+        "the stored file (a set the folders hold none of keeps its stored figures), then this page:", "",
         "```sh",
-        "python -m nbrdf_tools estimation --work out/estimation-seed0 --seed 0  # and so on for each seed",
-        "python -m nbrdf_tools estimation-seeds --work out/estimation-seed0 out/estimation-seed1 ... "
-        f"--stored {STORED}",
+        "python -m nbrdf_tools estimation --set test --work out/estimation-test-seed0 --seed 0  # and seeds 1, 2",
+        "python -m nbrdf_tools estimation-seeds --work out/estimation-test-seed0 out/estimation-test-seed1 "
+        f"out/estimation-test-seed2 --stored {STORED}",
         f"python -m nbrdf_tools estimation --stored-only --out {PAGE}",
         "```", "",
-        "A run's own page (`WORK/estimation.md`) adds SSIM, HDR-FLIP, the BRDF log error and the candidates "
-        "the prior chose; the figure is that run's (`WORK/images/estimation.png`).", ""]
+        "`--set tuning` measures the tuning set the same way. A run's own page (`WORK/estimation.md`) adds "
+        "SSIM, HDR-FLIP, the BRDF log error and the candidates the prior chose; the figure is that run's "
+        "(`WORK/images/estimation.png`).", ""]
     return "\n".join(lines)
 
 

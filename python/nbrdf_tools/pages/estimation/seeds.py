@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from nbrdf_tools.pages import estimation as report
+from nbrdf_tools.pages.estimation import truths
 
 
 def stored_results(work: Path) -> list[dict]:
@@ -64,9 +65,9 @@ def comparable(results: list[dict]) -> None:
 
 
 def report_order(case: tuple[str, str]) -> tuple:
-    """The report's order: its materials (the Mitsuba truth, RGL, MERL), then any other by name;
-    within a material its models, the ceiling last."""
-    materials = ["mitsuba-roughplastic", *(f"rgl-{n}" for n in report.RGL), *(f"merl-{n}" for n in report.MERL)]
+    """The report's order: its truths (the test set's, then the tuning set's), then any other by
+    name; within a material its models, the ceiling last."""
+    materials = truths.names("all")
     models = [*report.MODELS, report.CEILING]
     material, model = case
     return (materials.index(material) if material in materials else len(materials), material,
@@ -113,7 +114,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--stored", type=Path, metavar="FILE",
                    help="also write the folders' results as the stored figures the results page is written from "
                         "(python -m nbrdf_tools estimation --stored-only; the checked-in file is "
-                        "docs/results/estimation/stored.json)")
+                        "docs/results/estimation/stored.json); where FILE exists, the figures of a set (test, "
+                        "tuning) the folders hold none of are kept")
     return p
 
 
@@ -142,7 +144,10 @@ def main(argv: list[str] | None = None) -> int:
         from nbrdf_tools.pages.estimation import page
 
         args.stored.parent.mkdir(parents=True, exist_ok=True)
-        args.stored.write_text(page.dump(page.from_results(results, args.work)))
+        collected = page.from_results(results, args.work)
+        if args.stored.is_file():  # the other set's stored figures stay
+            collected = page.merged(page.load(args.stored), collected)
+        args.stored.write_text(page.dump(collected))
         print(f"wrote {args.stored}")
     if args.out:
         args.out.write_text(text)
