@@ -32,9 +32,9 @@ pub mod textured;
 #[cfg(feature = "train")]
 pub mod analytic;
 #[cfg(feature = "train")]
-pub mod fit;
-#[cfg(feature = "train")]
 pub mod distillation;
+#[cfg(feature = "train")]
+pub mod fit;
 #[cfg(feature = "train")]
 pub mod latent;
 #[cfg(feature = "train")]
