@@ -1,5 +1,5 @@
 //! Distilling a textured source into a spatially varying material ([`crate::textured`],
-//! docs/design.md section 14, "Distillation"), after Zeltner et al. 2023: the cost does not grow
+//! docs/textured.md, "Distillation"), after Zeltner et al. 2023: the cost does not grow
 //! with the texture's size.
 //!
 //! Each texel of the source has `P` parameters (every texture its BSDF reads, at that texel).

@@ -1,5 +1,5 @@
 //! Importance sampling of a spatially varying material: per texel, Blinn-Phong lobe parameters
-//! baked into extra texture channels (docs/design.md section 14). At a hit they are filtered
+//! baked into extra texture channels (docs/textured.md). At a hit they are filtered
 //! like the latent code, into one [`SamplingStrategy`] (a Blinn-Phong or two-lobe mixture with
 //! cosine) that both `sample` and `pdf` use, so the pdf is that strategy's exact density.
 //! Parameters outside their range, beyond float32 rounding, give cosine sampling.

@@ -2,7 +2,7 @@
 //! Models"; Kuznetsov et al. 2021, NeuMIP): one decoder MLP per material reads a latent code of
 //! `C` channels, looked up in a texture at the hit's UV, together with the six direction
 //! features of the homogeneous network, and gives `f_r` in RGB. Sampling reads Blinn-Phong lobe
-//! parameters baked into extra channels of the same texture (docs/design.md section 14; the
+//! parameters baked into extra channels of the same texture (docs/textured.md; the
 //! files: docs/formats.md).
 //!
 //! * `texture.rs`: the texture ([`LatentTexture`]) and its lookup ([`UvMapping`]: `to_uv`,

@@ -1,5 +1,5 @@
 //! The texture lookup and the decoder against float64 oracles written here from the definitions
-//! (docs/design.md section 14), batches against single hits, bad texels and extreme UVs.
+//! (docs/textured.md), batches against single hits, bad texels and extreme UVs.
 //! Validation and files: `file_tests.rs`; sampling: `sampling_tests.rs`.
 
 use super::*;

@@ -1,5 +1,5 @@
-//! The latent texture and its lookup, as Mitsuba's `bitmap` texture does it (docs/design.md
-//! section 14): the hit's UV through `to_uv`, then the wrap mode, then nearest or bilinear
+//! The latent texture and its lookup, as Mitsuba's `bitmap` texture does it (docs/textured.md,
+//! "Lookup"): the hit's UV through `to_uv`, then the wrap mode, then nearest or bilinear
 //! filtering between texel centres at `(i + 1/2) / width`. Positions are rounded to float32 once,
 //! like Dr.Jit's `fmadd(uv, resolution, -1/2)`, and texel indices are wrapped in float64, so a
 //! UV of any finite size reads some texel instead of overflowing an integer.
