@@ -21,6 +21,7 @@ GROUPS = {
                                    "the estimation report's loss curves"),
         "fidelity": ("nbrdf_tools.pages.fidelity", "NBRDFs against analytic fits and the measurement"),
         "latent": ("nbrdf_tools.pages.latent", "the latent space of materials"),
+        "neural-textures": ("nbrdf_tools.pages.neural_textures", "textured BSDFs as a decoder and a latent texture"),
         "performance": ("nbrdf_tools.pages.performance", "speed, rays per second, many materials"),
         "rgl-training": ("nbrdf_tools.pages.rgl_training", "training NBRDFs from RGL measurements directly"),
         "sampling": ("nbrdf_tools.pages.sampling", "sampling variance: cosine, one lobe, two lobes"),
