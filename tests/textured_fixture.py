@@ -258,3 +258,62 @@ def pdf_oracle(material: Textured, uv, view, light) -> np.ndarray:
     v = view / np.linalg.norm(view, axis=0)
     pdf = w1 * lobe_density(view, light, n1) + w2 * lobe_density(view, light, n2) + (1 - w1 - w2) * l[2] / np.pi
     return np.where((l[2] > 0) & (v[2] > 0), pdf, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# A chi^2 goodness-of-fit test of sampled directions against a density (for scalar variants,
+# where Mitsuba's mitsuba.chi2 cannot run: it works on Dr.Jit arrays)
+
+
+def chi2_pvalue(light: np.ndarray, valid: np.ndarray, density, z_bins: int = 8, phi_bins: int = 16,
+                refine: int = 24) -> float:
+    """The p-value of the hypothesis that the sampled directions ``light`` (3, n) with
+    ``valid`` (n,) (false: an invalid sample, pdf 0) come from ``density(light (3, m)) -> pdf
+    (m,)`` (per unit solid angle, on the upper hemisphere). Bins are equal in ``cos theta`` and
+    ``phi`` (equal solid angle), each bin's probability integrated by the midpoint rule on a
+    ``refine x refine`` grid; invalid samples fall in one more bin, whose probability is what
+    the density leaves off the hemisphere. Bins expected to hold fewer than 5 samples are pooled,
+    as Mitsuba's ChiSquareTest does."""
+    from scipy import stats
+
+    n = light.shape[1]
+    l = light[:, valid] / np.linalg.norm(light[:, valid], axis=0)
+    z_index = np.clip((l[2] * z_bins).astype(int), 0, z_bins - 1)
+    phi_index = np.clip(((np.arctan2(l[1], l[0]) + np.pi) / (2 * np.pi) * phi_bins).astype(int), 0, phi_bins - 1)
+    observed = np.bincount(z_index * phi_bins + phi_index, minlength=z_bins * phi_bins).astype(float)
+    t = (np.arange(refine) + 0.5) / refine
+    z = ((np.arange(z_bins)[:, None] + t[None]) / z_bins).ravel()
+    phi = ((np.arange(phi_bins)[:, None] + t[None]) / phi_bins * 2 * np.pi - np.pi).ravel()
+    Z, P = np.meshgrid(z, phi, indexing="ij")
+    s = np.sqrt(np.maximum(1 - Z**2, 0))
+    pdf = density(np.stack([s * np.cos(P), s * np.sin(P), Z]).reshape(3, -1)).reshape(Z.shape)
+    cell = (1.0 / (z_bins * refine)) * (2 * np.pi / (phi_bins * refine))
+    mass = (pdf * cell).reshape(z_bins, refine, phi_bins, refine).sum(axis=(1, 3)).ravel()
+    observed = np.append(observed, n - valid.sum())
+    expected = np.append(mass, max(1.0 - mass.sum(), 0.0)) * n
+    order = np.argsort(expected)
+    small = np.cumsum(expected[order]) < 5
+    pooled_observed = np.append(observed[order][~small], observed[order][small].sum())
+    pooled_expected = np.append(expected[order][~small], expected[order][small].sum())
+    keep = pooled_expected > 0
+    if np.any(pooled_observed[~keep] > 0):
+        return 0.0  # samples where the density says there are none
+    statistic = np.sum((pooled_observed[keep] - pooled_expected[keep]) ** 2 / pooled_expected[keep])
+    return float(stats.chi2.sf(statistic, keep.sum() - 1))
+
+
+def render(path: Path, seed: int = 0, spp: int = 4, size: int = 8, **bsdf) -> np.ndarray:
+    """A small render of a sphere (its UVs cover the texture) with the material at ``path``
+    under a constant environment, in the current variant. The box filter keeps each sample in
+    its pixel, so that a scalar variant's threads cannot change the order of a pixel's sums."""
+    scene = mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 3},
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 1, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "light": {"type": "constant"},
+        "sphere": {"type": "sphere", "bsdf": {"type": "nbrdf", "filename": str(path), **bsdf}},
+    })
+    return np.asarray(mi.render(scene, seed=seed), dtype=np.float64)
