@@ -14,7 +14,8 @@ from conftest import bsdf_calls, use_variant
 from nbrdf_testing import f32, grazing_pairs, random_pairs, sph
 from test_backends import veach_like
 from test_textured_plugin import SKEW, TEXELS, _moderate_lobes, column, hits
-from textured_fixture import lobe_parameters, random_texture, render, write_textured
+from textured_fixture import (eval_oracle, lobe_parameters, pdf_oracle, random_decoder, random_texture, render,
+                              write_textured)
 
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])  # Mitsuba's luminance (tests/test_variants.py)
 
@@ -200,3 +201,102 @@ def test_renders_of_both_backends_match(llvm_variant, tmp_path):
     a, b = images["rust"], images["jit"]
     assert np.all(np.isfinite(b)) and a.mean() > 0
     assert np.abs(a - b).mean() <= 1e-3 * a.mean(), (np.abs(a - b).mean(), a.mean())
+
+
+# ---------------------------------------------------------------------------------------------
+# traverse, updates and gradients
+
+
+def _layers_of(flat: np.ndarray, layers: list) -> list:
+    out, offset = [], 0
+    for W, b in layers:
+        out.append((flat[offset:offset + W.size].reshape(W.shape), flat[offset + W.size:offset + W.size + b.size]))
+        offset += W.size + b.size
+    return out
+
+
+def test_traverse_exposes_the_texture_and_the_decoder(llvm_variant, tmp_path):
+    material = write_textured(tmp_path / "m.nbrdf.json", texture=random_texture(5, 4, 3, 2), lobes=2)
+    for jit_weights, differentiable in (("auto", False), ("opaque", True)):
+        params = mi.traverse(mi.load_dict({"type": "nbrdf", "filename": str(material.path), "jit_weights": jit_weights}))
+        assert set(params.keys()) == {"latent", "lobes", "weights"}
+        np.testing.assert_array_equal(np.array(params["latent"]), material.texture[..., :3])
+        np.testing.assert_array_equal(np.array(params["lobes"]), material.texture[..., 3:])
+        flat = np.concatenate([np.concatenate([W.ravel(), b]) for W, b in material.layers])
+        np.testing.assert_array_equal(np.array(params["weights"]), flat)
+        fixed = {key: bool(params.flags(key) & mi.ParamFlags.NonDifferentiable) for key in params.keys()}
+        assert fixed == {"latent": False, "lobes": True, "weights": not differentiable}
+    rust = mi.load_dict({"type": "nbrdf", "filename": str(material.path), "backend": "rust"})
+    assert len(mi.traverse(rust).keys()) == 0  # the library's material is immutable
+
+
+def test_updates_reach_the_kernels_and_bad_ones_are_refused(llvm_variant, tmp_path):
+    """New codes, lobes and weights evaluate as the oracle of the updated material; a wrong shape
+    or a non-finite value is refused naming what is wrong, and the BSDF keeps its last good
+    parameters (in the traversed values too)."""
+    material = write_textured(tmp_path / "m.nbrdf.json", texture=random_texture(5, 4, 3, 1), lobes=1)
+    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(material.path)})
+    params = mi.traverse(bsdf)
+    view, light, u = _queries(200, 41)
+    uv = hits(view.shape[1], 42, huge=False)
+
+    def agrees():
+        got = bsdf_calls(bsdf, view, light, u, uv=uv)
+        np.testing.assert_allclose(got["eval"], eval_oracle(material, uv, view, light), rtol=3e-6, atol=1e-6)
+        np.testing.assert_allclose(got["pdf"], pdf_oracle(material, uv, view, light), rtol=1e-4, atol=1e-6)
+
+    rng = np.random.default_rng(43)
+    material.texture = random_texture(5, 4, 3, 1, seed=44)
+    flat = np.array(params["weights"]) * rng.uniform(0.8, 1.2, dr.width(params["weights"])).astype(np.float32)
+    material.layers = _layers_of(flat, material.layers)
+    params["latent"] = mi.TensorXf(material.texture[..., :3])
+    params["lobes"] = mi.TensorXf(material.texture[..., 3:])
+    params["weights"] = mi.Float(flat)
+    params.update()
+    agrees()
+    bad_updates = [
+        ("latent", mi.TensorXf(np.zeros((4, 6, 3), np.float32)), r'"latent" has shape \(4, 6, 3\), expected \(4, 5, 3\)'),
+        ("lobes", mi.TensorXf(np.zeros((4, 5, 1), np.float32)), r'"lobes" has shape \(4, 5, 1\), expected \(4, 5, 2\)'),
+        ("latent", mi.TensorXf(np.where(np.arange(60).reshape(4, 5, 3) == 7, np.nan, 0.5).astype(np.float32)),
+         r'"latent" texel \(x 2, y 0\) channel 1 is NaN'),
+        ("weights", mi.Float(np.where(np.arange(flat.size) == 20, np.inf, flat).astype(np.float32)),
+         r'"weights" value 20 \(layer 1 weight 20\) is \+inf'),
+    ]
+    for key, value, message in bad_updates:
+        params["latent"] = mi.TensorXf(np.zeros((4, 5, 3), np.float32))  # a good value in the same update
+        params[key] = value
+        with pytest.raises(Exception, match="update rejected, the BSDF keeps its previous parameters: " + message):
+            params.update()
+        np.testing.assert_array_equal(np.array(params["latent"]), material.texture[..., :3])
+        np.testing.assert_array_equal(np.array(params["weights"]), flat)
+        agrees()
+
+
+def test_prb_gradients_reach_the_texture_and_the_decoder(llvm_variant, tmp_path):
+    """prb's gradients of a render reach the latent codes and the decoder's weights (opaque), and
+    match central differences of the render (same seed) in one texel's code."""
+    material = write_textured(tmp_path / "m.nbrdf.json", layers=random_decoder(3, hidden=8),
+                              texture=random_texture(5, 4, 3, 1, seed=4))
+    scene = veach_like({"type": "nbrdf", "filename": str(material.path), "jit_weights": "opaque"}, spp=32)
+    scene["integrator"] = {"type": "prb", "max_depth": 3}
+    scene = mi.load_dict(scene)
+    params = mi.traverse(scene)
+    latent, weights = (next(k for k in params.keys() if k.endswith(name)) for name in (".latent", ".weights"))
+    dr.enable_grad(params[latent])
+    dr.enable_grad(params[weights])
+    params.update()
+    dr.backward(dr.mean(mi.render(scene, params, seed=1, seed_grad=2), axis=None))
+    g_latent, g_weights = np.array(dr.grad(params[latent])), np.array(dr.grad(params[weights]))
+    assert np.all(np.isfinite(g_latent)) and np.all(np.isfinite(g_weights))
+    assert np.count_nonzero(g_latent) > g_latent.size // 2 and np.count_nonzero(g_weights) > g_weights.size // 2
+    y, x, k = np.unravel_index(np.argmax(np.abs(g_latent)), g_latent.shape)
+    dr.disable_grad(params[latent])
+    dr.disable_grad(params[weights])
+    codes, eps, renders = np.array(params[latent]), 1e-2, []
+    for step in (eps, -eps):
+        moved = codes.copy()
+        moved[y, x, k] += step
+        params[latent] = mi.TensorXf(moved)
+        params.update()
+        renders.append(np.mean(np.array(mi.render(scene, seed=1)), dtype=np.float64))
+    assert (renders[0] - renders[1]) / (2 * eps) == pytest.approx(g_latent[y, x, k], rel=0.05)

@@ -7,11 +7,13 @@ decoder's weights and the texture's values, which the C ABI does not hand out: o
 has accepted the file, :func:`read_parts` reads the JSON again and :func:`read_texture` the
 OpenEXR texture (through Mitsuba's ``Bitmap``).
 
-With the ``jit`` backend, ``traverse`` exposes ``latent.data`` (the latent codes, a
-``mi.TensorXf`` of height x width x C, differentiable), ``latent.lobes`` (the lobe channels,
-height x width x 2 per lobe, when the file stores lobes) and ``decoder.weights`` (W1 b1 W2 b2 ...
-as one ``mi.Float``, differentiable with ``jit_weights`` = ``opaque``). Updates are validated as
-a whole (shapes, finite values) and applied atomically, as for homogeneous networks.
+With the ``jit`` backend, ``traverse`` exposes ``latent`` (the latent codes, a ``mi.TensorXf``
+of height x width x C, differentiable), ``lobes`` (the lobe channels, height x width x 2 per
+lobe, when the file stores lobes) and ``weights`` (the decoder's W1 b1 W2 b2 ... as one
+``mi.Float``, differentiable with ``jit_weights`` = ``opaque``, as a homogeneous network's). The
+names have no dot: ``SceneParameters`` reads a dot as a child object's name. Updates are
+validated as a whole (shapes, finite values) and applied atomically, as for homogeneous
+networks.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from .validation import non_finite_name
 #: the lobes its texture stores.
 HOMOGENEOUS_ONLY = ("sampling", "exponent", "specular_weight", "exponent2", "specular_weight2", "exponent_v")
 #: The traversed keys.
-LATENT, LOBES, WEIGHTS = "latent.data", "latent.lobes", "decoder.weights"
+LATENT, LOBES, WEIGHTS = "latent", "lobes", "weights"
 
 
 @dataclass
@@ -171,7 +173,7 @@ class TexturedMaterial:
         back into the traversed parameters and leaves the BSDF as it was."""
         if self.backend.name != "jit":
             return
-        named = (lambda key: True) if keys is None else (lambda key: any(str(k).endswith(key) for k in keys))
+        named = (lambda key: True) if keys is None else (lambda key: any(str(k).rsplit(".", 1)[-1] == key for k in keys))
         try:
             weights = self._validated_weights() if named(WEIGHTS) else None
             textures = {key: self._validated_texture(key) for key in (LATENT, LOBES)
