@@ -94,7 +94,7 @@ def read_texture(parts: TexturedParts) -> np.ndarray:
     channels than the library did."""
     bitmap = mi.Bitmap(str(parts.texture))
     names = [channel.name for channel in bitmap.struct_()]
-    values = np.array(bitmap, copy=False).astype(np.float32).reshape(parts.height, parts.width, -1)
+    values = np.asarray(bitmap).astype(np.float32).reshape(parts.height, parts.width, -1)
     if sorted(names) != sorted(parts.channel_names):
         raise RuntimeError(f'"{parts.texture}": Mitsuba reads the channels {", ".join(names)}, expected '
                            f'{", ".join(parts.channel_names)}')
