@@ -229,7 +229,7 @@ class TexturedMaterial:
 
     def to_string(self, class_name: str) -> str:
         parts = self.parts
-        to_uv = "identity" if np.allclose(parts.to_uv, np.eye(3), rtol=0, atol=0) else str(
+        to_uv = "identity" if np.array_equal(parts.to_uv, np.eye(3)) else str(
             [[float(x) for x in row] for row in parts.to_uv])
         lobes = {0: "cosine", 1: "one Blinn-Phong lobe and cosine", 2: "two Blinn-Phong lobes and cosine"}[parts.lobes]
         lines = [f'filename = "{self.filename}"', "kind = spatially varying (format version 4)", f'name = "{parts.name}"',

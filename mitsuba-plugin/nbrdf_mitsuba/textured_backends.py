@@ -22,8 +22,8 @@ from . import jit
 from .backends import JitBackend, RustBackend, _both_above, _glossy, _to_spectrum, _width
 
 
-def _sample_record(n, arrays=None):
-    bs = dr.zeros(mi.BSDFSample3f) if arrays is None else arrays.empty_sample(n)
+def _glossy_sample(bs):
+    """``bs`` marked as a sample of the one glossy reflection component."""
     bs.eta = 1.0
     bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
     bs.sampled_component = mi.UInt32(0)
@@ -42,7 +42,7 @@ class TexturedJitBackend(JitBackend):
     def sample(self, ctx, si, sample1, sample2, active=True):
         if _width(si.wi, sample1, sample2) == 0:
             return dr.zeros(mi.BSDFSample3f, 0), dr.zeros(mi.Spectrum, 0)
-        bs = _sample_record(None)
+        bs = _glossy_sample(dr.zeros(mi.BSDFSample3f))
         light, pdf = self.traced.sample(si.uv, si.wi, sample1, sample2.x, sample2.y)
         active = active & _glossy(ctx) & (mi.Frame3f.cos_theta(si.wi) > 0) & (pdf > 0)
         bs.wo = light
@@ -101,7 +101,7 @@ class TexturedRustBackend(RustBackend):
         n = arrays.width(si.wi, sample1, sample2)
         if not self._enabled(ctx, si.wi, sample1, sample2):
             return arrays.empty_sample(n), arrays.zero_spectrum(n)
-        bs = _sample_record(n, arrays)
+        bs = _glossy_sample(arrays.empty_sample(n))
         arrays.evaluate(si.uv, si.wi, sample1, sample2)
         uv = arrays.planar([si.uv.x, si.uv.y], n)
         view = arrays.planar([si.wi.x, si.wi.y, si.wi.z], n)
