@@ -302,3 +302,13 @@ def test_prb_gradients_reach_the_texture_and_the_decoder(llvm_variant, tmp_path)
         params.update()
         renders.append(np.mean(np.array(mi.render(scene, seed=1)), dtype=np.float64))
     assert (renders[0] - renders[1]) / (2 * eps) == pytest.approx(g_latent[y, x, k], rel=0.05)
+
+
+def test_a_wide_decoder_goes_to_the_rust_backend(llvm_variant, tmp_path):
+    """As a wide network: ``auto`` takes the library (and says so), ``jit`` is refused."""
+    from nbrdf_mitsuba.bsdf import JIT_MAX_HIDDEN_WIDTH
+
+    material = write_textured(tmp_path / "m.nbrdf.json", layers=random_decoder(3, hidden=JIT_MAX_HIDDEN_WIDTH + 8))
+    assert "backend = rust" in str(mi.load_dict({"type": "nbrdf", "filename": str(material.path)}))
+    with pytest.raises(Exception, match=f"hidden width {JIT_MAX_HIDDEN_WIDTH + 8} is above {JIT_MAX_HIDDEN_WIDTH}"):
+        mi.load_dict({"type": "nbrdf", "filename": str(material.path), "backend": "jit"})

@@ -1,5 +1,6 @@
-"""The Mitsuba BSDF plugins ``nbrdf`` (a neural BRDF, ``*.nbrdf.json``) and ``merl`` (a
-MERL-format ``.binary`` table).
+"""The Mitsuba BSDF plugins ``nbrdf`` (a neural BRDF, ``*.nbrdf.json``, or a spatially varying
+material of format version 4: :mod:`nbrdf_mitsuba.textured`) and ``merl`` (a MERL-format
+``.binary`` table).
 
 Mitsuba's ``BSDF`` base class differs per variant, so :func:`classes` builds the two plugin
 classes for the current variant from the variant-independent mixins below. Every variant: RGB,
@@ -247,7 +248,9 @@ class _NativeBSDFMixin(SamplingParameters):
 
 
 class NbrdfMixin(_NativeBSDFMixin):
-    """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file.
+    """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file (a spatially varying file, format
+    version 4, goes to :class:`nbrdf_mitsuba.textured.TexturedMaterial`, which takes ``filename``,
+    ``backend`` and ``jit_weights`` only).
 
     Parameters: ``filename``; ``sampling`` = the file's ``sampling.default`` when it names one
     (the strategy ``nbrdf fit-phong`` measured with the lowest variance) | ``tabulated`` (a
