@@ -221,17 +221,21 @@ def use_variant(variant: str) -> None:
     mi.set_variant(variant)
 
 
-def bsdf_calls(bsdf, view, light, u, wavelengths=None) -> dict:
+def bsdf_calls(bsdf, view, light, u, wavelengths=None, uv=None) -> dict:
     """eval, pdf, eval_pdf and sample of ``bsdf`` at the columns of ``view``/``light``/``u`` (and
-    ``wavelengths``: 4 per column, read in spectral variants only), as float64 NumPy arrays whose
-    last axis runs over the columns (scalar variants: one call per column)."""
+    ``wavelengths``: 4 per column, read in spectral variants only; ``uv``: the hits' texture
+    coordinates, 0 without), as float64 NumPy arrays whose last axis runs over the columns
+    (scalar variants: one call per column)."""
     ctx = mi.BSDFContext()
     if wavelengths is None:
         wavelengths = np.full((4, view.shape[1]), 550.0)
+    if uv is None:
+        uv = np.zeros((2, view.shape[1]))
 
-    def one(v, l, s, w):
+    def one(v, l, s, w, t):
         si = dr.zeros(mi.SurfaceInteraction3f)
         si.wi = mi.Vector3f(*v)
+        si.uv = mi.Point2f(*t)
         if mi.is_spectral:
             si.wavelengths = mi.UnpolarizedSpectrum(*w)
         wo = mi.Vector3f(*l)
@@ -240,7 +244,7 @@ def bsdf_calls(bsdf, view, light, u, wavelengths=None) -> dict:
         return {"eval": bsdf.eval(ctx, si, wo), "pdf": bsdf.pdf(ctx, si, wo), "eval_pdf.value": value,
                 "eval_pdf.pdf": pdf, "sample.wo": bs.wo, "sample.pdf": bs.pdf, "sample.weight": weight}
 
-    columns = (view, light, u, wavelengths)
+    columns = (view, light, u, wavelengths, uv)
     if dr.is_jit_v(mi.Float):
         out = one(*([mi.Float(r) for r in a] for a in columns))
         return {k: np.asarray(v.numpy(), np.float64) for k, v in out.items()}

@@ -38,6 +38,9 @@ TWINS = [
     Twin(FASTMATH, "nbrdf_tools.common.network", "EXP_ARG_MAX"),
     Twin("nbrdf-core/src/coords.rs", "nbrdf_mitsuba.jit.network", "SIN_THETA_H_EPS_F32"),
     Twin("nbrdf-core/src/sampling/mod.rs", "nbrdf_mitsuba.jit.sampling", "MAX_EXPONENT"),
+    Twin("nbrdf-core/src/sampling/mod.rs", "textured_fixture", "MAX_EXPONENT"),
+    Twin("nbrdf-core/src/textured/lobes.rs", "nbrdf_mitsuba.jit.textured", "FILTER_SLACK"),
+    Twin("nbrdf-core/src/textured/lobes.rs", "textured_fixture", "FILTER_SLACK"),
     Twin("nbrdf-core/src/sampling/two_lobe.rs", "nbrdf_mitsuba.validation", "WEIGHT_SUM_TOLERANCE"),
     *(Twin(GRID, "nbrdf_mitsuba.jit.merl", name) for name in ("N_THETA_H", "N_THETA_D", "N_PHI_D", "SCALE")),
     *(Twin(GRID, "nbrdf_mitsuba.tabulate_rgl", name)

@@ -115,6 +115,16 @@ def _planar(array) -> np.ndarray:
     return array
 
 
+def _uv_planar(array) -> np.ndarray:
+    """A C-contiguous float32 (2, n) array of texture coordinates (one UV (2,) becomes (2, 1))."""
+    array = np.ascontiguousarray(array, dtype=np.float32)
+    if array.ndim == 1:
+        array = array.reshape(2, 1)
+    if array.ndim != 2 or array.shape[0] != 2:
+        raise ValueError(f"expected planar (2, n) texture coordinates, got shape {array.shape}")
+    return array
+
+
 def _in(array: np.ndarray):
     return ffi.from_buffer("float[]", array)
 
@@ -141,7 +151,7 @@ _SAMPLING_NAMES = {code: name for name, code in SAMPLING_KINDS.items()}
 #: The strategies' names as attributes (``KIND.two_lobe == "two_lobe"``), so that code comparing
 #: with a strategy names it through the library: a name the library does not know fails at import.
 KIND = SimpleNamespace(**{name: name for name in SAMPLING_KINDS})
-#: ``NbrdfMaterialKind`` values by name: ``network``, ``merl``.
+#: ``NbrdfMaterialKind`` values by name: ``network``, ``merl``, ``textured``.
 MATERIAL_KINDS = {element.removeprefix("NBRDF_MATERIAL_").lower(): code
                   for code, element in ffi.typeof("NbrdfMaterialKind").elements.items()}
 _MATERIAL_NAMES = {code: name for name, code in MATERIAL_KINDS.items()}
@@ -201,9 +211,11 @@ class Sampler:
 
 class Material:
     """A loaded material (``NbrdfMaterial``): a neural BRDF (``*.nbrdf.json``, ``kind``
-    ``network``) or a MERL-format table (``.binary``, ``kind`` ``merl``), told apart by the
-    library. A network's parameters and the proof of which hidden units can fire come with the
-    handle (:meth:`network`): nothing reads the file again."""
+    ``network``), a MERL-format table (``.binary``, ``kind`` ``merl``) or a spatially varying
+    material (``*.nbrdf.json`` of format version 4 and its latent texture, ``kind``
+    ``textured``: :meth:`eval_uv`, :meth:`sample_uv`), told apart by the library. A network's
+    parameters and the proof of which hidden units can fire come with the handle
+    (:meth:`network`): nothing reads the file again."""
 
     def __init__(self, path):
         out = ffi.new("NbrdfMaterial **")
@@ -233,6 +245,10 @@ class Material:
         self.spectral_count = int(info.spectral_count)
         #: ``(min_nm, max_nm)`` of its spectral basis, ``(0.0, 0.0)`` when not spectral.
         self.spectral_range_nm = (float(info.spectral_range_nm[0]), float(info.spectral_range_nm[1]))
+        #: A textured material's latent channels ``C`` (0 for the other kinds).
+        self.latent_channels = int(info.latent_channels)
+        #: A textured material's texture size in texels ``(width, height)`` ((0, 0) otherwise).
+        self.texture_size = (int(info.texture_size[0]), int(info.texture_size[1]))
 
     def eval(self, view, light) -> np.ndarray:
         """``f_r cos(theta_l)`` as planar RGB (3, n) for planar ``view`` and ``light`` (3, n)."""
@@ -278,6 +294,35 @@ class Material:
         pdf_ = np.empty(n, dtype=np.float32)
         check(lib.nbrdf_material_sample(self._ptr, sampler_.ptr, _in(view), _in(u), n, _out(light), _out(weight),
                                         _out(pdf_)))
+        return light, weight, pdf_
+
+    def eval_uv(self, uv, view, light, pdf: bool = True):
+        """``(f_r cos(theta_l) (3, n), pdf (n,) or None)`` at hits of planar texture coordinates
+        ``uv`` (2, n) for planar ``view`` and ``light`` (3, n) (``nbrdf_material_eval_uv``; a
+        homogeneous material ignores the UVs)."""
+        uv, view, light = _uv_planar(uv), _planar(view), _planar(light)
+        n = view.shape[-1]
+        if light.shape != view.shape or uv.shape[-1] != n:
+            raise ValueError(f"uv {uv.shape}, view {view.shape} and light {light.shape} differ in length")
+        out = np.empty((3, n), dtype=np.float32)
+        pdf_ = np.empty(n, dtype=np.float32) if pdf else None
+        check(lib.nbrdf_material_eval_uv(self._ptr, _in(uv), _in(view), _in(light), n, _out(out),
+                                         ffi.NULL if pdf_ is None else _out(pdf_)))
+        return out, pdf_
+
+    def sample_uv(self, uv, view, u):
+        """``(light (3, n), weight (3, n), pdf (n,))`` with the material's own sampling at hits of
+        planar ``uv`` (2, n), for planar ``view`` and uniforms ``u`` (3, n)
+        (``nbrdf_material_sample_uv``)."""
+        uv, view, u = _uv_planar(uv), _planar(view), _planar(u)
+        n = view.shape[-1]
+        if u.shape != view.shape or uv.shape[-1] != n:
+            raise ValueError(f"uv {uv.shape}, view {view.shape} and u {u.shape} differ in length")
+        light = np.empty((3, n), dtype=np.float32)
+        weight = np.empty((3, n), dtype=np.float32)
+        pdf_ = np.empty(n, dtype=np.float32)
+        check(lib.nbrdf_material_sample_uv(self._ptr, _in(uv), _in(view), _in(u), n, _out(light), _out(weight),
+                                           _out(pdf_)))
         return light, weight, pdf_
 
     def network(self, prove: bool = True) -> tuple[list[tuple[np.ndarray, np.ndarray]],

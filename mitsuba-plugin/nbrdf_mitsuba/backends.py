@@ -29,7 +29,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import jit
+from . import _llvm, jit
 from ._native import KIND
 
 # --------------------------------------------------------------------------------------------
@@ -82,6 +82,22 @@ def say_scalar_cost() -> None:
                              "renders are tens of times slower than in llvm_ad_rgb (or than with Mitsuba's "
                              "own BSDFs). Use scalar variants for reference checks and small images "
                              "(said once per process).")
+
+
+def prepare_variant(arrays, label: str) -> None:
+    """What the variant needs before a BSDF's backends are built: in scalar variants, the
+    warning of :func:`say_scalar_cost`; in JIT ones, a usable libLLVM (llvm_*; errors start with
+    ``label``) and, in spectral ones, Mitsuba's RGB-to-spectrum model read before any trace."""
+    if not arrays.wavefront:
+        say_scalar_cost()
+        return
+    if mi.variant().startswith("llvm"):
+        try:
+            _llvm.check_backend()
+        except RuntimeError as error:
+            raise RuntimeError(f"{label}: {error}") from None
+    if mi.is_spectral:
+        jit.srgb_model()  # Mitsuba's model file, read once per variant and before any trace
 
 
 # --------------------------------------------------------------------------------------------

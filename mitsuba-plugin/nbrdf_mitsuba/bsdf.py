@@ -1,5 +1,6 @@
-"""The Mitsuba BSDF plugins ``nbrdf`` (a neural BRDF, ``*.nbrdf.json``) and ``merl`` (a
-MERL-format ``.binary`` table).
+"""The Mitsuba BSDF plugins ``nbrdf`` (a neural BRDF, ``*.nbrdf.json``, or a spatially varying
+material of format version 4: :mod:`nbrdf_mitsuba.textured`) and ``merl`` (a MERL-format
+``.binary`` table).
 
 Mitsuba's ``BSDF`` base class differs per variant, so :func:`classes` builds the two plugin
 classes for the current variant from the variant-independent mixins below. Every variant: RGB,
@@ -32,9 +33,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import _llvm, _native, jit
+from . import _native, jit, textured
 from ._native import KIND
-from .backends import JitBackend, RustBackend, say_scalar_cost, use_wavefront_mode, variant_arrays
+from .backends import JitBackend, RustBackend, prepare_variant, use_wavefront_mode, variant_arrays
 from .parameters import SAMPLING_NAMES, SamplingParameters
 from .validation import format_problem, non_finite_name, special_file_problem, strip_function
 
@@ -88,6 +89,8 @@ class _NativeBSDFMixin(SamplingParameters):
 
     PLUGIN = ""  # the Mitsuba plugin name
     MATERIAL_KIND = ""  # what the library must load (a key of _native.MATERIAL_KINDS)
+    TEXTURED = False  # whether the plugin also takes spatially varying materials
+    _textured = None  # their state (textured.TexturedMaterial), for such a file
 
     def _init_native(self, props) -> None:
         mi.BSDF.__init__(self, props)
@@ -121,6 +124,11 @@ class _NativeBSDFMixin(SamplingParameters):
             where = "" if path in message else f'"{path}": '
             raise RuntimeError(f"{self._type_name()}: cannot load {where}{message} "
                                f"[{error.status_name}]") from None
+        if self.TEXTURED and self._native.kind == "textured":
+            self._path = path
+            textured.TexturedMaterial(self, lambda key: _get(props, key), _get(props, "backend", _default_backend),
+                                      self._props_jit_weights)
+            return
         problem = None
         if self._native.kind != self.MATERIAL_KIND:
             problem = format_problem(path, self.PLUGIN) or (
@@ -148,16 +156,8 @@ class _NativeBSDFMixin(SamplingParameters):
         """The backend object that evaluates and samples this BSDF from now on."""
         name = self._choose_backend(requested)
         twin = None
-        if not self._arrays.wavefront:
-            say_scalar_cost()
-        else:
-            if mi.variant().startswith("llvm"):
-                try:
-                    _llvm.check_backend()
-                except RuntimeError as error:
-                    raise RuntimeError(f"{self._type_name()}: {error}") from None
-            if mi.is_spectral:
-                jit.srgb_model()  # Mitsuba's model file, read once per variant and before any trace
+        prepare_variant(self._arrays, self._type_name())
+        if self._arrays.wavefront:
             # The rust backend keeps a traced twin for symbolic scopes: Dr.Jit traces a symbolic
             # call through every live BSDF, wherever it was built, and native code cannot run
             # there (see RustBackend).
@@ -222,6 +222,8 @@ class _NativeBSDFMixin(SamplingParameters):
     def traverse(self, callback):
         # Mitsuba types (not Python floats) so that SceneParameters can update them in place.
         put = getattr(callback, "put", None) or callback.put_parameter
+        if self._textured is not None:
+            return self._textured.traverse(put)
         put("exponent", self.exponent, mi.ParamFlags.NonDifferentiable)
         put("specular_weight", self.specular_weight, mi.ParamFlags.NonDifferentiable)
         put("exponent2", self.exponent2, mi.ParamFlags.NonDifferentiable)
@@ -231,6 +233,8 @@ class _NativeBSDFMixin(SamplingParameters):
             self._traverse_traced(put)
 
     def to_string(self):
+        if self._textured is not None:
+            return self._textured.to_string(type(self).__name__)
         exponent, weight, exponent2, weight2 = self._lobes
         lines = [f'filename = "{self._filename}"', *self._describe(), f"backend = {self._backend.name}",
                  f"sampling = {self._sampling}"]
@@ -244,7 +248,9 @@ class _NativeBSDFMixin(SamplingParameters):
 
 
 class NbrdfMixin(_NativeBSDFMixin):
-    """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file.
+    """``nbrdf``: a neural BRDF from an ``*.nbrdf.json`` file (a spatially varying file, format
+    version 4, goes to :class:`nbrdf_mitsuba.textured.TexturedMaterial`, which takes ``filename``,
+    ``backend`` and ``jit_weights`` only).
 
     Parameters: ``filename``; ``sampling`` = the file's ``sampling.default`` when it names one
     (the strategy ``nbrdf fit-phong`` measured with the lowest variance) | ``tabulated`` (a
@@ -258,10 +264,16 @@ class NbrdfMixin(_NativeBSDFMixin):
 
     PLUGIN = "nbrdf"
     MATERIAL_KIND = "network"
+    TEXTURED = True
 
     def __init__(self, props):
         self._props_jit_weights = _get(props, "jit_weights", "auto")
         self._init_native(props)
+
+    def parameters_changed(self, keys=None):
+        if self._textured is not None:
+            return self._textured.parameters_changed(keys)
+        return SamplingParameters.parameters_changed(self, keys)
 
     def _trace(self, path, mode=None):
         # The network as the library loaded, validated and proved it: no second read or proof.
@@ -315,7 +327,7 @@ class NbrdfMixin(_NativeBSDFMixin):
         return count, min_nm, max_nm, self._native.spectral_srgb_matrix()
 
     def _traced_width_problem(self) -> str | None:
-        width = self._native.hidden_width
+        width = self._native.hidden_width if self._textured is None else self._textured.hidden_width
         if width <= JIT_MAX_HIDDEN_WIDTH:
             return None
         return (f"hidden width {width} is above {JIT_MAX_HIDDEN_WIDTH}, the widest network the traced "

@@ -7,6 +7,9 @@ concern:
 * :mod:`.sampling`: each sampling strategy's sampler beside its pdf, the tabulated sampler
   (:class:`TracedTable`) and :func:`sample` / :func:`pdf` by strategy name;
 * :mod:`.merl`: the MERL table lookup (:class:`TracedMerl`);
+* :mod:`.textured`: spatially varying materials: the latent texture's lookup
+  (:class:`TracedUvMapping`), the lobe channels' strategy (:func:`lobe_parameters`) and the
+  material (:class:`TracedTexturedMaterial`);
 * :mod:`.spectral`: the output stage of spectral variants: Mitsuba's RGB-to-spectrum lookup per
   lane (:class:`SrgbModel`, :func:`spectrum_from_rgb`) and spectral networks' B-spline basis.
 
@@ -41,12 +44,14 @@ from .sampling import (
     unit_interval,
 )
 from .spectral import SrgbModel, bspline_weights, spectral_value, spectrum_from_rgb, srgb_model, srgb_projection
+from .textured import TracedTexturedMaterial, TracedUvMapping, lobe_parameters
 
 __all__ = [
     "AUTO_LITERAL_MAX", "EXP_ARG_MAX", "EXP_ARG_MIN", "MAX_EXPONENT", "SIN_THETA_H_EPS_F32", "STRATEGIES",
-    "WEIGHT_MODES", "SrgbModel", "TracedMerl", "TracedNetwork", "TracedTable", "anisotropic_half_vector",
-    "anisotropic_pdf", "both_valid_above", "bspline_weights", "clamp_exp_argument", "cos_theta", "cosine_hemisphere",
-    "expm1", "live_networks", "mixture_pdf", "network_input", "pdf", "phong_half_vector", "relu", "sample",
-    "spectral_value", "spectrum_from_rgb", "srgb_model", "srgb_projection", "two_lobe_pdf", "uniform_hemisphere",
-    "unit", "unit_interval", "unit_or_normal", "unit_vector",
+    "WEIGHT_MODES", "SrgbModel", "TracedMerl", "TracedNetwork", "TracedTable", "TracedTexturedMaterial",
+    "TracedUvMapping", "anisotropic_half_vector", "anisotropic_pdf", "both_valid_above", "bspline_weights",
+    "clamp_exp_argument", "cos_theta", "cosine_hemisphere", "expm1", "live_networks", "lobe_parameters",
+    "mixture_pdf", "network_input", "pdf", "phong_half_vector", "relu", "sample", "spectral_value",
+    "spectrum_from_rgb", "srgb_model", "srgb_projection", "two_lobe_pdf", "uniform_hemisphere", "unit",
+    "unit_interval", "unit_or_normal", "unit_vector",
 ]
