@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _exit, _llvm
+from .. import _exit, _llvm
 
 _llvm.configure()  # must precede the first import of drjit
 
@@ -271,7 +271,7 @@ def network_name(output: Path) -> str:
 
 
 def config_from(args):
-    from . import _train_native as native
+    from .. import _train_native as native
 
     config = native.default_config()
     for field, value in (("samples", args.samples), ("max_epochs", args.epochs), ("hidden", args.hidden),
@@ -300,7 +300,7 @@ def distill(args) -> dict:
     variant = pick_variant(args.variant)
     mi.set_variant(variant)
     bsdf, kind = load_bsdf(args.source, args.bsdf)
-    from . import _train_native as native
+    from .. import _train_native as native
 
     config = config_from(args)
     anisotropic, anisotropy = decide_anisotropy(bsdf, args.anisotropy)
@@ -439,6 +439,3 @@ def main(argv: list[str] | None = None) -> int:
           f"{summary['loss']:.4e}; {summary['seconds']:.1f} s in all")
     return _exit.SUCCESS
 
-
-if __name__ == "__main__":
-    sys.exit(main())
