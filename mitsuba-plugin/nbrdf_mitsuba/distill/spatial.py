@@ -344,7 +344,7 @@ def distill_spatial(args, output: Path) -> dict:
         "anisotropy": anisotropy, "notes": notes, "evaluation_seconds": round(evaluation_seconds, 3),
     }
     epochs = _progress(args.quiet, config.epochs)
-    baking = _bake_progress(args.quiet)
+    baking = _bake_progress(args.quiet, epochs)
     try:
         native.train_textured(config, image[texel].T, view, light, values, image.reshape(height, width, -1), output,
                               name=args.name or network_name(output), source=f"Mitsuba BSDF {args.source}",
@@ -392,12 +392,14 @@ class _bar:
 
 
 class _bake_progress:
-    """The baking's stages as one tqdm bar over the lobe fits."""
+    """The baking's stages as one tqdm bar over the lobe fits; ``training.close()`` (the epochs'
+    bar) when the baking begins."""
 
-    def __init__(self, quiet: bool):
-        self.quiet, self.bar = quiet, None
+    def __init__(self, quiet: bool, training):
+        self.quiet, self.bar, self.training = quiet, None, training
 
     def update(self, stage: str, done: int, total: int) -> None:
+        self.training.close()
         if stage != "fitting lobes":
             return
         if self.bar is None:
