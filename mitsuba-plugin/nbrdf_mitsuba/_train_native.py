@@ -175,3 +175,55 @@ def _call_for_json(call, on_epoch) -> str:
         return ffi.string(out[0]).decode()
     finally:
         lib.nbrdf_train_string_free(out[0])
+
+
+# -- spatially varying materials -----------------------------------------------------------------
+
+
+def textured_default_config():
+    """An ``NbrdfTexturedConfig`` holding the defaults of ``nbrdf_train_textured``."""
+    config = ffi.new("NbrdfTexturedConfig *")
+    check(lib.nbrdf_train_textured_config_default(config))
+    return config
+
+
+#: ``NbrdfBakeStage`` values by name.
+BAKE_STAGES = {0: "encoded", 1: "clustering", 2: "fitting lobes"}
+
+
+def train_textured(config, params: np.ndarray, view: np.ndarray, light: np.ndarray, eval_cos: np.ndarray,
+                   image: np.ndarray, path, name: str, source: str, details: dict | None = None,
+                   on_epoch=None, on_bake=None) -> None:
+    """Trains a spatially varying material on n samples and writes it to ``path`` (its latent
+    texture beside it; see ``nbrdf_train_textured`` in nbrdf_train.h): ``params`` (P, n), the
+    parameters of each sample's texel; planar (3, n) ``view``, ``light`` and ``eval_cos``;
+    ``image`` (height, width, P), the parameters at every texel centre, row 0 at v = 0.
+    ``on_epoch(stats)`` gets an ``NbrdfEpochStats`` after every epoch, ``on_bake(stage, done,
+    total)`` a :data:`BAKE_STAGES` name and counts as the baking proceeds."""
+    arrays = [np.ascontiguousarray(a, dtype=np.float32) for a in (view, light, eval_cos)]
+    n = arrays[0].shape[1]
+    if any(a.shape != (3, n) for a in arrays):
+        raise ValueError(f"expected planar (3, n) arrays, got shapes {[a.shape for a in arrays]}")
+    params = np.ascontiguousarray(params, dtype=np.float32)
+    texels = np.ascontiguousarray(image, dtype=np.float32)
+    if params.ndim != 2 or params.shape[1] != n or texels.ndim != 3 or texels.shape[2] != params.shape[0]:
+        raise ValueError(f"expected (P, {n}) parameters and a (height, width, P) image, got shapes "
+                         f"{params.shape} and {texels.shape}")
+    epoch_callback, bake_callback = ffi.NULL, ffi.NULL
+    if on_epoch is not None:
+        @ffi.callback("void(void *, const NbrdfEpochStats *)")
+        def epoch_callback(_user, stats):
+            on_epoch(stats)
+    if on_bake is not None:
+        @ffi.callback("void(void *, const NbrdfBakeProgress *)")
+        def bake_callback(_user, progress):
+            on_bake(BAKE_STAGES.get(progress.stage, "baking"), progress.done, progress.total)
+
+    def buffer(a):  # cffi refuses a zero-length buffer; the library names what is empty itself
+        return ffi.from_buffer("float[]", a) if a.size else ffi.NULL
+
+    height, width, parameters = texels.shape
+    check(lib.nbrdf_train_textured(
+        config, buffer(params), parameters, *(buffer(a) for a in arrays), n, buffer(texels), width, height,
+        os.fsencode(str(path)), name.encode(), source.encode(), _details_text(details), epoch_callback,
+        bake_callback, ffi.NULL))

@@ -1,11 +1,13 @@
 //! C ABI of nbrdf's trainer for distillation (`libnbrdf_train`): the trainer's sample
 //! directions, and a network trained from reflectance values a caller computed there
-//! (`python -m nbrdf_mitsuba.distill` evaluates a Mitsuba 3 BSDF). A library of its own so that
-//! the rendering library `libnbrdf_ffi` never links the training stack.
+//! (`python -m nbrdf_mitsuba.distill` evaluates a Mitsuba 3 BSDF); and a spatially varying
+//! material trained from a textured source's values and written to disk (`textured.rs`,
+//! `python -m nbrdf_mitsuba.distill --spatial`). A library of its own so that the rendering
+//! library `libnbrdf_ffi` never links the training stack.
 //!
-//! The header `include/nbrdf_train.h` is generated from this file by cbindgen
+//! The header `include/nbrdf_train.h` is generated from these files by cbindgen
 //! (`NBRDF_BLESS=1 cargo test -p nbrdf-train-ffi --test header` regenerates it). The crate is a
-//! thin shell around `nbrdf_core::ops::distill`: it checks pointers and lengths, turns errors
+//! thin shell around `nbrdf_core::ops::distill` and `nbrdf_core::distillation`: it checks pointers and lengths, turns errors
 //! and panics into status codes with a thread-local message, and converts planar arrays. The
 //! error plumbing (failures, last error, panic guard, pointer checks) is nbrdf-ffi-common's,
 //! shared with nbrdf-ffi.
@@ -16,6 +18,9 @@
 //! are `f_r(view, light) cos(theta_light)`, what Mitsuba's `BSDF.eval` returns.
 
 #![deny(unsafe_op_in_unsafe_fn)]
+
+mod textured;
+pub use textured::*;
 
 use glam::Vec3;
 use nbrdf_core::ops::distill::{self, DistillArrays, DistillRequest};
@@ -41,6 +46,8 @@ pub enum NbrdfTrainStatus {
     NBRDF_TRAIN_ERROR_NULL_POINTER = 1,
     /// An argument is outside its domain: settings, lengths, values that are not finite.
     NBRDF_TRAIN_ERROR_INVALID_ARGUMENT = 2,
+    /// A file could not be written (`nbrdf_train_textured`); the message names it.
+    NBRDF_TRAIN_ERROR_IO = 3,
     /// The library caught an internal panic (a bug); the message carries the panic message.
     NBRDF_TRAIN_ERROR_PANIC = 5,
 }
@@ -134,13 +141,14 @@ pub type NbrdfEpochCallback =
 impl Status for NbrdfTrainStatus {
     const OK: i32 = NbrdfTrainStatus::NBRDF_TRAIN_OK as i32;
 
-    /// The trainer reads no files: what the core reports as a file's failure is an argument's.
+    /// The trainer reads no files: what the core reports as a file's content is an argument's.
     fn code(kind: FailureKind) -> i32 {
         (match kind {
             FailureKind::NullPointer => NbrdfTrainStatus::NBRDF_TRAIN_ERROR_NULL_POINTER,
-            FailureKind::InvalidArgument | FailureKind::Io | FailureKind::Format => {
+            FailureKind::InvalidArgument | FailureKind::Format => {
                 NbrdfTrainStatus::NBRDF_TRAIN_ERROR_INVALID_ARGUMENT
             }
+            FailureKind::Io => NbrdfTrainStatus::NBRDF_TRAIN_ERROR_IO,
             FailureKind::Panic => NbrdfTrainStatus::NBRDF_TRAIN_ERROR_PANIC,
         }) as i32
     }

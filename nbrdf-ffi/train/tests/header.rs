@@ -29,6 +29,11 @@ fn header_declares_the_contract() {
             "int32_t nbrdf_train_from_arrays(",
             "int32_t nbrdf_train_spectral_from_arrays(",
             "void nbrdf_train_string_free(",
+            "typedef struct NbrdfTexturedConfig",
+            "typedef enum NbrdfBakeStage",
+            "NBRDF_TRAIN_ERROR_IO = 3",
+            "int32_t nbrdf_train_textured_config_default(",
+            "int32_t nbrdf_train_textured(",
         ],
     );
 }

@@ -29,6 +29,9 @@ exactly as ``nbrdf train`` does (same sampling, loss, validation split and early
   BSDF's flags say ``Anisotropic`` or when its values change as view and light turn together
   about the normal (:func:`rotation_difference`): a Python BSDF may not set the flag.
 
+``--spatial`` distils a textured BSDF into a spatially varying material instead (a decoder and a
+latent texture, file format version 4): :mod:`nbrdf_mitsuba.distill.spatial`.
+
 Errors are one line on stderr: a usage or input error (a missing or invalid source, an invalid
 setting or output path, a BSDF that is not finite) exits with status 2, a training that fails or
 a network that cannot be written once trained with 1.
@@ -45,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _exit, _llvm
+from .. import _exit, _llvm
 
 _llvm.configure()  # must precede the first import of drjit
 
@@ -148,13 +151,17 @@ def load_bsdf(source: Path, bsdf_id: str | None = None):
 WAVELENGTHS = np.arange(360.0, 830.0 + 1e-9, 10.0)
 
 
-def _interaction(n: int | None, view):
+def _interaction(n: int | None, view, uv=None):
     """A surface interaction in the local frame (``si.sh_frame`` the identity) viewed from
-    ``view``: n lanes of planar (3, n) directions in JIT variants, one (3,) direction else."""
+    ``view`` at texture coordinates ``uv`` (default the texture's centre): n lanes of planar
+    (3, n) directions and (2, n) ``uv`` in JIT variants, one (3,) direction and (2,) ``uv`` else."""
     si = dr.zeros(mi.SurfaceInteraction3f, n) if n is not None else dr.zeros(mi.SurfaceInteraction3f)
     si.sh_frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
     si.n = mi.Normal3f(0, 0, 1)
-    si.uv = mi.Point2f(0.5, 0.5)
+    if uv is None:
+        si.uv = mi.Point2f(0.5, 0.5)
+    else:
+        si.uv = mi.Point2f(np.ascontiguousarray(uv, dtype=np.float32)) if n is not None else mi.Point2f(*map(float, uv))
     si.wi = mi.Vector3f(np.ascontiguousarray(view, dtype=np.float32)) if n is not None else mi.Vector3f(*map(float, view))
     return si
 
@@ -169,11 +176,12 @@ def _wavelength_groups(wavelengths) -> list:
     return [tuple(map(float, w[k:k + 4])) for k in range(0, len(w), 4)]
 
 
-def eval_cos(bsdf, view: np.ndarray, light: np.ndarray, wavelengths=None) -> np.ndarray:
+def eval_cos(bsdf, view: np.ndarray, light: np.ndarray, wavelengths=None, uv: np.ndarray | None = None) -> np.ndarray:
     """Planar float64 ``bsdf.eval`` (``f_r cos(theta_light)``) at planar (3, n) ``view`` (``si.wi``)
     and ``light`` (``wo``) in the local frame, in the current variant: (3, n) RGB, or in spectral
     variants (m, n), the value at wavelength j of pair i at ``[j, i]`` (``wavelengths``, default
-    :data:`WAVELENGTHS`, m of them, set through ``si.wavelengths`` 4 at a time)."""
+    :data:`WAVELENGTHS`, m of them, set through ``si.wavelengths`` 4 at a time). ``uv``: planar
+    (2, n) texture coordinates (``si.uv``) of each pair; by default the texture's centre."""
     ctx = mi.BSDFContext()
     n = view.shape[1]
     groups = _wavelength_groups(wavelengths)
@@ -182,7 +190,9 @@ def eval_cos(bsdf, view: np.ndarray, light: np.ndarray, wavelengths=None) -> np.
     jit = dr.is_jit_v(mi.Float)
     for start in range(0, n, CHUNK if jit else 1):
         stop = min(start + (CHUNK if jit else 1), n)
-        si = _interaction(stop - start, view[:, start:stop]) if jit else _interaction(None, view[:, start])
+        uv_chunk = None if uv is None else uv[:, start:stop] if jit else uv[:, start]
+        si = (_interaction(stop - start, view[:, start:stop], uv_chunk) if jit
+              else _interaction(None, view[:, start], uv_chunk))
         wo = mi.Vector3f(np.ascontiguousarray(light[:, start:stop], dtype=np.float32)) if jit else (
             mi.Vector3f(*map(float, light[:, start])))
         for g, group in enumerate(groups):
@@ -271,7 +281,7 @@ def network_name(output: Path) -> str:
 
 
 def config_from(args):
-    from . import _train_native as native
+    from .. import _train_native as native
 
     config = native.default_config()
     for field, value in (("samples", args.samples), ("max_epochs", args.epochs), ("hidden", args.hidden),
@@ -297,10 +307,20 @@ def distill(args) -> dict:
         raise DistillError(f"{output}: is a directory; name the network file, e.g. {output / 'out.nbrdf.json'}")
     if not output.parent.is_dir() or not os.access(output.parent, os.W_OK):
         raise DistillError(f"{output}: cannot write there (the folder {output.parent} does not exist or is not writable)")
+    if args.spatial:
+        from .spatial import distill_spatial
+
+        return distill_spatial(args, output)
+    spatial_only = [option for option, value in (("--resolution", args.resolution), ("--channels", args.channels),
+                                                 ("--lobes", args.lobes), ("--representatives", args.representatives),
+                                                 ("--parameters", args.parameters))
+                    if value is not None]
+    if spatial_only:
+        raise DistillError(f"{', '.join(spatial_only)}: only with --spatial (a spatially varying material)")
     variant = pick_variant(args.variant)
     mi.set_variant(variant)
     bsdf, kind = load_bsdf(args.source, args.bsdf)
-    from . import _train_native as native
+    from .. import _train_native as native
 
     config = config_from(args)
     anisotropic, anisotropy = decide_anisotropy(bsdf, args.anisotropy)
@@ -387,7 +407,8 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m nbrdf_mitsuba.distill",
         description="Train a neural BRDF (*.nbrdf.json) from any Mitsuba 3 BSDF: Mitsuba evaluates it at the "
-                    "trainer's sample directions, and nbrdf's trainer learns the values (as `nbrdf train`).")
+                    "trainer's sample directions, and nbrdf's trainer learns the values (as `nbrdf train`). With "
+                    "--spatial, a spatially varying material (a decoder and a latent texture) from a textured BSDF.")
     p.add_argument("source", type=Path,
                    help="the BSDF: a scene .xml holding one BSDF (or a bare <bsdf> element), a .json dictionary "
                         "for mi.load_dict, or an RGL measurement .bsdf")
@@ -416,6 +437,29 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="random seed (default: 0)")
     p.add_argument("--threads", type=int, help="training threads (default: one per core)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    spatial = p.add_argument_group(
+        "spatially varying materials", "--spatial distils a textured BSDF into a decoder and a latent texture "
+        "(docs/textured.md). These apply too, with their own defaults: --samples (1000000 pairs, 8 a texel), "
+        "--epochs (40), --hidden (the decoder's, 32), --batch (512), --learning-rate (0.002); and --sampling, "
+        "--seed, --threads, --anisotropy, --variant (an *_rgb one), --name, --bsdf")
+    spatial.add_argument("--spatial", action="store_true",
+                         help="write a spatially varying material (file format version 4, its latent texture "
+                              "OUT.latent.exr beside it) from a textured BSDF: a twosided gives its front, a bumpmap "
+                              "or normalmap wrapper its nested BSDF (keep the wrapper in the scene); a BSDF that is "
+                              "the same at every texel is refused (distil it without --spatial)")
+    spatial.add_argument("--resolution", type=int, metavar="N",
+                         help="the latent texture's size, N x N texels (default: the largest bitmap the BSDF reads, "
+                              "times its to_uv tiling; 256 x 256 without one)")
+    spatial.add_argument("--channels", type=int, metavar="C", help="latent channels per texel (default: 8)")
+    spatial.add_argument("--lobes", type=int, choices=[0, 1, 2],
+                         help="sampling lobes per texel, fitted to representative codes (default: 1; 0: cosine "
+                              "sampling)")
+    spatial.add_argument("--representatives", type=int, metavar="K",
+                         help="representative codes whose lobes are fitted, each texel taking its nearest one's "
+                              "(default: 64, at most 256; the fits are most of the baking's time)")
+    spatial.add_argument("--parameters", choices=["signature", "textures"],
+                         help="what describes a texel to the encoder: the BSDF's values at fixed direction pairs "
+                              "there (default) or the values of the textures it reads")
     return p
 
 
@@ -432,6 +476,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # delivered once the running Mitsuba or trainer call returns
         print("error: interrupted; no network written", file=sys.stderr)
         return 130
+    if args.spatial:
+        from .spatial import report
+
+        print(report(summary))
+        return _exit.SUCCESS
     kind = ("anisotropic" if summary["anisotropic"] else "isotropic") + (", spectral" if summary["spectral"] else "")
     print(f"wrote {summary['output']} ({kind}): {summary['pairs'] - summary['validation']} samples "
           f"(+{summary['validation']} validation) evaluated by Mitsuba ({summary['variant']}) in "
@@ -439,6 +488,3 @@ def main(argv: list[str] | None = None) -> int:
           f"{summary['loss']:.4e}; {summary['seconds']:.1f} s in all")
     return _exit.SUCCESS
 
-
-if __name__ == "__main__":
-    sys.exit(main())
