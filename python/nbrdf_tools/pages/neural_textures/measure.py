@@ -134,49 +134,18 @@ def chi2_at_texels(material: Path, variant: str, sample_count: int = 100_000) ->
     :data:`CHI2_TEXELS` for each view of :data:`CHI2_THETAS` (a vectorised variant: the test runs
     on Dr.Jit arrays); one row per texel and view, with its p-value."""
     import mitsuba as mi
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
     mi.set_variant(variant)
-    bsdf = mi.load_dict({"type": "nbrdf", "filename": str(material)})
     rows = []
     for uv in CHI2_TEXELS:
         for theta in CHI2_THETAS:
-            sample_func, pdf_func = _adapter(bsdf, uv, theta)
+            wi = [float(np.sin(theta)), 0.0, float(np.cos(theta))]
+            sample_func, pdf_func = BSDFAdapter("nbrdf", {"type": "nbrdf", "filename": str(material)}, wi=wi,
+                                                uv=list(uv))
             test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
                                  sample_dim=3, sample_count=sample_count, res=61)
             passed = bool(test.run(significance_level=0.01, test_count=len(CHI2_TEXELS) * len(CHI2_THETAS),
                                    quiet=True))
             rows.append({"uv": list(uv), "theta": theta, "passed": passed, "p_value": float(test.p_value)})
     return rows
-
-
-def _adapter(bsdf, uv, theta):
-    """sample/pdf functions of ``bsdf`` at the texel ``uv`` and the view ``theta`` for
-    ``ChiSquareTest``, as mitsuba.chi2.BSDFAdapter builds them but with the texel set."""
-    import mitsuba as mi
-
-    wi = mi.Vector3f(float(np.sin(theta)), 0.0, float(np.cos(theta)))
-
-    def interaction(n):
-        import drjit as dr
-
-        si = dr.zeros(mi.SurfaceInteraction3f, n)
-        si.wi, si.uv = wi, mi.Point2f(*uv)
-        si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-        return si
-
-    def sample_func(sample, n=None):
-        import drjit as dr
-
-        count = dr.width(sample)
-        si = interaction(count)
-        bs, _ = bsdf.sample(mi.BSDFContext(), si, sample[0], mi.Point2f(sample[1], sample[2]))
-        return bs.wo
-
-    def pdf_func(wo, n=None):
-        import drjit as dr
-
-        si = interaction(dr.width(wo))
-        return bsdf.pdf(mi.BSDFContext(), si, wo)
-
-    return sample_func, pdf_func

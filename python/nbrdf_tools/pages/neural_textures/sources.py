@@ -64,13 +64,21 @@ def luminance(image: str) -> np.ndarray:
     return rgb @ np.array([0.2126, 0.7152, 0.0722])
 
 
+#: Pixels per side of the blocks a mask's image is averaged over before thresholding.
+MASK_BLOCK = 8
+
+
 def derived_map(image: str, low: float, high: float, work: Path, name: str, threshold: bool = False) -> Path:
     """A single-channel EXR from ``image``'s luminance: remapped to [low, high] by its own 2nd and
     98th percentiles (a roughness map), or thresholded at its median (a blend's mask, 0 or 1 but
-    for a one-texel smooth edge from bilinear filtering)."""
+    for a one-texel smooth edge from bilinear filtering) after averaging blocks of
+    :data:`MASK_BLOCK` pixels, so that the mask keeps the image's shapes rather than its grain."""
     import mitsuba as mi
 
     value = luminance(image)
+    if threshold:
+        h, w = (n // MASK_BLOCK * MASK_BLOCK for n in value.shape)
+        value = value[:h, :w].reshape(h // MASK_BLOCK, MASK_BLOCK, w // MASK_BLOCK, MASK_BLOCK).mean(axis=(1, 3))
     lo, hi = np.percentile(value, [2, 98])
     t = np.clip((value - lo) / max(hi - lo, 1e-6), 0.0, 1.0)
     if threshold:
