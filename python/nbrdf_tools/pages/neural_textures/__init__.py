@@ -8,11 +8,10 @@ texture, rendered beside their sources under views and lights no training saw.
 
 The sources (:mod:`.sources`) are split once: the tuning set is where the distiller's defaults
 may be chosen, the test set is what the page's headline reports. For each source: the
-conversion (``python -m nbrdf_mitsuba.distill SOURCE --spatial``, seconds on this machine), a
-reference render of the source (``measure.REFERENCE_SPP_FACTOR`` times the samples), renders of
-the source (the noise floor), of the neural texture and, for blends, of the per-material route
-(the same blend over per-material networks of the two measurements) with their tone-mapped RMSE
-and HDR-FLIP against the reference; rays per second of the source, the neural texture and
+conversion (``python -m nbrdf_mitsuba.distill SOURCE --spatial``, seconds on this machine), renders
+of the source, of the neural texture and, for blends, of the per-material route (the same blend
+over per-material networks of the two measurements) that trace the same paths, with the
+tone-mapped RMSE and HDR-FLIP of the latter two against the source's; rays per second of the source, the neural texture and
 ``roughconductor`` in the same scene; memory; Mitsuba's chi2 test at several texels. Then the
 kitchen with its textured materials replaced by their neural textures beside the original.
 Writes the data (``--data``, default docs/results/data/neural-textures.json), pictures beside it

@@ -19,8 +19,8 @@ from nbrdf_tools.common.render import render_passes, sync, timed_render, warm_up
 #: The rays of one sample of the ``direct`` integrator with one emitter and one BSDF sample: the
 #: camera ray, the shadow ray and the BSDF ray (as bench-rays counts them).
 RAYS_PER_SAMPLE = 3
-#: The reference render has this many times the samples of the compared renders, so that its own
-#: noise adds little to theirs (the noise floor row of the page shows what is left).
+#: The kitchen's reference render has this many times the samples of the compared renders, so
+#: that its own noise adds little to theirs (its noise floor row shows what is left).
 REFERENCE_SPP_FACTOR = 4
 #: Texels (u, v) and view angles (radians from the normal) of the chi2 tests.
 CHI2_TEXELS = ((0.2, 0.3), (0.55, 0.5), (0.8, 0.85))
@@ -28,15 +28,18 @@ CHI2_THETAS = (0.3, 1.1)
 ROUGHCONDUCTOR = {"type": "roughconductor", "material": "Cu", "distribution": "ggx", "alpha": 0.2}
 
 
-def scene_dict(bsdf: dict, size: int, spp: int) -> dict:
-    """A sphere on a plane under two point lights and a dim sky; both shapes carry ``bsdf`` with
-    their own UVs (the sphere's wrap the texture once around it)."""
+def scene_dict(bsdf: dict, size: int, spp: int, lit_for: str = "comparison") -> dict:
+    """A sphere on a plane under two point lights; both shapes carry ``bsdf`` with their own UVs
+    (the sphere's wrap the texture once around it). ``comparison``: emitter samples only, so that
+    two renders with one seed trace the same paths and differ by the BSDF alone; ``timing``: one
+    emitter and one BSDF sample (MIS) and a dim sky, which BSDF sampling serves."""
     import mitsuba as mi
 
     T = mi.ScalarTransform4f
-    return {
+    timing = lit_for == "timing"
+    scene = {
         "type": "scene",
-        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 1},
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": int(timing)},
         "sensor": {"type": "perspective", "fov": 38,
                    "to_world": T().look_at(origin=[0.6, -3.6, 2.4], target=[0, 0, 0.45], up=[0, 0, 1]),
                    "film": {"type": "hdrfilm", "width": size, "height": size * 3 // 4, "rfilter": {"type": "box"}},
@@ -46,8 +49,10 @@ def scene_dict(bsdf: dict, size: int, spp: int) -> dict:
                  "to_world": T().translate([0.1, 0.2, 0.62]).rotate([1, 0, 0], 70).scale(0.6)},
         "key": {"type": "point", "position": [1.6, -1.0, 2.6], "intensity": {"type": "rgb", "value": 9.0}},
         "rim": {"type": "point", "position": [-1.8, 1.9, 1.4], "intensity": {"type": "rgb", "value": 4.0}},
-        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.06}},
     }
+    if timing:
+        scene["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": 0.06}}
+    return scene
 
 
 def distill(source_file: Path, out: Path, resolution: int, channels: int | None, extra: list[str]) -> dict:
@@ -72,6 +77,7 @@ def _run(command: list[str], out: Path) -> dict:
 
 
 def render_image(bsdf: dict, size: int, spp: int, seed: int = 0) -> np.ndarray:
+    """The comparison render of ``bsdf`` (:func:`scene_dict`)."""
     import mitsuba as mi
 
     return render_passes(mi.load_dict(scene_dict(bsdf, size, spp)), spp, seed=seed, progress=False)
@@ -87,7 +93,7 @@ def rays_per_second(bsdfs: dict[str, dict], size: int, spp: int, repeats: int) -
     alternate between them so that the machine's load affects all alike; the best of ``repeats``."""
     import mitsuba as mi
 
-    scenes = {name: mi.load_dict(scene_dict(bsdf, size, spp)) for name, bsdf in bsdfs.items()}
+    scenes = {name: mi.load_dict(scene_dict(bsdf, size, spp, "timing")) for name, bsdf in bsdfs.items()}
     for scene in scenes.values():
         warm_up(scene, spp)
     best = {name: float("inf") for name in scenes}

@@ -65,18 +65,17 @@ def measure_source(source: Source, work: Path, settings: dict) -> tuple[dict, di
     source_file = work / "source.json"
     source_file.write_text(json.dumps(source_bsdf, indent=1))
     material = work / f"{source.name}.nbrdf.json"
-    conversion = measure.distill(source_file, material, settings["resolution"], settings["channels"],
-                                 settings["distill"])
+    conversion = converted(source_file, material, settings)
     neural = {"type": "nbrdf", "filename": str(material)}
     size, spp = settings["size"], settings["spp"]
-    reference = measure.render_image(source_bsdf, size, spp * measure.REFERENCE_SPP_FACTOR, seed=REFERENCE_SEED)
-    images = {"source": measure.render_image(source_bsdf, size, spp), "neural": measure.render_image(neural, size, spp)}
+    reference = measure.render_image(source_bsdf, size, spp)
+    images = {"neural": measure.render_image(neural, size, spp)}
     timed = {"source": source_bsdf, "neural": neural, "roughconductor": measure.ROUGHCONDUCTOR}
     if source.kind == "blend":
         route = per_material_route(source_bsdf, source, work.parent / "measurements", settings)
         images["per_material"] = measure.render_image(route, size, spp)
         timed["per_material"] = route
-    errors = {"noise_floor" if k == "source" else k: measure.errors(reference, image) for k, image in images.items()}
+    errors = {k: measure.errors(reference, image) for k, image in images.items()}
     images["reference"] = reference
     memory = {**measure.neural_bytes(material), "source": measure.source_texture_bytes(source_bsdf)}
     result = {"name": source.name, "subset": source.subset, "kind": source.kind, "resolution": settings["resolution"],
@@ -85,6 +84,22 @@ def measure_source(source: Source, work: Path, settings: dict) -> tuple[dict, di
               "mrays_per_s": measure.rays_per_second(timed, size, spp, settings["repeats"]),
               "chi2": measure.chi2_at_texels(material, VARIANT, settings["chi2_samples"])}
     return result, images
+
+
+def converted(source_file: Path, material: Path, settings: dict) -> dict:
+    """The conversion of ``source_file``, run once per work folder and settings (kept beside the
+    material, so an interrupted or repeated run reuses it)."""
+    record = material.with_suffix(".conversion.json")
+    asked = {"source": source_file.read_text(), "resolution": settings["resolution"],
+             "channels": settings["channels"], "distill": settings["distill"]}
+    if record.is_file() and material.is_file():
+        kept = json.loads(record.read_text())
+        if kept["asked"] == asked:
+            return kept["conversion"]
+    conversion = measure.distill(source_file, material, settings["resolution"], settings["channels"],
+                                 settings["distill"])
+    record.write_text(json.dumps({"asked": asked, "conversion": conversion}))
+    return conversion
 
 
 def per_material_route(source_bsdf: dict, source: Source, folder: Path, settings: dict) -> dict:
@@ -113,8 +128,7 @@ def measure_kitchen(work: Path, settings: dict, figure: Path) -> dict:
         source_file = work / f"{bsdf_id}.json"
         source_file.write_text(json.dumps(kitchen_bsdf(bsdf_id), indent=1))
         material = work / f"{bsdf_id}.nbrdf.json"
-        seconds[bsdf_id] = measure.distill(source_file, material, settings["resolution"], settings["channels"],
-                                           settings["distill"])["seconds"]
+        seconds[bsdf_id] = converted(source_file, material, settings)["seconds"]
         replaced[bsdf_id] = {"type": "nbrdf", "filename": str(material)}
     size = {"resx": 2 * settings["size"], "resy": 2 * settings["size"] * 9 // 16}
     spp = settings["spp"]
