@@ -4,7 +4,7 @@ texture, rendered beside their sources under views and lights no training saw.
 
     python -m nbrdf_tools neural-textures --stored-only --out docs/results/neural-textures.md
     python -m nbrdf_tools neural-textures [--set test|tuning|all] [--sources NAME ...] [--work out/neural-textures]
-        [--resolution 256] [--size 256] [--spp 64] [--no-kitchen] [--quick]
+        [--resolution 256] [--size 256] [--spp 16] [--no-kitchen] [--quick]
 
 The sources (:mod:`.sources`) are split once: the tuning set is where the distiller's defaults
 may be chosen, the test set is what the page's headline reports. For each source: the
@@ -40,8 +40,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--resolution", type=int, default=256, help="the neural textures' size (default: 256)")
     p.add_argument("--channels", type=int, help="latent channels (default: the distiller's)")
     p.add_argument("--size", type=int, default=256, help="render width in pixels (default: 256)")
-    p.add_argument("--spp", type=int, default=64, help="samples per pixel of the compared renders (default: 64)")
-    p.add_argument("--repeats", type=int, default=3, help="timed renders per BSDF (default: 3)")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel of the compared renders (default: 16)")
+    p.add_argument("--repeats", type=int, default=5, help="timed renders per BSDF, the best kept (default: 5)")
     p.add_argument("--no-kitchen", action="store_true", help="skip the kitchen comparison")
     p.add_argument("--quick", action="store_true", help="tiny textures, renders and training (a smoke test)")
     return p

@@ -46,7 +46,7 @@ def measure_all(args, figures: Path) -> dict:
         results.append(result)
         pictures[source.name] = images
     data = {"settings": settings, "sources": results, "machine": machine()}
-    data["figure"] = str(_figure(pictures, figures / "neural-textures" / "sources.png"))
+    _figure(pictures, figures / "neural-textures" / "sources.png")
     if not (args.no_kitchen or args.quick):
         data["kitchen"] = measure_kitchen(work / "kitchen", settings, figures / "neural-textures" / "kitchen.png")
     return data
@@ -138,7 +138,7 @@ def measure_kitchen(work: Path, settings: dict, figure: Path) -> dict:
     neural = render_passes(load_kitchen(replaced, spp=spp, **size), spp, progress=False)
     _figure({"kitchen": {"reference": reference, "original": original, "neural": neural}}, figure,
             ("original", "neural", "error"))
-    return {"replaced": list(KITCHEN_BSDFS), "conversion_seconds": seconds, "figure": str(figure),
+    return {"replaced": list(KITCHEN_BSDFS), "conversion_seconds": seconds,
             "errors": {"original (noise floor)": measure.errors(reference, original),
                        "neural textures": measure.errors(reference, neural)}}
 
