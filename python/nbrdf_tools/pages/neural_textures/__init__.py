@@ -50,7 +50,8 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     data_path = stored_page.data_for(args, PAGE)
-    opening = stored_page.opening_command(PAGE, args.out, data_path)
+    # The page names its own path, wherever this run writes it (a check regenerates it elsewhere).
+    opening = stored_page.opening_command(PAGE, None, data_path)
     if not args.stored_only:
         from .run import measure_all
 

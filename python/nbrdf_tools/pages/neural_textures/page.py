@@ -59,6 +59,12 @@ def cost_table(sources: list[dict]) -> dict:
                         "source's textures"], "align": "lrrrrrrr", "rows": rows}
 
 
+def scaling_table(rows: list[dict]) -> dict:
+    return {"columns": ["source", "texture", "conversion s", "latent texture", "EXR file"], "align": "lrrrr",
+            "rows": [[r["name"], f"{r['resolution']}²", f"{r['seconds']:.0f}", _mib(r["memory"]["texture"]),
+                      _mib(r["memory"]["texture_file"])] for r in rows]}
+
+
 def chi2_table(sources: list[dict]) -> dict:
     rows = []
     for s in sources:
@@ -103,6 +109,7 @@ def page(data: dict, opening: str) -> str:
     sources = data["sources"]
     filled = {"tables": {"quality": quality_table(sources), "speed": speed_table(sources),
                          "cost": cost_table(sources), "chi2": chi2_table(sources),
+                         "scaling": scaling_table(data.get("scaling", [])),
                          "kitchen": kitchen_table(data.get("kitchen"))},
               "texts": {"opening": opening, "headline": headline(sources), "settings": settings_text(data)}}
     return stored_page.fill(template(), filled)

@@ -18,13 +18,16 @@ VARIANT = "llvm_ad_rgb"
 #: The kitchen's textured BSDFs replaced by their neural textures in the kitchen comparison.
 KITCHEN_BSDFS = ("TabletopBSDF", "SmallWorktopBSDF", "ChoppingBoardBSDF")
 REFERENCE_SEED = 1000
+#: The source converted at several texture sizes for the conversion-time table (a test source).
+SCALING_SOURCE = "principled-wood"
+SCALING_RESOLUTIONS = (256, 1024)
 QUICK = {"resolution": 16, "size": 64, "spp": 8, "repeats": 1, "chi2_samples": 20_000,
          "distill": ["--samples", "20000", "--epochs", "3"]}
 
 
 def settings_of(args) -> dict:
     settings = {"resolution": args.resolution, "channels": args.channels, "size": args.size, "spp": args.spp,
-                "repeats": args.repeats, "chi2_samples": 100_000, "distill": [], "variant": VARIANT,
+                "repeats": args.repeats, "chi2_samples": 1_000_000, "distill": [], "variant": VARIANT,
                 "reference_factor": measure.REFERENCE_SPP_FACTOR, "quick": args.quick}
     if args.quick:
         settings.update(QUICK)
@@ -47,6 +50,8 @@ def measure_all(args, figures: Path) -> dict:
         pictures[source.name] = images
     data = {"settings": settings, "sources": results, "machine": machine()}
     _figure(pictures, figures / "neural-textures" / "sources.png")
+    if not args.quick:
+        data["scaling"] = conversion_by_size(work, settings)
     if not (args.no_kitchen or args.quick):
         data["kitchen"] = measure_kitchen(work / "kitchen", settings, figures / "neural-textures" / "kitchen.png")
     return data
@@ -100,6 +105,23 @@ def converted(source_file: Path, material: Path, settings: dict) -> dict:
                                  settings["distill"])
     record.write_text(json.dumps({"asked": asked, "conversion": conversion}))
     return conversion
+
+
+def conversion_by_size(work: Path, settings: dict) -> list[dict]:
+    """Conversion seconds and sizes of :data:`SCALING_SOURCE` at each of
+    :data:`SCALING_RESOLUTIONS` (the page's own resolution reuses its conversion)."""
+    (source,) = select("all", [SCALING_SOURCE])
+    rows = []
+    for resolution in SCALING_RESOLUTIONS:
+        folder = work / (source.name if resolution == settings["resolution"] else f"{source.name}-{resolution}")
+        folder.mkdir(parents=True, exist_ok=True)
+        source_file = folder / "source.json"
+        source_file.write_text(json.dumps(bsdf(source, folder), indent=1))
+        material = folder / f"{source.name}.nbrdf.json"
+        conversion = converted(source_file, material, {**settings, "resolution": resolution})
+        rows.append({"name": source.name, "resolution": resolution, "seconds": conversion["seconds"],
+                     "memory": measure.neural_bytes(material)})
+    return rows
 
 
 def per_material_route(source_bsdf: dict, source: Source, folder: Path, settings: dict) -> dict:
