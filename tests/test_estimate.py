@@ -347,6 +347,21 @@ def test_prior_schedule_holds_out_a_view_only_where_it_can():
     assert fixed.pull_strengths == (0.5,) and fixed.candidate_steps == 0
 
 
+def test_the_analytic_start_is_a_candidate_wherever_the_held_out_view_chooses():
+    """The analytic start's fit takes the estimate's steps and adds its candidates to the held-out
+    choice; with a fixed pull, one image or no weight step nothing is chosen and it is not fitted."""
+    from nbrdf_mitsuba.estimate.plan import ANALYTIC_PULL_STRENGTHS, schedule
+
+    plan = schedule(100, 3, None)
+    assert (plan.analytic_steps, plan.analytic_pull_strengths) == (100, ANALYTIC_PULL_STRENGTHS)
+    candidates = len(plan.pull_strengths) + len(ANALYTIC_PULL_STRENGTHS)  # from the best code only
+    assert plan.total_steps() == 100 + plan.attempt_steps()
+    assert plan.attempt_steps() == len(plan.code_strengths) * 40 + 60 + (candidates - 1) * 30
+    for off in (schedule(100, 3, 0.5), schedule(100, 1, None), schedule(1, 3, None)):
+        assert (off.analytic_steps, off.analytic_pull_strengths) == (0, ())
+        assert off.total_steps() == off.attempt_steps()
+
+
 def spy_on_views(monkeypatch, estimate_module, judge=None):
     """Records the views each render_all call renders and the views held_out_loss judges;
     ``judge(call_index, loss)`` may replace the held-out losses."""
@@ -369,8 +384,9 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 
 def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The code sees every training view; the candidates (each pull strength from the decoded
-    start) see all but the last, the last alone judges them, the lowest held-out loss wins, its
+    """The analytic start is fitted first (every view, the estimate's steps); the code sees every
+    training view; the candidates (each pull strength from the decoded start, then the analytic
+    start's) see all but the last, the last alone judges them, the lowest held-out loss wins, its
     fit goes on over every view for the rest of the weight phase, and a seed repeats it (the code
     penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
@@ -392,27 +408,80 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    assert set(losses) == {str(s) for s in plan.PULL_STRENGTHS}
+    names = [str(s) for s in plan.PULL_STRENGTHS] + [f"principled, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS]
+    assert set(losses) == set(names)
     assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
     assert len(set(losses.values())) > 1, losses
     best = min(losses, key=losses.get)
-    assert provenance["start"] == "decoded" and provenance["pull_strength"] == float(best)
+    chosen_start = "analytic" if best.startswith("principled") else "decoded"
+    assert provenance["start"] == chosen_start and provenance["pull_strength"] == float(best.split()[-1])
+    assert provenance["analytic"]["type"] == "principled"
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < priors.ALBEDO_BOUND
-    assert judged == [1] * 2 * len(plan.PULL_STRENGTHS)  # the last training view, once per candidate and run
-    # Screening (49 starts) and code (2 steps) on both views; candidates (2 steps per strength
-    # from the decoded start) on view 0; the chosen one's fit on both (the weight phase's other 2).
-    assert rendered == [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(plan.PULL_STRENGTHS)) + [(0, 1)] * 2, rendered
-    # The last run starts where the chosen candidate's fit ended (the runs: code, candidates, final).
-    candidates = runs[1:-1]
-    assert [kind for kind, _, _ in runs] == ["code"] + ["weights"] * (len(plan.PULL_STRENGTHS) + 1)
-    chosen = candidates[list(plan.PULL_STRENGTHS).index(float(best))]
+    assert judged == [1] * 2 * len(names)  # the last training view, once per candidate and run
+    # The analytic fit (6 steps) on both views; screening (49 starts) and code (2 steps) on both
+    # views; candidates (2 steps each) on view 0; the chosen one's fit on both (the weight
+    # phase's other 2).
+    assert rendered == [(0, 1)] * (6 + 49 + 2) + [(0,)] * (2 * len(names)) + [(0, 1)] * 2, rendered
+    # The runs: analytic, code, candidates, final; the last starts where the chosen candidate's
+    # fit ended, the decoded candidates from the decoded start, the analytic one from the
+    # analytic start.
+    assert [kind for kind, _, _ in runs] == ["analytic", "code"] + ["weights"] * (len(names) + 1)
+    candidates = runs[2:-1]
+    chosen = candidates[names.index(best)]
     np.testing.assert_array_equal(runs[-1][1], chosen[2])
-    assert all(np.array_equal(candidates[0][1], start) for _, start, _ in candidates)  # all from the decoded start
+    decoded = candidates[:len(plan.PULL_STRENGTHS)]
+    assert all(np.array_equal(decoded[0][1], start) for _, start, _ in decoded)
+    assert not np.array_equal(candidates[-1][1], decoded[0][1])
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
+
+
+def test_the_analytic_start_is_the_analytic_estimate_distilled(setup, tmp_path, monkeypatch):
+    """The analytic start is ``--model principled``'s estimate at the same steps, samples and seed
+    (recorded in the provenance), distilled into a network close to it in BRDF space (far closer
+    than the common initialisation); where the held-out view prefers it, it is the estimate's
+    start, and no code strength is recorded."""
+    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import analytic_start, plan
+    from nbrdf_tools.common.compare_materials import log_error
+
+    scene, images = setup
+    starts = []
+    distil = analytic_start.distil
+
+    def spy_distil(fitted, threads):
+        starts.append(distil(fitted, threads))
+        return starts[-1]
+
+    monkeypatch.setattr(E.estimator, "distil", spy_distil)
+    assert len(plan.CODE_STRENGTHS) == 1  # no code is judged: the decoded candidates come first
+    analytic = len(plan.PULL_STRENGTHS)
+    spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == analytic else loss)
+    prior, principled = tmp_path / "prior.nbrdf.json", tmp_path / "principled.json"
+    common = ("--steps", "6", "--spp", "2", "--threads", "1", "--seed", "2")
+    assert run(scene, images, prior, *common) == 0
+    assert run(scene, images, principled, "--model", "principled", *common) == 0
+    provenance = json.loads(prior.read_text())["provenance"]
+    # The same numbers; fit-phong's rewrite of the network file may move a float by its last digit.
+    expected = json.loads(principled.read_text())
+    assert provenance["analytic"].keys() == expected.keys() and provenance["analytic"]["type"] == expected["type"]
+    for key, value in expected.items():
+        if key != "type":
+            got = provenance["analytic"][key]
+            assert (got["value"] if isinstance(value, dict) else got) == pytest.approx(
+                value["value"] if isinstance(value, dict) else value, rel=1e-12)
+    assert provenance["start"] == "analytic" and provenance["code_strength"] is None
+    assert provenance["pull_strength"] == plan.ANALYTIC_PULL_STRENGTHS[0]
+    fitted = mi.load_dict(provenance["analytic"])
+    errors = {}
+    for name, weights in (("distilled", starts[0]), ("common", E.common_initialisation())):
+        path = tmp_path / f"{name}.nbrdf.json"
+        E.write_network(path, weights, name, {})
+        errors[name] = log_error(fitted, mi.load_dict({"type": "nbrdf", "filename": str(path)}), "uniform", 4000)
+    assert errors["distilled"] < min(0.01, 0.1 * errors["common"]), errors
 
 
 def test_image_loss_is_linear_in_the_render(llvm_variant):
@@ -528,71 +597,80 @@ def test_pull_penalty_against_a_float64_oracle(llvm_variant):
 def test_code_strength_schedule():
     from nbrdf_mitsuba.estimate.plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, schedule
 
-    assert 0.0 in CODE_STRENGTHS and len(CODE_STRENGTHS) > 1
+    assert CODE_STRENGTHS == (FALLBACK_CODE_STRENGTH,)  # one code phase (docs/experiments.md)
     plan = schedule(100, 3, None)
     assert plan.code_strengths == CODE_STRENGTHS and plan.candidate_steps == 30
     assert schedule(100, 3, None, 0.0).code_strengths == (0.0,)
     assert schedule(100, 1, None).code_strengths == (FALLBACK_CODE_STRENGTH,)  # nothing to hold out
     assert schedule(100, 3, 0.5).code_strengths == (FALLBACK_CODE_STRENGTH,)  # a fixed pull fixes both
+    assert schedule(100, 3, None, 1e-3).code_strengths == (1e-3,)
     both = schedule(100, 3, 0.5, 0.25)
     assert both.code_strengths == (0.25,) and both.candidate_steps == 0
 
 
-def test_code_strength_is_chosen_with_the_pull_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """By default each code strength gets its own code phase and the pull's three candidates;
-    the code phases see every training view, the candidates all but the last, the last alone
-    judges them, the lowest held-out loss wins (its code strength recorded) and a seed repeats it."""
+def test_code_strength_is_chosen_by_the_held_out_view_before_the_candidates(setup, tmp_path, monkeypatch):
+    """With several code strengths each gets its own code phase (on every training view); the
+    held-out view judges their decoded networks, and only the best code's start runs the pull's
+    candidates (beside the analytic start's, on all views but the last), which the same view
+    judges; the code strength is recorded with both codes' held-out losses, and a seed repeats it."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import plan
 
+    monkeypatch.setattr(plan, "CODE_STRENGTHS", (0.0, 1e-3))
+    names = [str(w) for w in plan.PULL_STRENGTHS] + [f"principled, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS]
+    judged_per_run = len(plan.CODE_STRENGTHS) + len(names)
+    decoded = len(plan.CODE_STRENGTHS) + len(plan.PULL_STRENGTHS)  # judged per run before the analytic start
     scene, images = setup
-    rendered, judged = spy_on_views(monkeypatch, E)
+    # The analytic start made the worst candidate here, so that a decoded one (and its code) is chosen.
+    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: 1.0 if call % judged_per_run >= decoded
+                                    else loss)
     outs = [tmp_path / f"code{k}.nbrdf.json" for k in range(2)]
     for out in outs:
         rendered.clear()
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
-    losses = provenance["held_out_losses"]
-    pairs = [(c, w) for c in plan.CODE_STRENGTHS for w in plan.PULL_STRENGTHS]
-    names = [f"code {c}, pull {w}" for c, w in pairs]
-    assert set(losses) == set(names)  # fit-phong's rewrite sorts the keys
-    assert all(math.isfinite(v) for v in losses.values())
-    best = min(losses, key=losses.get)
-    c, w = pairs[names.index(best)]
-    assert (provenance["code_strength"], provenance["pull_strength"]) == (c, w)
-    assert judged == [1] * (2 * len(pairs))  # the last training view, once per candidate and run
-    # Screening (49) and a code phase per strength (2 steps each) on both views, the pull's
-    # candidates (2 steps each) on view 0; the chosen one's fit on both views (2 more steps).
-    assert rendered == [(0, 1)] * (49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(pairs)) + \
+    codes, losses = provenance["code_held_out_losses"], provenance["held_out_losses"]
+    assert set(codes) == {str(c) for c in plan.CODE_STRENGTHS} and set(losses) == set(names)
+    assert all(math.isfinite(v) for v in [*codes.values(), *losses.values()]) and len(set(codes.values())) > 1
+    best = min(plan.CODE_STRENGTHS, key=lambda c: codes[str(c)])
+    assert (provenance["start"], provenance["code_strength"]) == ("decoded", best)
+    assert judged == [1] * (2 * judged_per_run)  # the last training view: each code, then each candidate
+    # The analytic fit (6 steps), screening (49) and a code phase per strength (2 steps each) on
+    # both views, the candidates (2 steps each) on view 0; the chosen one's fit on both views (2
+    # more steps).
+    assert rendered == [(0, 1)] * (6 + 49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(names)) + \
         [(0, 1)] * 2
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 
 
 def test_code_strength_0_is_the_estimate_without_the_code_penalty(setup, tmp_path, monkeypatch):
-    """Where the held-out view picks code strength 0, the estimate is the one of ``--code-strength 0``
-    (the code phase without the penalty, as before it existed) weight for weight; its candidates'
-    held-out losses are that run's bit for bit, and those from code strength 1e-3 differ."""
+    """With code strengths 0 and 1e-3, where the held-out view picks 0 the estimate is the one of
+    ``--code-strength 0`` (one code phase, without the penalty) weight for weight, its candidates'
+    held-out losses that run's bit for bit; the other code was judged too."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import plan
 
+    monkeypatch.setattr(plan, "CODE_STRENGTHS", (0.0, 1e-3))
+    forced = {}  # judge call -> loss, per run: code 0 and the first candidate win
+    _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: forced.get(call, loss))
     scene, images = setup
-    picked = plan.PULL_STRENGTHS[0]  # judged in order: the pull's strengths from code strength 0 first
-    _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
     nets = {}
-    for name, extra in (("fixed", ("--code-strength", "0")), ("chosen", ())):
+    for name, extra, force in (("fixed", ("--code-strength", "0"), {0: -1.0}),
+                               ("chosen", (), {0: -1.0, len(plan.CODE_STRENGTHS): -1.0})):
         judged.clear()
+        forced.clear()
+        forced.update(force)
         nets[name] = tmp_path / f"{name}.nbrdf.json"
         assert run(scene, images, nets[name], "--steps", "6", "--spp", "2", "--threads", "1", *extra) == 0
     fixed, chosen = (json.loads(nets[k].read_text()) for k in ("fixed", "chosen"))
     assert chosen["provenance"]["code_strength"] == fixed["provenance"]["code_strength"] == 0.0
-    assert chosen["provenance"]["pull_strength"] == fixed["provenance"]["pull_strength"] == picked
+    assert chosen["provenance"]["pull_strength"] == fixed["provenance"]["pull_strength"] == plan.PULL_STRENGTHS[0]
     assert chosen["layers"] == fixed["layers"] and chosen["provenance"]["code"] == fixed["provenance"]["code"]
-    losses = chosen["provenance"]["held_out_losses"]
-    for strength in plan.PULL_STRENGTHS:
-        assert losses[f"code 0.0, pull {strength}"] == fixed["provenance"]["held_out_losses"][str(strength)]
-        if strength != picked:
-            assert losses[f"code 0.001, pull {strength}"] != losses[f"code 0.0, pull {strength}"]
+    assert chosen["provenance"]["held_out_losses"] == fixed["provenance"]["held_out_losses"]
+    codes = chosen["provenance"]["code_held_out_losses"]
+    assert set(codes) == {str(c) for c in plan.CODE_STRENGTHS} and "code_held_out_losses" not in fixed["provenance"]
+    assert all(math.isfinite(v) and v > 0 for k, v in codes.items() if k != "0.0")
 
 
 def test_code_strength_must_be_finite_and_non_negative(setup, tmp_path, capsys):
@@ -691,9 +769,9 @@ def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_va
 
 
 def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(setup, tmp_path, monkeypatch):
-    """With the bound below every decoded candidate's albedo (0), none is chosen even where the
-    held-out view prefers it: the estimate falls back to the common start, the nbrdf-no-prior
-    estimate, and the provenance names the rejected candidates with their albedo."""
+    """With the bound below every candidate's albedo (0), none is chosen even where the held-out
+    view prefers it: the estimate falls back to the common start, the nbrdf-no-prior estimate,
+    and the provenance names the rejected candidates (the analytic start's too) with their albedo."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import estimator, plan, priors
 
@@ -705,10 +783,11 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
     assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
     assert provenance["start"] == estimator.COMMON_START and provenance["pull_strength"] is None
-    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PULL_STRENGTHS}  # the last attempt's
+    names = {str(s) for s in plan.PULL_STRENGTHS} | {f"principled, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS}
+    assert set(provenance["held_out_losses"]) == names  # the last attempt's
     # Every attempt's candidates rejected, each attempt with its own seeds.
     prefixes = ["", "attempt 1: ", "attempt 2: "][:estimator.PRIOR_ATTEMPTS]
-    assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in prefixes for s in plan.PULL_STRENGTHS}
+    assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in prefixes for s in names}
     assert all(v > 0 for v in provenance["albedo_rejected"].values())
     assert provenance["attempts"] == estimator.PRIOR_ATTEMPTS
     assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
@@ -775,7 +854,7 @@ def test_a_rejected_attempt_of_the_prior_is_tried_again_with_other_seeds(setup, 
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--seed", "0") == 0
     assert seeds == [0, estimator.ATTEMPT_SEED_STRIDE] * 2
     provenance = json.loads(outs[0].read_text())["provenance"]
-    assert provenance["start"] == "decoded" and provenance["attempts"] == 2
-    assert set(provenance["albedo_rejected"]) == {f"code {c}, pull {w}" for c in plan.CODE_STRENGTHS
-                                                  for w in plan.PULL_STRENGTHS}
+    assert provenance["start"] in ("decoded", "analytic") and provenance["attempts"] == 2
+    assert set(provenance["albedo_rejected"]) == ({str(w) for w in plan.PULL_STRENGTHS}
+                                                  | {f"principled, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS})
     assert json.loads(outs[0].read_text())["layers"] == json.loads(outs[1].read_text())["layers"]

@@ -11,6 +11,7 @@ from pathlib import Path
 from .. import _exit
 from .errors import EstimateError
 from .estimator import estimate
+from .analytic_start import ANALYTIC_MODEL
 from .models import MODELS
 from .plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, FALLBACK_PULL_STRENGTH, PULL_STRENGTHS
 
@@ -41,19 +42,22 @@ def parser() -> argparse.ArgumentParser:
                    help="OUT.nbrdf.json (nbrdf models) or OUT.json (analytic models: a mi.load_dict dictionary)")
     p.add_argument("--model", choices=MODELS, default="nbrdf", help="what to fit (default: nbrdf, with the prior)")
     p.add_argument("--steps", type=int, default=200, help="optimisation steps, each rendering every view (default: 200)")
-    p.add_argument("--spp", type=int, default=16, help="samples per pixel of each render (default: 16)")
+    p.add_argument("--spp", type=int, default=8, help="samples per pixel of each render (default: 8)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the renders (default: 0)")
     p.add_argument("--max-depth", type=int, default=3, help="prb's path depth (default: 3, direct light and one "
                                                             "bounce)")
     p.add_argument("--pull-strength", type=float,
                    help="strength of the pull toward the decoded network's BRDF (default: chosen among "
-                        f"{', '.join(map(str, PULL_STRENGTHS))} by the last training view, held out; the common start "
+                        f"{', '.join(map(str, PULL_STRENGTHS))} by the last training view, held out, which may "
+                        f"choose the {ANALYTIC_MODEL} fit distilled into the network instead; the common start "
                         f"without the prior only where the albedo check rejects every network of the prior; "
-                        f"{FALLBACK_PULL_STRENGTH} with one image)")
+                        f"{FALLBACK_PULL_STRENGTH} with one image). Given, nothing is held out and no analytic "
+                        "start is fitted")
     p.add_argument("--code-strength", type=float,
                    help="strength of the Gaussian penalty keeping the latent code near the training codes (default: "
-                        f"chosen among {', '.join(map(str, CODE_STRENGTHS))} together with the pull's "
-                        f"strength, by the same held-out view; {FALLBACK_CODE_STRENGTH} with one image or a fixed "
+                        + (f"{CODE_STRENGTHS[0]}" if len(CODE_STRENGTHS) == 1 else
+                           f"chosen among {', '.join(map(str, CODE_STRENGTHS))} together with the pull's strength, by "
+                           "the same held-out view") + f"; {FALLBACK_CODE_STRENGTH} with one image or a fixed "
                         "--pull-strength)")
     for former, current in DEPRECATED_FLAGS.items():
         p.add_argument(former, dest=current[2:].replace("-", "_"), type=float, action=_Deprecated,

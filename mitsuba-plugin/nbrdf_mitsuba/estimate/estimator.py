@@ -15,6 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .analytic_start import ANALYTIC_MODEL, distil
 from .errors import EstimateError
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
 from .optimiser import Descent, Phase
@@ -167,54 +168,59 @@ def _estimate(args, on_step=None) -> dict:
     with tempfile.TemporaryDirectory(prefix="nbrdf-estimate-") as workdir:
         est = Estimator(scene_file, model, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
         est.on_step = on_step
+        plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
+                        args.code_strength)
+        # The analytic start's fit renders its own scene (the analytic model in the BSDF's place).
+        analytic = (Estimator(scene_file, Analytic(ANALYTIC_MODEL), args.images, args.spp, args.seed, args.max_depth,
+                              Path(workdir)) if model_has_prior(model) and plan.analytic_steps else None)
         if args.threads is not None:
             # One thread fixes the order of the gradients' float sums (bit-identical reruns). Set
             # after loading: Mitsuba builds the Python plugins on its worker threads.
             dr.set_thread_count(args.threads)
         from tqdm import tqdm
 
-        plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
-                        args.code_strength)
         with tqdm(total=plan.total_steps(), unit="step", desc=f"estimate {args.model}", disable=args.quiet,
                   file=sys.stderr) as bar:
-            result = _optimise(est, model, args, bar, plan)
+            result = _optimise(est, model, args, bar, plan, analytic)
     result["seconds"] = time.perf_counter() - start
     result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
-    result["halvings"] = est.halvings
+    result["halvings"] = est.halvings + (analytic.halvings if analytic is not None else 0)
     return result
 
 
 def model_has_prior(model) -> bool:
     return isinstance(model, Network) and model.prior
 
-def candidate_name(candidate, several_codes: bool) -> str:
-    """A candidate's key in ``held_out_losses``: the pull's strength, prefixed with the code
-    penalty's where several are candidates."""
-    code_strength, strength = candidate
-    return f"code {code_strength}, pull {strength}" if several_codes else str(strength)
+def candidate_name(candidate) -> str:
+    """A candidate's key in ``held_out_losses``: the pull's strength, prefixed with the analytic
+    model's name for the analytic start."""
+    start, strength = candidate
+    return f"{start}, pull {strength}" if isinstance(start, str) else str(strength)
 
 
-def choose_start(est: Estimator, decoded: dict, plan: Plan, bar) -> tuple:
+def choose_start(est: Estimator, starts: dict, plan: Plan, bar) -> tuple:
     """The candidate whose short fit on the training views but the held-out one (the last) has
-    the lowest loss on the held-out view: a pair (code penalty's strength, strength of the pull
-    toward ``decoded[code strength]``); ties go to the first (no code penalty, the tightest pull).
-    A candidate whose fit fails the albedo check (:func:`albedo_check`) is not chosen; where none
-    is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
+    the lowest loss on the held-out view: a pair (start, strength of the pull toward
+    ``starts[start]``), the start a code penalty's strength (the decoded start of that code) or
+    the analytic model's name (the analytic start, pulled by ``plan.analytic_pull_strengths``);
+    ties go to the first (the tightest pull, the decoded before the analytic). A candidate whose
+    fit fails the albedo check (:func:`albedo_check`) is not chosen; where none is left,
+    ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
     rejected ones and the chosen candidate's fitted weights (``None`` for ``COMMON_START``)."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
     views, est.views = est.views, list(range(held_out))
     losses, rejected, fits = {}, {}, {}
     try:
-        for code_strength, start in decoded.items():
-            for strength in plan.pull_strengths:
+        for name, start in starts.items():
+            for strength in plan.analytic_pull_strengths if isinstance(name, str) else plan.pull_strengths:
                 phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
                               pull_penalty(start, strength))
-                fitted = fits[code_strength, strength] = est.run(phase, bar, plan.code_steps)
-                losses[code_strength, strength] = est.held_out_loss(fitted, held_out)
+                fitted = fits[name, strength] = est.run(phase, bar, plan.code_steps)
+                losses[name, strength] = est.held_out_loss(fitted, held_out)
                 albedo, material = albedo_check(fitted)
                 if not material:
-                    rejected[code_strength, strength] = albedo
+                    rejected[name, strength] = albedo
     finally:
         est.on_step, est.views = on_step, views
     allowed = [k for k in losses if k not in rejected]
@@ -237,9 +243,10 @@ def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
             for strength in plan.code_strengths}
 
 
-def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
+def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic: tuple | None = None) -> tuple:
     """One attempt of the prior at the estimator's seed: the code through the decoder, then the
-    weights pulled toward the decoded ones by the chosen strengths. Returns the weights (``None``
+    weights pulled toward the decoded ones, or toward the analytic start ``analytic`` (its model's
+    name and distilled weights, if any), by the chosen strengths. Returns the weights (``None``
     where the albedo check rejected every candidate or the final network), the summary's
     additions, and the rejected albedos by candidate name (``final``: the final network)."""
     # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
@@ -247,25 +254,36 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
     # Estimation: "The code phase on every training view"). The candidates' weights, which can fit
     # noise, are fitted without it.
     codes = fit_codes(est, decoder, plan, bar)
-    decoded = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
-    choice, losses, rejected, fitted = (plan.code_strengths[0], plan.pull_strengths[0]), {}, {}, None
+    starts = {k: decoder.decode_numpy(code).astype(np.float64) for k, code in codes.items()}
+    extra = {}
+    if len(starts) > 1:
+        # The held-out view judges the decoded networks, and only the best code's start runs the
+        # candidates (docs/experiments.md, Estimation: "One code phase, or candidates from every code").
+        judged = {k: est.held_out_loss(w, len(est.references) - 1) for k, w in starts.items()}
+        extra["code_held_out_losses"] = {str(k): v for k, v in judged.items()}
+        best = min(judged, key=judged.__getitem__)
+        starts = {best: starts[best]}
+    code_strength = next(iter(starts))
+    if analytic is not None:
+        starts[analytic[0]] = analytic[1]
+    choice, losses, rejected, fitted = (code_strength, plan.pull_strengths[0]), {}, {}, None
     if plan.selecting:
-        choice, losses, rejected, fitted = choose_start(est, decoded, plan, bar)
-    several_codes = len(codes) > 1
-    extra = {"held_out_losses": {candidate_name(k, several_codes): v for k, v in losses.items()}} if losses else {}
-    rejected = {candidate_name(k, several_codes): v for k, v in rejected.items()}
-    # The common start keeps the best decoded candidate's code for the record.
-    code_strength = min(losses, key=losses.__getitem__)[0] if choice == COMMON_START else choice[0]
+        choice, losses, rejected, fitted = choose_start(est, starts, plan, bar)
+    if losses:
+        extra["held_out_losses"] = {candidate_name(k): v for k, v in losses.items()}
+    rejected = {candidate_name(k): v for k, v in rejected.items()}
+    # The analytic and the common start keep the decoded start's code for the record.
+    analytic_chosen = choice != COMMON_START and isinstance(choice[0], str)
     extra["code"] = [float(c) for c in codes[code_strength]]
     if choice == COMMON_START:
         return None, extra, rejected
     strength = choice[1]
-    extra.update({"start": "decoded", "pull_strength": strength, "code_strength": code_strength})
+    extra.update({"start": "analytic" if analytic_chosen else "decoded", "pull_strength": strength,
+                  "code_strength": None if analytic_chosen else code_strength})
     # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
-    # from the decoded start had): refitted from the decoded start instead, the network lost what
-    # the held-out view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit
-    # goes on").
-    center = decoded[code_strength]
+    # from its start had): refitted from the start instead, the network lost what the held-out
+    # view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit goes on").
+    center = starts[choice[0]]
     weights, steps = (center, plan.weight_steps) if fitted is None else (fitted, plan.weight_steps - plan.candidate_steps)
     if steps > 0:
         phase = Phase("weights", weights, steps, Network._set_weights, pull_penalty(center, strength))
@@ -278,25 +296,38 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar) -> tuple:
     return weights, extra, rejected
 
 
-def fit_with_prior(est: Estimator, args, plan: Plan, bar) -> tuple[np.ndarray, dict]:
-    """Up to ``PRIOR_ATTEMPTS`` attempts of the prior, each with its own render seeds, until the
-    albedo check keeps a network; else the common start, the nbrdf-no-prior estimate (its start,
-    steps and seeds, so the same network). The weights and the summary's additions."""
+def fit_analytic(est: Estimator, model: Analytic, plan: Plan, bar, threads: int | None) -> tuple[dict, np.ndarray]:
+    """The analytic start: ``model`` fitted through the images (as the model's own estimate of the
+    same steps and seed), and the network distilled from it (:func:`analytic_start.distil`)."""
+    (phase,) = model.phases(plan.analytic_steps)
+    fitted = model.result(est.run(phase, bar, 0))
+    return fitted, distil(fitted, threads)
+
+
+def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_est: Estimator | None = None
+                   ) -> tuple[np.ndarray, dict]:
+    """The analytic start (fitted by ``analytic_est``, if any), then up to ``PRIOR_ATTEMPTS``
+    attempts of the prior, each with its own render seeds, until the albedo check keeps a network;
+    else the common start, the nbrdf-no-prior estimate (its start, steps and seeds, so the same
+    network). The weights and the summary's additions."""
     from ..latent import Decoder, LatentError
 
     try:
         decoder = Decoder(args.ae)
     except LatentError as error:
         raise EstimateError(str(error)) from None
-    # An attempt costs what the progress bar was sized for (code and weight steps add up to --steps).
-    seed, rejected_all, attempt_steps = est.seed, {}, bar.total
+    analytic, analytic_extra = None, {}
+    if analytic_est is not None:
+        fitted, weights = fit_analytic(analytic_est, analytic_est.model, plan, bar, args.threads)
+        analytic, analytic_extra = (fitted["type"], weights), {"analytic": fitted}
+    seed, rejected_all, attempt_steps = est.seed, {}, plan.attempt_steps()
     try:
         for attempt in range(PRIOR_ATTEMPTS):
             est.seed = seed + ATTEMPT_SEED_STRIDE * attempt
             if attempt > 0:
                 bar.total += attempt_steps
             try:
-                weights, extra, rejected = prior_attempt(est, decoder, plan, bar)
+                weights, extra, rejected = prior_attempt(est, decoder, plan, bar, analytic)
             except LatentError as error:
                 raise EstimateError(str(error)) from None
             prefix = f"attempt {attempt}: " if attempt else ""
@@ -317,10 +348,10 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar) -> tuple[np.ndarray, d
         est.seed = seed
     if rejected_all:
         extra["albedo_rejected"] = rejected_all
-    return weights, extra
+    return weights, {**extra, **analytic_extra}
 
 
-def _optimise(est: Estimator, model, args, bar, plan: Plan) -> dict:
+def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: Estimator | None = None) -> dict:
     summary = {"output": str(args.output), "model": args.model, "steps": args.steps}
     if isinstance(model, Analytic):
         (phase,) = model.phases(args.steps)
@@ -330,7 +361,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan) -> dict:
         summary["bsdf"] = fitted
         return summary
     if model.prior:
-        weights, extra = fit_with_prior(est, args, plan, bar)
+        weights, extra = fit_with_prior(est, args, plan, bar, analytic)
         summary.update(extra)
     else:
         weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
@@ -345,8 +376,8 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan) -> dict:
     provenance = {"estimated_by": "nbrdf_mitsuba.estimate", "model": args.model, "steps": args.steps,
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
-    for key in ("code", "start", "pull_strength", "code_strength", "held_out_losses", "albedo_rejected", "attempts",
-                "albedo_max"):
+    for key in ("code", "start", "pull_strength", "code_strength", "code_held_out_losses", "held_out_losses",
+                "albedo_rejected", "attempts", "analytic", "albedo_max"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]

@@ -18,29 +18,36 @@ PULL_STRENGTHS = (1e-1, 0.0)
 #: The pull strength where no view can be held out (one image) or no weight step is left to judge.
 FALLBACK_PULL_STRENGTH = 1e-1
 #: Strengths of the code phase's Gaussian penalty (the training codes' mean and spread), each a code
-#: phase of its own whose decoded start runs every candidate of the weight phase; the held-out view
-#: judges the pairs together: 0 is no penalty; the other keeps the code near the training codes,
-#: which helps most materials but not all, hence the choice (docs/experiments.md, Estimation: "The
-#: code penalty's strength chosen by the held-out view").
-CODE_STRENGTHS = (0.0, 1e-3)
+#: phase of its own; where several, the held-out view judges their decoded networks and only the
+#: best one's start runs the weight phase's candidates. One, no penalty: a second strength (1e-3)
+#: helped some materials and cost others about as much, for a fifth of the estimate's time more
+#: (docs/experiments.md, Estimation: "One code phase, or candidates from every code").
+CODE_STRENGTHS = (0.0,)
 #: The code strength where nothing is chosen (one image, no weight step, or a fixed
 #: ``--pull-strength``): no penalty.
 FALLBACK_CODE_STRENGTH = 0.0
 #: Share of the weight phase's steps each candidate strength is fitted for before it is judged.
 CANDIDATE_SHARE = 0.5
+#: Strengths of the pull toward the analytic start (the analytic fit distilled into the network,
+#: :mod:`.analytic_start`), each a candidate beside the decoded ones wherever they are chosen among:
+#: the decoded start's pull, one candidate only, as it costs a candidate's steps.
+ANALYTIC_PULL_STRENGTHS = (1e-1,)
 
 
 @dataclass(frozen=True)
 class Plan:
     """Steps of the code phase and of the weight phase, the candidate strengths of the weight
-    phase's pull and of the code's penalty (one each: no choice), and the steps of each decoded
-    candidate's weight fit (0: nothing to choose)."""
+    phase's pull and of the code's penalty (one each: no choice), the steps of each candidate's
+    weight fit (0: nothing to choose), and the analytic start's fit's steps and its candidates'
+    pull strengths (0 and none: no analytic start)."""
 
     code_steps: int
     weight_steps: int
     pull_strengths: tuple[float, ...]
     code_strengths: tuple[float, ...]
     candidate_steps: int
+    analytic_steps: int = 0
+    analytic_pull_strengths: tuple[float, ...] = ()
 
     @property
     def selecting(self) -> bool:
@@ -48,17 +55,24 @@ class Plan:
         return self.candidate_steps > 0
 
     def total_steps(self) -> int:
-        """Steps of one attempt of the prior: every code phase, every candidate's fit, and the
-        chosen one's fit to the end of the weight phase (the code and weight phases add up to the
-        estimate's steps)."""
+        """Steps of the analytic fit and of one attempt of the prior: every code phase, every
+        candidate's fit, and the chosen one's fit to the end of the weight phase (the code and
+        weight phases add up to the estimate's steps)."""
+        return self.analytic_steps + self.attempt_steps()
+
+    def attempt_steps(self) -> int:
+        """Steps of one attempt of the prior (:meth:`total_steps` without the analytic fit)."""
         codes = len(self.code_strengths)
+        candidates = len(self.pull_strengths) + len(self.analytic_pull_strengths)
         return (self.code_steps + self.weight_steps + (codes - 1) * self.code_steps
-                + (codes * len(self.pull_strengths) - 1) * self.candidate_steps)
+                + (candidates - 1) * self.candidate_steps)
 
 
 def schedule(steps: int, views: int, pull_strength: float | None, code_strength: float | None = None) -> Plan:
     """The plan of an estimate of ``steps`` steps on ``views`` images. A fixed ``pull_strength``
-    fixes the code's strength too (``code_strength``, else none)."""
+    fixes the code's strength too (``code_strength``, else none) and leaves out the analytic
+    start, which is one more candidate of the held-out choice (its fit takes ``steps`` steps, as
+    the analytic model's own estimate)."""
     code = max(1, round(CODE_SHARE * steps)) if steps > 1 else 1
     weights = steps - code
     fixed_code = (code_strength if code_strength is not None else FALLBACK_CODE_STRENGTH,)
@@ -69,6 +83,7 @@ def schedule(steps: int, views: int, pull_strength: float | None, code_strength:
     else:
         strengths = PULL_STRENGTHS
         code_strengths = fixed_code if code_strength is not None else CODE_STRENGTHS
-    selecting = len(strengths) * len(code_strengths) > 1
+    analytic = ANALYTIC_PULL_STRENGTHS if pull_strength is None and views >= 2 and weights >= 1 else ()
+    selecting = len(strengths) + len(analytic) > 1
     candidate = max(1, round(CANDIDATE_SHARE * weights)) if selecting else 0
-    return Plan(code, weights, strengths, code_strengths, candidate)
+    return Plan(code, weights, strengths, code_strengths, candidate, steps if analytic else 0, analytic)

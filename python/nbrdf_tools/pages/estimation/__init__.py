@@ -305,7 +305,8 @@ def run_case(name: str, material: dict, model: str, settings: dict, work: Path) 
     argv = [str(folder / "train.xml"), "--images", *map(str, images), "--bsdf-id", "mat", "-o", str(out),
             *training_defines(),
             "--model", model, "--steps", str(settings["steps"]), "--spp", str(settings["spp"]),
-            "--seed", str(settings["seed"]), "-q"]
+            "--seed", str(settings["seed"]), "-q",
+            *(["--threads", str(settings["threads"])] if settings.get("threads") else [])]
     start, cpu = time.perf_counter(), time.process_time()
     status = estimate.main(argv)
     seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
@@ -443,9 +444,11 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
         pull = provenance.get("pull_strength", provenance.get("prior_weight"))
         code = provenance.get("code_strength", provenance.get("code_prior"))
-        chosen = ("the common start, no prior (the result is the no-prior estimate)"
-                  if provenance.get("start") == "common" else f"pull strength {pull}"
-                  + (f", code strength {code}" if code is not None else ""))
+        start = provenance.get("start")
+        analytic = (provenance.get("analytic") or {}).get("type", "analytic")
+        chosen = ("the common start, no prior (the result is the no-prior estimate)" if start == "common"
+                  else f"the analytic start ({analytic} distilled), pull strength {pull}" if start == "analytic"
+                  else f"pull strength {pull}" + (f", code strength {code}" if code is not None else ""))
         rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
                      + (f"; albedo over the bound, rejected: {rejected}" if rejected else ""))
@@ -540,6 +543,9 @@ def parser() -> argparse.ArgumentParser:
                         "a network's estimate")
     p.add_argument("--seed", type=int, default=0,
                    help="the estimates' seed (default: 0); the training and novel images do not depend on it")
+    p.add_argument("--threads", type=int,
+                   help="the estimates' Dr.Jit worker threads (default: one per core; 1 makes a rerun bit-identical, "
+                        "which comparisons of two estimators need)")
     p.add_argument("--no-ceiling", action="store_true",
                    help=f"leave out {CEILING}, the network distilled from the truth's BRDF (the estimates' ceiling)")
     p.add_argument("--quick", action="store_true",
@@ -578,7 +584,7 @@ def main(argv: list[str] | None = None) -> int:
     mi.set_variant("llvm_ad_rgb")
     settings = dict(QUICK if args.quick else FULL)
     settings["log_samples"] = 2000 if args.quick else 50000
-    settings.update(given_counts(args, ("steps", "spp", "measure_spp", "train_resolution")))
+    settings.update(given_counts(args, ("steps", "spp", "measure_spp", "train_resolution", "threads")))
     if args.views:
         settings["views"] = args.views
     if args.novel_pairs:
@@ -636,7 +642,9 @@ def main(argv: list[str] | None = None) -> int:
              "The `nbrdf` estimates' start and strengths (the code strength, the code phase's Gaussian penalty "
              f"toward the training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the pull strength, the weight "
              "phase's pull toward the "
-             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code), chosen per estimate "
+             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code; or the analytic "
+             f"start, the {estimate.ANALYTIC_MODEL} fit distilled into the network, pulled toward it by "
+             f"{_or(estimate.ANALYTIC_PULL_STRENGTHS)}), chosen per estimate "
              "by its last training view, held out; where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
              f"incidence if higher, by more than {estimate.ALBEDO_MARGIN:.0%}, or above {estimate.ALBEDO_BOUND:g}), "
