@@ -280,21 +280,29 @@ def network_name(output: Path) -> str:
     return output.name.split(".")[0] or "nbrdf"
 
 
-def config_from(args):
-    from .. import _train_native as native
-
-    config = native.default_config()
-    for field, value in (("samples", args.samples), ("max_epochs", args.epochs), ("hidden", args.hidden),
-                         ("batch", args.batch), ("seed", args.seed), ("threads", args.threads),
-                         ("learning_rate", args.learning_rate), ("target_loss", args.target_loss)):
+def set_options(config, values, options: dict[str, str]) -> None:
+    """Sets each given ``(field, value)`` of a trainer's C config; a value the field cannot hold
+    is a :class:`DistillError` naming its command-line option (``options[field]``, else
+    ``--field``)."""
+    for field, value in values:
         if value is not None:
-            option = {"max_epochs": "--epochs"}.get(field, f"--{field.replace('_', '-')}")
+            option = options.get(field, f"--{field.replace('_', '-')}")
             try:
                 if isinstance(value, int) and value < 0:
                     raise OverflowError
                 setattr(config, field, value)
             except OverflowError:
                 raise DistillError(f"{option} {value} is out of range") from None
+
+
+def config_from(args):
+    from .. import _train_native as native
+
+    config = native.default_config()
+    set_options(config, (("samples", args.samples), ("max_epochs", args.epochs), ("hidden", args.hidden),
+                         ("batch", args.batch), ("seed", args.seed), ("threads", args.threads),
+                         ("learning_rate", args.learning_rate), ("target_loss", args.target_loss)),
+                {"max_epochs": "--epochs"})
     if args.sampling is not None:
         config.sampling = native.SAMPLINGS[args.sampling]
     return config

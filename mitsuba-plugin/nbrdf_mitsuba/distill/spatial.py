@@ -37,6 +37,7 @@ from . import (
     mi,
     network_name,
     pick_variant,
+    set_options,
 )
 
 #: Classes that wrap one BSDF and change the shading frame from a texture: distilled without them.
@@ -277,18 +278,11 @@ def training_samples(bsdf, native, args, size: tuple[int, int], anisotropic: boo
 
 def textured_config(native, args):
     config = native.textured_default_config()
-    for field, value in (("channels", args.channels), ("epochs", args.epochs), ("batch", args.batch),
+    set_options(config, (("channels", args.channels), ("epochs", args.epochs), ("batch", args.batch),
                          ("decoder_hidden", args.hidden), ("learning_rate", args.learning_rate),
                          ("seed", args.seed), ("threads", args.threads), ("lobes", args.lobes),
-                         ("representatives", args.representatives)):
-        if value is not None:
-            option = {"decoder_hidden": "--hidden"}.get(field, f"--{field.replace('_', '-')}")
-            try:
-                if isinstance(value, int) and value < 0:
-                    raise OverflowError
-                setattr(config, field, value)
-            except OverflowError:
-                raise DistillError(f"{option} {value} is out of range") from None
+                         ("representatives", args.representatives)),
+                {"decoder_hidden": "--hidden"})
     if not 1 <= config.channels <= 32:
         raise DistillError(f"--channels {config.channels}: expected 1 to 32 latent channels")
     if config.lobes > 2:
