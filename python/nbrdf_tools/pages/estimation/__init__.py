@@ -1,4 +1,4 @@
-"""Material estimation from images, measured (issue 33).
+"""Material estimation from images, measured.
 
     python -m nbrdf_tools estimation [--work out/estimation] [--out WORK/estimation.md]
                                      [--materials A,B] [--models A,B] [--steps N] [--seed S] [--quick]
@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -43,12 +42,11 @@ from pathlib import Path
 import numpy as np
 
 from nbrdf_tools.common.paths import REPO, default_out
-from nbrdf_tools.pages.estimation import truths
+from nbrdf_tools.pages.estimation import run_page, truths
+from nbrdf_tools.pages.estimation.run_page import CEILING, chosen_strengths, summary
 from nbrdf_tools.pages.estimation.truths import MERL, MITSUBA_TRUTH, RGL, dict_to_xml, file_bsdf
 
 MODELS = ("nbrdf", "nbrdf-no-prior", "principled", "roughconductor", "roughplastic")
-#: The network distilled from the truth's BRDF (not an estimate from images): the ceiling.
-CEILING = "nbrdf-from-truth"
 #: Training sensors (origins looking at the sphere) and lights; the novel ones differ from all.
 #: The first ``--views`` are used; the later ones add directions no earlier view covers (the
 #: right side grazed by the first light, the top) and stay away from the novel view.
@@ -74,12 +72,6 @@ FULL = {"resolution": 64, "views": 3, "reference_spp": 128, "measure_spp": 4096,
 TRUTH_SPP_FACTOR = 4
 QUICK = {"resolution": 16, "views": 2, "reference_spp": 16, "measure_spp": 16, "spp": 2, "steps": 3,
          "ceiling_training": ["--samples", "4000", "--epochs", "2"]}
-
-
-def _or(values) -> str:
-    """Values as prose: ``0.1 or 0``, ``0, 0.001 or 0.1``."""
-    text = [f"{v:g}" for v in values]
-    return text[0] if len(text) == 1 else ", ".join(text[:-1]) + " or " + text[-1]
 
 
 def sensor(origin: str, resolution: int, fov: str = "30") -> str:
@@ -388,133 +380,6 @@ def prepare(name: str, material: dict, settings: dict, work: Path) -> None:
     (folder / "train.xml").write_text(training_scene_xml(placeholder, form, views, LIGHTS, side))
 
 
-def figure(results: list[dict], work: Path, path: Path, models: list[str]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from nbrdf_tools.common.metrics import tone_map
-
-    names = list(dict.fromkeys(r["material"] for r in results))
-    columns = ["truth", *models]
-    fig, axes = plt.subplots(len(names), len(columns), figsize=(1.6 * len(columns), 1.6 * len(names)),
-                             squeeze=False)
-    for row, name in enumerate(names):
-        for col, model in enumerate(columns):
-            ax = axes[row][col]
-            ax.axis("off")
-            exr = work / name / ("novel-truth-0.exr" if model == "truth" else f"novel-{model}-0.exr")
-            if exr.is_file():
-                ax.imshow(tone_map(read_exr(exr)))
-            if row == 0:
-                ax.set_title(model, fontsize=7)
-            if col == 0:
-                ax.text(-0.05, 0.5, name, transform=ax.transAxes, rotation=90, ha="right", va="center", fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def table(results: list[dict], models: list[str]) -> list[str]:
-    """Image metrics are means over the novel pairs; the RMSE of each pair beside them."""
-    lines = ["| material | model | RMSE (tone-mapped) | RMSE per novel pair | SSIM | HDR-FLIP | BRDF log error | "
-             "seconds (CPU s) |", "|---|---|---|---|---|---|---|---|"]
-    for r in results:
-        pairs = " / ".join(f"{m['rmse_tonemapped']:.4f}" for m in r.get("novel", []))
-        lines.append(f"| {r['material']} | {r['model']} | {r['rmse_tonemapped']:.4f} | {pairs or '-'} | "
-                     f"{r['ssim']:.4f} | {r['flip_hdr']:.4f} | {r['log_error']:.4f} | "
-                     f"{r['seconds']:.0f} ({r['cpu_seconds']:.0f}) |")
-    return lines
-
-
-def chosen_strengths(results: list[dict], work: Path) -> list[str]:
-    """Per ``nbrdf`` estimate: the candidate its held-out training view chose (the code strength
-    and the pull strength from the decoded start), or the common start without the prior where
-    the albedo check rejected the decoded network, the held-out losses of the candidates and the
-    rejected albedos (from the network file's provenance; a network written before the strengths
-    had these names records them as ``prior_weight`` and ``code_prior``)."""
-    lines = []
-    for r in results:
-        path = work / r["material"] / "nbrdf.nbrdf.json"
-        if r["model"] != "nbrdf" or not path.is_file():
-            continue
-        provenance = json.loads(path.read_text()).get("provenance", {})
-        losses = provenance.get("held_out_losses") or {}
-        text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
-        pull = provenance.get("pull_strength", provenance.get("prior_weight"))
-        code = provenance.get("code_strength", provenance.get("code_prior"))
-        start = provenance.get("start")
-        analytic = (provenance.get("analytic") or {}).get("type", "analytic")
-        chosen = ("the common start, no prior (the result is the no-prior estimate)" if start == "common"
-                  else f"the analytic start ({analytic} distilled), pull strength {pull}" if start == "analytic"
-                  else f"pull strength {pull}" + (f", code strength {code}" if code is not None else ""))
-        rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
-        lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
-                     + (f"; albedo over the bound, rejected: {rejected}" if rejected else ""))
-    return lines
-
-
-def measured_only(by_material: dict) -> list:
-    """The values of the measured materials (RGL and MERL), not of the Mitsuba BSDF truths."""
-    return [v for k, v in by_material.items() if not k.startswith("mitsuba-")]
-
-
-def summary(results: list[dict]) -> list[str]:
-    """Per material: the model with the lowest novel-view RMSE, and nbrdf's over the best analytic's."""
-    lines, ratios, ceilings = [], {}, {}
-    for name in dict.fromkeys(r["material"] for r in results):
-        rows = {r["model"]: r for r in results if r["material"] == name}
-        ceiling = rows.pop(CEILING, None)
-        if not rows:
-            continue
-        best = min(rows.values(), key=lambda r: r["rmse_tonemapped"])
-        analytic = [r for m, r in rows.items() if not m.startswith("nbrdf")]
-        best_analytic = min(analytic, key=lambda r: r["rmse_tonemapped"]) if analytic else None
-        text = f"* {name}: lowest novel-view RMSE: {best['model']}"
-        if "nbrdf" in rows and best_analytic:
-            ratio = rows["nbrdf"]["rmse_tonemapped"] / best_analytic["rmse_tonemapped"]
-            ratios[name] = ratio
-            text += f"; nbrdf / best analytic ({best_analytic['model']}) = {ratio:.2f}x"
-        if "nbrdf" in rows and "nbrdf-no-prior" in rows:
-            text += (f"; prior {rows['nbrdf']['rmse_tonemapped']:.4f} vs no prior "
-                     f"{rows['nbrdf-no-prior']['rmse_tonemapped']:.4f}")
-        if ceiling is not None and best_analytic:
-            ceilings[name] = ceiling["rmse_tonemapped"] / best_analytic["rmse_tonemapped"]
-            text += f"; the network trained on the truth itself {ceiling['rmse_tonemapped']:.4f}"
-        lines.append(text)
-    if ratios:
-        lines.append(f"* mean nbrdf / best analytic novel-view RMSE: {np.mean(list(ratios.values())):.2f}x over "
-                     f"{len(ratios)} materials")
-        # The issue's target is over measured materials; an analytic truth is the analytic model's home ground.
-        measured = measured_only(ratios)
-        if measured and len(measured) < len(ratios):
-            lines.append(f"* mean over the {len(measured)} measured materials (RGL and MERL): {np.mean(measured):.2f}x")
-    measured = measured_only(ceilings)
-    if measured:
-        lines.append(f"* the ceiling, {CEILING} (distilled from the truth's BRDF, not from images) / best analytic "
-                     f"estimate: {np.mean(measured):.2f}x over the {len(measured)} measured materials")
-    return lines
-
-
-def run_headline(results: list[dict], chosen: dict[str, dict]) -> list[str]:
-    """A run page's headline (:mod:`headline`): per set, then per material of each set measured."""
-    from nbrdf_tools.pages.estimation import headline, seeds
-
-    by_set = headline.split_by_set(seeds.by_case(results),
-                                   lambda m: next(r["set"] for r in results if r["material"] == m))
-    lines = ["Per set, the prior's (`nbrdf`) novel-view RMSE over the best analytic model's: the test set's "
-             "truths are the judgement (nothing was chosen on them), the tuning set's are what the defaults were "
-             "chosen on.", "", *headline.table(by_set), ""]
-    for which in truths.SETS:
-        if which in by_set:
-            lines += [f"The {which} set, per material:", "", *headline.material_table(by_set[which]), ""]
-    forms = "; ".join(f"{name}: {material['form']}" for name, material in chosen.items())
-    return [*lines, "Each truth's training images were rendered through its scene form (the marked BSDF "
-            f"nested in its shape, inside a `twosided`, or shared by two shapes; the field of view a `-D` "
-            f"parameter): {forms}."]
-
-
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m nbrdf_tools estimation", description=__doc__.split("\n")[0])
     p.add_argument("--out", type=Path,
@@ -613,54 +478,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
             results.append(result)
-    from nbrdf_mitsuba import estimate
-
     out = args.out or work / "estimation.md"
-    image = out.parent / "images" / "estimation.png"
-    image.parent.mkdir(parents=True, exist_ok=True)
-    figure(results, work, image, columns)
     command = "python -m nbrdf_tools estimation " + " ".join(argv if argv is not None else sys.argv[1:])
-    lines = ["```sh", command.strip(), "```", "", "# Material estimation from images (issue 33)", "",
-             f"A sphere, {settings['views']} training views ({train_resolution(settings)}x{train_resolution(settings)}, "
-             f"{settings['reference_spp']} spp references; the novel views {settings['resolution']}x"
-             f"{settings['resolution']}) under {len(LIGHTS)} point lights and a dim sky; every model "
-             f"fitted to the same images by `python -m nbrdf_mitsuba.estimate` ({settings['steps']} steps, "
-             f"{settings['spp']} spp per render, prb depth 3, seed {settings['seed']}). Measured on "
-             f"{len(novel_pairs(settings))} novel views, each under its own novel light (the image metrics are means over "
-             "the pairs), and in "
-             f"BRDF space (mean |ln(1 + f cos) - ln(1 + f' cos)|, {settings['log_samples']} uniform pairs). "
-             f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
-             f"{os.getloadavg()[0]:.1f} at the end (shared).", "",
-             *run_headline(results, chosen), "",
-             *table(results, models), "", *summary(results), "",
-             *([] if args.no_ceiling else [
-                 f"`{CEILING}` is no estimate: the same isotropic 675-weight network distilled from the truth's BRDF "
-                 "(`python -m nbrdf_mitsuba.distill`, the trainer's defaults), measured the same way. Its error is "
-                 "what the network's form leaves; the rest of an estimate's is what the few images and the "
-                 "optimisation leave.", ""]),
-             *([f"Not run (missing from this table): {', '.join(missing)}.", ""] if missing else []),
-             "The `nbrdf` estimates' start and strengths (the code strength, the code phase's Gaussian penalty "
-             f"toward the training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the pull strength, the weight "
-             "phase's pull toward the "
-             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code; or the analytic "
-             f"start, the {estimate.ANALYTIC_MODEL} fit distilled into the network, pulled toward it by "
-             f"{_or(estimate.ANALYTIC_PULL_STRENGTHS)}), chosen per estimate "
-             "by its last training view, held out; where the albedo check rejected every candidate or the final "
-             f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
-             f"incidence if higher, by more than {estimate.ALBEDO_MARGIN:.0%}, or above {estimate.ALBEDO_BOUND:g}), "
-             "the common start without the prior:", "",
-             *chosen_strengths(results, work), "",
-             "Every model gets the same images and the same number of steps; a step of an analytic model costs "
-             "a fraction of a network's (its kernels are smaller), so the seconds differ. The first network "
-             "estimate of a run includes compiling Mitsuba's kernels for the network (cached afterwards). Novel "
-             "pairs (view; light): " + "; ".join(f"({v}; {light} at {i:g})" for v, (light, i) in novel_pairs(settings))
-             + ", no view and no light any training image used; the estimates' novel renders take "
-             f"{novel_spp(settings, 'estimate')} spp, the truth's {novel_spp(settings, 'truth')}, and the errors "
-             "hold their Monte Carlo noise.", "",
-             f"![truth and estimates at the first novel pair]({os.path.relpath(image, out.parent)})", ""]
-    out.write_text("\n".join(lines))
+    image = run_page.write(out, command.strip(), results, work, settings, models, chosen, missing,
+                           ceiling=not args.no_ceiling)
     print(f"wrote {out} and {image}")
     return 0
 
 
-__all__ = ["main", "MODELS", "REPO", "MERL", "MITSUBA_TRUTH", "RGL", "dict_to_xml", "file_bsdf"]
+__all__ = ["main", "MODELS", "CEILING", "chosen_strengths", "summary", "REPO",
+           "MERL", "MITSUBA_TRUTH", "RGL", "dict_to_xml", "file_bsdf"]

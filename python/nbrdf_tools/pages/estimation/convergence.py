@@ -1,4 +1,4 @@
-"""Novel-view error against the number of steps (issue 33's check of the step budget).
+"""Novel-view error against the number of steps (the check of the step budget).
 
     python -m nbrdf_tools estimation-convergence --work out/estimation --materials A,B
         [--models nbrdf,nbrdf-no-prior,principled] [--steps 60] [--checkpoints 10,20,30,45,60]
