@@ -40,7 +40,7 @@ fn decoder(rng: &mut SplitMix64) -> Decoder {
             }
         })
         .collect();
-    Decoder::new(layers, CHANNELS, false).unwrap()
+    Decoder::new(layers, CHANNELS, false, None).unwrap()
 }
 
 /// A `WIDTH x HEIGHT` material with one Blinn-Phong lobe per texel (exponents 5 to 60, weights

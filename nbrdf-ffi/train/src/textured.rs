@@ -6,8 +6,8 @@
 use crate::{guard, read_details, read_str, Callback, NbrdfEpochCallback};
 use nbrdf_core::brdf::Directions;
 use nbrdf_core::distillation::{
-    bake, train_textured, BakeConfig, BakeStage, ParameterImage, TargetKind, TexturedSamples,
-    TexturedTrainConfig, MAX_REPRESENTATIVES,
+    bake, train_textured, BakeConfig, BakeStage, ParameterImage, TargetKind, TargetValues,
+    TexturedSamples, TexturedTrainConfig, MAX_REPRESENTATIVES,
 };
 use nbrdf_core::textured::{SamplingChannels, TexturePrecision};
 use nbrdf_core::train::adam::AdamConfig;
@@ -224,7 +224,7 @@ impl SampleArrays<'_> {
                 y: ly,
                 z: lz,
             },
-            target: planes(self.eval_cos, n),
+            target: TargetValues::Rgb(planes(self.eval_cos, n)),
             target_kind: TargetKind::BrdfCos,
         }
     }
