@@ -212,7 +212,6 @@ def test_spatial_options_need_spatial_and_settings_are_checked(llvm_variant, tmp
         (["--spatial", "--resolution", "0"], "--resolution 0"),
         (["--spatial", "--representatives", "300"], "--representatives 300"),
         (["--spatial", "--reciprocal"], "--reciprocal: not available with --spatial"),
-        (["--spatial", "--variant", "llvm_ad_spectral"], "RGB"),
     ):
         status, _, err = run_main(capsys, source, "-o", out, *args)
         assert status == 2 and words in err, (args, err)

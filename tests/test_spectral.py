@@ -143,13 +143,16 @@ def test_traced_fetch_is_mitsubas(restore_variant):
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
 
 
-def _adapter(plugin, params, wi, wavelengths):
+def _adapter(plugin, params, wi, wavelengths, uv=None):
     """mitsuba.chi2.BSDFAdapter with wavelengths set: its zero-wavelength interactions would zero
-    every sampled weight (wavelengths outside the visible range give 0) and discard the samples."""
+    every sampled weight (wavelengths outside the visible range give 0) and discard the samples;
+    ``uv``: the hit's texture coordinates (default 0)."""
     def interaction(n):
         si = dr.zeros(mi.SurfaceInteraction3f, n)
         si.wi = wi
         si.wavelengths = mi.UnpolarizedSpectrum(*wavelengths)
+        if uv is not None:
+            si.uv = mi.Point2f(*uv)
         return si
 
     def sample_func(sample, *args):

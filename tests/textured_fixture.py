@@ -44,6 +44,7 @@ class Textured:
     filter: str = "bilinear"
     to_uv: np.ndarray = field(default_factory=lambda: np.eye(3))
     anisotropic: bool = False
+    spectral: dict | None = None  # the file's "spectral" object: the decoder gives its coefficients
 
     @property
     def width(self) -> int:
@@ -57,15 +58,17 @@ class Textured:
         return [f"latent.{k}" for k in range(self.channels)] + LOBE_CHANNELS[self.lobes]
 
 
-def random_decoder(channels: int, hidden: int = 12, seed: int = 0, anisotropic: bool = False) -> list:
-    """float32 layers ``6 + C -> hidden -> hidden -> 3`` of a smooth decoder whose last layer is
-    positive, so that ``f_r > 0`` everywhere (Mitsuba's chi^2 adapter counts zero-weight samples
-    as failures)."""
+def random_decoder(channels: int, hidden: int = 12, seed: int = 0, anisotropic: bool = False,
+                   outputs: int = 3) -> list:
+    """float32 layers ``6 + C -> hidden -> hidden -> outputs`` (3, RGB, or a spectral basis'
+    count) of a smooth decoder whose last layer is positive, so that ``f_r > 0`` everywhere
+    (Mitsuba's chi^2 adapter counts zero-weight samples as failures)."""
     rng = np.random.default_rng(seed)
     shapes = [(6 + channels, hidden), (hidden, hidden)]
     layers = [(rng.uniform(-0.6, 0.6, s).astype(np.float32), rng.uniform(-0.1, 0.1, s[1]).astype(np.float32))
               for s in shapes]
-    layers.append((rng.uniform(0.0, 0.3, (hidden, 3)).astype(np.float32), np.full(3, 0.3, np.float32)))
+    bias = np.full(outputs, 0.3, np.float32) if outputs == 3 else rng.uniform(0.1, 0.5, outputs).astype(np.float32)
+    layers.append((rng.uniform(0.0, 0.3, (hidden, outputs)).astype(np.float32), bias))
     return layers
 
 
@@ -100,17 +103,19 @@ def write_exr(path: Path, texture: np.ndarray, names: list[str], precision: str 
 def write_textured(path: Path, layers=None, texture: np.ndarray | None = None, channels: int = 3, lobes: int = 1,
                    wrap: str | None = None, filter: str | None = None, to_uv=None, precision: str = "float16",
                    anisotropic: bool = False, name: str = "fixture", document: dict | None = None,
-                   exr_names: list[str] | None = None) -> Textured:
+                   exr_names: list[str] | None = None, spectral: dict | None = None) -> Textured:
     """Writes ``path`` (``*.nbrdf.json``, version 4) and its texture ``<stem>.latent.exr`` beside
     it. Defaults: a random decoder and a random 5 x 4 texture of ``channels`` latent channels and
-    ``lobes`` lobes. ``document`` entries replace the JSON's (to write broken files),
-    ``exr_names`` the texture's channel names."""
+    ``lobes`` lobes. ``spectral``: the file's ``spectral`` object (a spectral material, whose
+    random decoder gives its ``count`` coefficients). ``document`` entries replace the JSON's (to
+    write broken files), ``exr_names`` the texture's channel names."""
     path = Path(path)
-    layers = random_decoder(channels, anisotropic=anisotropic) if layers is None else layers
+    outputs = 3 if spectral is None else spectral["count"]
+    layers = random_decoder(channels, anisotropic=anisotropic, outputs=outputs) if layers is None else layers
     texture = random_texture(5, 4, channels, lobes) if texture is None else np.asarray(texture)
     material = Textured(path, path.with_name(path.name.replace(".nbrdf.json", "") + ".latent.exr"), layers,
                         texture, channels, lobes, wrap or "repeat", filter or "bilinear",
-                        np.eye(3) if to_uv is None else np.asarray(to_uv, np.float64), anisotropic)
+                        np.eye(3) if to_uv is None else np.asarray(to_uv, np.float64), anisotropic, spectral)
     material.texture = write_exr(material.exr, texture, exr_names or material.channel_names(), precision)
     latent = {"path": material.exr.name, "width": material.width, "height": material.height, "channels": channels}
     if wrap is not None:
@@ -127,6 +132,8 @@ def write_textured(path: Path, layers=None, texture: np.ndarray | None = None, c
         "latent": latent,
         "provenance": {"source": "nbrdf tests"},
     }
+    if spectral is not None:
+        out["spectral"] = spectral
     if lobes:
         names = LOBE_CHANNELS[lobes]
         out["sampling"] = {"model": "blinn-phong", "exponent_encoding": "log1p",
@@ -189,7 +196,8 @@ def lookup(material: Textured, uv: np.ndarray):
 
 def eval_oracle(material: Textured, uv, view, light) -> np.ndarray:
     """``f_r cos(theta_l)`` (3, n) at planar ``uv`` (2, n), ``view`` and ``light`` (3, n): 0 at
-    bad texels (a non-finite position or latent value), at or below the horizon."""
+    bad texels (a non-finite position or latent value), at or below the horizon. A spectral
+    material's (count, n): its coefficients times ``cos(theta_l)``."""
     values, mapped = lookup(material, uv)
     code = values[:, :material.channels]
     good = mapped & np.all(np.isfinite(code), axis=1)

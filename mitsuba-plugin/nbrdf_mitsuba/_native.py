@@ -241,7 +241,8 @@ class Material:
         self.exponent_v = float(stored.exponent_v)
         #: The file's ``sampling.default`` (lowest measured variance), or None.
         self.default_sampling = _SAMPLING_NAMES.get(int(info.default_sampling))
-        #: Coefficients of a spectral network (file format version 3), 0 when not spectral.
+        #: Coefficients of a spectral network (file format version 3) or spectral textured
+        #: material (version 4 with a ``spectral`` object), 0 when not spectral.
         self.spectral_count = int(info.spectral_count)
         #: ``(min_nm, max_nm)`` of its spectral basis, ``(0.0, 0.0)`` when not spectral.
         self.spectral_range_nm = (float(info.spectral_range_nm[0]), float(info.spectral_range_nm[1]))
@@ -260,9 +261,11 @@ class Material:
         check(lib.nbrdf_material_eval(self._ptr, _in(view), _in(light), n, _out(out)))
         return out
 
-    def eval_spectral(self, view, light, wavelengths) -> np.ndarray:
-        """A spectral network's ``f_r cos(theta_l)`` (m, n) for planar ``view`` and ``light``
-        (3, n) at ``wavelengths`` (m, n) in nm (row j: wavelength j of every pair)."""
+    def eval_spectral(self, view, light, wavelengths, uv=None) -> np.ndarray:
+        """A spectral material's ``f_r cos(theta_l)`` (m, n) for planar ``view`` and ``light``
+        (3, n) at ``wavelengths`` (m, n) in nm (row j: wavelength j of every pair), at planar
+        texture coordinates ``uv`` (2, n) for a spatially varying material (a network ignores
+        them; ``nbrdf_material_eval_spectral``)."""
         view, light = _planar(view), _planar(light)
         if view.shape != light.shape:
             raise ValueError(f"view {view.shape} and light {light.shape} differ in shape")
@@ -272,13 +275,17 @@ class Material:
             wavelengths = wavelengths.reshape(-1, n) if n else wavelengths.reshape(0, 0)
         if wavelengths.ndim != 2 or wavelengths.shape[1] != n:
             raise ValueError(f"wavelengths {wavelengths.shape} must be (m, {n})")
+        if uv is not None:
+            uv = _uv_planar(uv)
+            if uv.shape[-1] != n:
+                raise ValueError(f"uv {uv.shape} and view {view.shape} differ in length")
         out = np.empty(wavelengths.shape, dtype=np.float32)
-        check(lib.nbrdf_material_eval_spectral(self._ptr, _in(view), _in(light), _in(wavelengths), n,
-                                               wavelengths.shape[0], _out(out)))
+        check(lib.nbrdf_material_eval_spectral(self._ptr, ffi.NULL if uv is None else _in(uv), _in(view), _in(light),
+                                               _in(wavelengths), n, wavelengths.shape[0], _out(out)))
         return out
 
     def spectral_srgb_matrix(self) -> np.ndarray:
-        """The (3, spectral_count) matrix M of a spectral network: rgb = M c."""
+        """The (3, spectral_count) matrix M of a spectral material: rgb = M c."""
         out = np.empty((3, self.spectral_count), dtype=np.float32)
         check(lib.nbrdf_material_spectral_srgb(self._ptr, _out(out), out.size))
         return out

@@ -193,17 +193,23 @@ BAKE_STAGES = {0: "encoded", 1: "clustering", 2: "fitting lobes"}
 
 def train_textured(config, params: np.ndarray, view: np.ndarray, light: np.ndarray, eval_cos: np.ndarray,
                    image: np.ndarray, path, name: str, source: str, details: dict | None = None,
-                   on_epoch=None, on_bake=None) -> None:
+                   on_epoch=None, on_bake=None, wavelengths=None) -> None:
     """Trains a spatially varying material on n samples and writes it to ``path`` (its latent
     texture beside it; see ``nbrdf_train_textured`` in nbrdf_train.h): ``params`` (P, n), the
-    parameters of each sample's texel; planar (3, n) ``view``, ``light`` and ``eval_cos``;
-    ``image`` (height, width, P), the parameters at every texel centre, row 0 at v = 0.
-    ``on_epoch(stats)`` gets an ``NbrdfEpochStats`` after every epoch, ``on_bake(stage, done,
-    total)`` a :data:`BAKE_STAGES` name and counts as the baking proceeds."""
-    arrays = [np.ascontiguousarray(a, dtype=np.float32) for a in (view, light, eval_cos)]
-    n = arrays[0].shape[1]
-    if any(a.shape != (3, n) for a in arrays):
-        raise ValueError(f"expected planar (3, n) arrays, got shapes {[a.shape for a in arrays]}")
+    parameters of each sample's texel; planar (3, n) ``view`` and ``light``; ``eval_cos`` planar
+    (3, n) RGB, or with the m ``wavelengths`` (nm) of a spectral material (m, n), row j the
+    values at wavelength j; ``image`` (height, width, P), the parameters at every texel centre,
+    row 0 at v = 0. ``on_epoch(stats)`` gets an ``NbrdfEpochStats`` after every epoch,
+    ``on_bake(stage, done, total)`` a :data:`BAKE_STAGES` name and counts as the baking
+    proceeds."""
+    directions = [np.ascontiguousarray(a, dtype=np.float32) for a in (view, light)]
+    n = directions[0].shape[1]
+    lambdas = np.ascontiguousarray([] if wavelengths is None else wavelengths, dtype=np.float32).reshape(-1)
+    values = np.ascontiguousarray(eval_cos, dtype=np.float32)
+    rows = 3 if wavelengths is None else lambdas.size
+    if any(a.shape != (3, n) for a in directions) or values.shape != (rows, n):
+        raise ValueError(f"expected planar (3, n) directions and ({rows}, n) values, got shapes "
+                         f"{[a.shape for a in directions]} and {values.shape}")
     params = np.ascontiguousarray(params, dtype=np.float32)
     texels = np.ascontiguousarray(image, dtype=np.float32)
     if params.ndim != 2 or params.shape[1] != n or texels.ndim != 3 or texels.shape[2] != params.shape[0]:
@@ -224,6 +230,6 @@ def train_textured(config, params: np.ndarray, view: np.ndarray, light: np.ndarr
 
     height, width, parameters = texels.shape
     check(lib.nbrdf_train_textured(
-        config, buffer(params), parameters, *(buffer(a) for a in arrays), n, buffer(texels), width, height,
-        os.fsencode(str(path)), name.encode(), source.encode(), _details_text(details), epoch_callback,
-        bake_callback, ffi.NULL))
+        config, buffer(params), parameters, *(buffer(a) for a in directions), buffer(lambdas), lambdas.size,
+        buffer(values), n, buffer(texels), width, height, os.fsencode(str(path)), name.encode(), source.encode(),
+        _details_text(details), epoch_callback, bake_callback, ffi.NULL))

@@ -262,8 +262,9 @@ def _to_spectrum(color, si):
     Monochrome variants take its luminance, as Mitsuba converts RGB data there (``mi.luminance``,
     Rec. 709 weights). Spectral variants uplift it per evaluation (each direction has its own
     colour) as Mitsuba uplifts unbounded RGB data (:func:`jit.spectrum_from_rgb`); sample and pdf
-    never see the wavelengths, so there is one density. A spectral network evaluates its own
-    spectrum instead (``JitBackend._spectral_spectrum``, ``RustBackend._spectrum``). Polarized
+    never see the wavelengths, so there is one density. A spectral network or spatially varying
+    material evaluates its own spectrum instead (``JitBackend._spectral_spectrum``,
+    ``RustBackend._spectral_value``). Polarized
     variants get the depolarizer's Mueller matrix times the value, as Mitsuba's own
     non-polarizing BSDFs (``diffuse``, ``roughplastic``) return: a depolarizer needs no rotation
     between the BSDF's and Mitsuba's Stokes frames.
@@ -286,7 +287,7 @@ def _glossy(ctx):
 class JitBackend:
     """The material's traced twin (a :class:`jit.TracedNetwork` or :class:`jit.TracedMerl`) and
     the traced sampler of ``sampling``, traced into Mitsuba's kernels. ``spectral``: a spectral
-    network's ``(count, min_nm, max_nm, M)``, else None."""
+    material's ``(count, min_nm, max_nm, M)``, else None."""
 
     name = "jit"
 
@@ -359,7 +360,7 @@ class JitBackend:
         return dr.select(_both_above(active, si.wi, wo), pdf, 0.0)
 
     def _spectral_spectrum(self, coefficients, scale, active, si):
-        """A spectral network's value (its B-spline coefficients) times ``scale`` as the
+        """A spectral material's value (its B-spline coefficients) times ``scale`` as the
         variant's spectrum, 0 where not ``active`` or not finite: per wavelength in spectral
         variants (no uplift: the network is spectral), the sRGB projection ``M c`` in RGB
         variants and its luminance in monochrome ones (as ``_to_spectrum`` does for RGB
@@ -500,15 +501,22 @@ class RustBackend:
 
     def _spectrum(self, view, light, active, si, weight=None, pdf=None):
         """The library's ``f_r cos`` at planar directions (or a sample's ``weight`` with its
-        ``pdf``) as the variant's spectrum, 0 where not ``active``. A spectral network in a
-        spectral variant is evaluated at the lane's wavelengths (``eval_spectral``) and divided
-        by ``pdf`` (0 where the quotient is not finite, as ``sampling/mod.rs`` sample_weight);
-        anything else is the library's RGB value."""
+        ``pdf``) as the variant's spectrum, 0 where not ``active``: a spectral network in a
+        spectral variant at the lane's wavelengths (:meth:`_spectral_value`), anything else the
+        library's RGB value."""
         if self.spectral is None or not mi.is_spectral:
             value = self.arrays.color(self.native.eval(view, light) if weight is None else weight)
             return _to_spectrum(dr.select(active, value, 0.0), si)
+        return self._spectral_value(view, light, active, si, pdf)
+
+    def _spectral_value(self, view, light, active, si, pdf=None, uv=None):
+        """A spectral material's ``f_r cos`` at planar directions (and, for a spatially varying
+        one, planar texture coordinates ``uv``) evaluated at the lane's wavelengths
+        (``eval_spectral``; no uplift) as the variant's spectrum, 0 where not ``active``; divided
+        by ``pdf`` when given (0 where the quotient is not finite, as ``sampling/mod.rs``
+        sample_weight)."""
         wavelengths = [si.wavelengths[j] for j in range(len(si.wavelengths))]
-        values = self.native.eval_spectral(view, light, self.arrays.planar(wavelengths, view.shape[1]))
+        values = self.native.eval_spectral(view, light, self.arrays.planar(wavelengths, view.shape[1]), uv=uv)
         if pdf is not None:
             with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
                 values = np.where(pdf > 0, values / np.where(pdf > 0, pdf, 1.0), 0.0)

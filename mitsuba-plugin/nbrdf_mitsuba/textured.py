@@ -1,5 +1,7 @@
 """Spatially varying materials in the ``nbrdf`` BSDF: a file of format version 4, a decoder
-network and a latent texture (docs/textured.md; the files: docs/formats.md).
+network and a latent texture (docs/textured.md; the files: docs/formats.md). A file with a
+``spectral`` object is a spectral material: its decoder gives B-spline coefficients, evaluated
+per wavelength in spectral variants (:mod:`nbrdf_mitsuba.textured_backends`).
 
 The library loads and checks the file and is the reference (the ``rust`` backend, at
 ``si.uv``). The traced twin (the ``jit`` backend, :mod:`nbrdf_mitsuba.jit.textured`) needs the
@@ -119,6 +121,9 @@ class TexturedMaterial:
                              "version 4), which samples the Blinn-Phong lobes its latent texture stores")
         self.native, self.arrays, self.filename = bsdf._native, bsdf._arrays, bsdf._filename
         self.parts = read_parts(bsdf._path)
+        #: A spectral material's ``(count, min_nm, max_nm, M)`` (a file with a ``spectral``
+        #: object), else None.
+        self.spectral = bsdf._spectral_output()
         self.hidden_width = self.parts.hidden_width
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.SpatiallyVarying
         if self.parts.anisotropic:
@@ -131,9 +136,9 @@ class TexturedMaterial:
         too_wide = bsdf._traced_width_problem() if self.arrays.wavefront else None
         if self.arrays.wavefront and (name == "jit" or not too_wide):
             self.traced = self._trace(jit_weights if name == "jit" else "literal")
-            twin = TexturedJitBackend(self.traced)
-        self.backend = twin if name == "jit" else TexturedRustBackend(self.native, None, self.arrays, twin, self.label,
-                                                                      too_wide if twin is None else None)
+            twin = TexturedJitBackend(self.traced, self.spectral)
+        self.backend = twin if name == "jit" else TexturedRustBackend(self.native, self.spectral, self.arrays, twin,
+                                                                      self.label, too_wide if twin is None else None)
         bsdf._backend = self.backend
 
     def _trace(self, mode: str) -> TracedTexturedMaterial:
@@ -237,6 +242,9 @@ class TexturedMaterial:
                  f"mapping = wrap {parts.wrap}, filter {parts.filter}, to_uv {to_uv}",
                  f"decoder = {parts.shapes()}", f"anisotropic = {str(parts.anisotropic).lower()}",
                  f"sampling = texture lobes ({lobes})", f"backend = {self.backend.name}"]
+        if self.spectral is not None:
+            count, min_nm, max_nm, _ = self.spectral
+            lines.insert(6, f"spectral = cubic B-spline, {count} coefficients over {min_nm:g}-{max_nm:g} nm")
         if self.backend.name == "jit":
             lines.append(f"jit_weights = {self.traced.decoder.mode}")
         return f"{class_name}[\n" + ",\n".join("  " + line for line in lines) + "\n]"

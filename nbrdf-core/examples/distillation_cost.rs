@@ -7,8 +7,8 @@
 use glam::DVec3;
 use nbrdf_core::brdf::Directions;
 use nbrdf_core::distillation::{
-    bake, train_textured, BakeConfig, BakeStage, ParameterImage, TargetKind, TexturedSamples,
-    TexturedTrainConfig,
+    bake, train_textured, BakeConfig, BakeStage, ParameterImage, TargetKind, TargetValues,
+    TexturedSamples, TexturedTrainConfig,
 };
 use nbrdf_core::rng::SplitMix64;
 use std::f64::consts::PI;
@@ -56,7 +56,7 @@ fn main() -> nbrdf_core::Result<()> {
             y: &dirs[4],
             z: &dirs[5],
         },
-        target: [&target[0], &target[1], &target[2]],
+        target: TargetValues::Rgb([&target[0], &target[1], &target[2]]),
         target_kind: TargetKind::BrdfCos,
     };
     let config = TexturedTrainConfig::default();

@@ -126,9 +126,10 @@ typedef struct NbrdfMaterialInfo {
   // (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table and a
   // textured material).
   int32_t default_sampling;
-  // The number of spectral coefficients a spectral network (file format version 3) outputs,
+  // The number of spectral coefficients a spectral network (file format version 3) or a
+  // spectral textured material (version 4 with a `spectral` object) outputs,
   // `f_r(lambda) = sum_k c_k B_k(lambda)` with the clamped uniform cubic B-spline basis over
-  // `spectral_range_nm` (`nbrdf_material_eval_spectral`); 0 for RGB networks and tables.
+  // `spectral_range_nm` (`nbrdf_material_eval_spectral`); 0 for RGB materials and tables.
   uint32_t spectral_count;
   // The wavelength range of the spectral basis in nm; (0, 0) when not spectral.
   float spectral_range_nm[2];
@@ -266,17 +267,21 @@ int32_t nbrdf_material_active_units(const struct NbrdfMaterial *material,
                                     uint8_t *out_active,
                                     size_t active_len);
 
-// Evaluates a spectral network's `f_r(view, light, lambda) * cos(theta_light)` for `n`
-// direction pairs (`view`, `light` planar `3 n` floats) and `m` wavelengths (nm) per pair:
-// wavelength `j` of pair `i` at `wavelengths[j n + i]`, its value written to `out[j n + i]`.
-// Zero when either direction is at or below the horizon and at wavelengths outside
-// `NbrdfMaterialInfo::spectral_range_nm` or not finite. `NBRDF_ERROR_INVALID_ARGUMENT` for an
-// RGB network or a table.
+// Evaluates a spectral material's `f_r(view, light, lambda) * cos(theta_light)` at `n` hits
+// (`view`, `light` planar `3 n` floats) and `m` wavelengths (nm) per hit: wavelength `j` of hit
+// `i` at `wavelengths[j n + i]`, its value written to `out[j n + i]`. `uv`: the hits' texture
+// coordinates, planar `2 n` floats `[u0.., v0..]` (Mitsuba's `si.uv`), which a spatially
+// varying material reads as `nbrdf_material_eval_uv` does (required: NULL is
+// `NBRDF_ERROR_NULL_POINTER`); a network ignores them and `uv` may be NULL. Zero when either
+// direction is at or below the horizon, where `nbrdf_material_eval_uv` is zero, and at
+// wavelengths outside `NbrdfMaterialInfo::spectral_range_nm` or not finite.
+// `NBRDF_ERROR_INVALID_ARGUMENT` for an RGB material (`spectral_count` 0) or a table.
 //
 // # Safety
-// `material` is a live handle; `view` and `light` hold `3 n` floats, `wavelengths` and `out`
-// `m n` floats, and `out` overlaps no input.
+// `material` is a live handle; `uv` is NULL (a network) or holds `2 n` floats, `view` and
+// `light` hold `3 n` floats, `wavelengths` and `out` `m n` floats, and `out` overlaps no input.
 int32_t nbrdf_material_eval_spectral(const struct NbrdfMaterial *material,
+                                     const float *uv,
                                      const float *view,
                                      const float *light,
                                      const float *wavelengths,
@@ -284,10 +289,10 @@ int32_t nbrdf_material_eval_spectral(const struct NbrdfMaterial *material,
                                      size_t m,
                                      float *out);
 
-// Writes a spectral network's 3 x count matrix `M` (row-major, `len` = `3 spectral_count`
+// Writes a spectral material's 3 x count matrix `M` (row-major, `len` = `3 spectral_count`
 // floats): the linear sRGB value under D65 of each basis function, so that the RGB value of
-// coefficients `c` is `M c` (what `nbrdf_material_eval` computes). `NBRDF_ERROR_INVALID_ARGUMENT`
-// for an RGB network, a table or a wrong `len`.
+// coefficients `c` is `M c` (what `nbrdf_material_eval` and `nbrdf_material_eval_uv` compute).
+// `NBRDF_ERROR_INVALID_ARGUMENT` for an RGB material, a table or a wrong `len`.
 //
 // # Safety
 // `material` is a live handle; `out` points to `len` writable floats.

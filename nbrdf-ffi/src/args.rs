@@ -3,6 +3,7 @@
 //! themselves are nbrdf-ffi-common's).
 
 use nbrdf_core::brdf::Directions;
+use nbrdf_core::textured::Uvs;
 use nbrdf_ffi_common::{check_pointer, Failure, FfiResult};
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -56,6 +57,12 @@ pub(crate) fn exact_len(argument: &str, len: usize, expected: usize, from: &str)
 /// A planar `3 n` buffer as directions; the callers sized it with `array_len(n, 3)`.
 pub(crate) fn directions(buffer: &[f32]) -> Directions<'_> {
     Directions::from_planar(buffer).expect("planar buffers have length 3 n")
+}
+
+/// A planar `2 n` buffer `[u0.., v0..]` as UVs.
+pub(crate) fn uvs(buffer: &[f32]) -> Uvs<'_> {
+    let (u, v) = buffer.split_at(buffer.len() / 2);
+    Uvs { u, v }
 }
 
 /// Frees a boxed handle given back by C; null is ignored.

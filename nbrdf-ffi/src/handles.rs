@@ -8,7 +8,7 @@ use crate::vocabulary::{unknown_kind, NbrdfSamplingKind};
 use nbrdf_core::brdf::Brdf;
 use nbrdf_core::error::regular_file_size;
 use nbrdf_core::merl::{N_PHI_D, N_THETA_D, N_THETA_H};
-use nbrdf_core::network::ActiveUnits;
+use nbrdf_core::network::{ActiveUnits, Spectral};
 use nbrdf_core::sampling::tabulated::TableConfig;
 use nbrdf_core::sampling::{SamplingStrategy, TabulatedSampler};
 use nbrdf_core::textured::{NeuralMaterial, TexturedNbrdf};
@@ -169,6 +169,16 @@ impl NbrdfMaterial {
         match &self.source {
             Source::Textured(textured) => Some(textured),
             Source::Network(_) | Source::Merl(_) => None,
+        }
+    }
+
+    /// The spectral basis whose coefficients a spectral network or textured material outputs,
+    /// `None` for RGB materials and tables.
+    pub(crate) fn spectral(&self) -> Option<&Spectral> {
+        match &self.source {
+            Source::Network(loaded) => loaded.network.spectral.as_ref(),
+            Source::Textured(textured) => textured.decoder().spectral(),
+            Source::Merl(_) => None,
         }
     }
 

@@ -3,15 +3,17 @@
 //! operation (load, free, info, eval, sample; a network's parameters and active units). Eval
 //! and sample at texture coordinates, for every kind: [`crate::uv`].
 
-use crate::args::{directions, exact_len, free_boxed, read_path, write};
-use crate::handles::{LoadedNetwork, NbrdfMaterial, NbrdfSampler, NbrdfSamplerParams};
+use crate::args::{directions, exact_len, free_boxed, read_path, uvs, write};
+use crate::handles::{NbrdfMaterial, NbrdfSampler, NbrdfSamplerParams};
 use crate::status::guard;
 use crate::vocabulary::NbrdfSamplingKind;
 use nbrdf_core::brdf::{DirectionsMut, RgbMut};
-use nbrdf_core::network::ActiveUnits;
+use nbrdf_core::network::{ActiveUnits, Spectral};
 use nbrdf_core::sampling;
 use nbrdf_core::Nbrdf;
-use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference, Failure, FfiResult};
+use nbrdf_ffi_common::{
+    array_len, check_pointer, input, output, reference, Failure, FailureKind, FfiResult,
+};
 use std::ffi::c_char;
 
 /// What an `NbrdfMaterial` holds (the `kind` of `NbrdfMaterialInfo`).
@@ -63,9 +65,10 @@ pub struct NbrdfMaterialInfo {
     /// (`NBRDF_SAMPLING_TABULATED` included), or -1 when it names none (and for a table and a
     /// textured material).
     pub default_sampling: i32,
-    /// The number of spectral coefficients a spectral network (file format version 3) outputs,
+    /// The number of spectral coefficients a spectral network (file format version 3) or a
+    /// spectral textured material (version 4 with a `spectral` object) outputs,
     /// `f_r(lambda) = sum_k c_k B_k(lambda)` with the clamped uniform cubic B-spline basis over
-    /// `spectral_range_nm` (`nbrdf_material_eval_spectral`); 0 for RGB networks and tables.
+    /// `spectral_range_nm` (`nbrdf_material_eval_spectral`); 0 for RGB materials and tables.
     pub spectral_count: u32,
     /// The wavelength range of the spectral basis in nm; (0, 0) when not spectral.
     pub spectral_range_nm: [f32; 2],
@@ -98,6 +101,11 @@ impl NbrdfMaterial {
             latent_channels: 0,
             texture_size: [0; 2],
         };
+        if let Some(spectral) = self.spectral() {
+            let basis = spectral.basis();
+            info.spectral_count = to_u32(basis.count);
+            info.spectral_range_nm = [basis.min_nm as f32, basis.max_nm as f32];
+        }
         if let Some(textured) = self.textured() {
             info.kind = NbrdfMaterialKind::NBRDF_MATERIAL_TEXTURED as i32;
             info.anisotropic = u32::from(textured.decoder().anisotropic());
@@ -114,11 +122,6 @@ impl NbrdfMaterial {
             info.layer_inputs = network.layers.each_ref().map(|l| to_u32(l.inputs));
             info.layer_outputs = network.layers.each_ref().map(|l| to_u32(l.outputs));
             info.stored_sampling = stored_sampling(network);
-            if let Some(spectral) = &network.spectral {
-                let basis = spectral.basis();
-                info.spectral_count = to_u32(basis.count);
-                info.spectral_range_nm = [basis.min_nm as f32, basis.max_nm as f32];
-            }
             info.default_sampling = network
                 .sampling
                 .as_ref()
@@ -415,30 +418,34 @@ pub unsafe extern "C" fn nbrdf_material_active_units(
     })
 }
 
-/// The spectral network of a material, or an error for an RGB network or a table.
-fn spectral_network(material: &NbrdfMaterial) -> FfiResult<&LoadedNetwork> {
-    let loaded = material.loaded_network()?;
-    if loaded.network.spectral.is_none() {
-        return Err(Failure::invalid(
-            "the material is an RGB network, not a spectral one (file format version 3)",
-        ));
-    }
-    Ok(loaded)
+/// The spectral basis of a material, or an error for an RGB material or a table.
+fn spectral_of(material: &NbrdfMaterial) -> FfiResult<&Spectral> {
+    material.spectral().ok_or_else(|| {
+        Failure::invalid(
+            "the material is not spectral: an RGB network or spatially varying material, or a \
+             table (spectral materials are networks of file format version 3 and version-4 \
+             files with a \"spectral\" object)",
+        )
+    })
 }
 
-/// Evaluates a spectral network's `f_r(view, light, lambda) * cos(theta_light)` for `n`
-/// direction pairs (`view`, `light` planar `3 n` floats) and `m` wavelengths (nm) per pair:
-/// wavelength `j` of pair `i` at `wavelengths[j n + i]`, its value written to `out[j n + i]`.
-/// Zero when either direction is at or below the horizon and at wavelengths outside
-/// `NbrdfMaterialInfo::spectral_range_nm` or not finite. `NBRDF_ERROR_INVALID_ARGUMENT` for an
-/// RGB network or a table.
+/// Evaluates a spectral material's `f_r(view, light, lambda) * cos(theta_light)` at `n` hits
+/// (`view`, `light` planar `3 n` floats) and `m` wavelengths (nm) per hit: wavelength `j` of hit
+/// `i` at `wavelengths[j n + i]`, its value written to `out[j n + i]`. `uv`: the hits' texture
+/// coordinates, planar `2 n` floats `[u0.., v0..]` (Mitsuba's `si.uv`), which a spatially
+/// varying material reads as `nbrdf_material_eval_uv` does (required: NULL is
+/// `NBRDF_ERROR_NULL_POINTER`); a network ignores them and `uv` may be NULL. Zero when either
+/// direction is at or below the horizon, where `nbrdf_material_eval_uv` is zero, and at
+/// wavelengths outside `NbrdfMaterialInfo::spectral_range_nm` or not finite.
+/// `NBRDF_ERROR_INVALID_ARGUMENT` for an RGB material (`spectral_count` 0) or a table.
 ///
 /// # Safety
-/// `material` is a live handle; `view` and `light` hold `3 n` floats, `wavelengths` and `out`
-/// `m n` floats, and `out` overlaps no input.
+/// `material` is a live handle; `uv` is NULL (a network) or holds `2 n` floats, `view` and
+/// `light` hold `3 n` floats, `wavelengths` and `out` `m n` floats, and `out` overlaps no input.
 #[no_mangle]
 pub unsafe extern "C" fn nbrdf_material_eval_spectral(
     material: *const NbrdfMaterial,
+    uv: *const f32,
     view: *const f32,
     light: *const f32,
     wavelengths: *const f32,
@@ -449,12 +456,22 @@ pub unsafe extern "C" fn nbrdf_material_eval_spectral(
     guard("nbrdf_material_eval_spectral", || {
         // SAFETY: forwarded contract.
         let material = unsafe { reference(material, "material")? };
-        let loaded = spectral_network(material)?;
+        spectral_of(material)?;
+        let textured = material.textured();
+        if textured.is_some() && uv.is_null() {
+            return Err(Failure {
+                kind: FailureKind::NullPointer,
+                message: "argument `uv` is a null pointer: a spatially varying material is \
+                          evaluated at the hits' texture coordinates (planar 2 n floats)"
+                    .into(),
+            });
+        }
         check_pointer(view, "view")?;
         check_pointer(light, "light")?;
         check_pointer(wavelengths, "wavelengths")?;
         check_pointer(out, "out")?;
         let len = array_len(n, 3)?;
+        let uv_len = array_len(n, 2)?;
         let values = array_len(n, m)?;
         if values == 0 {
             return Ok(());
@@ -462,26 +479,29 @@ pub unsafe extern "C" fn nbrdf_material_eval_spectral(
         // SAFETY: checked above; sizes and aliasing are the caller's contract.
         let (view, light, wavelengths, out) = unsafe {
             (
-                input(view, len),
-                input(light, len),
+                directions(input(view, len)),
+                directions(input(light, len)),
                 input(wavelengths, values),
                 output(out, values),
             )
         };
-        loaded.proved().renderer.eval_spectral_cos_batch(
-            directions(view),
-            directions(light),
-            wavelengths,
-            out,
-        )?;
+        if let Some(textured) = textured {
+            check_pointer(uv, "uv")?;
+            // SAFETY: checked above; `2 n` floats by contract.
+            let uv = uvs(unsafe { input(uv, uv_len) });
+            textured.eval_spectral_cos_batch(uv, view, light, wavelengths, out)?;
+        } else {
+            let renderer = &material.loaded_network()?.proved().renderer;
+            renderer.eval_spectral_cos_batch(view, light, wavelengths, out)?;
+        }
         Ok(())
     })
 }
 
-/// Writes a spectral network's 3 x count matrix `M` (row-major, `len` = `3 spectral_count`
+/// Writes a spectral material's 3 x count matrix `M` (row-major, `len` = `3 spectral_count`
 /// floats): the linear sRGB value under D65 of each basis function, so that the RGB value of
-/// coefficients `c` is `M c` (what `nbrdf_material_eval` computes). `NBRDF_ERROR_INVALID_ARGUMENT`
-/// for an RGB network, a table or a wrong `len`.
+/// coefficients `c` is `M c` (what `nbrdf_material_eval` and `nbrdf_material_eval_uv` compute).
+/// `NBRDF_ERROR_INVALID_ARGUMENT` for an RGB material, a table or a wrong `len`.
 ///
 /// # Safety
 /// `material` is a live handle; `out` points to `len` writable floats.
@@ -494,11 +514,8 @@ pub unsafe extern "C" fn nbrdf_material_spectral_srgb(
     guard("nbrdf_material_spectral_srgb", || {
         // SAFETY: forwarded contract.
         let material = unsafe { reference(material, "material")? };
-        let loaded = spectral_network(material)?;
+        let spectral = spectral_of(material)?;
         check_pointer(out, "out")?;
-        let Some(spectral) = &loaded.network.spectral else {
-            return Ok(()); // checked by `spectral_network`
-        };
         let matrix = spectral.srgb_matrix();
         exact_len(
             "out",

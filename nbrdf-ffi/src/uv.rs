@@ -2,19 +2,12 @@
 //! material at `n` hits, each with its UV. A spatially varying material reads its latent texture
 //! there; a homogeneous one (network or table) is the same at every hit and ignores the UVs.
 
-use crate::args::directions;
+use crate::args::{directions, uvs};
 use crate::handles::{AtHits, NbrdfMaterial};
 use crate::status::guard;
 use nbrdf_core::brdf::{DirectionsMut, RgbMut};
 use nbrdf_core::sampling;
-use nbrdf_core::textured::Uvs;
 use nbrdf_ffi_common::{array_len, check_pointer, input, output, reference};
-
-/// A planar `2 n` buffer `[u0.., v0..]` as UVs.
-fn uvs(buffer: &[f32]) -> Uvs<'_> {
-    let (u, v) = buffer.split_at(buffer.len() / 2);
-    Uvs { u, v }
-}
 
 /// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) at `n`
 /// hits: `uv` holds planar `2 n` floats `[u0.., v0..]` (Mitsuba's `si.uv`), `view` and `light`

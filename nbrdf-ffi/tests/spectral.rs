@@ -1,5 +1,6 @@
-//! Spectral networks (file format version 3) through the C ABI: the info fields, per-wavelength
-//! evaluation, the sRGB matrix, and the refusals.
+//! Spectral networks (file format version 3) and spectral spatially varying materials (version
+//! 4 with a `spectral` object) through the C ABI: the info fields, per-wavelength evaluation, the
+//! sRGB matrix, and the refusals.
 
 mod support;
 
@@ -7,6 +8,9 @@ use glam::Vec3;
 use nbrdf_core::brdf::Directions;
 use nbrdf_core::network::{Layer, Spectral};
 use nbrdf_core::spectral_basis::SpectralBasis;
+use nbrdf_core::textured::{
+    Decoder, LatentTexture, SamplingChannels, TexturePrecision, TexturedNbrdf, UvMapping, Uvs,
+};
 use nbrdf_core::Nbrdf;
 use nbrdf_ffi::*;
 use std::ptr::{null, null_mut};
@@ -108,6 +112,7 @@ fn spectral_eval_and_rgb_eval_agree_with_the_core() {
     let status = unsafe {
         nbrdf_material_eval_spectral(
             material.ptr(),
+            null(),
             v.as_ptr(),
             l.as_ptr(),
             wavelengths.as_ptr(),
@@ -170,7 +175,21 @@ fn spectral_calls_refuse_bad_arguments() {
         assert_eq!(
             nbrdf_material_eval_spectral(
                 null(),
+                null(),
                 d.as_ptr(),
+                d.as_ptr(),
+                d.as_ptr(),
+                1,
+                1,
+                out.as_mut_ptr()
+            ),
+            NULL
+        );
+        assert_eq!(
+            nbrdf_material_eval_spectral(
+                material.ptr(),
+                null(),
+                null(),
                 d.as_ptr(),
                 d.as_ptr(),
                 1,
@@ -185,17 +204,6 @@ fn spectral_calls_refuse_bad_arguments() {
                 null(),
                 d.as_ptr(),
                 d.as_ptr(),
-                1,
-                1,
-                out.as_mut_ptr()
-            ),
-            NULL
-        );
-        assert_eq!(
-            nbrdf_material_eval_spectral(
-                material.ptr(),
-                d.as_ptr(),
-                d.as_ptr(),
                 null(),
                 1,
                 1,
@@ -206,6 +214,7 @@ fn spectral_calls_refuse_bad_arguments() {
         assert_eq!(
             nbrdf_material_eval_spectral(
                 material.ptr(),
+                null(),
                 d.as_ptr(),
                 d.as_ptr(),
                 d.as_ptr(),
@@ -235,6 +244,7 @@ fn spectral_calls_refuse_bad_arguments() {
         assert_eq!(
             nbrdf_material_eval_spectral(
                 rgb.ptr(),
+                null(),
                 d.as_ptr(),
                 d.as_ptr(),
                 d.as_ptr(),
@@ -250,4 +260,111 @@ fn spectral_calls_refuse_bad_arguments() {
             INVALID
         );
     }
+}
+
+/// A spectral spatially varying material (format version 4 with a `spectral` object): 3 latent
+/// channels over 4 x 3 texels, cosine sampling; saved, and loaded by the core.
+fn spectral_textured() -> (Material, TexturedNbrdf) {
+    let channels = 3;
+    let mut rng = nbrdf_core::rng::SplitMix64::from_state(11);
+    let mut uniform = |scale: f32| scale * (2.0 * rng.next_f32() - 1.0);
+    let layers = [(6 + channels, 10), (10, COUNT)]
+        .iter()
+        .map(|&(inputs, outputs)| Layer {
+            inputs,
+            outputs,
+            weights: (0..inputs * outputs).map(|_| uniform(0.4)).collect(),
+            bias: (0..outputs).map(|_| 0.2 + uniform(0.1)).collect(),
+        })
+        .collect();
+    let spectral = Spectral::new(SpectralBasis::default()).unwrap();
+    let decoder = Decoder::new(layers, channels, false, Some(spectral)).unwrap();
+    let sampling = SamplingChannels::cosine();
+    let names = TexturedNbrdf::channel_names_for(channels, &sampling);
+    let texels = (0..4 * 3 * channels).map(|_| uniform(1.0)).collect();
+    let texture = LatentTexture::new(4, 3, names, texels).unwrap();
+    let material = TexturedNbrdf::new(
+        "spectral-textured",
+        decoder,
+        texture,
+        UvMapping::default(),
+        sampling,
+        "latent.exr",
+    )
+    .unwrap();
+    let path = scratch("spectral-textured").join("m.nbrdf.json");
+    material.save(&path, TexturePrecision::Float).unwrap();
+    (load_material(&path), TexturedNbrdf::load(&path).unwrap())
+}
+
+#[test]
+fn textured_spectral_materials_evaluate_at_their_uvs() {
+    let (material, core) = spectral_textured();
+    let info = material.info();
+    assert_eq!(info.kind, NbrdfMaterialKind::NBRDF_MATERIAL_TEXTURED as i32);
+    assert_eq!(info.spectral_count as usize, COUNT);
+    assert_eq!(info.spectral_range_nm, [360.0, 830.0]);
+    let (view, light) = pairs();
+    let n = view.len();
+    let (v, l) = (planar(view.iter().copied()), planar(light.iter().copied()));
+    let uv: Vec<f32> = (0..2 * n).map(|k| 0.37 * k as f32 - 2.0).collect();
+    let m = 3;
+    let wavelengths: Vec<f32> = (0..m * n).map(|k| 365.0 + 7.3 * k as f32).collect();
+    let mut out = vec![-1.0f32; m * n];
+    // SAFETY: buffers of the sizes passed.
+    let status = unsafe {
+        nbrdf_material_eval_spectral(
+            material.ptr(),
+            uv.as_ptr(),
+            v.as_ptr(),
+            l.as_ptr(),
+            wavelengths.as_ptr(),
+            n,
+            m,
+            out.as_mut_ptr(),
+        )
+    };
+    assert_eq!(status, OK, "{}", last_error());
+    let mut want = vec![0.0f32; m * n];
+    let dirs = |p| Directions::from_planar(p).unwrap();
+    let uvs = Uvs {
+        u: &uv[..n],
+        v: &uv[n..],
+    };
+    core.eval_spectral_cos_batch(uvs, dirs(&v), dirs(&l), &wavelengths, &mut want)
+        .unwrap();
+    assert_eq!(out, want);
+    assert!(out.iter().filter(|v| **v > 0.0).count() > n);
+
+    // The sRGB matrix is the basis' and what eval_uv projects with.
+    let mut matrix = vec![0.0f32; 3 * COUNT];
+    // SAFETY: a buffer of the size passed.
+    let status =
+        unsafe { nbrdf_material_spectral_srgb(material.ptr(), matrix.as_mut_ptr(), 3 * COUNT) };
+    assert_eq!(status, OK, "{}", last_error());
+    let basis = Spectral::new(SpectralBasis::default()).unwrap();
+    for (a, b) in matrix.iter().zip(basis.srgb_matrix()) {
+        assert_eq!(*a, b as f32);
+    }
+
+    // Without UVs a textured material is refused, naming the argument.
+    // SAFETY: valid buffers but for the NULL `uv`.
+    let status = unsafe {
+        nbrdf_material_eval_spectral(
+            material.ptr(),
+            null(),
+            v.as_ptr(),
+            l.as_ptr(),
+            wavelengths.as_ptr(),
+            n,
+            m,
+            out.as_mut_ptr(),
+        )
+    };
+    assert_eq!(status, NULL);
+    assert!(
+        last_error().contains("`uv`") && last_error().contains("texture coordinates"),
+        "{}",
+        last_error()
+    );
 }

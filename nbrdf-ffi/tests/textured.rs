@@ -40,7 +40,7 @@ fn decoder(rng: &mut SplitMix64) -> Decoder {
             }
         })
         .collect();
-    Decoder::new(layers, CHANNELS, false).unwrap()
+    Decoder::new(layers, CHANNELS, false, None).unwrap()
 }
 
 /// A `WIDTH x HEIGHT` material with one Blinn-Phong lobe per texel (exponents 5 to 60, weights
@@ -317,7 +317,7 @@ fn homogeneous_functions_refuse_textured_materials() {
             "nbrdf_material_active_units",
         );
         assert_refused(
-            nbrdf_material_eval_spectral(m, p, p, p, 1, 1, p.add(6)),
+            nbrdf_material_eval_spectral(m, p, p, p, p, 1, 1, p.add(6)),
             "nbrdf_material_eval_spectral",
         );
         assert_refused(

@@ -449,7 +449,8 @@ def parser() -> argparse.ArgumentParser:
         "spatially varying materials", "--spatial distils a textured BSDF into a decoder and a latent texture "
         "(docs/textured.md). These apply too, with their own defaults: --samples (1000000 pairs, 8 a texel), "
         "--epochs (40), --hidden (the decoder's, 32), --batch (512), --learning-rate (0.002); and --sampling, "
-        "--seed, --threads, --anisotropy, --variant (an *_rgb one), --name, --bsdf")
+        "--seed, --threads, --anisotropy, --variant (an *_rgb one, or an *_spectral one for a spectral material), "
+        "--name, --bsdf")
     spatial.add_argument("--spatial", action="store_true",
                          help="write a spatially varying material (file format version 4, its latent texture "
                               "OUT.latent.exr beside it) from a textured BSDF: a twosided gives its front, a bumpmap "

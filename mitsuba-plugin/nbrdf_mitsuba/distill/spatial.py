@@ -13,7 +13,10 @@ lobes fitted to representative codes.
   it wraps, and the wrapper must stay in the scene around the ``nbrdf`` BSDF; a wrapper nested
   deeper (inside a ``blendbsdf``) cannot be separated and is refused.
 * A source whose values do not vary over the texture is refused, pointing to the plain distill.
-* RGB only: the values come from an ``*_rgb`` variant.
+* Spectra (an ``*_spectral`` variant): the training values are the source's at
+  :data:`~nbrdf_mitsuba.distill.WAVELENGTHS`, as for a spectral network, and the material is
+  spectral (its decoder gives B-spline coefficients); a texel's signature reads the source at
+  :data:`SIGNATURE_WAVELENGTHS`.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from . import (
+    WAVELENGTHS,
     DistillError,
     DistillFailed,
     _progress,
@@ -52,6 +56,10 @@ PAIRS_PER_TEXEL = 8
 DEFAULT_SAMPLES = 1_000_000
 #: Texels per Mitsuba call when evaluating the parameters over the texture.
 TEXEL_CHUNK = 1 << 16
+#: The wavelengths (nm) of a texel's signature in spectral variants: one of Mitsuba's evaluations
+#: (4 wavelengths a lane), spread over the observer's most sensitive range. Values at separate
+#: wavelengths tell apart spectra that an RGB projection would merge, and need no projection.
+SIGNATURE_WAVELENGTHS = (440.0, 510.0, 580.0, 650.0)
 
 
 # -- what is distilled ---------------------------------------------------------------------------
@@ -168,14 +176,17 @@ def signature_pairs() -> tuple[np.ndarray, np.ndarray]:
 
 
 def signature(bsdf, uv: np.ndarray) -> np.ndarray:
-    """(3 K, n) ``ln(1 + f cos)`` of the source at the n planar ``uv`` and the K
-    :func:`signature_pairs`, RGB of pair k in rows ``3 k .. 3 k + 2``."""
+    """(c K, n) ``ln(1 + f cos)`` of the source at the n planar ``uv`` and the K
+    :func:`signature_pairs`, the c values of pair k in rows ``c k .. c k + c - 1``: RGB, or in
+    spectral variants the values at :data:`SIGNATURE_WAVELENGTHS`."""
     view, light = signature_pairs()
     k, n = view.shape[1], uv.shape[1]
-    values = eval_cos(bsdf, np.repeat(view, n, axis=1), np.repeat(light, n, axis=1), uv=np.tile(uv, k))
-    check_finite(values, np.repeat(view, n, axis=1), np.repeat(light, n, axis=1), "values")
+    views, lights = np.repeat(view, n, axis=1), np.repeat(light, n, axis=1)
+    values = eval_cos(bsdf, views, lights, wavelengths=SIGNATURE_WAVELENGTHS, uv=np.tile(uv, k))
+    check_finite(values, views, lights, "values")
     values = np.log1p(np.maximum(values, 0.0))
-    return values.reshape(3, k, n).transpose(1, 0, 2).reshape(3 * k, n)
+    c = values.shape[0]
+    return values.reshape(c, k, n).transpose(1, 0, 2).reshape(c * k, n)
 
 
 def varying_textures(bsdf) -> list:
@@ -185,14 +196,17 @@ def varying_textures(bsdf) -> list:
 
 
 def texture_values(bsdf, uv: np.ndarray) -> np.ndarray:
-    """(3 T, n) RGB values of the T :func:`varying_textures` at the n planar ``uv``."""
+    """(c T, n) values of the T :func:`varying_textures` at the n planar ``uv``: RGB, or in
+    spectral variants the spectra at :data:`SIGNATURE_WAVELENGTHS`."""
     import drjit as dr
 
     rows = []
     for texture in varying_textures(bsdf):
         si = dr.zeros(mi.SurfaceInteraction3f, uv.shape[1])
         si.uv = mi.Point2f(np.ascontiguousarray(uv, dtype=np.float32))
-        rows.append(np.asarray(texture.eval(si).numpy(), dtype=np.float64).reshape(3, -1))
+        if mi.is_spectral:
+            si.wavelengths = mi.UnpolarizedSpectrum(*SIGNATURE_WAVELENGTHS)
+        rows.append(np.asarray(texture.eval(si).numpy(), dtype=np.float64).reshape(-1, uv.shape[1]))
     return np.concatenate(rows) if rows else np.zeros((0, uv.shape[1]))
 
 
@@ -253,7 +267,8 @@ def stratified_texels(count: int, width: int, height: int, rng: np.random.Genera
 def training_samples(bsdf, native, args, size: tuple[int, int], anisotropic: bool, rng: np.random.Generator):
     """(texel of each sample, view, light, eval_cos): the trainer's direction pairs (covering the
     half vector's azimuth when ``anisotropic``), each at a texel of :func:`stratified_texels`
-    (:data:`PAIRS_PER_TEXEL` pairs a texel, shuffled), and the source's values there."""
+    (:data:`PAIRS_PER_TEXEL` pairs a texel, shuffled), and the source's values there: (3, n) RGB,
+    or in spectral variants (m, n) at :data:`~nbrdf_mitsuba.distill.WAVELENGTHS`."""
     width, height = size
     config = native.default_config()
     config.samples = args.samples or DEFAULT_SAMPLES
@@ -306,8 +321,6 @@ def distill_spatial(args, output: Path) -> dict:
     if refused:
         raise DistillError(f"{', '.join(refused)}: not available with --spatial")
     variant = pick_variant(args.variant)
-    if variant.endswith("_spectral"):
-        raise DistillError(f"--spatial learns RGB: use an *_rgb variant, not {variant}")
     mi.set_variant(variant)
     source, kind = load_bsdf(args.source, args.bsdf)
     bsdf, notes = distilled_part(source)
@@ -337,26 +350,32 @@ def distill_spatial(args, output: Path) -> dict:
         "values": "BSDF.eval(si.uv = texel centre, si.wi = view, wo = light) = f_r cos(theta_light), local frame",
         "anisotropy": anisotropy, "notes": notes, "evaluation_seconds": round(evaluation_seconds, 3),
     }
+    wavelengths = None
+    if mi.is_spectral:
+        wavelengths = WAVELENGTHS
+        details["wavelengths_nm"] = [float(w) for w in WAVELENGTHS]
+        details["signature_wavelengths_nm"] = list(SIGNATURE_WAVELENGTHS)
     epochs = _progress(args.quiet, config.epochs)
     baking = _bake_progress(args.quiet, epochs)
     try:
         native.train_textured(config, image[texel].T, view, light, values, image.reshape(height, width, -1), output,
                               name=args.name or network_name(output), source=f"Mitsuba BSDF {args.source}",
-                              details=details, on_epoch=epochs.update, on_bake=baking.update)
+                              details=details, on_epoch=epochs.update, on_bake=baking.update, wavelengths=wavelengths)
     except native.TrainError as error:
         raise DistillFailed(str(error)) from None
     finally:
         epochs.close()
         baking.close()
     return {"output": output, "samples": view.shape[1], "parameters": image.shape[1], "size": (width, height),
-            "channels": config.channels, "anisotropic": anisotropic, "variant": variant,
-            "evaluation_seconds": evaluation_seconds, "seconds": time.perf_counter() - start, "notes": notes}
+            "channels": config.channels, "anisotropic": anisotropic, "spectral": wavelengths is not None,
+            "variant": variant, "evaluation_seconds": evaluation_seconds, "seconds": time.perf_counter() - start,
+            "notes": notes}
 
 
 def report(summary: dict) -> str:
     """The lines :func:`main` prints after a spatial distillation."""
     width, height = summary["size"]
-    kind = "anisotropic" if summary["anisotropic"] else "isotropic"
+    kind = ("anisotropic" if summary["anisotropic"] else "isotropic") + (", spectral" if summary["spectral"] else "")
     lines = [f"wrote {summary['output']} (spatially varying, {kind}, {width} x {height} texels, "
              f"{summary['channels']} latent channels; texture beside it): {summary['samples']} samples of "
              f"{summary['parameters']} parameters a texel evaluated by Mitsuba ({summary['variant']}) in "

@@ -197,11 +197,13 @@ class TracedTexturedMaterial:
         return [dr.select(good, c, 0.0) for c in code], good
 
     def eval(self, uv, view, light):
-        """``f_r`` (``mi.Color3f``) at the hits: 0 at bad texels, at or below the horizon and for
-        zero or non-finite directions (``TexturedNbrdf::eval_cos`` without the cosine)."""
+        """``f_r`` at the hits, a ``mi.Color3f`` or a spectral decoder's list of coefficients: 0
+        at bad texels, at or below the horizon and for zero or non-finite directions
+        (``TexturedNbrdf::eval_cos`` without the cosine)."""
         code, good = self.code(uv)
         f = self.decoder.eval_input(network_input(view, light, self.decoder.anisotropic) + code)
-        return dr.select(good & both_valid_above(view, light), f, 0.0)
+        ok = good & both_valid_above(view, light)
+        return [dr.select(ok, c, 0.0) for c in f] if isinstance(f, list) else dr.select(ok, f, 0.0)
 
     def strategy(self, uv):
         """``TexturedNbrdf::sampling_strategy``: the mixture ``(n1, w1, n2, w2)`` at the hits."""

@@ -6,7 +6,7 @@
 use super::dense::{backward, forward, DenseLayout, DenseScratch, DenseWeights};
 use super::samples::Rows;
 use crate::fastmath::{Fused, MulAdd, Unfused};
-use crate::network::{Layer, INPUTS, OUTPUTS};
+use crate::network::{Layer, INPUTS};
 use crate::train::adam::{Adam, AdamConfig};
 use crate::train::mlp_grad::{log_space_loss, Kernel, LANES};
 use rayon::prelude::*;
@@ -41,6 +41,11 @@ impl JointWeights {
         self.encoder.layout.outputs()
     }
 
+    /// The decoder's outputs: 3, or a spectral basis' count.
+    pub fn outputs(&self) -> usize {
+        self.decoder.layout.outputs()
+    }
+
     fn refresh(&mut self) {
         self.encoder.refresh_transposes();
         self.decoder.refresh_transposes();
@@ -51,7 +56,7 @@ impl JointWeights {
 pub(crate) struct JointScratch {
     encoder: DenseScratch,
     decoder: DenseScratch,
-    /// `[channel][lane]`.
+    /// `[output][lane]`.
     target: Vec<f32>,
     cos: Vec<f32>,
 }
@@ -61,7 +66,7 @@ impl JointScratch {
         JointScratch {
             encoder: DenseScratch::new(&w.encoder.layout),
             decoder: DenseScratch::new(&w.decoder.layout),
-            target: vec![0.0; OUTPUTS * LANES],
+            target: vec![0.0; w.outputs() * LANES],
             cos: vec![0.0; LANES],
         }
     }
@@ -83,8 +88,8 @@ impl JointScratch {
             if used {
                 d[..INPUTS].copy_from_slice(&rows.inputs[i]);
             }
-            for k in 0..OUTPUTS {
-                self.target[k * LANES + lane] = if used { rows.log_targets[i][k] } else { 0.0 };
+            for k in 0..rows.outputs {
+                self.target[k * LANES + lane] = if used { rows.log_targets_of(i)[k] } else { 0.0 };
             }
             self.cos[lane] = if used { rows.cos_light[i] } else { 0.0 };
         }
@@ -137,7 +142,7 @@ fn chunk_pass<M: MulAdd>(
         let (z, g) = (&s.decoder.acts[last], &mut s.decoder.grads[last]);
         g.fill(0.0);
         for lane in 0..LANES {
-            for k in 0..OUTPUTS {
+            for k in 0..w.outputs() {
                 let (t, c) = (s.target[k * LANES + lane], s.cos[lane]);
                 let (error, slope) = log_space_loss(z[lane * yw + k], t, c, clamp_output);
                 sum += f64::from(error);
@@ -246,7 +251,7 @@ impl JointTrainer {
             self.weights.encoder.layout.len,
             self.weights.decoder.layout.len,
         );
-        let scale = 1.0 / (OUTPUTS * n.max(1)) as f32;
+        let scale = 1.0 / (self.weights.outputs() * n.max(1)) as f32;
         let (kernel, weights) = (self.kernel, &self.weights);
         self.scratches[..chunks]
             .par_iter_mut()
@@ -291,7 +296,7 @@ impl JointTrainer {
                 },
             )
             .collect();
-        sums.iter().sum::<f64>() / (OUTPUTS * rows.len().max(1)) as f64
+        sums.iter().sum::<f64>() / (weights.outputs() * rows.len().max(1)) as f64
     }
 }
 

@@ -80,7 +80,7 @@ impl Owned {
                 y: &d[4],
                 z: &d[5],
             },
-            target: [&self.target[0], &self.target[1], &self.target[2]],
+            target: TargetValues::Rgb([&self.target[0], &self.target[1], &self.target[2]]),
             target_kind: TargetKind::BrdfCos,
         }
     }
@@ -160,10 +160,10 @@ fn held_out_error(material: &TexturedNbrdf) -> f64 {
 
 /// The model before training: the initial weights.
 fn untrained(config: &TexturedTrainConfig, trained: &TexturedModel) -> TexturedModel {
-    let (encoder, decoder) = config.initial_layers(1);
+    let (encoder, decoder) = config.initial_layers(1, OUTPUTS);
     TexturedModel {
         encoder,
-        decoder: crate::textured::Decoder::new(decoder, config.channels, false).unwrap(),
+        decoder: crate::textured::Decoder::new(decoder, config.channels, false, None).unwrap(),
         report: trained.report.clone(),
     }
 }
@@ -233,7 +233,7 @@ fn the_joint_gradient_matches_central_differences() {
         decoder_hidden: vec![6],
         ..small_config()
     };
-    let (encoder, decoder) = config.initial_layers(1);
+    let (encoder, decoder) = config.initial_layers(1, OUTPUTS);
     let weights = JointWeights::new(&encoder, &decoder);
     let mut trainer = JointTrainer::new(weights.clone(), 128, AdamConfig::default());
     let scale = 1.0 / (OUTPUTS * rows.len()) as f64;
@@ -269,12 +269,12 @@ fn the_joint_gradient_matches_central_differences() {
 #[test]
 fn the_baked_decoder_evaluates_what_was_trained() {
     let config = small_config();
-    let (encoder, decoder) = config.initial_layers(1);
+    let (encoder, decoder) = config.initial_layers(1, OUTPUTS);
     let weights = JointWeights::new(&encoder, &decoder);
     let layout = &weights.decoder.layout;
     assert_eq!(layout.unpad(&weights.decoder.p), decoder);
     let code = super::joint::encode(&weights, &[0.3], 1);
-    let d = crate::textured::Decoder::new(decoder, config.channels, false).unwrap();
+    let d = crate::textured::Decoder::new(decoder, config.channels, false, None).unwrap();
     // The encoder's code, recomputed from the layers with the crate's dense layer.
     let mut x = vec![0.3f32];
     for (k, layer) in encoder.iter().enumerate() {
@@ -300,7 +300,8 @@ fn the_baked_decoder_evaluates_what_was_trained() {
             parameters: 1,
             inputs: vec![features],
             params: vec![0.3],
-            log_targets: vec![[0.0; 3]],
+            outputs: OUTPUTS,
+            log_targets: vec![0.0; OUTPUTS],
             cos_light: vec![1.0],
             ..Rows::default()
         };

@@ -5,8 +5,9 @@
 use super::joint::{JointTrainer, JointWeights};
 use super::samples::{Rows, TexturedSamples};
 use crate::error::{NbrdfError, Result};
-use crate::network::{glorot_uniform, Layer, INPUTS, OUTPUTS};
+use crate::network::{glorot_uniform, Layer, Spectral, INPUTS};
 use crate::rng::{SplitMix64, Stream};
+use crate::spectral_basis::SpectralBasis;
 use crate::textured::{Decoder, MAX_DECODER_LAYERS, MAX_DECODER_WIDTH, MAX_LATENT_CHANNELS};
 use crate::train::adam::AdamConfig;
 use crate::train::{EpochStats, LrSchedule, TrainReport};
@@ -17,7 +18,8 @@ use std::time::Instant;
 pub struct TexturedTrainConfig {
     /// `C`, the latent channels of the code.
     pub channels: usize,
-    /// Hidden widths of the encoder (`P -> ... -> C`) and of the decoder (`6 + C -> ... -> 3`).
+    /// Hidden widths of the encoder (`P -> ... -> C`) and of the decoder (`6 + C -> ... -> 3`, or
+    /// the spectral basis' count for spectral samples).
     pub encoder_hidden: Vec<usize>,
     pub decoder_hidden: Vec<usize>,
     /// Feed the half vector's azimuth to the decoder ([`crate::network::Nbrdf::anisotropic`]).
@@ -86,9 +88,13 @@ impl TexturedTrainConfig {
         Ok(())
     }
 
-    /// The initial layers of an encoder of `parameters` inputs and of the decoder: Glorot
-    /// uniform from the seed's [`Stream::Init`] stream, encoder first.
-    pub(crate) fn initial_layers(&self, parameters: usize) -> (Vec<Layer>, Vec<Layer>) {
+    /// The initial layers of an encoder of `parameters` inputs and of a decoder of `outputs`
+    /// outputs: Glorot uniform from the seed's [`Stream::Init`] stream, encoder first.
+    pub(crate) fn initial_layers(
+        &self,
+        parameters: usize,
+        outputs: usize,
+    ) -> (Vec<Layer>, Vec<Layer>) {
         let mut rng = SplitMix64::new(self.seed, Stream::Init, 0);
         let encoder_widths: Vec<usize> = std::iter::once(parameters)
             .chain(self.encoder_hidden.iter().copied())
@@ -96,7 +102,7 @@ impl TexturedTrainConfig {
             .collect();
         let decoder_widths: Vec<usize> = std::iter::once(INPUTS + self.channels)
             .chain(self.decoder_hidden.iter().copied())
-            .chain([OUTPUTS])
+            .chain([outputs])
             .collect();
         let encoder = glorot_uniform(&encoder_widths, &mut rng);
         let decoder = glorot_uniform(&decoder_widths, &mut rng);
@@ -124,9 +130,10 @@ impl TexturedModel {
     }
 }
 
-/// Trains an encoder and a decoder on `samples`, calling `progress` after every epoch.
-/// Runs on the current rayon thread pool; the result is the same for a seed on any thread
-/// count.
+/// Trains an encoder and a decoder on `samples`, calling `progress` after every epoch: an RGB
+/// decoder, or for spectral samples one of the default spectral basis' coefficients
+/// ([`super::TargetValues::Spectral`]). Runs on the current rayon thread pool; the result is the
+/// same for a seed on any thread count.
 pub fn train_textured(
     samples: &TexturedSamples<'_>,
     config: &TexturedTrainConfig,
@@ -136,7 +143,7 @@ pub fn train_textured(
     config.validate()?;
     let rows = Rows::from_samples(samples, config.anisotropic)?;
     let (train, validation) = split(&rows, config)?;
-    let (encoder, decoder) = config.initial_layers(rows.parameters);
+    let (encoder, decoder) = config.initial_layers(rows.parameters, rows.outputs);
     let mut trainer = JointTrainer::new(
         JointWeights::new(&encoder, &decoder),
         config.batch,
@@ -157,7 +164,7 @@ pub fn train_textured(
                 let lr = config.adam.learning_rate * config.lr_schedule.factor(done, config.epochs);
                 sum += trainer.step(&train.subset(indices), lr);
             }
-            let train_loss = sum / (OUTPUTS * train.len()) as f64;
+            let train_loss = sum / (rows.outputs * train.len()) as f64;
             (train_loss, trainer.loss(&validation))
         });
         if !(train_loss.is_finite() && validation_loss.is_finite()) {
@@ -180,10 +187,15 @@ pub fn train_textured(
         });
     }
     let weights = best.2;
+    let spectral = match samples.target {
+        super::TargetValues::Spectral { .. } => Some(Spectral::new(SpectralBasis::default())?),
+        super::TargetValues::Rgb(_) => None,
+    };
     let decoder = Decoder::new(
         weights.decoder.layout.unpad(&weights.decoder.p),
         config.channels,
         config.anisotropic,
+        spectral,
     )?;
     Ok(TexturedModel {
         encoder: weights.encoder.layout.unpad(&weights.encoder.p),

@@ -28,6 +28,7 @@ pub use format::{
 pub(crate) use kernel::has_avx2_fma;
 pub use kernel::LANES;
 pub use pruning::{active_units, ActiveUnits};
+pub(crate) use spectral::check_spectral_batch;
 pub use spectral::Spectral;
 
 use crate::brdf::{Brdf, Directions, RgbMut};

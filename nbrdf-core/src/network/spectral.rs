@@ -55,6 +55,23 @@ impl Spectral {
         }
         rgb.map(|v| v as f32)
     }
+
+    /// `out[j n + i] = sum_k c_ik B_k(wavelengths[j n + i])` for the `n` pairs' coefficients
+    /// (`coefficients[i count + k]`, `n = coefficients.len() / count`); the layout is checked
+    /// by [`check_spectral_batch`].
+    pub(crate) fn values_into(&self, coefficients: &[f32], wavelengths: &[f32], out: &mut [f32]) {
+        let count = self.count();
+        let n = coefficients.len() / count;
+        out.par_chunks_mut(n)
+            .zip(wavelengths.par_chunks(n))
+            .for_each(|(values, lambdas)| {
+                for (i, (v, &l)) in values.iter_mut().zip(lambdas).enumerate() {
+                    *v = self
+                        .basis
+                        .value(&coefficients[i * count..(i + 1) * count], l);
+                }
+            });
+    }
 }
 
 impl Nbrdf {
@@ -105,33 +122,29 @@ impl Nbrdf {
             )));
         };
         let n = common_len(&[view.min_len(), light.min_len()]);
-        if wavelengths.len() != out.len()
-            || (n == 0 && !out.is_empty())
-            || out.len() % n.max(1) != 0
-        {
-            return Err(NbrdfError::InvalidArgument(format!(
-                "{} wavelengths and {} outputs for {n} direction pairs: both must be m n",
-                wavelengths.len(),
-                out.len()
-            )));
-        }
+        check_spectral_batch(n, wavelengths, out)?;
         if n == 0 {
             return Ok(());
         }
         let count = spectral.count();
         let mut coefficients = vec![0.0f32; n * count];
         self.eval_outputs_cos_batch(view, light, &mut coefficients);
-        out.par_chunks_mut(n)
-            .zip(wavelengths.par_chunks(n))
-            .for_each(|(values, lambdas)| {
-                for (i, (v, &l)) in values.iter_mut().zip(lambdas).enumerate() {
-                    *v = spectral
-                        .basis()
-                        .value(&coefficients[i * count..(i + 1) * count], l);
-                }
-            });
+        spectral.values_into(&coefficients, wavelengths, out);
         Ok(())
     }
+}
+
+/// The layout of a spectral batch of `n` pairs: `wavelengths` and `out` must both hold `m n`
+/// values; an error naming the lengths otherwise.
+pub(crate) fn check_spectral_batch(n: usize, wavelengths: &[f32], out: &[f32]) -> Result<()> {
+    if wavelengths.len() != out.len() || (n == 0 && !out.is_empty()) || out.len() % n.max(1) != 0 {
+        return Err(NbrdfError::InvalidArgument(format!(
+            "{} wavelengths and {} outputs for {n} direction pairs: both must be m n",
+            wavelengths.len(),
+            out.len()
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

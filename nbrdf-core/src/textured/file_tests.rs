@@ -8,7 +8,7 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
 /// A fresh folder for one test's files.
-fn scratch(name: &str) -> PathBuf {
+pub(super) fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("nbrdf-textured-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -422,14 +422,16 @@ fn bad_shapes_are_refused_naming_the_field() {
         (vec![layer(39, 3)], 33, "latent.channels 33"),
     ];
     for (layers, channels, message) in cases {
-        let error = Decoder::new(layers, channels, false)
+        let error = Decoder::new(layers, channels, false, None)
             .unwrap_err()
             .to_string();
         assert!(error.contains(message), "{error} lacks {message}");
     }
     let mut nan = layer(10, 3);
     nan.weights[4] = f32::NAN;
-    let error = Decoder::new(vec![nan], 4, false).unwrap_err().to_string();
+    let error = Decoder::new(vec![nan], 4, false, None)
+        .unwrap_err()
+        .to_string();
     assert!(error.contains("layer 1 weight 4 is not finite"), "{error}");
 
     let m = material(

@@ -10,8 +10,9 @@ use super::{
 };
 use crate::error::{NbrdfError, Result};
 use crate::network::{
-    describe_json_error, file_version, Layer, Nbrdf, FORMAT_NAME, FORMAT_VERSION_TEXTURED,
+    describe_json_error, file_version, Layer, Nbrdf, Spectral, FORMAT_NAME, FORMAT_VERSION_TEXTURED,
 };
+use crate::spectral_basis::SpectralBasis;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use serde_json::{Map, Value};
@@ -154,6 +155,15 @@ fn uv_transform(rows: &[Vec<f64>]) -> std::result::Result<UvTransform, String> {
     Ok(UvTransform { matrix })
 }
 
+/// The optional `spectral` object: the decoder's outputs are the coefficients of this basis
+/// (as a version-3 network's), else RGB.
+fn spectral_section(root: &Map<String, Value>) -> std::result::Result<Option<Spectral>, String> {
+    let Some(basis) = field::<SpectralBasis>(root, "spectral", "spectral")? else {
+        return Ok(None);
+    };
+    Spectral::new(basis).map(Some).map_err(invalid_message)
+}
+
 fn sampling_section(root: &Map<String, Value>) -> std::result::Result<SamplingChannels, String> {
     let Some(sampling) = section(root, "sampling")? else {
         return Ok(SamplingChannels::cosine());
@@ -218,9 +228,10 @@ impl TexturedNbrdf {
             .map_err(fail)?
             .unwrap_or(false);
         let layers: Vec<Layer> = required(&root, "layers", "layers").map_err(fail)?;
+        let spectral = spectral_section(&root).map_err(fail)?;
         let latent = latent_section(&root).map_err(fail)?;
         let sampling = sampling_section(&root).map_err(fail)?;
-        let decoder = Decoder::new(layers, latent.channels, anisotropic)
+        let decoder = Decoder::new(layers, latent.channels, anisotropic, spectral)
             .map_err(|e| fail(invalid_message(e)))?;
         if let Some(problem) = lobe_name_problem(&sampling, latent.channels) {
             return Err(fail(problem));
@@ -256,6 +267,7 @@ impl TexturedNbrdf {
             version: FORMAT_VERSION_TEXTURED,
             name: self.name(),
             anisotropic: self.decoder().anisotropic(),
+            spectral: self.decoder().spectral().map(Spectral::basis),
             layers: self.decoder().layers(),
             latent: LatentOut {
                 path: self.texture_path(),
@@ -301,6 +313,8 @@ struct FileOut<'a> {
     version: u32,
     name: &'a str,
     anisotropic: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    spectral: Option<&'a SpectralBasis>,
     layers: &'a [Layer],
     latent: LatentOut<'a>,
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -1,15 +1,17 @@
 //! Spatially varying neural materials (Zeltner et al. 2023, "Real-Time Neural Appearance
 //! Models"; Kuznetsov et al. 2021, NeuMIP): one decoder MLP per material reads a latent code of
 //! `C` channels, looked up in a texture at the hit's UV, together with the six direction
-//! features of the homogeneous network, and gives `f_r` in RGB. Sampling reads Blinn-Phong lobe
-//! parameters baked into extra channels of the same texture (docs/textured.md; the
-//! files: docs/formats.md).
+//! features of the homogeneous network, and gives `f_r` in RGB, or the coefficients of its
+//! spectrum in a spectral basis (a spectral material: its RGB value is their sRGB projection,
+//! as for a spectral network). Sampling reads Blinn-Phong lobe parameters baked into extra
+//! channels of the same texture (docs/textured.md; the files: docs/formats.md).
 //!
 //! * `texture.rs`: the texture ([`LatentTexture`]) and its lookup ([`UvMapping`]: `to_uv`,
 //!   wrap mode, nearest or bilinear filtering, as Mitsuba's `bitmap`);
 //! * `exr_file.rs`: reading and writing the texture as an OpenEXR file;
 //! * `decoder.rs`: the [`Decoder`] and its forward pass;
 //! * `lobes.rs`: the lobe channels ([`SamplingChannels`]) and the strategy they give;
+//! * `spectral.rs`: a spectral material's value per wavelength;
 //! * `format.rs`: the `*.nbrdf.json` file (version [`FORMAT_VERSION_TEXTURED`]) and
 //!   [`NeuralMaterial`], which loads either kind of file;
 //! * this file: [`TexturedNbrdf`], its evaluation and sampling, one hit or a batch.
@@ -27,6 +29,9 @@ mod format;
 mod lobes;
 #[cfg(test)]
 pub(crate) mod sampling_tests;
+mod spectral;
+#[cfg(test)]
+mod spectral_tests;
 #[cfg(test)]
 mod tests;
 mod texture;
@@ -299,7 +304,8 @@ impl TexturedNbrdf {
             });
     }
 
-    /// `f_r cos` at a footprint (`None`: a bad texel) with `M`'s arithmetic.
+    /// `f_r cos` in RGB at a footprint (`None`: a bad texel) with `M`'s arithmetic: a spectral
+    /// material's projection `M (c cos)`.
     #[inline(always)]
     fn eval_at<M: MulAdd>(
         &self,
@@ -307,24 +313,39 @@ impl TexturedNbrdf {
         view: Vec3,
         light: Vec3,
     ) -> [f32; 3] {
-        let Some(footprint) = footprint else {
-            return [0.0; 3];
-        };
+        self.outputs_cos_at::<M, _>(footprint, view, light, |f_cos| self.decoder.rgb_of(f_cos))
+            .unwrap_or([0.0; 3])
+    }
+
+    /// `finish` of the decoder's outputs times `cos(theta_light)` (RGB `f_r cos`, or the
+    /// coefficients of its spectrum) at a footprint with `M`'s arithmetic; `None` where the
+    /// material is 0: a bad texel (`None` footprint or a non-finite code), at or below the
+    /// horizon, for zero or non-finite directions.
+    #[inline(always)]
+    fn outputs_cos_at<M: MulAdd, R>(
+        &self,
+        footprint: Option<&Footprint>,
+        view: Vec3,
+        light: Vec3,
+        finish: impl FnOnce(&mut [f32]) -> R,
+    ) -> Option<R> {
+        let footprint = footprint?;
         let mut code = [0.0f32; MAX_LATENT_CHANNELS];
         let code = &mut code[..self.decoder.latent_channels()];
         self.texture.filter_into::<M>(footprint, 0, code);
         // Normalised in float64, so that very long or short vectors keep their direction; the
         // horizon test in float32, as the homogeneous network's.
         let unit = |d: Vec3| d.as_dvec3().try_normalize().map(|d| d.as_vec3());
-        let (Some(v), Some(l)) = (unit(view), unit(light)) else {
-            return [0.0; 3];
-        };
+        let (v, l) = (unit(view)?, unit(light)?);
         if v.z <= 0.0 || l.z <= 0.0 || !code.iter().all(|c| c.is_finite()) {
-            return [0.0; 3];
+            return None;
         }
         let features = network_input_for(self.decoder.anisotropic(), v, l);
         let cos = cos_theta_light(l);
-        self.decoder.forward::<M>(&features, code).map(|f| f * cos)
+        Some(self.decoder.forward_with::<M, _>(&features, code, |f| {
+            f.iter_mut().for_each(|v| *v *= cos);
+            finish(f)
+        }))
     }
 
     /// The strategy at a footprint: the lobe channels filtered with portable arithmetic, so that

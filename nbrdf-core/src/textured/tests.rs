@@ -15,11 +15,22 @@ pub(super) fn uniform(rng: &mut SplitMix64, lo: f64, hi: f64) -> f64 {
 /// A decoder `6 + channels -> widths... -> 3` with weights uniform in `[-scale, scale]` and
 /// output biases 0.3, so that `f_r` is positive over much of the domain.
 pub(super) fn decoder(channels: usize, widths: &[usize], anisotropic: bool, seed: u64) -> Decoder {
+    let layers = decoder_layers(channels, widths, 3, seed);
+    Decoder::new(layers, channels, anisotropic, None).unwrap()
+}
+
+/// The layers of [`decoder`] with `outputs` outputs.
+pub(super) fn decoder_layers(
+    channels: usize,
+    widths: &[usize],
+    outputs: usize,
+    seed: u64,
+) -> Vec<Layer> {
     let mut rng = SplitMix64::from_state(seed);
     let mut sizes = vec![6 + channels];
     sizes.extend_from_slice(widths);
-    sizes.push(3);
-    let layers = sizes
+    sizes.push(outputs);
+    sizes
         .windows(2)
         .enumerate()
         .map(|(k, io)| {
@@ -35,8 +46,7 @@ pub(super) fn decoder(channels: usize, widths: &[usize], anisotropic: bool, seed
                     .collect(),
             }
         })
-        .collect();
-    Decoder::new(layers, channels, anisotropic).unwrap()
+        .collect()
 }
 
 /// Per-texel lobe values: exponents in `[4, 60]` (encoded), weights in `[0.2, 0.8]`, the two
@@ -159,12 +169,24 @@ pub(super) fn oracle_eval_cos(
     view: Vec3,
     light: Vec3,
 ) -> [f64; 3] {
+    let x = oracle_outputs_cos(m, uv, view, light);
+    [x[0], x[1], x[2]]
+}
+
+/// [`oracle_eval_cos`] for every output of the decoder (a spectral decoder's coefficients).
+pub(super) fn oracle_outputs_cos(
+    m: &TexturedNbrdf,
+    uv: [f32; 2],
+    view: Vec3,
+    light: Vec3,
+) -> Vec<f64> {
+    let zero = vec![0.0; m.decoder().output_count()];
     let (v, l) = (view.as_dvec3().normalize(), light.as_dvec3().normalize());
     let Some(code) = oracle_lookup(m.texture(), m.mapping(), uv) else {
-        return [0.0; 3];
+        return zero;
     };
     if v.z <= 0.0 || l.z <= 0.0 {
-        return [0.0; 3];
+        return zero;
     }
     let hd = crate::coords::half_diff(v, l);
     let (h, d) = (hd.half, hd.diff);
@@ -191,7 +213,7 @@ pub(super) fn oracle_eval_cos(
             .collect();
         x = y;
     }
-    [x[0], x[1], x[2]]
+    x
 }
 
 /// A few UVs far outside `[0, 1]` at which float32 positions are exact (dyadic fractions).

@@ -125,7 +125,8 @@ typedef struct NbrdfTexturedConfig {
   size_t channels;
   // Width of the encoder's two hidden layers (parameters -> code).
   size_t encoder_hidden;
-  // Width of the decoder's two hidden layers (directions and code -> RGB).
+  // Width of the decoder's two hidden layers (directions and code -> RGB or spectral
+  // coefficients).
   size_t decoder_hidden;
   size_t epochs;
   size_t batch;
@@ -309,10 +310,19 @@ int32_t nbrdf_train_textured_config_default(struct NbrdfTexturedConfig *out);
 // * `params`: `parameters n` floats, parameter-major: `params[k n + i]` is parameter `k` of
 //   the texel of sample `i` (whatever describes the source at a texel, the same for every
 //   texel; all finite). `parameters` 0 is an error saying that the source has no textures.
-// * `view`, `light`: planar `3 n` floats; `eval_cos`: planar RGB `3 n` floats,
-//   `f_r(view, light) cos(theta_light)` of the source at the sample's texel (Mitsuba's
-//   `BSDF.eval`). Pairs at or below the horizon and values that are not finite and `>= 0`
-//   are dropped; a fraction `config.validation_fraction` of the rest picks the best epoch.
+// * `view`, `light`: planar `3 n` floats; `eval_cos`: `f_r(view, light) cos(theta_light)` of
+//   the source at the sample's texel (Mitsuba's `BSDF.eval`), planar RGB `3 n` floats when `m`
+//   is 0 (`wavelengths` may be null), else `m n` floats, sample `i`'s value at wavelength `j`
+//   at `eval_cos[j n + i]` (a spectral variant's `BSDF.eval`). Pairs at or below the horizon
+//   and values that are not finite and `>= 0` are dropped; a fraction
+//   `config.validation_fraction` of the rest picks the best epoch.
+// * `wavelengths`: `m` wavelengths in nm, finite, strictly increasing and overlapping
+//   360-830 nm (anything else is `NBRDF_TRAIN_ERROR_INVALID_ARGUMENT` naming the problem):
+//   the material is spectral, its decoder giving 16 cubic B-spline coefficients over 360-830
+//   nm (the file's `spectral` object), each sample's target the least-squares fit of its
+//   piecewise-linear spectrum, negative coefficients clamped to 0, as
+//   `nbrdf_train_spectral_from_arrays` trains; the loss is the RGB one per coefficient, and
+//   the lobes are fitted to the decoder's sRGB projection. `m` 0: an RGB material.
 // * `image`: `width height parameters` floats, texel-major (`image[(y width + x) parameters +
 //   k]`), row `y` = 0 at `v` = 0 as Mitsuba's `bitmap` reads an image: the parameters at the
 //   centre of every texel of the latent texture.
@@ -332,6 +342,8 @@ int32_t nbrdf_train_textured(const struct NbrdfTexturedConfig *config,
                              size_t parameters,
                              const float *view,
                              const float *light,
+                             const float *wavelengths,
+                             size_t m,
                              const float *eval_cos,
                              size_t n,
                              const float *image,

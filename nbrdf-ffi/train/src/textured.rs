@@ -6,11 +6,12 @@
 use crate::{guard, read_details, read_str, Callback, NbrdfEpochCallback};
 use nbrdf_core::brdf::Directions;
 use nbrdf_core::distillation::{
-    bake, train_textured, BakeConfig, BakeStage, ParameterImage, TargetKind, TexturedSamples,
-    TexturedTrainConfig, MAX_REPRESENTATIVES,
+    bake, train_textured, BakeConfig, BakeStage, ParameterImage, TargetKind, TargetValues,
+    TexturedSamples, TexturedTrainConfig, MAX_REPRESENTATIVES,
 };
 use nbrdf_core::textured::{SamplingChannels, TexturePrecision};
 use nbrdf_core::train::adam::AdamConfig;
+use nbrdf_core::train::spectral::provenance_entry;
 use nbrdf_core::train::EpochStats;
 use nbrdf_ffi_common::{array_len, check_pointer, input, Failure, FfiResult};
 use std::ffi::{c_char, c_void};
@@ -25,7 +26,8 @@ pub struct NbrdfTexturedConfig {
     pub channels: usize,
     /// Width of the encoder's two hidden layers (parameters -> code).
     pub encoder_hidden: usize,
-    /// Width of the decoder's two hidden layers (directions and code -> RGB).
+    /// Width of the decoder's two hidden layers (directions and code -> RGB or spectral
+    /// coefficients).
     pub decoder_hidden: usize,
     pub epochs: usize,
     pub batch: usize,
@@ -203,6 +205,8 @@ impl BakeReporter {
 struct SampleArrays<'a> {
     params: Vec<&'a [f32]>,
     directions: [&'a [f32]; 2],
+    /// The wavelengths of spectral values; empty for RGB.
+    wavelengths: &'a [f32],
     eval_cos: &'a [f32],
     n: usize,
 }
@@ -212,6 +216,14 @@ impl SampleArrays<'_> {
         let n = self.n;
         let ([vx, vy, vz], [lx, ly, lz]) =
             (planes(self.directions[0], n), planes(self.directions[1], n));
+        let target = if self.wavelengths.is_empty() {
+            TargetValues::Rgb(planes(self.eval_cos, n))
+        } else {
+            TargetValues::Spectral {
+                wavelengths: self.wavelengths,
+                values: self.eval_cos,
+            }
+        };
         TexturedSamples {
             params: &self.params,
             view: Directions {
@@ -224,7 +236,7 @@ impl SampleArrays<'_> {
                 y: ly,
                 z: lz,
             },
-            target: planes(self.eval_cos, n),
+            target,
             target_kind: TargetKind::BrdfCos,
         }
     }
@@ -235,20 +247,31 @@ fn planes(planar: &[f32], n: usize) -> [&[f32]; 3] {
     [0, 1, 2].map(|a| &planar[a * n..(a + 1) * n])
 }
 
-/// Borrows `params` (`parameters n` floats, parameter-major) and the planar `view`, `light` and
-/// `eval_cos` (`3 n` floats each).
+/// Borrows `params` (`parameters n` floats, parameter-major), the planar `view` and `light`
+/// (`3 n` floats each), the `m` `wavelengths` (none for RGB: null with `m` 0) and `eval_cos`
+/// (`3 n` floats, or `m n` for spectra).
 ///
 /// # Safety
 /// Each pointer is valid for its size above (`params` may be null when `parameters` is 0).
 unsafe fn read_samples<'a>(
     (params, parameters): (*const f32, usize),
-    [view, light, eval_cos]: [*const f32; 3],
+    [view, light]: [*const f32; 2],
+    (wavelengths, m): (*const f32, usize),
+    eval_cos: *const f32,
     n: usize,
 ) -> FfiResult<SampleArrays<'a>> {
     let len = array_len(n, 3)?;
     for (ptr, argument) in [(view, "view"), (light, "light"), (eval_cos, "eval_cos")] {
         check_pointer(ptr, argument)?;
     }
+    let wavelengths = if m == 0 {
+        &[][..]
+    } else {
+        check_pointer(wavelengths, "wavelengths")?;
+        // SAFETY: checked; `m` floats by contract.
+        unsafe { input(wavelengths, m) }
+    };
+    let values = if m == 0 { len } else { array_len(n, m)? };
     let params = if parameters == 0 {
         Vec::new()
     } else {
@@ -263,8 +286,9 @@ unsafe fn read_samples<'a>(
     Ok(SampleArrays {
         params,
         directions,
-        // SAFETY: as above.
-        eval_cos: unsafe { input(eval_cos, len) },
+        wavelengths,
+        // SAFETY: as above, `values` floats.
+        eval_cos: unsafe { input(eval_cos, values) },
         n,
     })
 }
@@ -320,10 +344,19 @@ pub unsafe extern "C" fn nbrdf_train_textured_config_default(out: *mut NbrdfText
 /// * `params`: `parameters n` floats, parameter-major: `params[k n + i]` is parameter `k` of
 ///   the texel of sample `i` (whatever describes the source at a texel, the same for every
 ///   texel; all finite). `parameters` 0 is an error saying that the source has no textures.
-/// * `view`, `light`: planar `3 n` floats; `eval_cos`: planar RGB `3 n` floats,
-///   `f_r(view, light) cos(theta_light)` of the source at the sample's texel (Mitsuba's
-///   `BSDF.eval`). Pairs at or below the horizon and values that are not finite and `>= 0`
-///   are dropped; a fraction `config.validation_fraction` of the rest picks the best epoch.
+/// * `view`, `light`: planar `3 n` floats; `eval_cos`: `f_r(view, light) cos(theta_light)` of
+///   the source at the sample's texel (Mitsuba's `BSDF.eval`), planar RGB `3 n` floats when `m`
+///   is 0 (`wavelengths` may be null), else `m n` floats, sample `i`'s value at wavelength `j`
+///   at `eval_cos[j n + i]` (a spectral variant's `BSDF.eval`). Pairs at or below the horizon
+///   and values that are not finite and `>= 0` are dropped; a fraction
+///   `config.validation_fraction` of the rest picks the best epoch.
+/// * `wavelengths`: `m` wavelengths in nm, finite, strictly increasing and overlapping
+///   360-830 nm (anything else is `NBRDF_TRAIN_ERROR_INVALID_ARGUMENT` naming the problem):
+///   the material is spectral, its decoder giving 16 cubic B-spline coefficients over 360-830
+///   nm (the file's `spectral` object), each sample's target the least-squares fit of its
+///   piecewise-linear spectrum, negative coefficients clamped to 0, as
+///   `nbrdf_train_spectral_from_arrays` trains; the loss is the RGB one per coefficient, and
+///   the lobes are fitted to the decoder's sRGB projection. `m` 0: an RGB material.
 /// * `image`: `width height parameters` floats, texel-major (`image[(y width + x) parameters +
 ///   k]`), row `y` = 0 at `v` = 0 as Mitsuba's `bitmap` reads an image: the parameters at the
 ///   centre of every texel of the latent texture.
@@ -345,6 +378,8 @@ pub unsafe extern "C" fn nbrdf_train_textured(
     parameters: usize,
     view: *const f32,
     light: *const f32,
+    wavelengths: *const f32,
+    m: usize,
     eval_cos: *const f32,
     n: usize,
     image: *const f32,
@@ -371,7 +406,17 @@ pub unsafe extern "C" fn nbrdf_train_textured(
             )
         };
         // SAFETY: forwarded contract.
-        let arrays = unsafe { read_samples((params, parameters), [view, light, eval_cos], n)? };
+        let arrays = unsafe {
+            read_samples(
+                (params, parameters),
+                [view, light],
+                (wavelengths, m),
+                eval_cos,
+                n,
+            )?
+        };
+        let spectral_target =
+            (!arrays.wavelengths.is_empty()).then(|| provenance_entry(arrays.wavelengths));
         // SAFETY: forwarded contract.
         let image = unsafe { read_image(image, [width, height, parameters])? };
         let path = Path::new(&path);
@@ -400,6 +445,9 @@ pub unsafe extern "C" fn nbrdf_train_textured(
             fields.insert("source".into(), source.into());
             if let Some(details) = details {
                 fields.insert("distilled_from".into(), details);
+            }
+            if let Some(target) = spectral_target {
+                fields.insert("spectral_target".into(), target);
             }
         }
         let material = material.with_provenance(provenance);

@@ -1,8 +1,8 @@
 //! `nbrdf_train_textured` as a C caller sees it: a textured source (a blend of a Lambertian and
 //! a glossy BRDF by a weight that grows with `u`) distilled into a material file that the core's
-//! loader reads back and that matches the source at texels it was baked at; the same files for
-//! a seed on any thread count; progress callbacks; and bad calls that return an error status
-//! with a message.
+//! loader reads back and that matches the source at texels it was baked at, in RGB and from
+//! spectra; the same files for a seed on any thread count; progress callbacks; and bad calls
+//! that return an error status with a message.
 
 use glam::Vec3;
 use nbrdf_core::rng::SplitMix64;
@@ -36,11 +36,13 @@ fn weight(x: usize) -> f32 {
     x as f32 / (WIDTH - 1) as f32
 }
 
-/// Samples at random texels (one parameter, the weight) and uniform directions, planar.
+/// Samples at random texels (one parameter, the weight) and uniform directions, planar: RGB
+/// values, or with `wavelengths` the values at each (`eval_cos[j n + i]`).
 struct Samples {
     params: Vec<f32>,
     view: Vec<f32>,
     light: Vec<f32>,
+    wavelengths: Vec<f32>,
     eval_cos: Vec<f32>,
     n: usize,
 }
@@ -51,6 +53,7 @@ fn samples(n: usize) -> Samples {
         params: vec![0.0; n],
         view: vec![0.0; 3 * n],
         light: vec![0.0; 3 * n],
+        wavelengths: Vec::new(),
         eval_cos: vec![0.0; 3 * n],
         n,
     };
@@ -137,6 +140,8 @@ fn distil(
             parameters,
             s.view.as_ptr(),
             s.light.as_ptr(),
+            s.wavelengths.as_ptr(),
+            s.wavelengths.len(),
             s.eval_cos.as_ptr(),
             s.n,
             image.as_ptr(),
@@ -209,36 +214,40 @@ fn a_textured_source_becomes_a_material_that_matches_it_at_its_texels() {
 #[test]
 fn a_seed_gives_the_same_files_on_any_thread_count() {
     let dir = temp_dir("determinism");
-    let s = samples(6_000);
     let config = NbrdfTexturedConfig {
         epochs: 3,
         representatives: 1,
         ..small_config(1)
     };
-    let mut files = Vec::new();
-    for (k, threads) in [1, 2, 1].into_iter().enumerate() {
-        let path = dir.join(format!("run{k}.nbrdf.json"));
-        let config = NbrdfTexturedConfig { threads, ..config };
-        let (status, _) = distil(&config, &s, 1, (&image(), WIDTH, HEIGHT), &path);
+    for (kind, s) in [
+        ("rgb", samples(6_000)),
+        ("spectral", spectral_samples(3_000)),
+    ] {
+        let mut files = Vec::new();
+        for (k, threads) in [1, 2, 1].into_iter().enumerate() {
+            let path = dir.join(format!("{kind}{k}.nbrdf.json"));
+            let config = NbrdfTexturedConfig { threads, ..config };
+            let (status, _) = distil(&config, &s, 1, (&image(), WIDTH, HEIGHT), &path);
+            assert_eq!(status, OK, "{}", last_error());
+            let mut json: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+            // The run's duration is the one field that may differ.
+            json["provenance"]
+                .as_object_mut()
+                .unwrap()
+                .remove("seconds");
+            json["latent"]["path"] = "".into();
+            let texture = std::fs::read(dir.join(format!("{kind}{k}.latent.exr"))).unwrap();
+            files.push((json, texture));
+        }
+        assert!(files[0] == files[1] && files[0] == files[2], "{kind}");
+        let other = NbrdfTexturedConfig { seed: 1, ..config };
+        let path = dir.join(format!("{kind}-seed1.nbrdf.json"));
+        let (status, _) = distil(&other, &s, 1, (&image(), WIDTH, HEIGHT), &path);
         assert_eq!(status, OK, "{}", last_error());
-        let mut json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-        // The run's duration is the one field that may differ.
-        json["provenance"]
-            .as_object_mut()
-            .unwrap()
-            .remove("seconds");
-        json["latent"]["path"] = "".into();
-        let texture = std::fs::read(dir.join(format!("run{k}.latent.exr"))).unwrap();
-        files.push((json, texture));
+        let texture = std::fs::read(dir.join(format!("{kind}-seed1.latent.exr"))).unwrap();
+        assert_ne!(texture, files[0].1, "{kind}");
     }
-    assert!(files[0] == files[1] && files[0] == files[2]);
-    let other = NbrdfTexturedConfig { seed: 1, ..config };
-    let path = dir.join("seed1.nbrdf.json");
-    let (status, _) = distil(&other, &s, 1, (&image(), WIDTH, HEIGHT), &path);
-    assert_eq!(status, OK, "{}", last_error());
-    let texture = std::fs::read(dir.join("seed1.latent.exr")).unwrap();
-    assert_ne!(texture, files[0].1);
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -318,6 +327,8 @@ fn bad_calls_return_an_error_status_with_a_message() {
             1,
             s.view.as_ptr(),
             s.light.as_ptr(),
+            s.wavelengths.as_ptr(),
+            s.wavelengths.len(),
             s.eval_cos.as_ptr(),
             s.n,
             image.as_ptr(),
@@ -350,6 +361,8 @@ fn bad_calls_return_an_error_status_with_a_message() {
                 1,
                 s.view.as_ptr(),
                 light,
+                null(),
+                0,
                 s.eval_cos.as_ptr(),
                 s.n,
                 image.as_ptr(),
@@ -369,5 +382,107 @@ fn bad_calls_return_an_error_status_with_a_message() {
     // SAFETY: a null output.
     let status = unsafe { nbrdf_train_textured_config_default(null_mut()) };
     assert_eq!(status, NULL);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// The spectral source: a blend by `p` of a diffuse reflector of spectrum `a` and a glossy one
+/// of spectrum `b`, `f_r(lambda) cos(theta_light)`.
+fn spectral_source(p: f32, view: Vec3, light: Vec3, lambda: f32) -> f32 {
+    let cos_h = (view + light).normalize().z.max(0.0);
+    let spec = 0.4 * 22.0 / (2.0 * PI) * cos_h.powf(20.0);
+    let a = 0.1 + 0.7 / (1.0 + (-(lambda - 580.0) / 25.0).exp());
+    let b = 0.5 + 0.3 * (lambda / 60.0).sin();
+    ((1.0 - p) * a / PI + p * (0.1 * b / PI + b * spec)) * light.z
+}
+
+fn planes3(d: &[f32]) -> nbrdf_core::brdf::Directions<'_> {
+    nbrdf_core::brdf::Directions::from_planar(d).unwrap()
+}
+
+/// [`samples`] with spectral values every 10 nm over 360-830 nm.
+fn spectral_samples(n: usize) -> Samples {
+    let mut s = samples(n);
+    s.wavelengths = (0..48).map(|j| 360.0 + 10.0 * j as f32).collect();
+    s.eval_cos = vec![0.0; 48 * n];
+    for i in 0..n {
+        let v = Vec3::new(s.view[i], s.view[n + i], s.view[2 * n + i]);
+        let l = Vec3::new(s.light[i], s.light[n + i], s.light[2 * n + i]);
+        for (j, &lambda) in s.wavelengths.iter().enumerate() {
+            s.eval_cos[j * n + i] = spectral_source(s.params[i], v, l, lambda);
+        }
+    }
+    s
+}
+
+#[test]
+fn spectral_values_give_a_spectral_material_that_matches_them() {
+    let dir = temp_dir("spectral");
+    let path = dir.join("spectral.nbrdf.json");
+    let config = NbrdfTexturedConfig {
+        epochs: 20,
+        ..small_config(2)
+    };
+    let s = spectral_samples(20_000);
+    let (status, _) = distil(&config, &s, 1, (&image(), WIDTH, HEIGHT), &path);
+    assert_eq!(status, OK, "{}", last_error());
+    let material = TexturedNbrdf::load(&path).unwrap();
+    let spectral = material.decoder().spectral().expect("a spectral material");
+    assert_eq!(spectral.count(), 16);
+    assert_eq!(material.provenance()["spectral_target"]["wavelengths"], 48);
+
+    // At texel centres of every column and random wavelengths, against the source of that
+    // column's weight, and of the mirrored column.
+    let mut rng = SplitMix64::from_state(12);
+    let (mut right, mut mirrored, mut total) = (0.0f64, 0.0f64, 0.0f64);
+    let n = 1000;
+    let (mut u, v) = (vec![0.0; n], vec![0.25; n]);
+    let (mut view, mut light) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
+    let mut columns = vec![0; n];
+    let wavelengths: Vec<f32> = (0..n).map(|_| 380.0 + 420.0 * rng.next_f32()).collect();
+    for i in 0..n {
+        columns[i] = (rng.next_f64() * WIDTH as f64) as usize % WIDTH;
+        u[i] = (columns[i] as f32 + 0.5) / WIDTH as f32;
+        let mut dir = || uniform_hemisphere(rng.next_f64(), rng.next_f64()).as_vec3();
+        let (a, b) = (dir(), dir());
+        for k in 0..3 {
+            view[k * n + i] = a[k];
+            light[k * n + i] = b[k];
+        }
+    }
+    let mut got = vec![0.0f32; n];
+    let uv = nbrdf_core::textured::Uvs { u: &u, v: &v };
+    material
+        .eval_spectral_cos_batch(uv, planes3(&view), planes3(&light), &wavelengths, &mut got)
+        .unwrap();
+    for i in 0..n {
+        let a = Vec3::new(view[i], view[n + i], view[2 * n + i]);
+        let b = Vec3::new(light[i], light[n + i], light[2 * n + i]);
+        let x = columns[i];
+        let want = spectral_source(weight(x), a, b, wavelengths[i]);
+        let flipped = spectral_source(weight(WIDTH - 1 - x), a, b, wavelengths[i]);
+        right += f64::from((got[i] - want).abs());
+        mirrored += f64::from((got[i] - flipped).abs());
+        total += f64::from(want);
+    }
+    assert!(right < 0.05 * total, "error {right} of {total}");
+    assert!(
+        right < 0.15 * mirrored,
+        "error {right}, mirrored {mirrored}"
+    );
+
+    // Bad wavelengths are refused, naming the problem.
+    let mut bad = spectral_samples(200);
+    bad.wavelengths.swap(3, 4);
+    let config = NbrdfTexturedConfig {
+        epochs: 1,
+        ..config
+    };
+    let (status, _) = distil(&config, &bad, 1, (&image(), WIDTH, HEIGHT), &path);
+    assert_eq!(status, INVALID);
+    assert!(
+        last_error().contains("strictly increasing"),
+        "{}",
+        last_error()
+    );
     std::fs::remove_dir_all(dir).unwrap();
 }
