@@ -348,19 +348,17 @@ def test_prior_schedule_holds_out_a_view_only_where_it_can():
 
 
 def test_the_analytic_start_is_a_candidate_wherever_the_held_out_view_chooses():
-    """Each analytic model's fit takes the estimate's steps, and the analytic start adds its
-    candidates to the held-out choice; with a fixed pull, one image or no weight step nothing is
-    chosen and no analytic model is fitted."""
-    from nbrdf_mitsuba.estimate.plan import ANALYTIC_MODELS, ANALYTIC_PULL_STRENGTHS, schedule
+    """The analytic start's fit takes the estimate's steps and adds its candidates to the held-out
+    choice; with a fixed pull, one image or no weight step nothing is chosen and it is not fitted."""
+    from nbrdf_mitsuba.estimate.plan import ANALYTIC_PULL_STRENGTHS, schedule
 
     plan = schedule(100, 3, None)
     assert (plan.analytic_steps, plan.analytic_pull_strengths) == (100, ANALYTIC_PULL_STRENGTHS)
-    assert plan.analytic_models == ANALYTIC_MODELS == ("principled", "roughconductor", "roughplastic")
     candidates = len(plan.pull_strengths) + len(ANALYTIC_PULL_STRENGTHS)  # from the best code only
-    assert plan.total_steps() == 3 * 100 + plan.attempt_steps()
+    assert plan.total_steps() == 100 + plan.attempt_steps()
     assert plan.attempt_steps() == len(plan.code_strengths) * 40 + 60 + (candidates - 1) * 30
     for off in (schedule(100, 3, 0.5), schedule(100, 1, None), schedule(1, 3, None)):
-        assert (off.analytic_steps, off.analytic_pull_strengths, off.analytic_models) == (0, (), ())
+        assert (off.analytic_steps, off.analytic_pull_strengths) == (0, ())
         assert off.total_steps() == off.attempt_steps()
 
 
@@ -386,7 +384,7 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 
 def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The analytic models are fitted first (every view, the estimate's steps); the code sees every
+    """The analytic start is fitted first (every view, the estimate's steps); the code sees every
     training view; the candidates (each pull strength from the decoded start, then the analytic
     start's) see all but the last, the last alone judges them, the lowest held-out loss wins, its
     fit goes on over every view for the rest of the weight phase, and a seed repeats it (the code
@@ -410,30 +408,27 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    analytic = provenance["analytic"]["type"]
-    names = [str(s) for s in plan.PULL_STRENGTHS] + [f"{analytic}, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS]
+    names = [str(s) for s in plan.PULL_STRENGTHS] + [f"principled, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS]
     assert set(losses) == set(names)
     assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
     assert len(set(losses.values())) > 1, losses
     best = min(losses, key=losses.get)
-    chosen_start = "analytic" if best.startswith(analytic) else "decoded"
+    chosen_start = "analytic" if best.startswith("principled") else "decoded"
     assert provenance["start"] == chosen_start and provenance["pull_strength"] == float(best.split()[-1])
-    assert provenance["analytic_losses"].keys() == set(plan.ANALYTIC_MODELS)
-    assert analytic == min(provenance["analytic_losses"], key=provenance["analytic_losses"].get)
+    assert provenance["analytic"]["type"] == "principled"
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < priors.ALBEDO_BOUND
     assert judged == [1] * 2 * len(names)  # the last training view, once per candidate and run
-    # The analytic fits (6 steps each) on both views; screening (49 starts) and code (2 steps) on
-    # both views; candidates (2 steps each) on view 0; the chosen one's fit on both (the weight
+    # The analytic fit (6 steps) on both views; screening (49 starts) and code (2 steps) on both
+    # views; candidates (2 steps each) on view 0; the chosen one's fit on both (the weight
     # phase's other 2).
-    fits = len(plan.ANALYTIC_MODELS)
-    assert rendered == [(0, 1)] * (6 * fits + 49 + 2) + [(0,)] * (2 * len(names)) + [(0, 1)] * 2, rendered
+    assert rendered == [(0, 1)] * (6 + 49 + 2) + [(0,)] * (2 * len(names)) + [(0, 1)] * 2, rendered
     # The runs: analytic, code, candidates, final; the last starts where the chosen candidate's
     # fit ended, the decoded candidates from the decoded start, the analytic one from the
     # analytic start.
-    assert [kind for kind, _, _ in runs] == ["analytic"] * fits + ["code"] + ["weights"] * (len(names) + 1)
-    candidates = runs[fits + 1:-1]
+    assert [kind for kind, _, _ in runs] == ["analytic", "code"] + ["weights"] * (len(names) + 1)
+    candidates = runs[2:-1]
     chosen = candidates[names.index(best)]
     np.testing.assert_array_equal(runs[-1][1], chosen[2])
     decoded = candidates[:len(plan.PULL_STRENGTHS)]
@@ -445,11 +440,10 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
 
 
 def test_the_analytic_start_is_the_analytic_estimate_distilled(setup, tmp_path, monkeypatch):
-    """The analytic start is the estimate of the analytic model whose fit has the lowest judged
-    loss, the same numbers as ``--model`` that model's at the same steps, samples and seed
-    (recorded in the provenance): on a ``roughplastic`` truth, ``roughplastic``. It is distilled
-    into a network close to it in BRDF space (far closer than the common initialisation); where
-    the held-out view prefers it, it is the estimate's start, and no code strength is recorded."""
+    """The analytic start is ``--model principled``'s estimate at the same steps, samples and seed
+    (recorded in the provenance), distilled into a network close to it in BRDF space (far closer
+    than the common initialisation); where the held-out view prefers it, it is the estimate's
+    start, and no code strength is recorded."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import analytic_start, plan
     from nbrdf_tools.common.compare_materials import log_error
@@ -466,16 +460,13 @@ def test_the_analytic_start_is_the_analytic_estimate_distilled(setup, tmp_path, 
     assert len(plan.CODE_STRENGTHS) == 1  # no code is judged: the decoded candidates come first
     analytic = len(plan.PULL_STRENGTHS)
     spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == analytic else loss)
-    prior = tmp_path / "prior.nbrdf.json"
+    prior, principled = tmp_path / "prior.nbrdf.json", tmp_path / "principled.json"
     common = ("--steps", "6", "--spp", "2", "--threads", "1", "--seed", "2")
     assert run(scene, images, prior, *common) == 0
+    assert run(scene, images, principled, "--model", "principled", *common) == 0
     provenance = json.loads(prior.read_text())["provenance"]
-    losses = provenance["analytic_losses"]
-    assert provenance["analytic"]["type"] == min(losses, key=losses.get) == "roughplastic", losses
-    own = tmp_path / "roughplastic.json"
-    assert run(scene, images, own, "--model", "roughplastic", *common) == 0
     # The same numbers; fit-phong's rewrite of the network file may move a float by its last digit.
-    expected = json.loads(own.read_text())
+    expected = json.loads(principled.read_text())
     assert provenance["analytic"].keys() == expected.keys() and provenance["analytic"]["type"] == expected["type"]
     for key, value in expected.items():
         if key != "type":
@@ -626,7 +617,8 @@ def test_code_strength_is_chosen_by_the_held_out_view_before_the_candidates(setu
     from nbrdf_mitsuba.estimate import plan
 
     monkeypatch.setattr(plan, "CODE_STRENGTHS", (0.0, 1e-3))
-    judged_per_run = len(plan.CODE_STRENGTHS) + len(plan.PULL_STRENGTHS) + len(plan.ANALYTIC_PULL_STRENGTHS)
+    names = [str(w) for w in plan.PULL_STRENGTHS] + [f"principled, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS]
+    judged_per_run = len(plan.CODE_STRENGTHS) + len(names)
     decoded = len(plan.CODE_STRENGTHS) + len(plan.PULL_STRENGTHS)  # judged per run before the analytic start
     scene, images = setup
     # The analytic start made the worst candidate here, so that a decoded one (and its code) is chosen.
@@ -638,18 +630,15 @@ def test_code_strength_is_chosen_by_the_held_out_view_before_the_candidates(setu
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     codes, losses = provenance["code_held_out_losses"], provenance["held_out_losses"]
-    analytic = provenance["analytic"]["type"]
-    names = [str(w) for w in plan.PULL_STRENGTHS] + [f"{analytic}, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS]
     assert set(codes) == {str(c) for c in plan.CODE_STRENGTHS} and set(losses) == set(names)
     assert all(math.isfinite(v) for v in [*codes.values(), *losses.values()]) and len(set(codes.values())) > 1
     best = min(plan.CODE_STRENGTHS, key=lambda c: codes[str(c)])
     assert (provenance["start"], provenance["code_strength"]) == ("decoded", best)
     assert judged == [1] * (2 * judged_per_run)  # the last training view: each code, then each candidate
-    # The analytic fits (6 steps each), screening (49) and a code phase per strength (2 steps each)
-    # on both views, the candidates (2 steps each) on view 0; the chosen one's fit on both views (2
+    # The analytic fit (6 steps), screening (49) and a code phase per strength (2 steps each) on
+    # both views, the candidates (2 steps each) on view 0; the chosen one's fit on both views (2
     # more steps).
-    fits = 6 * len(plan.ANALYTIC_MODELS)
-    assert rendered == [(0, 1)] * (fits + 49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(names)) + \
+    assert rendered == [(0, 1)] * (6 + 49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(names)) + \
         [(0, 1)] * 2
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
@@ -794,8 +783,7 @@ def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(s
     assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
     assert provenance["start"] == estimator.COMMON_START and provenance["pull_strength"] is None
-    analytic = provenance["analytic"]["type"]
-    names = {str(s) for s in plan.PULL_STRENGTHS} | {f"{analytic}, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS}
+    names = {str(s) for s in plan.PULL_STRENGTHS} | {f"principled, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS}
     assert set(provenance["held_out_losses"]) == names  # the last attempt's
     # Every attempt's candidates rejected, each attempt with its own seeds.
     prefixes = ["", "attempt 1: ", "attempt 2: "][:estimator.PRIOR_ATTEMPTS]
@@ -868,6 +856,5 @@ def test_a_rejected_attempt_of_the_prior_is_tried_again_with_other_seeds(setup, 
     provenance = json.loads(outs[0].read_text())["provenance"]
     assert provenance["start"] in ("decoded", "analytic") and provenance["attempts"] == 2
     assert set(provenance["albedo_rejected"]) == ({str(w) for w in plan.PULL_STRENGTHS}
-                                                  | {f"{provenance['analytic']['type']}, pull {w}"
-                                                     for w in plan.ANALYTIC_PULL_STRENGTHS})
+                                                  | {f"principled, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS})
     assert json.loads(outs[0].read_text())["layers"] == json.loads(outs[1].read_text())["layers"]

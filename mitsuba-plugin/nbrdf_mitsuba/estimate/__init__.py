@@ -14,9 +14,8 @@ view each step:
   weights themselves, with a pull toward the decoded network in function space (the squared
   difference of the two networks' log-space outputs at fixed direction pairs over the whole
   hemisphere, so that where no image constrains the BRDF it stays the decoded one). Before them
-  the analytic start (:mod:`.analytic_start`): each of ``ANALYTIC_MODELS`` (``principled``,
-  ``roughconductor``, ``roughplastic``) fitted through the same images, as its own estimate
-  would be, and the one whose renders fit the images best distilled into the network. The start and the pull strength are
+  the analytic start (:mod:`.analytic_start`): ``principled`` fitted through the same images, as
+  its own estimate would be, and distilled into the network. The start and the pull strength are
   chosen by a held-out training view (``--pull-strength`` fixes the pull instead, and then no
   analytic start is fitted): the code is fitted on every view once per strength of
   ``CODE_STRENGTHS`` (by default one, 0; the screening of the starts shared); from each decoded
@@ -67,11 +66,12 @@ from .cli import main, parser  # noqa: E402
 from .errors import EstimateError, EstimateFailed  # noqa: E402
 from .estimator import Estimator, estimate  # noqa: E402
 from .models import MODELS, Analytic, Network, common_initialisation, fit_sampling, write_network  # noqa: E402
-from .plan import ANALYTIC_MODELS, ANALYTIC_PULL_STRENGTHS, CODE_STRENGTHS, PULL_STRENGTHS, Plan, schedule  # noqa: E402
+from .analytic_start import ANALYTIC_MODEL  # noqa: E402
+from .plan import ANALYTIC_PULL_STRENGTHS, CODE_STRENGTHS, PULL_STRENGTHS, Plan, schedule  # noqa: E402
 from .priors import ALBEDO_BOUND, ALBEDO_LIT_INCIDENCE, ALBEDO_MARGIN  # noqa: E402
 from .scene import Scene  # noqa: E402
 
-__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "ANALYTIC_MODELS", "ANALYTIC_PULL_STRENGTHS",
+__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "ANALYTIC_MODEL", "ANALYTIC_PULL_STRENGTHS",
            "CODE_STRENGTHS", "MODELS",
            "PULL_STRENGTHS", "Analytic", "EstimateError", "EstimateFailed", "Estimator", "Network", "Plan", "Scene",
            "common_initialisation", "estimate", "fit_sampling", "main", "parser", "schedule", "write_network"]

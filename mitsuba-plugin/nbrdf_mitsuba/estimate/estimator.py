@@ -15,7 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .analytic_start import distil
+from .analytic_start import ANALYTIC_MODEL, distil
 from .errors import EstimateError
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
 from .optimiser import Descent, Phase
@@ -94,19 +94,12 @@ class Estimator(Descent):
 
     def held_out_loss(self, weights: np.ndarray, view: int) -> float:
         """The image loss of ``weights`` on the training view ``view`` (one render, a fixed seed)."""
-        return self.judged_loss(Network._set_weights, weights, [view])
-
-    def judged_loss(self, apply, theta: np.ndarray, views: list[int]) -> float:
-        """The image loss of ``theta`` (set by ``apply(params, prefix, theta)``) on ``views``: one
-        render each at ``HELD_OUT_SPP_FACTOR`` times the samples, the same seed for every ``theta``
-        (differences between judged values are not Monte Carlo noise)."""
         with dr.suspend_grad():
-            apply(self.params, self.prefix, mi.Float(np.asarray(theta, np.float32)))
+            Network._set_weights(self.params, self.prefix, mi.Float(np.asarray(weights, np.float32)))
             self.params.update()
-            images = [mi.render(self.scene, self.params, sensor=view, integrator=self.integrator,
-                                spp=HELD_OUT_SPP_FACTOR * self.spp, seed=render_seed(self.seed, 1 << 20, view))
-                      for view in views]
-            loss = image_loss(images, [self.references[view] for view in views])
+            image = mi.render(self.scene, self.params, sensor=view, integrator=self.integrator,
+                              spp=HELD_OUT_SPP_FACTOR * self.spp, seed=render_seed(self.seed, 1 << 20, view))
+            loss = image_loss([image], [self.references[view]])
         return float(np.asarray(loss.numpy()).reshape(-1)[0])
 
     def loss_and_grad(self, phase: Phase, theta: np.ndarray, step: int):
@@ -177,9 +170,9 @@ def _estimate(args, on_step=None) -> dict:
         est.on_step = on_step
         plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
                         args.code_strength)
-        # Each analytic start's fit renders its own scene (the analytic model in the BSDF's place).
-        analytic = [Estimator(scene_file, Analytic(kind), args.images, args.spp, args.seed, args.max_depth,
-                              Path(workdir)) for kind in (plan.analytic_models if model_has_prior(model) else ())]
+        # The analytic start's fit renders its own scene (the analytic model in the BSDF's place).
+        analytic = (Estimator(scene_file, Analytic(ANALYTIC_MODEL), args.images, args.spp, args.seed, args.max_depth,
+                              Path(workdir)) if model_has_prior(model) and plan.analytic_steps else None)
         if args.threads is not None:
             # One thread fixes the order of the gradients' float sums (bit-identical reruns). Set
             # after loading: Mitsuba builds the Python plugins on its worker threads.
@@ -191,7 +184,7 @@ def _estimate(args, on_step=None) -> dict:
             result = _optimise(est, model, args, bar, plan, analytic)
     result["seconds"] = time.perf_counter() - start
     result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
-    result["halvings"] = est.halvings + sum(fit.halvings for fit in analytic)
+    result["halvings"] = est.halvings + (analytic.halvings if analytic is not None else 0)
     return result
 
 
@@ -303,29 +296,17 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic: tuple | No
     return weights, extra, rejected
 
 
-def fit_analytic(est: Estimator, plan: Plan, bar) -> tuple[dict, float]:
-    """``est``'s analytic model fitted through the images (as the model's own estimate of the same
-    steps and seed): the fitted BSDF and its judged image loss on every view."""
-    (phase,) = est.model.phases(plan.analytic_steps)
-    theta = est.run(phase, bar, 0)
-    return est.model.result(theta), est.judged_loss(phase.apply, theta, est.views)
+def fit_analytic(est: Estimator, model: Analytic, plan: Plan, bar, threads: int | None) -> tuple[dict, np.ndarray]:
+    """The analytic start: ``model`` fitted through the images (as the model's own estimate of the
+    same steps and seed), and the network distilled from it (:func:`analytic_start.distil`)."""
+    (phase,) = model.phases(plan.analytic_steps)
+    fitted = model.result(est.run(phase, bar, 0))
+    return fitted, distil(fitted, threads)
 
 
-def best_analytic_start(fits: list[Estimator], plan: Plan, bar, threads: int | None) -> tuple[tuple | None, dict]:
-    """The analytic start: every model of ``fits`` fitted, the one with the lowest judged loss
-    distilled (:func:`analytic_start.distil`); its name and weights, and the provenance's record
-    (the fitted BSDF, every model's judged loss). ``(None, {})`` without fits."""
-    if not fits:
-        return None, {}
-    fitted = {est.model.kind: fit_analytic(est, plan, bar) for est in fits}
-    best = min(fitted, key=lambda kind: fitted[kind][1])
-    return ((best, distil(fitted[best][0], threads)),
-            {"analytic": fitted[best][0], "analytic_losses": {kind: loss for kind, (_, loss) in fitted.items()}})
-
-
-def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_fits: list[Estimator] = ()
+def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_est: Estimator | None = None
                    ) -> tuple[np.ndarray, dict]:
-    """The analytic start (the best of ``analytic_fits``, if any), then up to ``PRIOR_ATTEMPTS``
+    """The analytic start (fitted by ``analytic_est``, if any), then up to ``PRIOR_ATTEMPTS``
     attempts of the prior, each with its own render seeds, until the albedo check keeps a network;
     else the common start, the nbrdf-no-prior estimate (its start, steps and seeds, so the same
     network). The weights and the summary's additions."""
@@ -335,7 +316,10 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_fits: list[Es
         decoder = Decoder(args.ae)
     except LatentError as error:
         raise EstimateError(str(error)) from None
-    analytic, analytic_extra = best_analytic_start(list(analytic_fits), plan, bar, args.threads)
+    analytic, analytic_extra = None, {}
+    if analytic_est is not None:
+        fitted, weights = fit_analytic(analytic_est, analytic_est.model, plan, bar, args.threads)
+        analytic, analytic_extra = (fitted["type"], weights), {"analytic": fitted}
     seed, rejected_all, attempt_steps = est.seed, {}, plan.attempt_steps()
     try:
         for attempt in range(PRIOR_ATTEMPTS):
@@ -367,7 +351,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_fits: list[Es
     return weights, {**extra, **analytic_extra}
 
 
-def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list[Estimator] = ()) -> dict:
+def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: Estimator | None = None) -> dict:
     summary = {"output": str(args.output), "model": args.model, "steps": args.steps}
     if isinstance(model, Analytic):
         (phase,) = model.phases(args.steps)
@@ -393,7 +377,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list[Estim
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
     for key in ("code", "start", "pull_strength", "code_strength", "code_held_out_losses", "held_out_losses",
-                "albedo_rejected", "attempts", "analytic", "analytic_losses", "albedo_max"):
+                "albedo_rejected", "attempts", "analytic", "albedo_max"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]

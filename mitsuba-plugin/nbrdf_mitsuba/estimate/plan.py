@@ -32,19 +32,14 @@ CANDIDATE_SHARE = 0.5
 #: :mod:`.analytic_start`), each a candidate beside the decoded ones wherever they are chosen among:
 #: the decoded start's pull, one candidate only, as it costs a candidate's steps.
 ANALYTIC_PULL_STRENGTHS = (1e-1,)
-#: The analytic models fitted through the images as starts, each as its own estimate would be; the
-#: one whose renders fit the images best is distilled (:mod:`.analytic_start`). All three, not the
-#: best one on average: where a truth is one of them, the others' fits leave the network far from
-#: the analytic fit (docs/estimation.md, "Defaults, and why").
-ANALYTIC_MODELS = ("principled", "roughconductor", "roughplastic")
 
 
 @dataclass(frozen=True)
 class Plan:
     """Steps of the code phase and of the weight phase, the candidate strengths of the weight
     phase's pull and of the code's penalty (one each: no choice), the steps of each candidate's
-    weight fit (0: nothing to choose), and the analytic start's models, each fit's steps and its
-    candidates' pull strengths (none, 0 and none: no analytic start)."""
+    weight fit (0: nothing to choose), and the analytic start's fit's steps and its candidates'
+    pull strengths (0 and none: no analytic start)."""
 
     code_steps: int
     weight_steps: int
@@ -53,7 +48,6 @@ class Plan:
     candidate_steps: int
     analytic_steps: int = 0
     analytic_pull_strengths: tuple[float, ...] = ()
-    analytic_models: tuple[str, ...] = ()
 
     @property
     def selecting(self) -> bool:
@@ -61,13 +55,13 @@ class Plan:
         return self.candidate_steps > 0
 
     def total_steps(self) -> int:
-        """Steps of the analytic fits and of one attempt of the prior: every code phase, every
+        """Steps of the analytic fit and of one attempt of the prior: every code phase, every
         candidate's fit, and the chosen one's fit to the end of the weight phase (the code and
         weight phases add up to the estimate's steps)."""
-        return len(self.analytic_models) * self.analytic_steps + self.attempt_steps()
+        return self.analytic_steps + self.attempt_steps()
 
     def attempt_steps(self) -> int:
-        """Steps of one attempt of the prior (:meth:`total_steps` without the analytic fits)."""
+        """Steps of one attempt of the prior (:meth:`total_steps` without the analytic fit)."""
         codes = len(self.code_strengths)
         candidates = len(self.pull_strengths) + len(self.analytic_pull_strengths)
         return (self.code_steps + self.weight_steps + (codes - 1) * self.code_steps
@@ -77,8 +71,8 @@ class Plan:
 def schedule(steps: int, views: int, pull_strength: float | None, code_strength: float | None = None) -> Plan:
     """The plan of an estimate of ``steps`` steps on ``views`` images. A fixed ``pull_strength``
     fixes the code's strength too (``code_strength``, else none) and leaves out the analytic
-    start, which is one more candidate of the held-out choice (each analytic model's fit takes
-    ``steps`` steps, as the model's own estimate)."""
+    start, which is one more candidate of the held-out choice (its fit takes ``steps`` steps, as
+    the analytic model's own estimate)."""
     code = max(1, round(CODE_SHARE * steps)) if steps > 1 else 1
     weights = steps - code
     fixed_code = (code_strength if code_strength is not None else FALLBACK_CODE_STRENGTH,)
@@ -92,5 +86,4 @@ def schedule(steps: int, views: int, pull_strength: float | None, code_strength:
     analytic = ANALYTIC_PULL_STRENGTHS if pull_strength is None and views >= 2 and weights >= 1 else ()
     selecting = len(strengths) + len(analytic) > 1
     candidate = max(1, round(CANDIDATE_SHARE * weights)) if selecting else 0
-    return Plan(code, weights, strengths, code_strengths, candidate, steps if analytic else 0, analytic,
-                ANALYTIC_MODELS if analytic else ())
+    return Plan(code, weights, strengths, code_strengths, candidate, steps if analytic else 0, analytic)

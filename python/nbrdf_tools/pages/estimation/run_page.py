@@ -63,8 +63,7 @@ def write(out: Path, command: str, results: list[dict], work: Path, settings: di
              f"toward the training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the pull strength, the weight "
              "phase's pull toward the "
              f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code; or the analytic "
-             "start, the best-fitting of the analytic fits (" + ", ".join(estimate.ANALYTIC_MODELS)
-             + ") distilled into the network, pulled toward it by "
+             f"start, the {estimate.ANALYTIC_MODEL} fit distilled into the network, pulled toward it by "
              f"{_or(estimate.ANALYTIC_PULL_STRENGTHS)}), chosen per estimate "
              "by its last training view, held out; where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
