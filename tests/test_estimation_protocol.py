@@ -121,3 +121,8 @@ def test_the_report_end_to_end_on_one_test_truth(llvm_variant, tmp_path):
     assert text.index(row) < text.index("## Setup")
     assert "| test | - | - | no `nbrdf` estimate yet |" in text
     assert "| test | nbrdf-no-prior |" in text
+    # No prior's estimate stored: the page names every test truth as still to be estimated, this
+    # one with its other models measured.
+    missing = next(x for x in text.splitlines() if x.startswith("**The test set is measured in part**"))
+    assert f"`{name}` (the other models measured)" in missing
+    assert all(f"`{other}`" in missing for other in truths.heldout_names())
