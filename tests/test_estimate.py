@@ -126,6 +126,60 @@ def test_a_diverging_estimate_is_failed_work(setup, tmp_path, monkeypatch, capsy
     assert message.startswith("error: the optimisation diverged") and f"{optimiser.MAX_HALVINGS} halvings" in message
     assert not out.exists()
 
+def test_a_diverging_candidate_is_left_out_not_the_estimate(setup, tmp_path, monkeypatch):
+    """A candidate of the held-out choice whose fit runs away through every halving (here the
+    analytic start's, made to) is left out of the choice and named in the provenance; the
+    estimate goes on with the other candidates and the whole budget of halvings, and writes a
+    network."""
+    from nbrdf_mitsuba.estimate import estimator, plan
+
+    real_loss = estimator.Estimator.loss_and_grad
+    analytic_phase = {}
+
+    def loss_and_grad(self, phase, theta, step):
+        # The analytic candidate is the weight phase that starts from the analytic start's weights.
+        if phase.kind == "weights" and analytic_phase.get("start") is not None and \
+                np.array_equal(phase.theta, analytic_phase["start"]):
+            return math.nan, None
+        return real_loss(self, phase, theta, step)
+
+    real_distil = estimator.distil
+
+    def distil(fitted, threads):
+        analytic_phase["start"] = real_distil(fitted, threads)
+        return analytic_phase["start"]
+
+    real_choose = estimator.choose_start
+    halvings_after = []
+
+    def choose_start(est, starts, plan, bar):
+        chosen = real_choose(est, starts, plan, bar)
+        halvings_after.append(est.halvings)
+        return chosen
+
+    real_run = estimator.Estimator.run
+
+    def run_phase(self, phase, bar, first_step):
+        theta = real_run(self, phase, bar, first_step)
+        halvings_after.append(self.halvings)
+        return theta
+
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
+    monkeypatch.setattr(estimator.Estimator, "run", run_phase)
+    monkeypatch.setattr(estimator, "distil", distil)
+    monkeypatch.setattr(estimator, "choose_start", choose_start)
+    scene, images = setup
+    out = tmp_path / "prior.nbrdf.json"
+    assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    provenance = json.loads(out.read_text())["provenance"]
+    analytic = [f"{provenance['analytic']['type']}, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS]
+    assert provenance["diverged"] == analytic
+    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PULL_STRENGTHS}
+    assert provenance["start"] == "decoded" and provenance["attempts"] == 1
+    # Its halvings (one more than the budget) were given back: none are counted after it.
+    assert halvings_after == [0] * len(halvings_after) and len(halvings_after) >= 4, halvings_after
+
+
 def test_an_unexpected_error_is_one_line_and_a_hint_not_a_traceback(setup, tmp_path, monkeypatch, capsys):
     from nbrdf_mitsuba.estimate import estimator
 

@@ -16,7 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from .analytic_start import ANALYTIC_MODEL, distil
-from .errors import EstimateError
+from .errors import EstimateError, EstimateFailed
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
 from .optimiser import Descent, Phase
 from .plan import Plan, schedule
@@ -204,19 +204,28 @@ def choose_start(est: Estimator, starts: dict, plan: Plan, bar) -> tuple:
     ``starts[start]``), the start a code penalty's strength (the decoded start of that code) or
     the analytic model's name (the analytic start, pulled by ``plan.analytic_pull_strengths``);
     ties go to the first (the tightest pull, the decoded before the analytic). A candidate whose
-    fit fails the albedo check (:func:`albedo_check`) is not chosen; where none is left,
-    ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of the
-    rejected ones and the chosen candidate's fitted weights (``None`` for ``COMMON_START``)."""
+    fit fails the albedo check (:func:`albedo_check`) or diverges is not chosen; where none is
+    left, ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of
+    the rejected ones, the chosen candidate's fitted weights (``None`` for ``COMMON_START``) and
+    the candidates that diverged."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
     views, est.views = est.views, list(range(held_out))
-    losses, rejected, fits = {}, {}, {}
+    losses, rejected, fits, diverged = {}, {}, {}, []
     try:
         for name, start in starts.items():
             for strength in plan.analytic_pull_strengths if isinstance(name, str) else plan.pull_strengths:
                 phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
                               pull_penalty(start, strength))
-                fitted = fits[name, strength] = est.run(phase, bar, plan.code_steps)
+                halvings = est.halvings
+                try:
+                    fitted = fits[name, strength] = est.run(phase, bar, plan.code_steps)
+                except EstimateFailed:
+                    # A start whose fit runs away (a lobe too sharp for the distilled start) is no
+                    # candidate; the others keep the whole budget of halvings.
+                    est.halvings = halvings
+                    diverged.append((name, strength))
+                    continue
                 losses[name, strength] = est.held_out_loss(fitted, held_out)
                 albedo, material = albedo_check(fitted)
                 if not material:
@@ -225,7 +234,7 @@ def choose_start(est: Estimator, starts: dict, plan: Plan, bar) -> tuple:
         est.on_step, est.views = on_step, views
     allowed = [k for k in losses if k not in rejected]
     choice = min(allowed, key=losses.__getitem__) if allowed else COMMON_START
-    return choice, losses, rejected, fits.get(choice)
+    return choice, losses, rejected, fits.get(choice), diverged
 
 
 def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
@@ -266,11 +275,13 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic: tuple | No
     code_strength = next(iter(starts))
     if analytic is not None:
         starts[analytic[0]] = analytic[1]
-    choice, losses, rejected, fitted = (code_strength, plan.pull_strengths[0]), {}, {}, None
+    choice, losses, rejected, fitted, diverged = (code_strength, plan.pull_strengths[0]), {}, {}, None, []
     if plan.selecting:
-        choice, losses, rejected, fitted = choose_start(est, starts, plan, bar)
+        choice, losses, rejected, fitted, diverged = choose_start(est, starts, plan, bar)
     if losses:
         extra["held_out_losses"] = {candidate_name(k): v for k, v in losses.items()}
+    if diverged:
+        extra["diverged"] = [candidate_name(k) for k in diverged]
     rejected = {candidate_name(k): v for k, v in rejected.items()}
     # The analytic and the common start keep the decoded start's code for the record.
     analytic_chosen = choice != COMMON_START and isinstance(choice[0], str)
@@ -377,7 +388,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: Estimator 
                   "spp": args.spp, "seed": args.seed, "images": [str(p) for p in args.images],
                   "scene": str(args.scene), "bsdf_id": args.bsdf_id}
     for key in ("code", "start", "pull_strength", "code_strength", "code_held_out_losses", "held_out_losses",
-                "albedo_rejected", "attempts", "analytic", "albedo_max"):
+                "albedo_rejected", "attempts", "analytic", "albedo_max", "diverged"):
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
