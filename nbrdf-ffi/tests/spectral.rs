@@ -39,6 +39,33 @@ fn spectral_net() -> Nbrdf {
     net
 }
 
+/// `nbrdf_material_eval_spectral` over whole buffers, `uv` NULL where `None` and
+/// `wavelengths.len() / n` wavelengths a hit: its status and output (-1 where nothing was written).
+fn eval_spectral(
+    material: &Material,
+    uv: Option<&[f32]>,
+    view: &[f32],
+    light: &[f32],
+    wavelengths: &[f32],
+    n: usize,
+) -> (i32, Vec<f32>) {
+    let mut out = vec![-1.0f32; wavelengths.len()];
+    // SAFETY: buffers of the sizes passed (`uv` 2 n, the directions 3 n, the rest m n).
+    let status = unsafe {
+        nbrdf_material_eval_spectral(
+            material.ptr(),
+            uv.map_or(null(), <[f32]>::as_ptr),
+            view.as_ptr(),
+            light.as_ptr(),
+            wavelengths.as_ptr(),
+            n,
+            wavelengths.len() / n,
+            out.as_mut_ptr(),
+        )
+    };
+    (status, out)
+}
+
 fn pairs() -> (Vec<Vec3>, Vec<Vec3>) {
     let dir = |t: f32, p: f32| Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos());
     let mut view: Vec<Vec3> = (0..20)
@@ -107,20 +134,7 @@ fn spectral_eval_and_rgb_eval_agree_with_the_core() {
     let mut wavelengths: Vec<f32> = (0..m * n).map(|k| 350.0 + 6.1 * k as f32).collect();
     wavelengths[1] = f32::NAN;
     wavelengths[2] = f32::INFINITY;
-    let mut out = vec![-1.0f32; m * n];
-    // SAFETY: buffers of the sizes passed.
-    let status = unsafe {
-        nbrdf_material_eval_spectral(
-            material.ptr(),
-            null(),
-            v.as_ptr(),
-            l.as_ptr(),
-            wavelengths.as_ptr(),
-            n,
-            m,
-            out.as_mut_ptr(),
-        )
-    };
+    let (status, out) = eval_spectral(&material, None, &v, &l, &wavelengths, n);
     assert_eq!(status, OK, "{}", last_error());
     let mut want = vec![0.0f32; m * n];
     let dirs = |p| Directions::from_planar(p).unwrap();
@@ -310,20 +324,7 @@ fn textured_spectral_materials_evaluate_at_their_uvs() {
     let uv: Vec<f32> = (0..2 * n).map(|k| 0.37 * k as f32 - 2.0).collect();
     let m = 3;
     let wavelengths: Vec<f32> = (0..m * n).map(|k| 365.0 + 7.3 * k as f32).collect();
-    let mut out = vec![-1.0f32; m * n];
-    // SAFETY: buffers of the sizes passed.
-    let status = unsafe {
-        nbrdf_material_eval_spectral(
-            material.ptr(),
-            uv.as_ptr(),
-            v.as_ptr(),
-            l.as_ptr(),
-            wavelengths.as_ptr(),
-            n,
-            m,
-            out.as_mut_ptr(),
-        )
-    };
+    let (status, out) = eval_spectral(&material, Some(&uv), &v, &l, &wavelengths, n);
     assert_eq!(status, OK, "{}", last_error());
     let mut want = vec![0.0f32; m * n];
     let dirs = |p| Directions::from_planar(p).unwrap();
@@ -348,19 +349,7 @@ fn textured_spectral_materials_evaluate_at_their_uvs() {
     }
 
     // Without UVs a textured material is refused, naming the argument.
-    // SAFETY: valid buffers but for the NULL `uv`.
-    let status = unsafe {
-        nbrdf_material_eval_spectral(
-            material.ptr(),
-            null(),
-            v.as_ptr(),
-            l.as_ptr(),
-            wavelengths.as_ptr(),
-            n,
-            m,
-            out.as_mut_ptr(),
-        )
-    };
+    let (status, _) = eval_spectral(&material, None, &v, &l, &wavelengths, n);
     assert_eq!(status, NULL);
     assert!(
         last_error().contains("`uv`") && last_error().contains("texture coordinates"),
