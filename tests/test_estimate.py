@@ -127,27 +127,22 @@ def test_a_diverging_estimate_is_failed_work(setup, tmp_path, monkeypatch, capsy
     assert not out.exists()
 
 def test_a_diverging_candidate_is_left_out_not_the_estimate(setup, tmp_path, monkeypatch):
-    """A candidate of the held-out choice whose fit runs away through every halving (here the
-    analytic start's, made to) is left out of the choice and named in the provenance; the
-    estimate goes on with the other candidates and the whole budget of halvings, and writes a
-    network."""
+    """Candidates of the held-out choice whose fit runs away through every halving (here the first
+    network candidate and the roughconductor fit, made to) are left out of the choice and named
+    in the provenance; the estimate goes on with the others and the whole budget of halvings, and
+    writes a network."""
     from nbrdf_mitsuba.estimate import estimator, plan
 
     real_loss = estimator.Estimator.loss_and_grad
-    analytic_phase = {}
+    first_weights = []
 
     def loss_and_grad(self, phase, theta, step):
-        # The analytic candidate is the weight phase that starts from the analytic start's weights.
-        if phase.kind == "weights" and analytic_phase.get("start") is not None and \
-                np.array_equal(phase.theta, analytic_phase["start"]):
+        if phase.kind == "weights" and not first_weights:
+            first_weights.append(phase)
+        if (phase.kind == "weights" and phase is first_weights[0]) or \
+                getattr(self.model, "kind", None) == "roughconductor":
             return math.nan, None
         return real_loss(self, phase, theta, step)
-
-    real_distil = estimator.distil
-
-    def distil(fitted, threads):
-        analytic_phase["start"] = real_distil(fitted, threads)
-        return analytic_phase["start"]
 
     real_choose = estimator.choose_start
     halvings_after = []
@@ -166,17 +161,17 @@ def test_a_diverging_candidate_is_left_out_not_the_estimate(setup, tmp_path, mon
 
     monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
     monkeypatch.setattr(estimator.Estimator, "run", run_phase)
-    monkeypatch.setattr(estimator, "distil", distil)
     monkeypatch.setattr(estimator, "choose_start", choose_start)
     scene, images = setup
     out = tmp_path / "prior.nbrdf.json"
     assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
     provenance = json.loads(out.read_text())["provenance"]
-    analytic = [f"{provenance['analytic']['type']}, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS]
-    assert provenance["diverged"] == analytic
-    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PULL_STRENGTHS}
-    assert provenance["start"] == "decoded" and provenance["attempts"] == 1
-    # Its halvings (one more than the budget) were given back: none are counted after it.
+    first = str(plan.PULL_STRENGTHS[0])
+    assert provenance["diverged"] == [first, "roughconductor"]
+    assert set(provenance["held_out_losses"]) == ({str(s) for s in plan.PULL_STRENGTHS[1:]}
+                                                  | set(plan.ANALYTIC_MODELS) - {"roughconductor"})
+    assert provenance["attempts"] == 1
+    # Their halvings (one more than the budget) were given back: none are counted after them.
     assert halvings_after == [0] * len(halvings_after) and len(halvings_after) >= 4, halvings_after
 
 
@@ -401,18 +396,20 @@ def test_prior_schedule_holds_out_a_view_only_where_it_can():
     assert fixed.pull_strengths == (0.5,) and fixed.candidate_steps == 0
 
 
-def test_the_analytic_start_is_a_candidate_wherever_the_held_out_view_chooses():
-    """The analytic start's fit takes the estimate's steps and adds its candidates to the held-out
-    choice; with a fixed pull, one image or no weight step nothing is chosen and it is not fitted."""
-    from nbrdf_mitsuba.estimate.plan import ANALYTIC_PULL_STRENGTHS, schedule
+def test_the_analytic_candidates_are_fitted_wherever_the_held_out_view_chooses():
+    """Each analytic model is fitted for a share of the estimate's steps as a candidate of the
+    held-out choice, and the chosen one goes on for another share; with a fixed pull, one image or
+    no weight step nothing is chosen and none is fitted."""
+    from nbrdf_mitsuba.estimate.plan import ANALYTIC_MODELS, ANALYTIC_REFIT_SHARE, ANALYTIC_STEP_SHARE, schedule
 
     plan = schedule(100, 3, None)
-    assert (plan.analytic_steps, plan.analytic_pull_strengths) == (100, ANALYTIC_PULL_STRENGTHS)
-    candidates = len(plan.pull_strengths) + len(ANALYTIC_PULL_STRENGTHS)  # from the best code only
-    assert plan.total_steps() == 100 + plan.attempt_steps()
-    assert plan.attempt_steps() == len(plan.code_strengths) * 40 + 60 + (candidates - 1) * 30
+    assert plan.analytic_models == ANALYTIC_MODELS == ("principled", "roughconductor", "roughplastic")
+    assert (plan.analytic_steps, plan.analytic_refit_steps) == (round(100 * ANALYTIC_STEP_SHARE),
+                                                                round(100 * ANALYTIC_REFIT_SHARE))
+    assert plan.total_steps() == len(ANALYTIC_MODELS) * plan.analytic_steps + plan.attempt_steps()
+    assert plan.attempt_steps() == len(plan.code_strengths) * 40 + 60 + (len(plan.pull_strengths) - 1) * 30
     for off in (schedule(100, 3, 0.5), schedule(100, 1, None), schedule(1, 3, None)):
-        assert (off.analytic_steps, off.analytic_pull_strengths) == (0, ())
+        assert (off.analytic_steps, off.analytic_models, off.analytic_refit_steps) == (0, (), 0)
         assert off.total_steps() == off.attempt_steps()
 
 
@@ -427,9 +424,9 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
         rendered.append(tuple(self.views))
         return render_all(self, step, spp)
 
-    def spy_judge(self, weights, view):
+    def spy_judge(self, theta, view, *apply):
         judged.append(view)
-        loss = held_out_loss(self, weights, view)
+        loss = held_out_loss(self, theta, view, *apply)
         return loss if judge is None else judge(len(judged) - 1, loss)
 
     monkeypatch.setattr(E.Estimator, "render_all", spy_render)
@@ -438,16 +435,18 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
 
 
 def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
-    """The analytic start is fitted first (every view, the estimate's steps); the code sees every
-    training view; the candidates (each pull strength from the decoded start, then the analytic
-    start's) see all but the last, the last alone judges them, the lowest held-out loss wins, its
-    fit goes on over every view for the rest of the weight phase, and a seed repeats it (the code
-    penalty fixed at 0)."""
+    """The analytic candidates are fitted first; the code sees every training view; the network
+    candidates (each pull strength from the decoded start) and the analytic ones see all but the
+    last, the last alone judges them, the lowest held-out loss wins (here a network's: the
+    analytic candidates' losses are made the worst), its fit goes on over every view for the rest
+    of the weight phase, and a seed repeats it (the code penalty fixed at 0)."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import plan, priors
 
     scene, images = setup
-    rendered, judged = spy_on_views(monkeypatch, E)
+    analytic = len(plan.ANALYTIC_MODELS)
+    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: 1.0 if call % (analytic + 2) < analytic
+                                    else loss)
     runs, run_phase = [], E.Estimator.run
 
     def spy_run(self, phase, bar, first_step):
@@ -462,80 +461,107 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
         assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(outs[0].read_text())["provenance"]
     losses = provenance["held_out_losses"]
-    names = [str(s) for s in plan.PULL_STRENGTHS] + [f"principled, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS]
-    assert set(losses) == set(names)
+    names = [str(s) for s in plan.PULL_STRENGTHS]
+    assert set(losses) == set(names) | set(plan.ANALYTIC_MODELS)
     assert all(math.isfinite(v) for v in losses.values())
     # The first step from the decoded weights is the same for every strength (no pull there yet):
     # two candidate steps make them differ; ties would go to the first, the tightest.
-    assert len(set(losses.values())) > 1, losses
-    best = min(losses, key=losses.get)
-    chosen_start = "analytic" if best.startswith("principled") else "decoded"
-    assert provenance["start"] == chosen_start and provenance["pull_strength"] == float(best.split()[-1])
-    assert provenance["analytic"]["type"] == "principled"
+    assert len({losses[k] for k in names}) > 1, losses
+    best = min(names, key=losses.get)
+    assert provenance["start"] == "decoded" and provenance["pull_strength"] == float(best)
+    assert "analytic" not in provenance
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < priors.ALBEDO_BOUND
-    assert judged == [1] * 2 * len(names)  # the last training view, once per candidate and run
-    # The analytic fit (6 steps) on both views; screening (49 starts) and code (2 steps) on both
-    # views; candidates (2 steps each) on view 0; the chosen one's fit on both (the weight
-    # phase's other 2).
-    assert rendered == [(0, 1)] * (6 + 49 + 2) + [(0,)] * (2 * len(names)) + [(0, 1)] * 2, rendered
-    # The runs: analytic, code, candidates, final; the last starts where the chosen candidate's
-    # fit ended, the decoded candidates from the decoded start, the analytic one from the
-    # analytic start.
-    assert [kind for kind, _, _ in runs] == ["analytic", "code"] + ["weights"] * (len(names) + 1)
-    candidates = runs[2:-1]
-    chosen = candidates[names.index(best)]
-    np.testing.assert_array_equal(runs[-1][1], chosen[2])
-    decoded = candidates[:len(plan.PULL_STRENGTHS)]
-    assert all(np.array_equal(decoded[0][1], start) for _, start, _ in decoded)
-    assert not np.array_equal(candidates[-1][1], decoded[0][1])
+    assert judged == [1] * 2 * (analytic + len(names))  # the last training view, once per candidate and run
+    # The analytic fits (3 steps each), the screening (49 starts) and code (2 steps) on both views;
+    # the analytic fits and the network candidates (2 steps each) on view 0; the chosen one's fit
+    # on both (the weight phase's other 2).
+    assert rendered == [(0,)] * (3 * analytic) + [(0, 1)] * (49 + 2) + [(0,)] * (2 * len(names)) + \
+        [(0, 1)] * 2, rendered
+    # The runs: analytic fits, code, candidates, final; the last starts where the chosen
+    # candidate's fit ended, every candidate from the decoded start.
+    assert [kind for kind, _, _ in runs] == ["analytic"] * analytic + ["code"] + ["weights"] * (len(names) + 1)
+    candidates = runs[analytic + 1:-1]
+    np.testing.assert_array_equal(runs[-1][1], candidates[names.index(best)][2])
+    assert all(np.array_equal(candidates[0][1], start) for _, start, _ in candidates)
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and provenance["held_out_losses"] == \
         second["provenance"]["held_out_losses"]
 
 
-def test_the_analytic_start_is_the_analytic_estimate_distilled(setup, tmp_path, monkeypatch):
-    """The analytic start is ``--model principled``'s estimate at the same steps, samples and seed
-    (recorded in the provenance), distilled into a network close to it in BRDF space (far closer
-    than the common initialisation); where the held-out view prefers it, it is the estimate's
-    start, and no code strength is recorded."""
+def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_distilled(setup, tmp_path, monkeypatch):
+    """Where an analytic fit (here roughplastic, made to) has the lowest held-out loss, its fit goes
+    on over every view from where the candidate's ended, is recorded in the provenance, and the
+    written network is its distillation: close to it in BRDF space, far closer than the common
+    initialisation; no pull or code strength is recorded."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import analytic_start, plan
     from nbrdf_tools.common.compare_materials import log_error
 
     scene, images = setup
-    starts = []
-    distil = analytic_start.distil
+    distilled, real_distil = [], analytic_start.distil
 
     def spy_distil(fitted, threads):
-        starts.append(distil(fitted, threads))
-        return starts[-1]
+        distilled.append((fitted, real_distil(fitted, threads)))
+        return distilled[-1][1]
+
+    runs, run_phase = [], E.Estimator.run
+
+    def spy_run(self, phase, bar, first_step):
+        runs.append((phase.kind, phase.theta.copy(), run_phase(self, phase, bar, first_step)))
+        return runs[-1][2]
 
     monkeypatch.setattr(E.estimator, "distil", spy_distil)
-    assert len(plan.CODE_STRENGTHS) == 1  # no code is judged: the decoded candidates come first
-    analytic = len(plan.PULL_STRENGTHS)
-    spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == analytic else loss)
-    prior, principled = tmp_path / "prior.nbrdf.json", tmp_path / "principled.json"
-    common = ("--steps", "6", "--spp", "2", "--threads", "1", "--seed", "2")
-    assert run(scene, images, prior, *common) == 0
-    assert run(scene, images, principled, "--model", "principled", *common) == 0
-    provenance = json.loads(prior.read_text())["provenance"]
+    monkeypatch.setattr(E.Estimator, "run", spy_run)
+    chosen = plan.ANALYTIC_MODELS.index("roughplastic")
+    rendered, _ = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == chosen else loss)
+    out = tmp_path / "prior.nbrdf.json"
+    assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--seed", "2") == 0
+    document = json.loads(out.read_text())
+    provenance = document["provenance"]
+    assert provenance["start"] == "analytic" and provenance["analytic"]["type"] == "roughplastic"
+    assert provenance["pull_strength"] is None and provenance["code_strength"] is None
+    assert set(provenance["held_out_losses"]) == {str(s) for s in plan.PULL_STRENGTHS} | set(plan.ANALYTIC_MODELS)
+    # The refit: on both views, from the roughplastic candidate's fitted parameters.
+    assert runs[-1][0] == "analytic" and rendered[-1] == (0, 1)
+    np.testing.assert_array_equal(runs[-1][1], runs[chosen][2])
+    ((fitted, weights),) = distilled
     # The same numbers; fit-phong's rewrite of the network file may move a float by its last digit.
-    expected = json.loads(principled.read_text())
-    assert provenance["analytic"].keys() == expected.keys() and provenance["analytic"]["type"] == expected["type"]
-    for key, value in expected.items():
-        if key != "type":
-            got = provenance["analytic"][key]
-            assert (got["value"] if isinstance(value, dict) else got) == pytest.approx(
-                value["value"] if isinstance(value, dict) else value, rel=1e-12)
-    assert provenance["start"] == "analytic" and provenance["code_strength"] is None
-    assert provenance["pull_strength"] == plan.ANALYTIC_PULL_STRENGTHS[0]
-    fitted = mi.load_dict(provenance["analytic"])
+    assert fitted.keys() == provenance["analytic"].keys()
+    for key, value in fitted.items():
+        got = provenance["analytic"][key]
+        assert got == value if key == "type" else (got["value"] if isinstance(value, dict) else got) == \
+            pytest.approx(value["value"] if isinstance(value, dict) else value, rel=1e-12)
+    flat = np.concatenate([np.concatenate([layer["weights"], layer["bias"]]) for layer in document["layers"]])
+    np.testing.assert_allclose(flat, np.float32(weights), rtol=0, atol=1e-6)
     errors = {}
-    for name, weights in (("distilled", starts[0]), ("common", E.common_initialisation())):
+    for name, network in (("distilled", weights), ("common", E.common_initialisation())):
         path = tmp_path / f"{name}.nbrdf.json"
-        E.write_network(path, weights, name, {})
-        errors[name] = log_error(fitted, mi.load_dict({"type": "nbrdf", "filename": str(path)}), "uniform", 4000)
+        E.write_network(path, network, name, {})
+        errors[name] = log_error(mi.load_dict(fitted), mi.load_dict({"type": "nbrdf", "filename": str(path)}),
+                                 "uniform", 4000)
     assert errors["distilled"] < min(0.01, 0.1 * errors["common"]), errors
+
+
+def test_the_chosen_analytic_fit_is_distilled_at_the_trainers_defaults(llvm_variant, monkeypatch):
+    """The command distils at the trainer's defaults (the suite cuts them: conftest.py
+    ``quick_distillation``); a failed training is the estimate's failure, named."""
+    from nbrdf_mitsuba import _train_native as native
+    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import analytic_start
+
+    monkeypatch.setattr(analytic_start, "DISTIL_SETTINGS", {})
+    seen = []
+
+    def train(config, *args, **options):
+        seen.append((config.samples, config.max_epochs, config.hidden))
+        raise native.TrainError("stopped by the test", 1)
+
+    monkeypatch.setattr(native, "train_from_arrays", train)
+    fitted = {"type": "roughplastic", "alpha": 0.2, "diffuse_reflectance": {"type": "rgb", "value": [0.5, 0.3, 0.2]}}
+    with pytest.raises(E.EstimateFailed, match="stopped by the test"):
+        analytic_start.distil(fitted, 1)
+    default = native.default_config()
+    assert seen == [(default.samples, default.max_epochs, E.models.HIDDEN)]
 
 
 def test_image_loss_is_linear_in_the_render(llvm_variant):
@@ -665,18 +691,19 @@ def test_code_strength_schedule():
 def test_code_strength_is_chosen_by_the_held_out_view_before_the_candidates(setup, tmp_path, monkeypatch):
     """With several code strengths each gets its own code phase (on every training view); the
     held-out view judges their decoded networks, and only the best code's start runs the pull's
-    candidates (beside the analytic start's, on all views but the last), which the same view
-    judges; the code strength is recorded with both codes' held-out losses, and a seed repeats it."""
+    candidates (on all views but the last, as the analytic fits), which the same view judges; the
+    code strength is recorded with both codes' held-out losses, and a seed repeats it."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import plan
 
     monkeypatch.setattr(plan, "CODE_STRENGTHS", (0.0, 1e-3))
-    names = [str(w) for w in plan.PULL_STRENGTHS] + [f"principled, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS]
+    names = [str(w) for w in plan.PULL_STRENGTHS] + list(plan.ANALYTIC_MODELS)
+    analytic = len(plan.ANALYTIC_MODELS)
     judged_per_run = len(plan.CODE_STRENGTHS) + len(names)
-    decoded = len(plan.CODE_STRENGTHS) + len(plan.PULL_STRENGTHS)  # judged per run before the analytic start
     scene, images = setup
-    # The analytic start made the worst candidate here, so that a decoded one (and its code) is chosen.
-    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: 1.0 if call % judged_per_run >= decoded
+    # The analytic fits (judged first) made the worst candidates here, so that a decoded one (and its
+    # code) is chosen.
+    rendered, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: 1.0 if call % judged_per_run < analytic
                                     else loss)
     outs = [tmp_path / f"code{k}.nbrdf.json" for k in range(2)]
     for out in outs:
@@ -689,11 +716,12 @@ def test_code_strength_is_chosen_by_the_held_out_view_before_the_candidates(setu
     best = min(plan.CODE_STRENGTHS, key=lambda c: codes[str(c)])
     assert (provenance["start"], provenance["code_strength"]) == ("decoded", best)
     assert judged == [1] * (2 * judged_per_run)  # the last training view: each code, then each candidate
-    # The analytic fit (6 steps), screening (49) and a code phase per strength (2 steps each) on
-    # both views, the candidates (2 steps each) on view 0; the chosen one's fit on both views (2
-    # more steps).
-    assert rendered == [(0, 1)] * (6 + 49 + 2 * len(plan.CODE_STRENGTHS)) + [(0,)] * (2 * len(names)) + \
-        [(0, 1)] * 2
+    # The analytic fits (3 steps each) on view 0; screening (49) and a code phase per strength (2
+    # steps each) on both views, the network candidates (2 steps each) on view 0; the chosen one's
+    # fit on both views (2 more steps).
+    network = len(plan.PULL_STRENGTHS)
+    assert rendered == [(0,)] * (3 * analytic) + [(0, 1)] * (49 + 2 * len(plan.CODE_STRENGTHS)) + \
+        [(0,)] * (2 * network) + [(0, 1)] * 2
     first, second = (json.loads(out.read_text()) for out in outs)
     assert first["layers"] == second["layers"] and losses == second["provenance"]["held_out_losses"]
 
@@ -710,8 +738,9 @@ def test_code_strength_0_is_the_estimate_without_the_code_penalty(setup, tmp_pat
     _, judged = spy_on_views(monkeypatch, E, judge=lambda call, loss: forced.get(call, loss))
     scene, images = setup
     nets = {}
-    for name, extra, force in (("fixed", ("--code-strength", "0"), {0: -1.0}),
-                               ("chosen", (), {0: -1.0, len(plan.CODE_STRENGTHS): -1.0})):
+    first = len(plan.ANALYTIC_MODELS)  # the analytic fits are judged first
+    for name, extra, force in (("fixed", ("--code-strength", "0"), {first: -1.0}),
+                               ("chosen", (), {first: -1.0, first + len(plan.CODE_STRENGTHS): -1.0})):
         judged.clear()
         forced.clear()
         forced.update(force)
@@ -823,30 +852,33 @@ def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_va
 
 
 def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(setup, tmp_path, monkeypatch):
-    """With the bound below every candidate's albedo (0), none is chosen even where the held-out
-    view prefers it: the estimate falls back to the common start, the nbrdf-no-prior estimate,
-    and the provenance names the rejected candidates (the analytic start's too) with their albedo."""
+    """With the bound below every network's albedo (0), no network candidate is chosen even where
+    the held-out view prefers it: after every attempt of the prior the estimate is the best
+    analytic candidate, distilled, and the provenance names the rejected candidates with their
+    albedo (without analytic candidates, the common start:
+    test_a_final_network_over_the_bound_falls_back_to_the_common_start)."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import estimator, plan, priors
 
     scene, images = setup
     # The held-out view prefers the first decoded candidate by far.
-    spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == 0 else loss)
+    first = len(plan.ANALYTIC_MODELS)
+    spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == first else loss)
     monkeypatch.setattr(priors, "ALBEDO_BOUND", 0.0)
-    prior, no_prior = tmp_path / "prior.nbrdf.json", tmp_path / "no-prior.nbrdf.json"
+    prior = tmp_path / "prior.nbrdf.json"
     assert run(scene, images, prior, "--steps", "6", "--spp", "2", "--threads", "1", "--code-strength", "0") == 0
     provenance = json.loads(prior.read_text())["provenance"]
-    assert provenance["start"] == estimator.COMMON_START and provenance["pull_strength"] is None
-    names = {str(s) for s in plan.PULL_STRENGTHS} | {f"principled, pull {s}" for s in plan.ANALYTIC_PULL_STRENGTHS}
-    assert set(provenance["held_out_losses"]) == names  # the last attempt's
+    losses = provenance["held_out_losses"]  # the last attempt's
+    names = {str(s) for s in plan.PULL_STRENGTHS}
+    assert set(losses) == names | set(plan.ANALYTIC_MODELS)
+    best = min(plan.ANALYTIC_MODELS, key=losses.get)
+    assert provenance["start"] == "analytic" and provenance["analytic"]["type"] == best
+    assert provenance["pull_strength"] is None
     # Every attempt's candidates rejected, each attempt with its own seeds.
     prefixes = ["", "attempt 1: ", "attempt 2: "][:estimator.PRIOR_ATTEMPTS]
     assert set(provenance["albedo_rejected"]) == {f"{p}{s}" for p in prefixes for s in names}
     assert all(v > 0 for v in provenance["albedo_rejected"].values())
     assert provenance["attempts"] == estimator.PRIOR_ATTEMPTS
-    assert run(scene, images, no_prior, "--model", "nbrdf-no-prior", "--steps", "6", "--spp", "2",
-               "--threads", "1") == 0
-    assert json.loads(prior.read_text())["layers"] == json.loads(no_prior.read_text())["layers"]
 
 
 def test_every_network_estimate_records_its_albedo_and_warns_over_the_bound(setup, tmp_path, monkeypatch, capsys):
@@ -909,6 +941,5 @@ def test_a_rejected_attempt_of_the_prior_is_tried_again_with_other_seeds(setup, 
     assert seeds == [0, estimator.ATTEMPT_SEED_STRIDE] * 2
     provenance = json.loads(outs[0].read_text())["provenance"]
     assert provenance["start"] in ("decoded", "analytic") and provenance["attempts"] == 2
-    assert set(provenance["albedo_rejected"]) == ({str(w) for w in plan.PULL_STRENGTHS}
-                                                  | {f"principled, pull {w}" for w in plan.ANALYTIC_PULL_STRENGTHS})
+    assert set(provenance["albedo_rejected"]) == {str(w) for w in plan.PULL_STRENGTHS}
     assert json.loads(outs[0].read_text())["layers"] == json.loads(outs[1].read_text())["layers"]

@@ -108,15 +108,15 @@ def test_the_ceiling_is_no_competitor():
 
 def test_the_chosen_start_is_named(tmp_path):
     """The run page names each prior estimate's start from its provenance: the decoded start with
-    its strengths, the analytic start with its model, the common start."""
+    its strengths, the analytic fit chosen with its model, the common start."""
     import json
 
     from nbrdf_tools.pages.estimation import chosen_strengths
 
     provenances = {
         "rgl-a": {"start": "decoded", "pull_strength": 0.1, "code_strength": 0.0, "held_out_losses": {"0.1": 0.002}},
-        "rgl-b": {"start": "analytic", "pull_strength": 0.1, "code_strength": None,
-                  "analytic": {"type": "principled"}, "held_out_losses": {"principled, pull 0.1": 0.001}},
+        "rgl-b": {"start": "analytic", "pull_strength": None, "code_strength": None,
+                  "analytic": {"type": "roughplastic"}, "held_out_losses": {"0.1": 0.002, "roughplastic": 0.001}},
         "rgl-c": {"start": "common", "pull_strength": None, "code_strength": None},
     }
     for name, provenance in provenances.items():
@@ -124,8 +124,8 @@ def test_the_chosen_start_is_named(tmp_path):
         (tmp_path / name / "nbrdf.nbrdf.json").write_text(json.dumps({"provenance": provenance}))
     lines = chosen_strengths([{"material": name, "model": "nbrdf"} for name in provenances], tmp_path)
     assert lines[0] == "* rgl-a: pull strength 0.1, code strength 0.0 (held-out view loss 0.1: 0.002)"
-    assert lines[1] == ("* rgl-b: the analytic start (principled distilled), pull strength 0.1 (held-out view loss "
-                        "principled, pull 0.1: 0.001)")
+    assert lines[1] == ("* rgl-b: the roughplastic fit, distilled (held-out view loss 0.1: 0.002; "
+                        "roughplastic: 0.001)")
     assert lines[2].startswith("* rgl-c: the common start, no prior")
 
 

@@ -13,16 +13,18 @@ view each step:
   with a Gaussian penalty on the code (the training codes' mean and spread); then the 675
   weights themselves, with a pull toward the decoded network in function space (the squared
   difference of the two networks' log-space outputs at fixed direction pairs over the whole
-  hemisphere, so that where no image constrains the BRDF it stays the decoded one). Before them
-  the analytic start (:mod:`.analytic_start`): ``principled`` fitted through the same images, as
-  its own estimate would be, and distilled into the network. The start and the pull strength are
-  chosen by a held-out training view (``--pull-strength`` fixes the pull instead, and then no
-  analytic start is fitted): the code is fitted on every view once per strength of
-  ``CODE_STRENGTHS`` (by default one, 0; the screening of the starts shared); from each decoded
-  code every strength of ``PULL_STRENGTHS``, and from the analytic start every strength of
-  ``ANALYTIC_PULL_STRENGTHS``, fits the weights on all views but the last (the held-out one) for
-  a share of the steps; the candidate with the lowest loss on the held-out view is kept, and its
-  fit goes on over every view for the rest of the weight phase's steps.
+  hemisphere, so that where no image constrains the BRDF it stays the decoded one). Beside them
+  the analytic candidates (:mod:`.analytic_start`): ``principled``, ``roughconductor`` and
+  ``roughplastic``, each fitted through the same images for ``ANALYTIC_STEP_SHARE`` of the steps. The pull
+  strength, or an analytic candidate, is chosen by a held-out training view (``--pull-strength``
+  fixes the pull instead, and then no analytic model is fitted): the code is fitted on every
+  view once per strength of ``CODE_STRENGTHS`` (by default one, 0; the screening of the starts
+  shared); from the decoded code every strength of ``PULL_STRENGTHS`` fits the weights on all
+  views but the last (the held-out one) for a share of the steps, and each analytic model is
+  fitted on the same views; each is judged by one render of the held-out view at ``JUDGE_SPP``
+  samples. The candidate with the lowest loss is kept: a network candidate's fit goes on over
+  every view for the rest of the weight phase's steps; an analytic one's goes on over every view
+  for ``ANALYTIC_REFIT_SHARE`` of the steps and is distilled into the network by the trainer.
   A candidate or final network whose directional albedo exceeds its bound (:func:`albedo_bound`:
   1, or the network's own albedo where the lights fall square if higher, plus ``ALBEDO_MARGIN``;
   at most ``ALBEDO_BOUND``) is no material and is not kept; the prior is then attempted again
@@ -52,7 +54,7 @@ The package: :mod:`.cli` (the command line), :mod:`.scene` (the scene file, vari
 :mod:`.models` (the fitted models and the files written), :mod:`.plan` (how the steps and the
 candidate strengths are laid out), :mod:`.optimiser` (Adam and the descent that takes back a
 diverging step), :mod:`.priors` (the code penalty, the pull and the albedo check),
-:mod:`.analytic_start` (the analytic fit distilled into a start) and :mod:`.estimator` (the loss,
+:mod:`.analytic_start` (the analytic candidates and their distillation) and :mod:`.estimator` (the loss,
 its gradient and the estimate's course).
 """
 
@@ -66,12 +68,14 @@ from .cli import main, parser  # noqa: E402
 from .errors import EstimateError, EstimateFailed  # noqa: E402
 from .estimator import Estimator, estimate  # noqa: E402
 from .models import MODELS, Analytic, Network, common_initialisation, fit_sampling, write_network  # noqa: E402
-from .analytic_start import ANALYTIC_MODEL  # noqa: E402
-from .plan import ANALYTIC_PULL_STRENGTHS, CODE_STRENGTHS, PULL_STRENGTHS, Plan, schedule  # noqa: E402
+from .analytic_start import ANALYTIC_MODELS  # noqa: E402
+from .estimator import JUDGE_SPP  # noqa: E402
+from .plan import (ANALYTIC_REFIT_SHARE, ANALYTIC_STEP_SHARE, CODE_STRENGTHS, PULL_STRENGTHS, Plan,  # noqa: E402
+                   schedule)
 from .priors import ALBEDO_BOUND, ALBEDO_LIT_INCIDENCE, ALBEDO_MARGIN  # noqa: E402
 from .scene import Scene  # noqa: E402
 
-__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "ANALYTIC_MODEL", "ANALYTIC_PULL_STRENGTHS",
-           "CODE_STRENGTHS", "MODELS",
-           "PULL_STRENGTHS", "Analytic", "EstimateError", "EstimateFailed", "Estimator", "Network", "Plan", "Scene",
-           "common_initialisation", "estimate", "fit_sampling", "main", "parser", "schedule", "write_network"]
+__all__ = ["ALBEDO_BOUND", "ALBEDO_LIT_INCIDENCE", "ALBEDO_MARGIN", "ANALYTIC_MODELS", "ANALYTIC_REFIT_SHARE",
+           "ANALYTIC_STEP_SHARE", "CODE_STRENGTHS", "JUDGE_SPP", "MODELS", "PULL_STRENGTHS", "Analytic",
+           "EstimateError", "EstimateFailed", "Estimator", "Network", "Plan", "Scene", "common_initialisation",
+           "estimate", "fit_sampling", "main", "parser", "schedule", "write_network"]

@@ -11,7 +11,7 @@ from pathlib import Path
 from .. import _exit
 from .errors import EstimateError
 from .estimator import estimate
-from .analytic_start import ANALYTIC_MODEL
+from .analytic_start import ANALYTIC_MODELS
 from .models import MODELS
 from .plan import CODE_STRENGTHS, FALLBACK_CODE_STRENGTH, FALLBACK_PULL_STRENGTH, PULL_STRENGTHS
 
@@ -49,10 +49,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--pull-strength", type=float,
                    help="strength of the pull toward the decoded network's BRDF (default: chosen among "
                         f"{', '.join(map(str, PULL_STRENGTHS))} by the last training view, held out, which may "
-                        f"choose the {ANALYTIC_MODEL} fit distilled into the network instead; the common start "
-                        f"without the prior only where the albedo check rejects every network of the prior; "
-                        f"{FALLBACK_PULL_STRENGTH} with one image). Given, nothing is held out and no analytic "
-                        "start is fitted")
+                        f"choose the best of the {', '.join(ANALYTIC_MODELS)} fits instead, distilled into the "
+                        f"network; the common start without the prior only where the albedo check rejects every "
+                        f"network of the prior; {FALLBACK_PULL_STRENGTH} with one image). Given, nothing is held "
+                        "out and no analytic model is fitted")
     p.add_argument("--code-strength", type=float,
                    help="strength of the Gaussian penalty keeping the latent code near the training codes (default: "
                         + (f"{CODE_STRENGTHS[0]}" if len(CODE_STRENGTHS) == 1 else

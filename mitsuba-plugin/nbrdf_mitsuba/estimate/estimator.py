@@ -15,7 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .analytic_start import ANALYTIC_MODEL, distil
+from .analytic_start import distil
 from .errors import EstimateError, EstimateFailed
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
 from .optimiser import Descent, Phase
@@ -34,9 +34,12 @@ SCREENED_STARTS = 48
 #: novel views or no material, which the albedo check catches (docs/experiments.md, Estimation: "The
 #: albedo check instead of the common candidate").
 COMMON_START = "common"
-#: The held-out view is judged with this many times the samples of a training render (one render
-#: per candidate, the same seed for all: the candidates' differences are not Monte Carlo noise).
-HELD_OUT_SPP_FACTOR = 4
+#: Samples per pixel of the held-out view's render that judges each candidate (one render per
+#: candidate, the same seed for all): at 4x a training render's samples an analytic fit and a
+#: network were within the noise of each other, at this many the better one was lowest on every
+#: view (docs/experiments.md, Estimation: "Can the training views tell the analytic fit from the
+#: decoded network?").
+JUDGE_SPP = 256
 #: Attempts of the prior (code phases, candidates, final fit) before the fallback to the common
 #: start, each with its own render seeds: the renders' noise decides which code the code phase
 #: reaches, and a later attempt can give a material where the first did not (docs/experiments.md,
@@ -75,6 +78,9 @@ class Estimator(Descent):
                  workdir: Path):
         super().__init__()
         self.model, self.spp, self.seed = model, spp, seed
+        #: The held-out renders' seed: the estimate's, whatever the attempt, so that every candidate
+        #: is judged on the same samples.
+        self.judge_seed = seed
         self.bsdf_id = scene_file.bsdf_id
         self.scene = scene_file.load(model.element(workdir))
         self.references = load_images(images, self.scene)
@@ -92,13 +98,14 @@ class Estimator(Descent):
     def view_references(self) -> list:
         return [self.references[i] for i in self.views]
 
-    def held_out_loss(self, weights: np.ndarray, view: int) -> float:
-        """The image loss of ``weights`` on the training view ``view`` (one render, a fixed seed)."""
+    def held_out_loss(self, theta: np.ndarray, view: int, apply=Network._set_weights) -> float:
+        """The image loss of the parameters ``theta`` (set by ``apply``: by default the network's
+        weights) on the training view ``view`` (one render of ``JUDGE_SPP``, a fixed seed)."""
         with dr.suspend_grad():
-            Network._set_weights(self.params, self.prefix, mi.Float(np.asarray(weights, np.float32)))
+            apply(self.params, self.prefix, mi.Float(np.asarray(theta, np.float32)))
             self.params.update()
             image = mi.render(self.scene, self.params, sensor=view, integrator=self.integrator,
-                              spp=HELD_OUT_SPP_FACTOR * self.spp, seed=render_seed(self.seed, 1 << 20, view))
+                              spp=JUDGE_SPP, seed=render_seed(self.judge_seed, 1 << 20, view))
             loss = image_loss([image], [self.references[view]])
         return float(np.asarray(loss.numpy()).reshape(-1)[0])
 
@@ -170,9 +177,9 @@ def _estimate(args, on_step=None) -> dict:
         est.on_step = on_step
         plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
                         args.code_strength)
-        # The analytic start's fit renders its own scene (the analytic model in the BSDF's place).
-        analytic = (Estimator(scene_file, Analytic(ANALYTIC_MODEL), args.images, args.spp, args.seed, args.max_depth,
-                              Path(workdir)) if model_has_prior(model) and plan.analytic_steps else None)
+        # Each analytic candidate's fit renders its own scene (the analytic model in the BSDF's place).
+        analytic = [Estimator(scene_file, Analytic(kind), args.images, args.spp, args.seed, args.max_depth,
+                              Path(workdir)) for kind in (plan.analytic_models if model_has_prior(model) else ())]
         if args.threads is not None:
             # One thread fixes the order of the gradients' float sums (bit-identical reruns). Set
             # after loading: Mitsuba builds the Python plugins on its worker threads.
@@ -184,7 +191,7 @@ def _estimate(args, on_step=None) -> dict:
             result = _optimise(est, model, args, bar, plan, analytic)
     result["seconds"] = time.perf_counter() - start
     result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
-    result["halvings"] = est.halvings + (analytic.halvings if analytic is not None else 0)
+    result["halvings"] = est.halvings + sum(a.halvings for a in analytic)
     return result
 
 
@@ -192,37 +199,33 @@ def model_has_prior(model) -> bool:
     return isinstance(model, Network) and model.prior
 
 def candidate_name(candidate) -> str:
-    """A candidate's key in ``held_out_losses``: the pull's strength, prefixed with the analytic
-    model's name for the analytic start."""
-    start, strength = candidate
-    return f"{start}, pull {strength}" if isinstance(start, str) else str(strength)
+    """A network candidate's key in ``held_out_losses``: its pull's strength."""
+    return str(candidate[1])
 
 
 def choose_start(est: Estimator, starts: dict, plan: Plan, bar) -> tuple:
-    """The candidate whose short fit on the training views but the held-out one (the last) has
-    the lowest loss on the held-out view: a pair (start, strength of the pull toward
-    ``starts[start]``), the start a code penalty's strength (the decoded start of that code) or
-    the analytic model's name (the analytic start, pulled by ``plan.analytic_pull_strengths``);
-    ties go to the first (the tightest pull, the decoded before the analytic). A candidate whose
-    fit fails the albedo check (:func:`albedo_check`) or diverges is not chosen; where none is
-    left, ``COMMON_START``. Returns the choice, the held-out losses by candidate, the albedos of
-    the rejected ones, the chosen candidate's fitted weights (``None`` for ``COMMON_START``) and
-    the candidates that diverged."""
+    """The network candidate whose short fit on the training views but the held-out one (the last)
+    has the lowest loss on the held-out view: a pair (code strength of the decoded start in
+    ``starts``, strength of the pull toward it); ties go to the first (the tightest pull). A
+    candidate whose fit fails the albedo check (:func:`albedo_check`) or diverges is not chosen;
+    where none is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate,
+    the albedos of the rejected ones, the chosen candidate's fitted weights (``None`` for
+    ``COMMON_START``) and the candidates that diverged."""
     held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
     views, est.views = est.views, list(range(held_out))
     losses, rejected, fits, diverged = {}, {}, {}, []
     try:
         for name, start in starts.items():
-            for strength in plan.analytic_pull_strengths if isinstance(name, str) else plan.pull_strengths:
+            for strength in plan.pull_strengths:
                 phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
                               pull_penalty(start, strength))
                 halvings = est.halvings
                 try:
                     fitted = fits[name, strength] = est.run(phase, bar, plan.code_steps)
                 except EstimateFailed:
-                    # A start whose fit runs away (a lobe too sharp for the distilled start) is no
-                    # candidate; the others keep the whole budget of halvings.
+                    # A candidate whose fit runs away is no candidate; the others keep the whole
+                    # budget of halvings.
                     est.halvings = halvings
                     diverged.append((name, strength))
                     continue
@@ -252,12 +255,17 @@ def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
             for strength in plan.code_strengths}
 
 
-def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic: tuple | None = None) -> tuple:
+#: What :func:`prior_attempt` returns in place of weights where an analytic candidate wins.
+ANALYTIC_CHOSEN = "analytic"
+
+
+def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dict | None = None) -> tuple:
     """One attempt of the prior at the estimator's seed: the code through the decoder, then the
-    weights pulled toward the decoded ones, or toward the analytic start ``analytic`` (its model's
-    name and distilled weights, if any), by the chosen strengths. Returns the weights (``None``
-    where the albedo check rejected every candidate or the final network), the summary's
-    additions, and the rejected albedos by candidate name (``final``: the final network)."""
+    weights pulled toward the decoded ones by the chosen strength. Returns the weights (``None``
+    where the albedo check rejected every candidate or the final network; ``ANALYTIC_CHOSEN``
+    where an analytic candidate's held-out loss, of ``analytic_losses`` by model, is lower than
+    the best kept network candidate's), the summary's additions, and the rejected albedos by
+    candidate name (``final``: the final network)."""
     # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
     # view's noise, and the view's light often decides which code is reached (docs/experiments.md,
     # Estimation: "The code phase on every training view"). The candidates' weights, which can fit
@@ -273,24 +281,23 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic: tuple | No
         best = min(judged, key=judged.__getitem__)
         starts = {best: starts[best]}
     code_strength = next(iter(starts))
-    if analytic is not None:
-        starts[analytic[0]] = analytic[1]
     choice, losses, rejected, fitted, diverged = (code_strength, plan.pull_strengths[0]), {}, {}, None, []
     if plan.selecting:
         choice, losses, rejected, fitted, diverged = choose_start(est, starts, plan, bar)
-    if losses:
-        extra["held_out_losses"] = {candidate_name(k): v for k, v in losses.items()}
+    analytic_losses = analytic_losses or {}
+    extra["held_out_losses"] = {**{candidate_name(k): v for k, v in losses.items()}, **analytic_losses}
+    if not extra["held_out_losses"]:
+        del extra["held_out_losses"]
     if diverged:
         extra["diverged"] = [candidate_name(k) for k in diverged]
     rejected = {candidate_name(k): v for k, v in rejected.items()}
-    # The analytic and the common start keep the decoded start's code for the record.
-    analytic_chosen = choice != COMMON_START and isinstance(choice[0], str)
     extra["code"] = [float(c) for c in codes[code_strength]]
     if choice == COMMON_START:
         return None, extra, rejected
+    if analytic_losses and min(analytic_losses.values()) < losses[choice]:
+        return ANALYTIC_CHOSEN, extra, rejected
     strength = choice[1]
-    extra.update({"start": "analytic" if analytic_chosen else "decoded", "pull_strength": strength,
-                  "code_strength": None if analytic_chosen else code_strength})
+    extra.update({"start": "decoded", "pull_strength": strength, "code_strength": code_strength})
     # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
     # from its start had): refitted from the start instead, the network lost what the held-out
     # view had judged (docs/experiments.md, Estimation: "The chosen candidate's fit goes on").
@@ -307,30 +314,53 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic: tuple | No
     return weights, extra, rejected
 
 
-def fit_analytic(est: Estimator, model: Analytic, plan: Plan, bar, threads: int | None) -> tuple[dict, np.ndarray]:
-    """The analytic start: ``model`` fitted through the images (as the model's own estimate of the
-    same steps and seed), and the network distilled from it (:func:`analytic_start.distil`)."""
-    (phase,) = model.phases(plan.analytic_steps)
-    fitted = model.result(est.run(phase, bar, 0))
+def fit_analytic_candidates(estimators: list, plan: Plan, bar) -> tuple[dict, dict, list]:
+    """Each analytic model (one estimator each) fitted through the training views but the held-out
+    one (the last), as the model's own estimate of the same steps and seed would be on them, and
+    judged on the held-out view. Returns the fitted parameters and the held-out losses by model,
+    and the models whose fit diverged (no candidates)."""
+    thetas, losses, diverged = {}, {}, []
+    for est in estimators:
+        held_out = len(est.references) - 1
+        views, est.views = est.views, list(range(held_out))
+        try:
+            (phase,) = est.model.phases(plan.analytic_steps)
+            try:
+                thetas[est.model.kind] = est.run(phase, bar, 0)
+            except EstimateFailed:
+                est.halvings = 0  # given back: the estimate goes on without this candidate
+                diverged.append(est.model.kind)
+                continue
+            losses[est.model.kind] = est.held_out_loss(thetas[est.model.kind], held_out, est.model._apply)
+        finally:
+            est.views = views
+    return thetas, losses, diverged
+
+
+def refit_analytic(est: Estimator, theta: np.ndarray, plan: Plan, bar, threads: int | None) -> tuple[dict, np.ndarray]:
+    """The chosen analytic candidate's fit gone on over every view, and the network distilled from
+    it (:func:`analytic_start.distil`)."""
+    bar.total += plan.analytic_refit_steps
+    phase = Phase("analytic", theta, plan.analytic_refit_steps, est.model._apply, None)
+    fitted = est.model.result(est.run(phase, bar, plan.analytic_steps))
     return fitted, distil(fitted, threads)
 
 
-def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_est: Estimator | None = None
-                   ) -> tuple[np.ndarray, dict]:
-    """The analytic start (fitted by ``analytic_est``, if any), then up to ``PRIOR_ATTEMPTS``
-    attempts of the prior, each with its own render seeds, until the albedo check keeps a network;
-    else the common start, the nbrdf-no-prior estimate (its start, steps and seeds, so the same
-    network). The weights and the summary's additions."""
+def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None = None) -> tuple[np.ndarray, dict]:
+    """The analytic candidates (fitted by the estimators ``analytic``, if any), then up to
+    ``PRIOR_ATTEMPTS`` attempts of the prior, each with its own render seeds, until the albedo
+    check keeps a network or an analytic candidate wins the held-out view (its fit then goes on
+    over every view and is distilled); where no attempt keeps a network, the best analytic
+    candidate, and without one the common start, the nbrdf-no-prior estimate (its start, steps
+    and seeds, so the same network). The weights and the summary's additions."""
     from ..latent import Decoder, LatentError
 
     try:
         decoder = Decoder(args.ae)
     except LatentError as error:
         raise EstimateError(str(error)) from None
-    analytic, analytic_extra = None, {}
-    if analytic_est is not None:
-        fitted, weights = fit_analytic(analytic_est, analytic_est.model, plan, bar, args.threads)
-        analytic, analytic_extra = (fitted["type"], weights), {"analytic": fitted}
+    analytic = analytic or []
+    thetas, analytic_losses, analytic_diverged = fit_analytic_candidates(analytic, plan, bar)
     seed, rejected_all, attempt_steps = est.seed, {}, plan.attempt_steps()
     try:
         for attempt in range(PRIOR_ATTEMPTS):
@@ -338,7 +368,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_est: Estimato
             if attempt > 0:
                 bar.total += attempt_steps
             try:
-                weights, extra, rejected = prior_attempt(est, decoder, plan, bar, analytic)
+                weights, extra, rejected = prior_attempt(est, decoder, plan, bar, analytic_losses)
             except LatentError as error:
                 raise EstimateError(str(error)) from None
             prefix = f"attempt {attempt}: " if attempt else ""
@@ -347,22 +377,31 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic_est: Estimato
                 extra["attempts"] = attempt + 1
                 break
         else:
-            # No attempt gave a material: the nbrdf-no-prior estimate; the last attempt's best code is
-            # kept for the record.
+            # No attempt gave a material: the best analytic candidate, else the nbrdf-no-prior
+            # estimate; the last attempt's best code is kept for the record.
+            extra["attempts"] = PRIOR_ATTEMPTS
+            weights = ANALYTIC_CHOSEN if analytic_losses else None
+        if weights is None:
             est.seed = seed
             bar.total += plan.code_steps + plan.weight_steps
-            extra.update({"start": COMMON_START, "pull_strength": None, "code_strength": None,
-                          "attempts": PRIOR_ATTEMPTS})
+            extra.update({"start": COMMON_START, "pull_strength": None, "code_strength": None})
             weights = est.run(Phase("weights", common_initialisation(), plan.code_steps + plan.weight_steps,
                                     Network._set_weights, None), bar, 0)
     finally:
         est.seed = seed
+    if isinstance(weights, str):  # ANALYTIC_CHOSEN
+        kind = min(analytic_losses, key=analytic_losses.__getitem__)
+        chosen = next(a for a in analytic if a.model.kind == kind)
+        fitted, weights = refit_analytic(chosen, thetas[kind], plan, bar, args.threads)
+        extra.update({"start": "analytic", "analytic": fitted, "pull_strength": None, "code_strength": None})
+    if analytic_diverged:
+        extra["diverged"] = extra.get("diverged", []) + analytic_diverged
     if rejected_all:
         extra["albedo_rejected"] = rejected_all
-    return weights, {**extra, **analytic_extra}
+    return weights, extra
 
 
-def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: Estimator | None = None) -> dict:
+def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | None = None) -> dict:
     summary = {"output": str(args.output), "model": args.model, "steps": args.steps}
     if isinstance(model, Analytic):
         (phase,) = model.phases(args.steps)

@@ -62,10 +62,10 @@ def write(out: Path, command: str, results: list[dict], work: Path, settings: di
              "The `nbrdf` estimates' start and strengths (the code strength, the code phase's Gaussian penalty "
              f"toward the training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the pull strength, the weight "
              "phase's pull toward the "
-             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code; or the analytic "
-             f"start, the {estimate.ANALYTIC_MODEL} fit distilled into the network, pulled toward it by "
-             f"{_or(estimate.ANALYTIC_PULL_STRENGTHS)}), chosen per estimate "
-             "by its last training view, held out; where the albedo check rejected every candidate or the final "
+             f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code; or an analytic "
+             f"fit, the best of {', '.join(estimate.ANALYTIC_MODELS)}, distilled into the network), chosen per "
+             f"estimate by its last training view, held out (one render at {estimate.JUDGE_SPP} samples per "
+             "candidate); where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
              f"incidence if higher, by more than {estimate.ALBEDO_MARGIN:.0%}, or above {estimate.ALBEDO_BOUND:g}), "
              "the common start without the prior:", "",
@@ -143,7 +143,7 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         start = provenance.get("start")
         analytic = (provenance.get("analytic") or {}).get("type", "analytic")
         chosen = ("the common start, no prior (the result is the no-prior estimate)" if start == "common"
-                  else f"the analytic start ({analytic} distilled), pull strength {pull}" if start == "analytic"
+                  else f"the {analytic} fit, distilled" if start == "analytic"
                   else f"pull strength {pull}" + (f", code strength {code}" if code is not None else ""))
         rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
