@@ -4,6 +4,7 @@ fallback, the written result."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -135,6 +136,26 @@ class Estimator(Descent):
             raise EstimateError(f"the images do not depend on BSDF '{self.bsdf_id}' (zero gradient at the "
                                 "start): is the object visible to the sensors and lit?")
 
+    @contextlib.contextmanager
+    def holding_out(self):
+        """Fits within see every view but the last, the held-out one, whose index it yields."""
+        held_out = len(self.references) - 1
+        views, self.views = self.views, list(range(held_out))
+        try:
+            yield held_out
+        finally:
+            self.views = views
+
+    def run_candidate(self, phase: Phase, bar, first_step: int) -> np.ndarray | None:
+        """:meth:`run`, or ``None`` where the candidate's fit runs away; its halvings are given back,
+        so the estimate goes on without it with the whole budget."""
+        halvings = self.halvings
+        try:
+            return self.run(phase, bar, first_step)
+        except EstimateFailed:
+            self.halvings = halvings
+            return None
+
     def screen_codes(self, decoder, candidates: np.ndarray) -> np.ndarray:
         """The candidate code whose renders (a quarter of the samples) fit the images best."""
         best, best_loss = candidates[0], math.inf
@@ -211,30 +232,25 @@ def choose_start(est: Estimator, starts: dict, plan: Plan, bar) -> tuple:
     where none is left, ``COMMON_START``. Returns the choice, the held-out losses by candidate,
     the albedos of the rejected ones, the chosen candidate's fitted weights (``None`` for
     ``COMMON_START``) and the candidates that diverged."""
-    held_out = len(est.references) - 1
     on_step, est.on_step = est.on_step, None  # candidates are no snapshots of the estimate
-    views, est.views = est.views, list(range(held_out))
     losses, rejected, fits, diverged = {}, {}, {}, []
     try:
-        for name, start in starts.items():
-            for strength in plan.pull_strengths:
-                phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
-                              pull_penalty(start, strength))
-                halvings = est.halvings
-                try:
-                    fitted = fits[name, strength] = est.run(phase, bar, plan.code_steps)
-                except EstimateFailed:
-                    # A candidate whose fit runs away is no candidate; the others keep the whole
-                    # budget of halvings.
-                    est.halvings = halvings
-                    diverged.append((name, strength))
-                    continue
-                losses[name, strength] = est.held_out_loss(fitted, held_out)
-                albedo, material = albedo_check(fitted)
-                if not material:
-                    rejected[name, strength] = albedo
+        with est.holding_out() as held_out:
+            for name, start in starts.items():
+                for strength in plan.pull_strengths:
+                    phase = Phase("weights", start, plan.candidate_steps, Network._set_weights,
+                                  pull_penalty(start, strength))
+                    fitted = est.run_candidate(phase, bar, plan.code_steps)
+                    if fitted is None:
+                        diverged.append((name, strength))
+                        continue
+                    fits[name, strength] = fitted
+                    losses[name, strength] = est.held_out_loss(fitted, held_out)
+                    albedo, material = albedo_check(fitted)
+                    if not material:
+                        rejected[name, strength] = albedo
     finally:
-        est.on_step, est.views = on_step, views
+        est.on_step = on_step
     allowed = [k for k in losses if k not in rejected]
     choice = min(allowed, key=losses.__getitem__) if allowed else COMMON_START
     return choice, losses, rejected, fits.get(choice), diverged
@@ -285,9 +301,9 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dic
     if plan.selecting:
         choice, losses, rejected, fitted, diverged = choose_start(est, starts, plan, bar)
     analytic_losses = analytic_losses or {}
-    extra["held_out_losses"] = {**{candidate_name(k): v for k, v in losses.items()}, **analytic_losses}
-    if not extra["held_out_losses"]:
-        del extra["held_out_losses"]
+    held_out_losses = {**{candidate_name(k): v for k, v in losses.items()}, **analytic_losses}
+    if held_out_losses:
+        extra["held_out_losses"] = held_out_losses
     if diverged:
         extra["diverged"] = [candidate_name(k) for k in diverged]
     rejected = {candidate_name(k): v for k, v in rejected.items()}
@@ -321,19 +337,14 @@ def fit_analytic_candidates(estimators: list, plan: Plan, bar) -> tuple[dict, di
     and the models whose fit diverged (no candidates)."""
     thetas, losses, diverged = {}, {}, []
     for est in estimators:
-        held_out = len(est.references) - 1
-        views, est.views = est.views, list(range(held_out))
-        try:
-            (phase,) = est.model.phases(plan.analytic_steps)
-            try:
-                thetas[est.model.kind] = est.run(phase, bar, 0)
-            except EstimateFailed:
-                est.halvings = 0  # given back: the estimate goes on without this candidate
-                diverged.append(est.model.kind)
+        kind = est.model.kind
+        (phase,) = est.model.phases(plan.analytic_steps)
+        with est.holding_out() as held_out:
+            theta = est.run_candidate(phase, bar, 0)
+            if theta is None:
+                diverged.append(kind)
                 continue
-            losses[est.model.kind] = est.held_out_loss(thetas[est.model.kind], held_out, est.model._apply)
-        finally:
-            est.views = views
+            thetas[kind], losses[kind] = theta, est.held_out_loss(theta, held_out, est.model._apply)
     return thetas, losses, diverged
 
 
