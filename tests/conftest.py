@@ -201,10 +201,9 @@ def network_file(tmp_path_factory) -> Path:
     return write_network(out / "synthetic.nbrdf.json")
 
 
-#: The trainer settings and restarts of an estimate's distillation of its chosen analytic fit, in
-#: tests: the command's take half a minute (tests/test_estimate.py checks how they are used).
+#: The trainer settings of an estimate's distillation of its chosen analytic fit, in tests: the
+#: defaults take about a minute (tests/test_estimate.py checks the command uses them).
 QUICK_DISTILLATION = {"samples": 200_000, "max_epochs": 30}
-QUICK_DISTIL_RESTARTS = 2
 
 
 @pytest.fixture(autouse=True)
@@ -212,7 +211,6 @@ def quick_distillation(monkeypatch):
     from nbrdf_mitsuba.estimate import analytic_start
 
     monkeypatch.setattr(analytic_start, "DISTIL_SETTINGS", QUICK_DISTILLATION)
-    monkeypatch.setattr(analytic_start, "DISTIL_RESTARTS", QUICK_DISTIL_RESTARTS)
 
 
 @pytest.fixture
