@@ -271,17 +271,19 @@ def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
             for strength in plan.code_strengths}
 
 
-#: What :func:`prior_attempt` returns in place of weights where an analytic candidate wins.
-ANALYTIC_CHOSEN = "analytic"
+def best_analytic(analytic_losses: dict) -> str | None:
+    """The analytic candidate of the lowest held-out loss (``analytic_losses`` by model); None
+    without any."""
+    return min(analytic_losses, key=analytic_losses.__getitem__) if analytic_losses else None
 
 
 def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dict | None = None) -> tuple:
     """One attempt of the prior at the estimator's seed: the code through the decoder, then the
     weights pulled toward the decoded ones by the chosen strength. Returns the weights (``None``
-    where the albedo check rejected every candidate or the final network; ``ANALYTIC_CHOSEN``
-    where an analytic candidate's held-out loss, of ``analytic_losses`` by model, is lower than
-    the best kept network candidate's), the summary's additions, and the rejected albedos by
-    candidate name (``final``: the final network)."""
+    where the albedo check rejected every candidate or the final network, or where an analytic
+    candidate won), the analytic candidate that won (its held-out loss, of ``analytic_losses`` by
+    model, lower than the best kept network candidate's; else None), the summary's additions, and
+    the rejected albedos by candidate name (``final``: the final network)."""
     # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
     # view's noise, and the view's light often decides which code is reached (docs/experiments.md,
     # Estimation: "The code phase on every training view"). The candidates' weights, which can fit
@@ -309,9 +311,10 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dic
     rejected = {candidate_name(k): v for k, v in rejected.items()}
     extra["code"] = [float(c) for c in codes[code_strength]]
     if choice == COMMON_START:
-        return None, extra, rejected
-    if analytic_losses and min(analytic_losses.values()) < losses[choice]:
-        return ANALYTIC_CHOSEN, extra, rejected
+        return None, None, extra, rejected
+    analytic = best_analytic(analytic_losses)
+    if analytic is not None and analytic_losses[analytic] < losses[choice]:
+        return None, analytic, extra, rejected
     strength = choice[1]
     extra.update({"start": "decoded", "pull_strength": strength, "code_strength": code_strength})
     # The chosen candidate's fit goes on over every view (its first steps' render seeds, as a refit
@@ -325,9 +328,9 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dic
     albedo, material = albedo_check(weights)
     if not material:
         rejected["final"] = albedo
-        return None, extra, rejected
+        return None, None, extra, rejected
     extra["albedo_max"] = albedo
-    return weights, extra, rejected
+    return weights, None, extra, rejected
 
 
 def fit_analytic_candidates(estimators: list, plan: Plan, bar) -> tuple[dict, dict, list]:
@@ -372,27 +375,27 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
         raise EstimateError(str(error)) from None
     analytic = analytic or []
     thetas, analytic_losses, analytic_diverged = fit_analytic_candidates(analytic, plan, bar)
-    seed, rejected_all, attempt_steps = est.seed, {}, plan.attempt_steps()
+    seed, rejected_all, attempt_steps, chosen = est.seed, {}, plan.attempt_steps(), None
     try:
         for attempt in range(PRIOR_ATTEMPTS):
             est.seed = seed + ATTEMPT_SEED_STRIDE * attempt
             if attempt > 0:
                 bar.total += attempt_steps
             try:
-                weights, extra, rejected = prior_attempt(est, decoder, plan, bar, analytic_losses)
+                weights, chosen, extra, rejected = prior_attempt(est, decoder, plan, bar, analytic_losses)
             except LatentError as error:
                 raise EstimateError(str(error)) from None
             prefix = f"attempt {attempt}: " if attempt else ""
             rejected_all.update({prefix + k: v for k, v in rejected.items()})
-            if weights is not None:
+            if weights is not None or chosen is not None:
                 extra["attempts"] = attempt + 1
                 break
         else:
             # No attempt gave a material: the best analytic candidate, else the nbrdf-no-prior
             # estimate; the last attempt's best code is kept for the record.
             extra["attempts"] = PRIOR_ATTEMPTS
-            weights = ANALYTIC_CHOSEN if analytic_losses else None
-        if weights is None:
+            chosen = best_analytic(analytic_losses)
+        if weights is None and chosen is None:
             est.seed = seed
             bar.total += plan.code_steps + plan.weight_steps
             extra.update({"start": COMMON_START, "pull_strength": None, "code_strength": None})
@@ -400,10 +403,9 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
                                     Network._set_weights, None), bar, 0)
     finally:
         est.seed = seed
-    if isinstance(weights, str):  # ANALYTIC_CHOSEN
-        kind = min(analytic_losses, key=analytic_losses.__getitem__)
-        chosen = next(a for a in analytic if a.model.kind == kind)
-        fitted, weights = refit_analytic(chosen, thetas[kind], plan, bar, args.threads)
+    if chosen is not None:
+        candidate = next(a for a in analytic if a.model.kind == chosen)
+        fitted, weights = refit_analytic(candidate, thetas[chosen], plan, bar, args.threads)
         extra.update({"start": "analytic", "analytic": fitted, "pull_strength": None, "code_strength": None})
     if analytic_diverged:
         extra["diverged"] = extra.get("diverged", []) + analytic_diverged
