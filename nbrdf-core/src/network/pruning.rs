@@ -53,9 +53,10 @@ const WORK_BUDGET: usize = 200_000_000;
 /// work would exceed [`WORK_BUDGET`], and at least one (the whole domain).
 pub(crate) fn box_budget(widths: [usize; 2]) -> usize {
     let [h1, h2] = widths;
-    let work_per_box = (super::INPUTS * h1)
+    let work_per_box = super::INPUTS
+        .saturating_mul(h1)
         .saturating_add(h1.saturating_mul(h2))
-        .saturating_add(3 * h2)
+        .saturating_add(h2.saturating_mul(3))
         .max(1);
     (WORK_BUDGET / work_per_box).clamp(1, BOX_BUDGET)
 }
