@@ -175,6 +175,43 @@ def test_a_diverging_candidate_is_left_out_not_the_estimate(setup, tmp_path, mon
     assert halvings_after == [0] * len(halvings_after) and len(halvings_after) >= 4, halvings_after
 
 
+def test_a_chosen_network_whose_fit_on_every_view_runs_away_is_kept_as_chosen(setup, tmp_path, monkeypatch):
+    """Where the chosen network candidate's fit over every view runs away through every halving,
+    the estimate writes that candidate's network as the held-out view chose it and names the
+    continuation in the provenance, instead of failing."""
+    from nbrdf_mitsuba.estimate import estimator
+
+    chosen, real_choose, real_loss = [], estimator.choose_start, estimator.Estimator.loss_and_grad
+
+    def choose_start(est, starts, plan, bar):
+        chosen.append(real_choose(est, starts, plan, bar))
+        return chosen[-1]
+
+    continuation = []
+
+    def loss_and_grad(self, phase, theta, step):
+        if len(chosen) == 1 and phase.kind == "weights" and not continuation:
+            continuation.append(phase)  # the first weights phase after the choice
+        if continuation and phase is continuation[0]:
+            return math.nan, None
+        return real_loss(self, phase, theta, step)
+
+    monkeypatch.setattr(estimator, "choose_start", choose_start)
+    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda estimators, plan, bar: ({}, {}, []))
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
+    scene, images = setup
+    out = tmp_path / "prior.nbrdf.json"
+    assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    document = json.loads(out.read_text())
+    assert document["provenance"]["diverged"] == [estimator.CONTINUATION]
+    choice, _, _, fitted, _ = chosen[0]
+    assert document["provenance"]["attempts"] == len(chosen)
+    if len(chosen) == 1:  # the albedo check kept the candidate: it is the network written
+        assert document["provenance"]["pull_strength"] == choice[1]
+        flat = np.concatenate([np.concatenate([layer["weights"], layer["bias"]]) for layer in document["layers"]])
+        np.testing.assert_allclose(flat, np.float32(fitted), rtol=0, atol=1e-6)
+
+
 def test_an_unexpected_error_is_one_line_and_a_hint_not_a_traceback(setup, tmp_path, monkeypatch, capsys):
     from nbrdf_mitsuba.estimate import estimator
 

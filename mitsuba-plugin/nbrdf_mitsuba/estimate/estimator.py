@@ -271,6 +271,10 @@ def fit_codes(est: Estimator, decoder, plan: Plan, bar) -> dict:
             for strength in plan.code_strengths}
 
 
+#: The name in the provenance's ``diverged`` of the chosen network candidate's fit over every view.
+CONTINUATION = "continuation"
+
+
 def best_analytic(analytic_losses: dict) -> str | None:
     """The analytic candidate of the lowest held-out loss (``analytic_losses`` by model); None
     without any."""
@@ -324,7 +328,12 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dic
     weights, steps = (center, plan.weight_steps) if fitted is None else (fitted, plan.weight_steps - plan.candidate_steps)
     if steps > 0:
         phase = Phase("weights", weights, steps, Network._set_weights, pull_penalty(center, strength))
-        weights = est.run(phase, bar, plan.code_steps)
+        continued = est.run_candidate(phase, bar, plan.code_steps)
+        if continued is None:
+            # Its fit over every view ran away: the network the held-out view chose is kept.
+            extra["diverged"] = extra.get("diverged", []) + [CONTINUATION]
+        else:
+            weights = continued
     albedo, material = albedo_check(weights)
     if not material:
         rejected["final"] = albedo
