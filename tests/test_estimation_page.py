@@ -31,13 +31,18 @@ def test_the_page_is_what_its_command_writes(tmp_path):
     assert (PAGE.parent / json.loads(STORED.read_text())["figure"]["path"]).is_file()
 
 
+def figures_by_seed(stored: dict, which: str) -> dict[tuple[str, str], dict]:
+    """The stored novel-view RMSE of set ``which``, by (material, model) and then seed."""
+    figures: dict[tuple[str, str], dict] = {}
+    for r in stored["results"]:
+        if r["set"] == which:
+            figures.setdefault((r["material"], r["model"]), {})[r.get("seed")] = r["rmse_tonemapped"]
+    return figures
+
+
 def test_the_tables_numbers_are_the_stored_figures():
     stored, text = json.loads(STORED.read_text()), PAGE.read_text()
-    figures: dict[tuple[str, str], dict] = {}
-    for r in stored["results"]:  # the per-model table is the tuning set's (the test set has its own)
-        if r["set"] != "tuning":
-            continue
-        figures.setdefault((r["material"], r["model"]), {})[r.get("seed")] = r["rmse_tonemapped"]
+    figures = figures_by_seed(stored, "tuning")  # the per-model table is the tuning set's
     assert len(figures) == 42
     for (material, model), by_seed in figures.items():
         cells = row(text, material, model)
@@ -73,13 +78,9 @@ def test_the_test_sets_table_is_the_stored_figures():
     """Each test truth's row: the prior's RMSE, the best analytic model's and their ratio, from the
     stored figures' means over the seeds each was measured at."""
     stored, text = json.loads(STORED.read_text()), PAGE.read_text()
-    test = [r for r in stored["results"] if r["set"] == "test"]
-    for material in {r["material"] for r in test}:
-        by_model: dict[str, list[float]] = {}
-        for r in test:
-            if r["material"] == material:
-                by_model.setdefault(r["model"], []).append(r["rmse_tonemapped"])
-        rmse = {model: statistics.fmean(values) for model, values in by_model.items()}
+    figures = figures_by_seed(stored, "test")
+    for material in {m for m, _ in figures}:
+        rmse = {model: statistics.fmean(by_seed.values()) for (m, model), by_seed in figures.items() if m == material}
         analytic = {m: v for m, v in rmse.items() if m in ("principled", "roughconductor", "roughplastic")}
         cells = next(line for line in text.splitlines() if line.startswith(f"| {material} | ")).split(" | ")
         best = min(analytic, key=analytic.get)
