@@ -175,6 +175,46 @@ def test_a_diverging_candidate_is_left_out_not_the_estimate(setup, tmp_path, mon
     assert halvings_after == [0] * len(halvings_after) and len(halvings_after) >= 4, halvings_after
 
 
+def test_a_runaway_continuation_stays_named_where_the_albedo_check_then_rejects_its_attempt(setup, tmp_path,
+                                                                                          monkeypatch):
+    """Where the chosen network candidate's fit over every view runs away and the albedo check then
+    rejects the network kept, the next attempt runs, and the provenance still names the first
+    attempt's continuation among what diverged (as it names its rejected albedo)."""
+    from nbrdf_mitsuba.estimate import estimator
+
+    chosen, real_choose, real_loss = [], estimator.choose_start, estimator.Estimator.loss_and_grad
+    real_albedo, continuation, rejections = estimator.albedo_check, [], []
+
+    def choose_start(est, starts, plan, bar):
+        chosen.append(real_choose(est, starts, plan, bar))
+        return chosen[-1]
+
+    def loss_and_grad(self, phase, theta, step):
+        if len(chosen) == 1 and phase.kind == "weights" and not continuation:
+            continuation.append(phase)  # the first attempt's weights phase after the choice
+        if continuation and phase is continuation[0]:
+            return math.nan, None
+        return real_loss(self, phase, theta, step)
+
+    def albedo_check(weights):
+        if continuation and not rejections:  # the first attempt's final network
+            rejections.append(weights)
+            return 2.0, False
+        return real_albedo(weights)
+
+    monkeypatch.setattr(estimator, "choose_start", choose_start)
+    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda estimators, plan, bar: ({}, {}, []))
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
+    monkeypatch.setattr(estimator, "albedo_check", albedo_check)
+    scene, images = setup
+    out = tmp_path / "prior.nbrdf.json"
+    assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    provenance = json.loads(out.read_text())["provenance"]
+    assert len(chosen) == 2 and provenance["attempts"] == 2 and len(rejections) == 1
+    assert provenance["albedo_rejected"] == {"final": 2.0}
+    assert provenance["diverged"] == [estimator.CONTINUATION]
+
+
 def test_a_chosen_network_whose_fit_on_every_view_runs_away_is_kept_as_chosen(setup, tmp_path, monkeypatch):
     """Where the chosen network candidate's fit over every view runs away through every halving,
     the estimate writes that candidate's network as the held-out view chose it and names the

@@ -384,7 +384,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
         raise EstimateError(str(error)) from None
     analytic = analytic or []
     thetas, analytic_losses, analytic_diverged = fit_analytic_candidates(analytic, plan, bar)
-    seed, rejected_all, attempt_steps, chosen = est.seed, {}, plan.attempt_steps(), None
+    seed, rejected_all, diverged_all, attempt_steps, chosen = est.seed, {}, [], plan.attempt_steps(), None
     try:
         for attempt in range(PRIOR_ATTEMPTS):
             est.seed = seed + ATTEMPT_SEED_STRIDE * attempt
@@ -396,6 +396,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
                 raise EstimateError(str(error)) from None
             prefix = f"attempt {attempt}: " if attempt else ""
             rejected_all.update({prefix + k: v for k, v in rejected.items()})
+            diverged_all += [prefix + name for name in extra.pop("diverged", [])]
             if weights is not None or chosen is not None:
                 extra["attempts"] = attempt + 1
                 break
@@ -416,8 +417,9 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
         candidate = next(a for a in analytic if a.model.kind == chosen)
         fitted, weights = refit_analytic(candidate, thetas[chosen], plan, bar, args.threads)
         extra.update({"start": "analytic", "analytic": fitted, "pull_strength": None, "code_strength": None})
-    if analytic_diverged:
-        extra["diverged"] = extra.get("diverged", []) + analytic_diverged
+    diverged_all += analytic_diverged
+    if diverged_all:
+        extra["diverged"] = diverged_all
     if rejected_all:
         extra["albedo_rejected"] = rejected_all
     return weights, extra
