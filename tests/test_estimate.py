@@ -619,6 +619,45 @@ def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_disti
     assert errors["distilled"] < min(0.01, 0.1 * errors["common"]), errors
 
 
+def test_an_analytic_candidate_wins_unless_a_network_is_lower_by_more_than_the_margin():
+    """The rule at its boundary: the network candidate's held-out loss times ``ANALYTIC_MARGIN``
+    against the analytic one's; a tie goes to the analytic fit."""
+    from nbrdf_mitsuba.estimate import estimator
+
+    margin = estimator.ANALYTIC_MARGIN
+    assert 1.0 < margin < 1.5
+    assert estimator.analytic_wins(1.0, 1.0) and estimator.analytic_wins(0.9, 1.0)
+    assert estimator.analytic_wins(margin * 0.999, 1.0) and estimator.analytic_wins(margin, 1.0)
+    assert not estimator.analytic_wins(margin * 1.001, 1.0) and not estimator.analytic_wins(2.0, 1.0)
+
+
+@pytest.mark.parametrize("analytic_ratio, start", [(1.03, "analytic"), (1.3, "decoded")])
+def test_a_network_candidate_lower_within_the_margin_leaves_the_analytic_fit_chosen(setup, tmp_path, monkeypatch,
+                                                                                   analytic_ratio, start):
+    """The held-out losses made so that the best network candidate is lower than the best analytic
+    one (roughconductor) by ``analytic_ratio``: within the margin the analytic fit is written, beyond
+    it the network; the provenance keeps the losses the choice was made on."""
+    from nbrdf_mitsuba import estimate as E
+    from nbrdf_mitsuba.estimate import plan
+
+    analytic = len(plan.ANALYTIC_MODELS)
+    losses = {i: 10.0 for i in range(analytic)}
+    losses[plan.ANALYTIC_MODELS.index("roughconductor")] = analytic_ratio
+    losses[analytic] = 1.0  # the first network candidate; the second keeps its real (higher) loss
+    spy_on_views(monkeypatch, E, judge=lambda call, loss: losses.get(call, max(loss, 5.0)))
+    scene, images = setup
+    out = tmp_path / "prior.nbrdf.json"
+    assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0
+    provenance = json.loads(out.read_text())["provenance"]
+    held_out = provenance["held_out_losses"]
+    assert held_out["roughconductor"] == analytic_ratio and held_out[str(plan.PULL_STRENGTHS[0])] == 1.0
+    assert provenance["start"] == start
+    if start == "analytic":
+        assert provenance["analytic"]["type"] == "roughconductor"
+    else:
+        assert provenance["pull_strength"] == plan.PULL_STRENGTHS[0] and "analytic" not in provenance
+
+
 def test_the_chosen_analytic_fit_is_distilled_at_the_trainers_defaults(llvm_variant, monkeypatch):
     """The command distils at the trainer's defaults (the suite cuts them: conftest.py
     ``quick_distillation``); a failed training is the estimate's failure, named."""
