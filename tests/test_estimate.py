@@ -175,15 +175,11 @@ def test_a_diverging_candidate_is_left_out_not_the_estimate(setup, tmp_path, mon
     assert halvings_after == [0] * len(halvings_after) and len(halvings_after) >= 4, halvings_after
 
 
-def test_a_runaway_continuation_stays_named_where_the_albedo_check_then_rejects_its_attempt(setup, tmp_path,
-                                                                                          monkeypatch):
-    """Where the chosen network candidate's fit over every view runs away and the albedo check then
-    rejects the network kept, the next attempt runs, and the provenance still names the first
-    attempt's continuation among what diverged (as it names its rejected albedo)."""
-    from nbrdf_mitsuba.estimate import estimator
-
-    chosen, real_choose, real_loss = [], estimator.choose_start, estimator.Estimator.loss_and_grad
-    real_albedo, continuation, rejections = estimator.albedo_check, [], []
+def run_away_in_the_first_continuation(monkeypatch, estimator) -> tuple[list, list]:
+    """Makes the first attempt's chosen network candidate's fit over every view run away (every
+    step non-finite), with no analytic candidates; returns the held-out choices made (one per
+    attempt) and that continuation's phase once it has run."""
+    chosen, real_choose, real_loss, continuation = [], estimator.choose_start, estimator.Estimator.loss_and_grad, []
 
     def choose_start(est, starts, plan, bar):
         chosen.append(real_choose(est, starts, plan, bar))
@@ -196,15 +192,28 @@ def test_a_runaway_continuation_stays_named_where_the_albedo_check_then_rejects_
             return math.nan, None
         return real_loss(self, phase, theta, step)
 
+    monkeypatch.setattr(estimator, "choose_start", choose_start)
+    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda estimators, plan, bar: ({}, {}, []))
+    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
+    return chosen, continuation
+
+
+def test_a_runaway_continuation_stays_named_where_the_albedo_check_then_rejects_its_attempt(setup, tmp_path,
+                                                                                          monkeypatch):
+    """Where the chosen network candidate's fit over every view runs away and the albedo check then
+    rejects the network kept, the next attempt runs, and the provenance still names the first
+    attempt's continuation among what diverged (as it names its rejected albedo)."""
+    from nbrdf_mitsuba.estimate import estimator
+
+    chosen, continuation = run_away_in_the_first_continuation(monkeypatch, estimator)
+    real_albedo, rejections = estimator.albedo_check, []
+
     def albedo_check(weights):
         if continuation and not rejections:  # the first attempt's final network
             rejections.append(weights)
             return 2.0, False
         return real_albedo(weights)
 
-    monkeypatch.setattr(estimator, "choose_start", choose_start)
-    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda estimators, plan, bar: ({}, {}, []))
-    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
     monkeypatch.setattr(estimator, "albedo_check", albedo_check)
     scene, images = setup
     out = tmp_path / "prior.nbrdf.json"
@@ -221,24 +230,7 @@ def test_a_chosen_network_whose_fit_on_every_view_runs_away_is_kept_as_chosen(se
     continuation in the provenance, instead of failing."""
     from nbrdf_mitsuba.estimate import estimator
 
-    chosen, real_choose, real_loss = [], estimator.choose_start, estimator.Estimator.loss_and_grad
-
-    def choose_start(est, starts, plan, bar):
-        chosen.append(real_choose(est, starts, plan, bar))
-        return chosen[-1]
-
-    continuation = []
-
-    def loss_and_grad(self, phase, theta, step):
-        if len(chosen) == 1 and phase.kind == "weights" and not continuation:
-            continuation.append(phase)  # the first weights phase after the choice
-        if continuation and phase is continuation[0]:
-            return math.nan, None
-        return real_loss(self, phase, theta, step)
-
-    monkeypatch.setattr(estimator, "choose_start", choose_start)
-    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda estimators, plan, bar: ({}, {}, []))
-    monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
+    chosen, _ = run_away_in_the_first_continuation(monkeypatch, estimator)
     scene, images = setup
     out = tmp_path / "prior.nbrdf.json"
     assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1") == 0

@@ -299,8 +299,8 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dic
     where the albedo check rejected every candidate or the final network, or where an analytic
     candidate won), the analytic candidate that won (its held-out loss, of ``analytic_losses`` by
     model, not ``ANALYTIC_MARGIN`` times the best kept network candidate's: :func:`analytic_wins`;
-    else None), the summary's additions, and
-    the rejected albedos by candidate name (``final``: the final network)."""
+    else None), the summary's additions, and the rejected albedos by candidate name (``final``: the
+    final network)."""
     # The code phase sees every view, the held-out one too: its 32 values are too few to fit that
     # view's noise, and the view's light often decides which code is reached (docs/experiments.md,
     # Estimation: "The code phase on every training view"). The candidates' weights, which can fit
