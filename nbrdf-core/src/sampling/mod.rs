@@ -297,6 +297,42 @@ pub(crate) fn split_chunks<const K: usize>(
     chunks
 }
 
+/// The outputs of one task of a batched sampling call: its lanes' light directions, weights and
+/// pdfs.
+pub(crate) struct SampleOut<'a> {
+    pub(crate) light: DirectionsMut<'a>,
+    pub(crate) weight: RgbMut<'a>,
+    pub(crate) pdf: &'a mut [f32],
+}
+
+/// The first `n` lanes of a batched sampling call's outputs, split in order into tasks of
+/// `lanes` lanes (the last may be shorter): task `k` starts at lane `k * lanes`.
+pub(crate) fn sample_tasks<'a>(
+    light: DirectionsMut<'a>,
+    weight: RgbMut<'a>,
+    pdf: &'a mut [f32],
+    n: usize,
+    lanes: usize,
+) -> Vec<SampleOut<'a>> {
+    let outputs = [
+        &mut light.x[..n],
+        &mut light.y[..n],
+        &mut light.z[..n],
+        &mut weight.r[..n],
+        &mut weight.g[..n],
+        &mut weight.b[..n],
+        &mut pdf[..n],
+    ];
+    split_chunks(outputs, lanes)
+        .into_iter()
+        .map(|[x, y, z, r, g, b, pdf]| SampleOut {
+            light: DirectionsMut { x, y, z },
+            weight: RgbMut { r, g, b },
+            pdf,
+        })
+        .collect()
+}
+
 /// Batched sampling: for each lane draws a light direction, its pdf, and the weight
 /// `f_r cos / pdf` of `brdf` (0 for invalid samples). All slices have the same length; if they
 /// do not, only the common prefix is processed.
@@ -316,32 +352,29 @@ pub fn sample_batch(
         weight.min_len(),
         pdf.len(),
     ]);
-    let outputs = [
-        &mut light.x[..n],
-        &mut light.y[..n],
-        &mut light.z[..n],
-        &mut weight.r[..n],
-        &mut weight.g[..n],
-        &mut weight.b[..n],
-        &mut pdf[..n],
-    ];
-    split_chunks(outputs, TASK_LANES)
+    sample_tasks(light, weight, pdf, n, TASK_LANES)
         .into_par_iter()
         .enumerate()
-        .for_each(|(k, [lx, ly, lz, r, g, b, p])| {
+        .for_each(|(k, out)| {
+            let SampleOut {
+                mut light,
+                weight,
+                pdf,
+            } = out;
             let start = k * TASK_LANES;
-            let end = start + lx.len();
-            for i in 0..lx.len() {
-                let j = start + i;
-                let s = strategy.sample(view.get(j), [u.x[j], u.y[j], u.z[j]]);
-                (lx[i], ly[i], lz[i], p[i]) = (s.light.x, s.light.y, s.light.z, s.pdf);
+            let end = start + pdf.len();
+            for (i, p) in pdf.iter_mut().enumerate() {
+                let s = strategy.sample(view.get(start + i), u.get(start + i).to_array());
+                light.set(i, s.light);
+                *p = s.pdf;
             }
             // One batched BRDF call per task keeps the network on its vectorised path.
             let sampled = Directions {
-                x: lx,
-                y: ly,
-                z: lz,
+                x: light.x,
+                y: light.y,
+                z: light.z,
             };
+            let RgbMut { r, g, b } = weight;
             brdf.eval_cos_batch(
                 view.slice(start, end),
                 sampled,
@@ -351,7 +384,7 @@ pub fn sample_batch(
                     b: &mut *b,
                 },
             );
-            for (i, &pdf) in p.iter().enumerate() {
+            for (i, &pdf) in pdf.iter().enumerate() {
                 for c in [&mut r[i], &mut g[i], &mut b[i]] {
                     *c = sample_weight(*c, pdf);
                 }

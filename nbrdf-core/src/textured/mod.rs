@@ -56,7 +56,9 @@ use crate::error::{NbrdfError, Result};
 #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
 use crate::fastmath::Fused;
 use crate::fastmath::{MulAdd, Unfused};
-use crate::sampling::{sample_weight, split_chunks, DirectionSample, SamplingStrategy};
+use crate::sampling::{
+    sample_tasks, sample_weight, split_chunks, DirectionSample, SampleOut, SamplingStrategy,
+};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -261,26 +263,11 @@ impl TexturedNbrdf {
             weight.min_len(),
             pdf.len(),
         ]);
-        let outputs = [
-            &mut light.x[..n],
-            &mut light.y[..n],
-            &mut light.z[..n],
-            &mut weight.r[..n],
-            &mut weight.g[..n],
-            &mut weight.b[..n],
-            &mut pdf[..n],
-        ];
-        split_chunks(outputs, TASK_LANES)
+        sample_tasks(light, weight, pdf, n, TASK_LANES)
             .into_par_iter()
             .enumerate()
-            .for_each(|(k, [x, y, z, r, g, b, pdf])| {
-                let lanes = Lanes::new(k * TASK_LANES, uv, view);
-                let out = SampleOut {
-                    light: DirectionsMut { x, y, z },
-                    weight: RgbMut { r, g, b },
-                    pdf,
-                };
-                self.sample_chunk(lanes, u, out);
+            .for_each(|(k, out)| {
+                self.sample_chunk(Lanes::new(k * TASK_LANES, uv, view), u, out);
             });
     }
 
@@ -458,13 +445,6 @@ impl<'a> Lanes<'a> {
     fn new(start: usize, uv: Uvs<'a>, view: Directions<'a>) -> Self {
         Lanes { start, uv, view }
     }
-}
-
-/// The outputs of one task of [`TexturedNbrdf::sample_batch`].
-struct SampleOut<'a> {
-    light: DirectionsMut<'a>,
-    weight: RgbMut<'a>,
-    pdf: &'a mut [f32],
 }
 
 /// Why the lobes' channel names are unusable, if they are: empty, not printable ASCII, a latent
