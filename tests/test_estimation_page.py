@@ -141,8 +141,9 @@ def headline_row(text, which):
     return [c.strip() for c in line.strip("|").split("|")]
 
 
-def prior_ratios(results):
-    """material -> the prior's mean RMSE over the best analytic model's mean (from stored rows)."""
+def prior_ratios(results, model="nbrdf"):
+    """material -> ``model``'s (the prior's) mean RMSE over the best analytic model's mean (from
+    stored rows)."""
     means: dict[tuple[str, str], list] = {}
     for r in results:
         means.setdefault((r["material"], r["model"]), []).append(r["rmse_tonemapped"])
@@ -150,8 +151,8 @@ def prior_ratios(results):
     for material in {m for m, _ in means}:
         analytic = [statistics.fmean(v) for (m, model), v in means.items()
                     if m == material and model in ("principled", "roughconductor", "roughplastic")]
-        if (material, "nbrdf") in means and analytic:
-            ratios[material] = statistics.fmean(means[material, "nbrdf"]) / min(analytic)
+        if (material, model) in means and analytic:
+            ratios[material] = statistics.fmean(means[material, model]) / min(analytic)
     return ratios
 
 
@@ -177,6 +178,9 @@ def test_the_headline_leads_with_the_test_set_and_its_ratios_are_the_stored_figu
         assert cells[6] == f"{sum(v < 1 for v in ratios.values())} of {len(ratios)}"
         measured = [v for m, v in ratios.items() if not m.startswith("mitsuba-")]
         assert cells[7] == f"{statistics.fmean(measured):.2f}x ({len(measured)})"
+        ceilings = prior_ratios([r for r in stored["results"] if r["set"] == which], "nbrdf-from-truth")
+        assert cells[9] == (f"{statistics.fmean(ceilings[m] for m in ratios):.2f}x" if set(ratios) <= set(ceilings)
+                            else "-")
     estimated = {r["material"] for r in stored["results"] if r["set"] == "test" and r["model"] == "nbrdf"}
     assert ("**The test set is measured in part**" in text) == (0 < len(estimated) < 25)
 
@@ -213,3 +217,16 @@ def test_collecting_a_set_keeps_the_others_stored_figures(tmp_path):
     assert "0.0250 (roughconductor)" in line and "| 0.80x | 2.00x |" in line
     assert text.index("| merl-chrome-abc |") < text.index("## The tuning set")
     assert "| test | nbrdf | 60-60 | 60 |" in text
+
+
+def test_the_ceilings_mean_is_over_every_material_or_none():
+    """The headline's ceiling mean is the mean of ceiling / best analytic over the materials with a
+    prior's ratio, and absent where one of them has no ceiling (a mean over some would not compare)."""
+    from nbrdf_tools.pages.estimation import headline
+
+    cases = {("a", "nbrdf"): {0: 2.0}, ("a", "principled"): {0: 4.0}, ("a", "nbrdf-from-truth"): {None: 1.0},
+             ("b", "nbrdf"): {0: 3.0}, ("b", "roughplastic"): {0: 2.0}, ("b", "nbrdf-from-truth"): {None: 0.5}}
+    assert headline.summary(headline.per_material(cases))["ceiling_mean"] == pytest.approx((0.25 + 0.25) / 2)
+    del cases["b", "nbrdf-from-truth"]
+    assert headline.summary(headline.per_material(cases))["ceiling_mean"] is None
+    assert headline.table({"test": cases})[2].endswith("| - |")

@@ -239,7 +239,8 @@ def render(stored: dict, stored_arg: str | None) -> str:
         "Per material, the prior's (`nbrdf`) mean novel-view RMSE over its seeds divided by the best analytic "
         "model's mean; per set, the mean, median and worst of these ratios, the wins (ratios below 1), the "
         "mean over the measured materials alone (RGL, MERL) and the same mean for the network without the "
-        "prior.", "",
+        f"prior and for the ceiling (`{report.CEILING}`, the network distilled from the truth: what the network's "
+        "form allows).", "",
         *headline.table(by_set), "", *test,
         "## Setup", "",
         f"A sphere, {s['views']} training views ({side}x{side}, {s['reference_spp']} spp references) under "
