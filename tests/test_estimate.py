@@ -503,7 +503,7 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
     return rendered, judged
 
 
-def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch):
+def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, monkeypatch, capsys):
     """The analytic candidates are fitted first; the code sees every training view; the network
     candidates (each pull strength from the decoded start) and the analytic ones see all but the
     last, the last alone judges them, the lowest held-out loss wins (here a network's: the
@@ -538,7 +538,7 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
     assert len({losses[k] for k in names}) > 1, losses
     best = min(names, key=losses.get)
     assert provenance["start"] == "decoded" and provenance["pull_strength"] == float(best)
-    assert "analytic" not in provenance
+    assert "analytic" not in provenance and "chose the" not in capsys.readouterr().out
     assert "albedo_rejected" not in provenance and 0 < provenance["albedo_max"] < priors.ALBEDO_BOUND
     assert judged == [1] * 2 * (analytic + len(names))  # the last training view, once per candidate and run
     # The analytic fits (3 steps each), the screening (49 starts) and code (2 steps) on both views;
@@ -557,11 +557,12 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
         second["provenance"]["held_out_losses"]
 
 
-def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_distilled(setup, tmp_path, monkeypatch):
+def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_distilled(setup, tmp_path, monkeypatch,
+                                                                                        capsys):
     """Where an analytic fit (here roughplastic, made to) has the lowest held-out loss, its fit goes
     on over every view from where the candidate's ended, is recorded in the provenance, and the
     written network is its distillation: close to it in BRDF space, far closer than the common
-    initialisation; no pull or code strength is recorded."""
+    initialisation; no pull or code strength is recorded; the command says which fit it chose."""
     from nbrdf_mitsuba import estimate as E
     from nbrdf_mitsuba.estimate import analytic_start, plan
     from nbrdf_tools.common.compare_materials import log_error
@@ -585,6 +586,7 @@ def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_disti
     rendered, _ = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == chosen else loss)
     out = tmp_path / "prior.nbrdf.json"
     assert run(scene, images, out, "--steps", "6", "--spp", "2", "--threads", "1", "--seed", "2") == 0
+    assert "the held-out view chose the roughplastic fit" in capsys.readouterr().out
     document = json.loads(out.read_text())
     provenance = document["provenance"]
     assert provenance["start"] == "analytic" and provenance["analytic"]["type"] == "roughplastic"

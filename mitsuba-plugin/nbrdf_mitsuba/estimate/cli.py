@@ -93,5 +93,9 @@ def main(argv: list[str] | None = None) -> int:
         return _exit.FAILED
     print(f"wrote {summary['output']} ({summary['model']}): loss {summary['loss_first']:.4g} -> "
           f"{summary['loss_last']:.4g} in {summary['steps']} steps, {summary['seconds']:.1f} s")
+    if summary.get("analytic"):
+        # The distilled network can render above the fit itself (docs/estimation.md, "What is not done").
+        print(f"the held-out view chose the {summary['analytic']['type']} fit: the network is that fit distilled; "
+              "the fit itself is the provenance's \"analytic\", a mi.load_dict dictionary")
     return _exit.SUCCESS
 
