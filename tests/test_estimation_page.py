@@ -149,8 +149,8 @@ def prior_ratios(results, model="nbrdf"):
         means.setdefault((r["material"], r["model"]), []).append(r["rmse_tonemapped"])
     ratios = {}
     for material in {m for m, _ in means}:
-        analytic = [statistics.fmean(v) for (m, model), v in means.items()
-                    if m == material and model in ("principled", "roughconductor", "roughplastic")]
+        analytic = [statistics.fmean(v) for (m, other), v in means.items()
+                    if m == material and other in ("principled", "roughconductor", "roughplastic")]
         if (material, model) in means and analytic:
             ratios[material] = statistics.fmean(means[material, model]) / min(analytic)
     return ratios
