@@ -201,18 +201,6 @@ def network_file(tmp_path_factory) -> Path:
     return write_network(out / "synthetic.nbrdf.json")
 
 
-#: The trainer settings of an estimate's distillation of its chosen analytic fit, in tests: the
-#: defaults take about a minute (tests/test_estimate.py checks the command uses them).
-QUICK_DISTILLATION = {"samples": 200_000, "max_epochs": 30}
-
-
-@pytest.fixture(autouse=True)
-def quick_distillation(monkeypatch):
-    from nbrdf_mitsuba.estimate import analytic_start
-
-    monkeypatch.setattr(analytic_start, "DISTIL_SETTINGS", QUICK_DISTILLATION)
-
-
 @pytest.fixture
 def restore_variant():
     """Gives the test's caller its Mitsuba variant back (tests here switch between variants)."""

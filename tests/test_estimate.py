@@ -557,30 +557,24 @@ def test_pull_strength_is_chosen_by_the_held_out_training_view(setup, tmp_path, 
         second["provenance"]["held_out_losses"]
 
 
-def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_distilled(setup, tmp_path, monkeypatch,
-                                                                                        capsys):
+def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_written_as_the_base(
+        setup, tmp_path, monkeypatch, capsys):
     """Where an analytic fit (here roughplastic, made to) has the lowest held-out loss, its fit goes
     on over every view from where the candidate's ended, is recorded in the provenance, and the
-    written network is its distillation: close to it in BRDF space, far closer than the common
-    initialisation; no pull or code strength is recorded; the command says which fit it chose."""
+    written network is a zero residual on it (file field ``base``): the written material renders
+    as the fit itself, in BRDF space too; no pull or code strength is recorded; the command says
+    which fit it chose."""
     from nbrdf_mitsuba import estimate as E
-    from nbrdf_mitsuba.estimate import analytic_start, plan
+    from nbrdf_mitsuba.estimate import plan
     from nbrdf_tools.common.compare_materials import log_error
 
     scene, images = setup
-    distilled, real_distil = [], analytic_start.distil
-
-    def spy_distil(fitted, threads):
-        distilled.append((fitted, real_distil(fitted, threads)))
-        return distilled[-1][1]
-
     runs, run_phase = [], E.Estimator.run
 
     def spy_run(self, phase, bar, first_step):
         runs.append((phase.kind, phase.theta.copy(), run_phase(self, phase, bar, first_step)))
         return runs[-1][2]
 
-    monkeypatch.setattr(E.estimator, "distil", spy_distil)
     monkeypatch.setattr(E.Estimator, "run", spy_run)
     chosen = plan.ANALYTIC_MODELS.index("roughplastic")
     rendered, _ = spy_on_views(monkeypatch, E, judge=lambda call, loss: -1.0 if call == chosen else loss)
@@ -595,22 +589,11 @@ def test_an_analytic_candidate_that_wins_the_held_out_view_is_refitted_and_disti
     # The refit: on both views, from the roughplastic candidate's fitted parameters.
     assert runs[-1][0] == "analytic" and rendered[-1] == (0, 1)
     np.testing.assert_array_equal(runs[-1][1], runs[chosen][2])
-    ((fitted, weights),) = distilled
-    # The same numbers; fit-phong's rewrite of the network file may move a float by its last digit.
-    assert fitted.keys() == provenance["analytic"].keys()
-    for key, value in fitted.items():
-        got = provenance["analytic"][key]
-        assert got == value if key == "type" else (got["value"] if isinstance(value, dict) else got) == \
-            pytest.approx(value["value"] if isinstance(value, dict) else value, rel=1e-12)
-    flat = np.concatenate([np.concatenate([layer["weights"], layer["bias"]]) for layer in document["layers"]])
-    np.testing.assert_allclose(flat, np.float32(weights), rtol=0, atol=1e-6)
-    errors = {}
-    for name, network in (("distilled", weights), ("common", E.common_initialisation())):
-        path = tmp_path / f"{name}.nbrdf.json"
-        E.write_network(path, network, name, {})
-        errors[name] = log_error(mi.load_dict(fitted), mi.load_dict({"type": "nbrdf", "filename": str(path)}),
-                                 "uniform", 4000)
-    assert errors["distilled"] < min(0.01, 0.1 * errors["common"]), errors
+    assert document["base"] == provenance["analytic"]
+    assert all(not any(layer["weights"]) and not any(layer["bias"]) for layer in document["layers"])
+    assert "sampling" not in document  # the base samples itself
+    estimate = mi.load_dict({"type": "nbrdf", "filename": str(out)})
+    assert log_error(mi.load_dict(document["base"]), estimate, "uniform", 4000) < 1e-6
 
 
 def test_an_analytic_candidate_wins_unless_a_network_is_lower_by_more_than_the_margin():
@@ -650,28 +633,6 @@ def test_a_network_candidate_lower_within_the_margin_leaves_the_analytic_fit_cho
         assert provenance["analytic"]["type"] == "roughconductor"
     else:
         assert provenance["pull_strength"] == plan.PULL_STRENGTHS[0] and "analytic" not in provenance
-
-
-def test_the_chosen_analytic_fit_is_distilled_at_the_trainers_defaults(llvm_variant, monkeypatch):
-    """The command distils at the trainer's defaults (the suite cuts them: conftest.py
-    ``quick_distillation``); a failed training is the estimate's failure, named."""
-    from nbrdf_mitsuba import _train_native as native
-    from nbrdf_mitsuba import estimate as E
-    from nbrdf_mitsuba.estimate import analytic_start
-
-    monkeypatch.setattr(analytic_start, "DISTIL_SETTINGS", {})
-    seen = []
-
-    def train(config, *args, **options):
-        seen.append((config.samples, config.max_epochs, config.hidden))
-        raise native.TrainError("stopped by the test", 1)
-
-    monkeypatch.setattr(native, "train_from_arrays", train)
-    fitted = {"type": "roughplastic", "alpha": 0.2, "diffuse_reflectance": {"type": "rgb", "value": [0.5, 0.3, 0.2]}}
-    with pytest.raises(E.EstimateFailed, match="stopped by the test"):
-        analytic_start.distil(fitted, 1)
-    default = native.default_config()
-    assert seen == [(default.samples, default.max_epochs, E.models.HIDDEN)]
 
 
 def test_image_loss_is_linear_in_the_render(llvm_variant):
@@ -964,7 +925,7 @@ def test_the_albedo_bound_allows_above_one_only_what_the_lit_angles_show(llvm_va
 def test_a_decoded_candidate_that_reflects_more_than_it_receives_is_not_chosen(setup, tmp_path, monkeypatch):
     """With the bound below every network's albedo (0), no network candidate is chosen even where
     the held-out view prefers it: after every attempt of the prior the estimate is the best
-    analytic candidate, distilled, and the provenance names the rejected candidates with their
+    analytic candidate (the base of a zero network), and the provenance names the rejected candidates with their
     albedo (without analytic candidates, the common start:
     test_a_final_network_over_the_bound_falls_back_to_the_common_start)."""
     from nbrdf_mitsuba import estimate as E

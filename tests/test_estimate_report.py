@@ -108,7 +108,8 @@ def test_the_ceiling_is_no_competitor():
 
 def test_the_chosen_start_is_named(tmp_path):
     """The run page names each prior estimate's start from its provenance: the decoded start with
-    its strengths, the analytic fit chosen with its model, the common start."""
+    its strengths, the analytic fit chosen with its model (as the network's base, or distilled in
+    files written before), the common start."""
     import json
 
     from nbrdf_tools.pages.estimation import chosen_strengths
@@ -119,14 +120,17 @@ def test_the_chosen_start_is_named(tmp_path):
                   "analytic": {"type": "roughplastic"}, "held_out_losses": {"0.1": 0.002, "roughplastic": 0.001}},
         "rgl-c": {"start": "common", "pull_strength": None, "code_strength": None},
     }
+    provenances["rgl-d"] = provenances["rgl-b"]
     for name, provenance in provenances.items():
         (tmp_path / name).mkdir()
-        (tmp_path / name / "nbrdf.nbrdf.json").write_text(json.dumps({"provenance": provenance}))
+        base = {"base": provenance["analytic"]} if name == "rgl-d" else {}
+        (tmp_path / name / "nbrdf.nbrdf.json").write_text(json.dumps({**base, "provenance": provenance}))
     lines = chosen_strengths([{"material": name, "model": "nbrdf"} for name in provenances], tmp_path)
     assert lines[0] == "* rgl-a: pull strength 0.1, code strength 0.0 (held-out view loss 0.1: 0.002)"
     assert lines[1] == ("* rgl-b: the roughplastic fit, distilled (held-out view loss 0.1: 0.002; "
                         "roughplastic: 0.001)")
     assert lines[2].startswith("* rgl-c: the common start, no prior")
+    assert lines[3].startswith("* rgl-d: the roughplastic fit, as its base (held-out")
 
 
 def test_merl_truths_are_unseen_by_the_prior():

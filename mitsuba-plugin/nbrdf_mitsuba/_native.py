@@ -7,6 +7,7 @@ plain C declarations only.
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 from pathlib import Path
@@ -250,6 +251,11 @@ class Material:
         self.latent_channels = int(info.latent_channels)
         #: A textured material's texture size in texels ``(width, height)`` ((0, 0) otherwise).
         self.texture_size = (int(info.texture_size[0]), int(info.texture_size[1]))
+        base = ffi.new("const char **")
+        check(lib.nbrdf_material_base(self._ptr, base))
+        #: A network's analytic base (the file's ``base``: a Mitsuba BSDF dictionary), or None.
+        #: The material is the base plus the network; the library evaluates the network alone.
+        self.base = None if base[0] == ffi.NULL else json.loads(ffi.string(base[0]).decode("utf-8"))
 
     def eval(self, view, light) -> np.ndarray:
         """``f_r cos(theta_l)`` as planar RGB (3, n) for planar ``view`` and ``light`` (3, n)."""

@@ -33,7 +33,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import _native, jit, textured
+from . import _native, base, jit, textured
 from ._native import KIND
 from .backends import JitBackend, RustBackend, prepare_variant, use_wavefront_mode, variant_arrays
 from .parameters import SAMPLING_NAMES, SamplingParameters
@@ -151,6 +151,20 @@ class _NativeBSDFMixin(SamplingParameters):
         second = (_get(props, "exponent2"), _get(props, "specular_weight2"))
         self._configure_sampling(sampling, exponent, weight, second, _get(props, "exponent_v"))
         self._backend = self._make_backend(_get(props, "backend", _default_backend))
+        if self._native.base is not None:
+            self._add_base(self._native.base)
+
+    def _add_base(self, dictionary: dict) -> None:
+        """Puts the file's analytic base under the network (:mod:`.base`): the BSDF is their sum."""
+        label = f'{self._type_name()} "{self._filename}"'
+        bsdf = base.load_base(dictionary, label)
+        layers, _ = self._native.network(prove=False)
+        flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
+        differentiable = self._traced is not None and self._traced.mode == "opaque"
+        self._backend = base.OnBase(self._backend, bsdf, base.network_is_zero(flat, self._native.layer_shapes[-1]),
+                                    differentiable)
+        self.m_flags = self.m_flags | bsdf.flags()
+        self.m_components = [self.m_flags]
 
     def _make_backend(self, requested) -> JitBackend | RustBackend:
         """The backend object that evaluates and samples this BSDF from now on."""
@@ -314,6 +328,8 @@ class NbrdfMixin(_NativeBSDFMixin):
 
     def _apply_weights(self, weights) -> None:
         self._traced.refresh()
+        if isinstance(self._backend, base.OnBase):
+            self._backend.network_changed(base.network_is_zero(weights, self._native.layer_shapes[-1]))
 
     def _restore_weights(self) -> None:
         if not np.array_equal(np.asarray(dr.detach(self._traced.flat).numpy()).reshape(-1), self._traced.good):
@@ -364,6 +380,8 @@ class NbrdfMixin(_NativeBSDFMixin):
         if self._spectral is not None:
             count, min_nm, max_nm, _ = self._spectral
             lines.append(f"spectral = cubic B-spline, {count} coefficients over {min_nm:g}-{max_nm:g} nm")
+        if isinstance(self._backend, base.OnBase):
+            lines.append(f"base = {self._native.base['type']}")
         if self._backend.name == "jit":
             lines.append(f"jit_weights = {self._traced.mode}")
             if self._traced.mode == "auto":

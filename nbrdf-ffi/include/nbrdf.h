@@ -192,6 +192,17 @@ void nbrdf_material_free(struct NbrdfMaterial *material);
 int32_t nbrdf_material_info(const struct NbrdfMaterial *material,
                             struct NbrdfMaterialInfo *out);
 
+// Stores in `*out` a network's analytic base (the file's `base`) as JSON text: UTF-8,
+// NUL-terminated, a Mitsuba 3 BSDF dictionary, owned by the handle (valid until
+// `nbrdf_material_free`); NULL when the file has none, and for a table and a textured material.
+// Such a material's BRDF is the base plus the network, and eval and sample here give the
+// network alone: a renderer must add the base (the Mitsuba plugin does) or refuse the file.
+//
+// # Safety
+// `material` is a live handle; `out` points to writable storage for one pointer.
+int32_t nbrdf_material_base(const struct NbrdfMaterial *material,
+                            const char **out);
+
 // Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
 // direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 // `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A

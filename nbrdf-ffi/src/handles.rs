@@ -26,6 +26,8 @@ pub struct NbrdfMaterial {
     source: Source,
     /// The material's name (empty for a table), for `NbrdfMaterialInfo::name`.
     name: CString,
+    /// A network's `base` as JSON text, for `NbrdfMaterialInfo::base`.
+    base: Option<CString>,
 }
 
 enum Source {
@@ -92,12 +94,14 @@ impl NbrdfMaterial {
             return Ok(NbrdfMaterial {
                 source: Source::Merl(MerlTable::read(path)?),
                 name: CString::default(),
+                base: None,
             });
         }
         let c_name = |name: &str| CString::new(name.replace('\0', "")).unwrap_or_default();
         Ok(match NeuralMaterial::load(path)? {
             NeuralMaterial::Homogeneous(network) => NbrdfMaterial {
                 name: c_name(&network.name),
+                base: network.base.as_ref().map(|base| c_name(&base.to_string())),
                 source: Source::Network(Box::new(LoadedNetwork {
                     network,
                     proved: OnceLock::new(),
@@ -105,6 +109,7 @@ impl NbrdfMaterial {
             },
             NeuralMaterial::Textured(textured) => NbrdfMaterial {
                 name: c_name(textured.name()),
+                base: None,
                 source: Source::Textured(Box::new(textured)),
             },
         })
@@ -154,6 +159,11 @@ impl NbrdfMaterial {
     /// The material's name (empty for a table), NUL-terminated.
     pub(crate) fn name(&self) -> &CStr {
         &self.name
+    }
+
+    /// A network's `base` (JSON text, NUL-terminated), if its file has one.
+    pub(crate) fn base(&self) -> Option<&CStr> {
+        self.base.as_deref()
     }
 
     /// The network, or `None` for a table or a textured material.

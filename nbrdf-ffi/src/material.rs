@@ -221,6 +221,32 @@ pub unsafe extern "C" fn nbrdf_material_info(
     })
 }
 
+/// Stores in `*out` a network's analytic base (the file's `base`) as JSON text: UTF-8,
+/// NUL-terminated, a Mitsuba 3 BSDF dictionary, owned by the handle (valid until
+/// `nbrdf_material_free`); NULL when the file has none, and for a table and a textured material.
+/// Such a material's BRDF is the base plus the network, and eval and sample here give the
+/// network alone: a renderer must add the base (the Mitsuba plugin does) or refuse the file.
+///
+/// # Safety
+/// `material` is a live handle; `out` points to writable storage for one pointer.
+#[no_mangle]
+pub unsafe extern "C" fn nbrdf_material_base(
+    material: *const NbrdfMaterial,
+    out: *mut *const c_char,
+) -> i32 {
+    guard("nbrdf_material_base", || {
+        // SAFETY: forwarded contract; cleared first so that `*out` is NULL after a failure.
+        unsafe { write(out, "out", std::ptr::null())? };
+        // SAFETY: forwarded contract.
+        let material = unsafe { reference(material, "material")? };
+        let base = material
+            .base()
+            .map_or(std::ptr::null(), |base| base.as_ptr());
+        // SAFETY: as above.
+        unsafe { write(out, "out", base) }
+    })
+}
+
 /// Evaluates `f_r(view, light) * cos(theta_light)` (what Mitsuba's `BSDF.eval` returns) for `n`
 /// direction pairs: `view` and `light` are planar `3 n` floats, `out_rgb` receives planar
 /// `3 n` floats `[r.., g.., b..]`. Zero when either direction is at or below the horizon. A

@@ -869,3 +869,50 @@ fn files_are_told_apart_by_their_header() {
     assert!(last_error().contains("directory"), "{}", last_error());
     assert!(handle.is_null());
 }
+
+#[test]
+fn material_base_is_the_files_dictionary_or_null() {
+    let base_of = |material: &Material| {
+        let mut out = null();
+        // SAFETY: a live handle and a writable pointer.
+        let status = unsafe { nbrdf_material_base(material.ptr(), &mut out) };
+        assert_eq!(status, OK, "{}", last_error());
+        // SAFETY: NULL or a NUL-terminated string owned by the handle.
+        (!out.is_null()).then(|| unsafe { CStr::from_ptr(out) }.to_str().unwrap().to_string())
+    };
+    let (plain, _) = load_network(4);
+    assert_eq!(base_of(&plain), None);
+    let (merl, _) = load_smooth_merl();
+    assert_eq!(base_of(&merl), None);
+    let text = network_json(4).replacen(
+        "\"provenance\"",
+        r#""base": {"type": "roughconductor", "alpha": 0.2}, "provenance""#,
+        1,
+    );
+    let (with_base, _) = load_network_text(&text, "net-base");
+    let base: serde_json::Value = serde_json::from_str(&base_of(&with_base).unwrap()).unwrap();
+    assert_eq!(
+        base,
+        serde_json::json!({"type": "roughconductor", "alpha": 0.2})
+    );
+    // The library evaluates the network alone: the same values as without the base.
+    let (view, light) = (Vec3::new(0.3, 0.1, 0.9).normalize(), Vec3::Z);
+    let eval = |m: &Material| {
+        let mut out = [0.0f32; 3];
+        let (v, l) = ([view.x, view.y, view.z], [light.x, light.y, light.z]);
+        // SAFETY: one pair, planar arrays of 3 floats.
+        let status =
+            unsafe { nbrdf_material_eval(m.ptr(), v.as_ptr(), l.as_ptr(), 1, out.as_mut_ptr()) };
+        assert_eq!(status, OK, "{}", last_error());
+        out
+    };
+    assert_eq!(eval(&with_base), eval(&plain));
+    // SAFETY: NULL arguments are reported, not dereferenced.
+    unsafe {
+        let mut out = null();
+        assert_ne!(nbrdf_material_base(null(), &mut out), OK);
+        assert!(last_error().contains("material"));
+        assert_ne!(nbrdf_material_base(plain.ptr(), null_mut()), OK);
+        assert!(last_error().contains("out"));
+    }
+}

@@ -24,7 +24,8 @@ view each step:
   fitted on the same views; each is judged by one render of the held-out view at ``JUDGE_SPP``
   samples. The candidate with the lowest loss is kept: a network candidate's fit goes on over
   every view for the rest of the weight phase's steps; an analytic one's goes on over every view
-  for ``ANALYTIC_REFIT_SHARE`` of the steps and is distilled into the network by the trainer.
+  for ``ANALYTIC_REFIT_SHARE`` of the steps and is written as the network's base (file field
+  ``base``) under a zero network.
   A candidate or final network whose directional albedo exceeds its bound (:func:`albedo_bound`:
   1, or the network's own albedo where the lights fall square if higher, plus ``ALBEDO_MARGIN``;
   at most ``ALBEDO_BOUND``) is no material and is not kept; the prior is then attempted again
@@ -54,7 +55,7 @@ The package: :mod:`.cli` (the command line), :mod:`.scene` (the scene file, vari
 :mod:`.models` (the fitted models and the files written), :mod:`.plan` (how the steps and the
 candidate strengths are laid out), :mod:`.optimiser` (Adam and the descent that takes back a
 diverging step), :mod:`.priors` (the code penalty, the pull and the albedo check),
-:mod:`.analytic_start` (the analytic candidates and their distillation) and :mod:`.estimator` (the loss,
+:mod:`.analytic_start` (the analytic candidates and the zero residual on the chosen one) and :mod:`.estimator` (the loss,
 its gradient and the estimate's course).
 """
 

@@ -49,8 +49,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--pull-strength", type=float,
                    help="strength of the pull toward the decoded network's BRDF (default: chosen among "
                         f"{', '.join(map(str, PULL_STRENGTHS))} by the last training view, held out, which may "
-                        f"choose the best of the {', '.join(ANALYTIC_MODELS)} fits instead, distilled into the "
-                        f"network; the common start without the prior only where the albedo check rejects every "
+                        f"choose the best of the {', '.join(ANALYTIC_MODELS)} fits instead, written as the "
+                        f"network's base; the common start without the prior only where the albedo check rejects every "
                         f"network of the prior; {FALLBACK_PULL_STRENGTH} with one image). Given, nothing is held "
                         "out and no analytic model is fitted")
     p.add_argument("--code-strength", type=float,
@@ -94,8 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {summary['output']} ({summary['model']}): loss {summary['loss_first']:.4g} -> "
           f"{summary['loss_last']:.4g} in {summary['steps']} steps, {summary['seconds']:.1f} s")
     if summary.get("analytic"):
-        # The distilled network can render above the fit itself (docs/estimation.md, "What is not done").
-        print(f"the held-out view chose the {summary['analytic']['type']} fit: the network is that fit distilled; "
-              "the fit itself is the provenance's \"analytic\", a mi.load_dict dictionary")
+        print(f"the held-out view chose the {summary['analytic']['type']} fit: it is the material's \"base\", "
+              "under a zero network (the nbrdf BSDF renders it as the fit itself)")
     return _exit.SUCCESS
 

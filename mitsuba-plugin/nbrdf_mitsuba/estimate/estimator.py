@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .analytic_start import distil
+from .analytic_start import residual_start
 from .errors import EstimateError, EstimateFailed
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
 from .optimiser import Descent, Phase
@@ -373,22 +373,22 @@ def fit_analytic_candidates(estimators: list, plan: Plan, bar) -> tuple[dict, di
     return thetas, losses, diverged
 
 
-def refit_analytic(est: Estimator, theta: np.ndarray, plan: Plan, bar, threads: int | None) -> tuple[dict, np.ndarray]:
-    """The chosen analytic candidate's fit gone on over every view, and the network distilled from
-    it (:func:`analytic_start.distil`)."""
+def refit_analytic(est: Estimator, theta: np.ndarray, plan: Plan, bar) -> dict:
+    """The chosen analytic candidate's fit gone on over every view: the estimate's base
+    (:func:`analytic_start.residual_start`)."""
     bar.total += plan.analytic_refit_steps
     phase = Phase("analytic", theta, plan.analytic_refit_steps, est.model._apply, None)
-    fitted = est.model.result(est.run(phase, bar, plan.analytic_steps))
-    return fitted, distil(fitted, threads)
+    return est.model.result(est.run(phase, bar, plan.analytic_steps))
 
 
 def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None = None) -> tuple[np.ndarray, dict]:
     """The analytic candidates (fitted by the estimators ``analytic``, if any), then up to
     ``PRIOR_ATTEMPTS`` attempts of the prior, each with its own render seeds, until the albedo
     check keeps a network or an analytic candidate wins the held-out view (its fit then goes on
-    over every view and is distilled); where no attempt keeps a network, the best analytic
-    candidate, and without one the common start, the nbrdf-no-prior estimate (its start, steps
-    and seeds, so the same network). The weights and the summary's additions."""
+    over every view and becomes the network's base, under a zero network); where no attempt keeps
+    a network, the best analytic candidate, and without one the common start, the nbrdf-no-prior
+    estimate (its start, steps and seeds, so the same network). The weights and the summary's
+    additions."""
     from ..latent import Decoder, LatentError
 
     try:
@@ -428,8 +428,10 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
         est.seed = seed
     if chosen is not None:
         candidate = next(a for a in analytic if a.model.kind == chosen)
-        fitted, weights = refit_analytic(candidate, thetas[chosen], plan, bar, args.threads)
-        extra.update({"start": "analytic", "analytic": fitted, "pull_strength": None, "code_strength": None})
+        fitted = refit_analytic(candidate, thetas[chosen], plan, bar)
+        weights = residual_start()
+        extra.update({"start": "analytic", "analytic": fitted, "base": fitted, "pull_strength": None,
+                      "code_strength": None})
     diverged_all += analytic_diverged
     if diverged_all:
         extra["diverged"] = diverged_all
@@ -452,7 +454,9 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | Non
         summary.update(extra)
     else:
         weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
-    material = "albedo_max" in summary  # the prior's kept network has passed already
+    # The prior's kept network has passed already; a zero residual on an analytic base has nothing
+    # to check (the base is the fitted model, energy conserving as Mitsuba implements it).
+    material = "albedo_max" in summary or "base" in summary
     if not material:
         summary["albedo_max"], material = albedo_check(weights)
     if not material:
@@ -468,6 +472,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | Non
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
-    write_network(args.output, weights, name, provenance)
-    summary["sampling"] = fit_sampling(args.output)
+    write_network(args.output, weights, name, provenance, base=summary.get("base"))
+    # A zero residual is never sampled: the nbrdf BSDF samples its base (nbrdf_mitsuba.base).
+    summary["sampling"] = "base" if "base" in summary else fit_sampling(args.output)
     return summary

@@ -162,15 +162,16 @@ def _layers(flat: np.ndarray) -> list:
     return layers
 
 
-def write_network(path: Path, flat: np.ndarray, name: str, provenance: dict) -> None:
-    """An ``*.nbrdf.json`` (docs/design.md section 4) of flat width-21 weights; refuses
-    non-finite weights."""
+def write_network(path: Path, flat: np.ndarray, name: str, provenance: dict, base: dict | None = None) -> None:
+    """An ``*.nbrdf.json`` (docs/design.md section 4) of flat width-21 weights, on the analytic
+    ``base`` (a ``mi.load_dict`` dictionary) where one is given; refuses non-finite weights."""
     flat = np.asarray(flat, dtype=np.float32)
     if flat.size != HIDDEN * HIDDEN + 11 * HIDDEN + 3 or not np.all(np.isfinite(flat)):
         raise EstimateFailed("internal: refusing to write a network with non-finite or missing weights")
     layers = [{"inputs": W.shape[0], "outputs": W.shape[1], "weights": [float(v) for v in W.ravel()],
                "bias": [float(v) for v in b]} for W, b in _layers(flat)]
-    document = {"format": "nbrdf", "version": 1, "name": name, "layers": layers, "provenance": provenance}
+    document = {"format": "nbrdf", "version": 1, "name": name, "layers": layers,
+                **({"base": base} if base is not None else {}), "provenance": provenance}
     write_text(path, json.dumps(document))
 
 

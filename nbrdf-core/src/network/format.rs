@@ -61,6 +61,8 @@ struct FileIn {
     #[serde(default)]
     sampling: Option<SamplingParams>,
     #[serde(default)]
+    base: Option<serde_json::Value>,
+    #[serde(default)]
     provenance: serde_json::Value,
 }
 
@@ -78,6 +80,8 @@ struct FileOut<'a> {
     spectral: Option<&'a SpectralBasis>,
     #[serde(skip_serializing_if = "Option::is_none")]
     sampling: &'a Option<SamplingParams>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    base: &'a Option<serde_json::Value>,
     provenance: &'a serde_json::Value,
 }
 
@@ -259,6 +263,9 @@ impl Nbrdf {
         if let Some(message) = anisotropy_problem(file.anisotropic, file.sampling.as_ref()) {
             return Err(fail(message));
         }
+        if let Some(message) = file.base.as_ref().and_then(base_problem) {
+            return Err(fail(message));
+        }
         let layers: [Layer; 3] = file
             .layers
             .try_into()
@@ -269,6 +276,7 @@ impl Nbrdf {
             anisotropic: file.anisotropic,
             spectral,
             sampling: file.sampling,
+            base: file.base,
             provenance: if file.provenance.is_null() {
                 empty_object()
             } else {
@@ -296,6 +304,7 @@ impl Nbrdf {
             anisotropic: self.anisotropic,
             spectral: self.spectral.as_ref().map(Spectral::basis),
             sampling: &self.sampling,
+            base: &self.base,
             provenance: &self.provenance,
         };
         // Plain structs and a JSON value with string keys: serde_json cannot fail on these.
@@ -313,7 +322,8 @@ impl Nbrdf {
         let problem = shape_problem(&self.layers, self.output_count())
             .or_else(|| value_problem(&self.layers))
             .or_else(|| self.sampling.as_ref().and_then(SamplingParams::problem))
-            .or_else(|| anisotropy_problem(self.anisotropic, self.sampling.as_ref()));
+            .or_else(|| anisotropy_problem(self.anisotropic, self.sampling.as_ref()))
+            .or_else(|| self.base.as_ref().and_then(base_problem));
         match problem {
             Some(message) => Err(NbrdfError::InvalidArgument(format!(
                 "network '{}': {message}",
@@ -352,5 +362,20 @@ fn anisotropy_problem(anisotropic: bool, sampling: Option<&SamplingParams>) -> O
             "sampling exponent_v (an anisotropic lobe) needs an anisotropic network".to_string(),
         ),
         _ => None,
+    }
+}
+
+/// What is wrong with a `base`, if anything: the library does not evaluate it, but a renderer
+/// needs a dictionary naming a BSDF plugin (Mitsuba's `mi.load_dict`).
+fn base_problem(base: &serde_json::Value) -> Option<String> {
+    match base.as_object().map(|object| object.get("type")) {
+        None => Some(format!(
+            "\"base\" must be a BSDF dictionary (a JSON object with a \"type\"), got {base}"
+        )),
+        Some(Some(serde_json::Value::String(kind))) if !kind.is_empty() => None,
+        Some(_) => Some(
+            "\"base\" must name its BSDF plugin in a string \"type\" (e.g. \"roughconductor\")"
+                .to_string(),
+        ),
     }
 }

@@ -276,6 +276,10 @@ pub struct Nbrdf {
     /// `None` for an RGB network.
     pub spectral: Option<Spectral>,
     pub sampling: Option<SamplingParams>,
+    /// An analytic BSDF the network is a residual on (`f_r = base + network`): a Mitsuba 3 BSDF
+    /// dictionary (`mi.load_dict`) with a string `type`, kept as written. The library evaluates
+    /// and samples the network alone; a renderer adds the base (the Mitsuba plugin does).
+    pub base: Option<serde_json::Value>,
     pub provenance: serde_json::Value,
 }
 
@@ -381,6 +385,7 @@ impl Nbrdf {
             anisotropic: false,
             spectral: None,
             sampling: None,
+            base: None,
             provenance: empty_object(),
         };
         net.validate()?;
@@ -406,6 +411,7 @@ impl Nbrdf {
             anisotropic: false,
             spectral: None,
             sampling: None,
+            base: None,
             provenance: serde_json::json!({
                 "initialisation": INITIALISATION,
                 "seed": seed,

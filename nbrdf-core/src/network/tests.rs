@@ -1169,3 +1169,33 @@ fn sampling_default_loads_old_spellings_as_the_canonical_kind() {
     let err = with_default("anisotropic-phong").unwrap_err().to_string();
     assert!(err.contains("needs an exponent_v"), "{err}");
 }
+
+#[test]
+fn analytic_base_round_trips_and_is_checked_on_load() {
+    let mut net = test_net(4, 3);
+    let base = serde_json::json!({"type": "roughconductor", "alpha": 0.12,
+        "specular_reflectance": {"type": "rgb", "value": [0.9, 0.8, 0.5]}});
+    net.base = Some(base.clone());
+    let text = net.to_json_string();
+    let back = Nbrdf::from_json_str(&text, Path::new("t")).unwrap();
+    assert_eq!(back.base, Some(base));
+    assert_eq!(back, net);
+    // Kept through a rewrite (what fit-phong does) and absent from files without one.
+    assert!(back.to_json_string().contains("\"roughconductor\""));
+    net.base = None;
+    assert!(!net.to_json_string().contains("\"base\""));
+    for (bad, needle) in [
+        (
+            serde_json::json!("roughconductor"),
+            "must be a BSDF dictionary",
+        ),
+        (serde_json::json!({"alpha": 0.1}), "string \"type\""),
+        (serde_json::json!({"type": 3}), "string \"type\""),
+        (serde_json::json!({"type": ""}), "string \"type\""),
+    ] {
+        net.base = Some(bad);
+        let err = Nbrdf::from_json_str(&net.to_json_string(), Path::new("t")).unwrap_err();
+        assert!(err.to_string().contains(needle), "{err}");
+        assert!(net.validate().is_err());
+    }
+}

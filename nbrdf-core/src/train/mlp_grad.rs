@@ -884,6 +884,7 @@ mod tests {
             anisotropic: false,
             spectral: None,
             sampling: None,
+            base: None,
             provenance: serde_json::Value::Null,
         };
         let layout = Layout::new(21);

@@ -368,6 +368,7 @@ pub fn train_on_samples<S: TrainingSample>(
         anisotropic: config.anisotropic,
         spectral,
         sampling: None,
+        base: None,
         provenance: serde_json::Value::Null,
     };
     Ok(TrainOutcome { network, report })

@@ -129,13 +129,15 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
     and the pull strength from the decoded start), or the common start without the prior where
     the albedo check rejected the decoded network, the held-out losses of the candidates and the
     rejected albedos (from the network file's provenance; a network written before the strengths
-    had these names records them as ``prior_weight`` and ``code_prior``)."""
+    had these names records them as ``prior_weight`` and ``code_prior``, and one written before
+    the chosen fit became the network's base has the fit distilled)."""
     lines = []
     for r in results:
         path = work / r["material"] / "nbrdf.nbrdf.json"
         if r["model"] != "nbrdf" or not path.is_file():
             continue
-        provenance = json.loads(path.read_text()).get("provenance", {})
+        document = json.loads(path.read_text())
+        provenance = document.get("provenance", {})
         losses = provenance.get("held_out_losses") or {}
         text = "; ".join(f"{k}: {v:.4g}" for k, v in losses.items())
         pull = provenance.get("pull_strength", provenance.get("prior_weight"))
@@ -143,7 +145,8 @@ def chosen_strengths(results: list[dict], work: Path) -> list[str]:
         start = provenance.get("start")
         analytic = (provenance.get("analytic") or {}).get("type", "analytic")
         chosen = ("the common start, no prior (the result is the no-prior estimate)" if start == "common"
-                  else f"the {analytic} fit, distilled" if start == "analytic"
+                  else f"the {analytic} fit, {'as its base' if 'base' in document else 'distilled'}"
+                  if start == "analytic"
                   else f"pull strength {pull}" + (f", code strength {code}" if code is not None else ""))
         rejected = "; ".join(f"{k}: {v:.3g}" for k, v in (provenance.get("albedo_rejected") or {}).items())
         lines.append(f"* {r['material']}: {chosen}" + (f" (held-out view loss {text})" if text else "")
