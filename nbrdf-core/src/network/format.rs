@@ -316,6 +316,21 @@ impl Nbrdf {
         std::fs::write(path, self.to_json_string()).map_err(|e| NbrdfError::io(path, e))
     }
 
+    /// An error where the network is a residual on an analytic `base`, which the library does not
+    /// evaluate: `what` (e.g. "tabulating it") would see the residual alone, a silently wrong
+    /// material.
+    pub fn require_no_base(&self, what: &str) -> Result<()> {
+        match &self.base {
+            None => Ok(()),
+            Some(base) => Err(NbrdfError::InvalidArgument(format!(
+                "network '{}' is a residual on an analytic base ({}), which this library does \
+                 not evaluate: {what} would see the residual alone (render it with the nbrdf \
+                 BSDF in Mitsuba, which adds the base)",
+                self.name, base["type"]
+            ))),
+        }
+    }
+
     /// Checks an in-memory network (shapes, finite values, sampling parameters), e.g. after
     /// training or decoding; files are checked by [`Nbrdf::load`] already.
     pub fn validate(&self) -> Result<()> {

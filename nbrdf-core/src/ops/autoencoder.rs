@@ -325,6 +325,7 @@ pub fn encode(
 ) -> Result<Encoded> {
     limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
     let net = Nbrdf::load(input)?;
+    net.require_no_base("encoding it")?;
     let net = encoding.prepare(ae, &net)?;
     let t0 = Instant::now();
     let code = ae.encode_refined(&net, refine)?;
@@ -377,6 +378,8 @@ pub fn interpolate(
     limits::check_range("--steps", steps, 2, 1000)?;
     limits::check_range("--refine", refine, 0, limits::MAX_ITERATIONS)?;
     let (a, b) = (Nbrdf::load(a)?, Nbrdf::load(b)?);
+    a.require_no_base("interpolating it")?;
+    b.require_no_base("interpolating it")?;
     // Both checked before either is relearnt (minutes), not only when its turn comes.
     crate::latent::require_isotropic(&a)?;
     crate::latent::require_isotropic(&b)?;

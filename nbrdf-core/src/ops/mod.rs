@@ -99,6 +99,7 @@ pub fn read_nbrdf_dir(dir: &Path) -> Result<Vec<(String, Nbrdf)>> {
         };
         if let Some(name) = file.strip_suffix(".nbrdf.json") {
             let net = Nbrdf::load(&path)?;
+            net.require_no_base("the latent commands")?;
             if let Some(message) = crate::latent::anisotropy_problem(&net) {
                 return Err(NbrdfError::Format { path, message });
             }

@@ -87,6 +87,7 @@ pub fn tabulate(
     threads: Option<usize>,
 ) -> Result<TabulateReport> {
     let net = Nbrdf::load(network)?;
+    net.require_no_base("tabulating it")?;
     let output = output.map_or_else(
         || PathBuf::from(format!("{}.binary", net.name)),
         Path::to_path_buf,
@@ -130,5 +131,22 @@ mod tests {
             report.contains("red") && report.contains("1.000000e0"),
             "{report}"
         );
+    }
+
+    #[test]
+    fn a_network_on_an_analytic_base_is_not_tabulated() {
+        let mut net = Nbrdf::random("on-base", 4, 1);
+        net.base = Some(serde_json::json!({"type": "roughconductor", "alpha": 0.2}));
+        let dir = std::env::temp_dir().join(format!("nbrdf-base-tab-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("on-base.nbrdf.json");
+        net.save(&path).unwrap();
+        let output = dir.join("on-base.binary");
+        let err = tabulate(&path, Some(&output), Some(1))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("analytic base (\"roughconductor\")"), "{err}");
+        assert!(!output.exists());
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
