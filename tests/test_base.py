@@ -160,3 +160,32 @@ def test_weight_updates_turn_the_network_on_and_off(tmp_path, restore_variant):
     off = bsdf_calls(bsdf, view, light, u)
     np.testing.assert_allclose(off["eval"], base["eval"], rtol=1e-6, atol=1e-7)
     np.testing.assert_allclose(off["pdf"], base["pdf"], rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_rgb", "llvm_ad_spectral_polarized"])
+def test_a_scene_renders_a_zero_network_as_its_base(variant, tmp_path, restore_variant):
+    """A path-traced scene: the zero network on a base renders the base's image, sample for
+    sample (the same random numbers go to the same strategy); a non-zero network adds light and
+    no NaN."""
+    use_variant(variant)
+    zero = with_base(tmp_path / "zero.nbrdf.json", zero_layers(), BASES["roughconductor"])
+    plus = with_base(tmp_path / "plus.nbrdf.json", random_layers(seed=8), BASES["roughconductor"])
+
+    def render(bsdf: dict) -> np.ndarray:
+        scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": "path", "max_depth": 3},
+            "sensor": {"type": "perspective", "fov": 30,
+                       "to_world": mi.ScalarTransform4f().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+                       "film": {"type": "hdrfilm", "width": 12, "height": 12, "rfilter": {"type": "box"}},
+                       "sampler": {"type": "independent", "sample_count": 4}},
+            "ball": {"type": "sphere", "bsdf": bsdf},
+            "light": {"type": "point", "position": [2, 2, 3], "intensity": {"type": "rgb", "value": 20.0}},
+            "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.1}},
+        })
+        return np.asarray(mi.render(scene, seed=3), dtype=np.float64)
+
+    base = render(BASES["roughconductor"])
+    assert np.max(base) > 0.1
+    np.testing.assert_allclose(render({"type": "nbrdf", "filename": str(zero)}), base, rtol=1e-5, atol=1e-6)
+    summed = render({"type": "nbrdf", "filename": str(plus)})
+    assert np.all(np.isfinite(summed)) and summed.mean() > 1.05 * base.mean()
