@@ -63,7 +63,7 @@ def write(out: Path, command: str, results: list[dict], work: Path, settings: di
              f"toward the training codes, `code` {_or(estimate.CODE_STRENGTHS)}; the pull strength, the weight "
              "phase's pull toward the "
              f"decoded network's BRDF, `pull` {_or(estimate.PULL_STRENGTHS)}, from each code; or an analytic "
-             f"fit, the best of {', '.join(estimate.ANALYTIC_MODELS)}, distilled into the network), chosen per "
+             f"fit, the best of {', '.join(estimate.ANALYTIC_MODELS)}, as the base of a zero network), chosen per "
              f"estimate by its last training view, held out (one render at {estimate.JUDGE_SPP} samples per "
              "candidate); where the albedo check rejected every candidate or the final "
              f"network (directional albedo above 1, or above its own up to {estimate.ALBEDO_LIT_INCIDENCE} degrees' "
