@@ -273,7 +273,8 @@ class NbrdfMixin(_NativeBSDFMixin):
     anisotropic lobe, ``sampling.exponent_v``; ``exponent`` is then ``n_u`` and ``exponent_v``
     ``n_v``) | ``phong`` (default when it stores one; with a two-lobe file, its first lobe) |
     ``cosine`` (default otherwise) | ``uniform``; ``exponent``, ``specular_weight``,
-    ``exponent2``, ``specular_weight2`` and ``exponent_v`` override the stored lobes.
+    ``exponent2``, ``specular_weight2`` and ``exponent_v`` override the stored lobes (the network's
+    strategy; a file with an analytic ``base`` is the sum of the two, :mod:`nbrdf_mitsuba.base`).
     """
 
     PLUGIN = "nbrdf"
