@@ -67,7 +67,6 @@ class OnBase:
 
     def network_changed(self, zero: bool) -> None:
         """Takes the network's new weights into account (``zero``: :func:`network_is_zero`)."""
-        self.zero = zero
         self.skip_network = zero and not self.differentiable
         self.probability = 1.0 if zero else BASE_SAMPLING_PROBABILITY
 
@@ -75,19 +74,21 @@ class OnBase:
         f = self.base.eval(ctx, si, wo, active)
         return f if self.skip_network else f + self.network.eval(ctx, si, wo, active)
 
-    def pdf(self, ctx, si, wo, active=True):
-        pdf = self.base.pdf(ctx, si, wo, active)
+    def _mixture_pdf(self, base_pdf, ctx, si, wo, active):
+        """The sampling mixture's pdf at ``wo`` from the base's pdf there."""
         if self.probability == 1.0:
-            return pdf
-        return dr.fma(self.probability, pdf, (1.0 - self.probability) * self.network.pdf(ctx, si, wo, active))
+            return base_pdf
+        return dr.fma(self.probability, base_pdf,
+                      (1.0 - self.probability) * self.network.pdf(ctx, si, wo, active))
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self._mixture_pdf(self.base.pdf(ctx, si, wo, active), ctx, si, wo, active)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         f, pdf = self.base.eval_pdf(ctx, si, wo, active)
         if not self.skip_network:
             f = f + self.network.eval(ctx, si, wo, active)
-        if self.probability < 1.0:
-            pdf = dr.fma(self.probability, pdf, (1.0 - self.probability) * self.network.pdf(ctx, si, wo, active))
-        return f, pdf
+        return f, self._mixture_pdf(pdf, ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         p = self.probability

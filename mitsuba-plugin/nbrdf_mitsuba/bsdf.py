@@ -159,7 +159,8 @@ class _NativeBSDFMixin(SamplingParameters):
         label = f'{self._type_name()} "{self._filename}"'
         bsdf = base.load_base(dictionary, label)
         layers, _ = self._native.network(prove=False)
-        flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
+        W, b = layers[-1]  # network_is_zero reads the tail of the flat weights: the last layer
+        flat = np.concatenate([W.ravel(), b.ravel()])
         differentiable = self._traced is not None and self._traced.mode == "opaque"
         self._backend = base.OnBase(self._backend, bsdf, base.network_is_zero(flat, self._native.layer_shapes[-1]),
                                     differentiable)

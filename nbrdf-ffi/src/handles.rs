@@ -26,7 +26,7 @@ pub struct NbrdfMaterial {
     source: Source,
     /// The material's name (empty for a table), for `NbrdfMaterialInfo::name`.
     name: CString,
-    /// A network's `base` as JSON text, for `NbrdfMaterialInfo::base`.
+    /// A network's `base` as JSON text, for `nbrdf_material_base`.
     base: Option<CString>,
 }
 

@@ -430,8 +430,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
         candidate = next(a for a in analytic if a.model.kind == chosen)
         fitted = refit_analytic(candidate, thetas[chosen], plan, bar)
         weights = residual_start()
-        extra.update({"start": "analytic", "analytic": fitted, "base": fitted, "pull_strength": None,
-                      "code_strength": None})
+        extra.update({"start": "analytic", "analytic": fitted, "pull_strength": None, "code_strength": None})
     diverged_all += analytic_diverged
     if diverged_all:
         extra["diverged"] = diverged_all
@@ -454,9 +453,11 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | Non
         summary.update(extra)
     else:
         weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)
-    # The prior's kept network has passed already; a zero residual on an analytic base has nothing
-    # to check (the base is the fitted model, energy conserving as Mitsuba implements it).
-    material = "albedo_max" in summary or "base" in summary
+    # The prior's kept network has passed already; a zero network on the chosen analytic fit (its
+    # base) has nothing to check (the base is the fitted model, energy conserving as Mitsuba
+    # implements it).
+    base = summary.get("analytic")
+    material = "albedo_max" in summary or base is not None
     if not material:
         summary["albedo_max"], material = albedo_check(weights)
     if not material:
@@ -472,7 +473,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | Non
         if key in summary:
             provenance[key] = summary[key]
     name = args.output.name.split(".")[0]
-    write_network(args.output, weights, name, provenance, base=summary.get("base"))
-    # A zero residual is never sampled: the nbrdf BSDF samples its base (nbrdf_mitsuba.base).
-    summary["sampling"] = "base" if "base" in summary else fit_sampling(args.output)
+    write_network(args.output, weights, name, provenance, base=base)
+    # A zero network is never sampled: the nbrdf BSDF samples its base (nbrdf_mitsuba.base).
+    summary["sampling"] = "base" if base is not None else fit_sampling(args.output)
     return summary
