@@ -193,7 +193,7 @@ def run_away_in_the_first_continuation(monkeypatch, estimator) -> tuple[list, li
         return real_loss(self, phase, theta, step)
 
     monkeypatch.setattr(estimator, "choose_start", choose_start)
-    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda estimators, plan, bar: ({}, {}, []))
+    monkeypatch.setattr(estimator, "fit_analytic_candidates", lambda loaders, plan, bar: estimator.AnalyticCandidates())
     monkeypatch.setattr(estimator.Estimator, "loss_and_grad", loss_and_grad)
     return chosen, continuation
 
@@ -489,9 +489,9 @@ def spy_on_views(monkeypatch, estimate_module, judge=None):
     rendered, judged = [], []
     render_all, held_out_loss = E.Estimator.render_all, E.Estimator.held_out_loss
 
-    def spy_render(self, step, spp=None):
+    def spy_render(self, step, spp=None, params=None):
         rendered.append(tuple(self.views))
-        return render_all(self, step, spp)
+        return render_all(self, step, spp, params)
 
     def spy_judge(self, theta, view, *apply):
         judged.append(view)

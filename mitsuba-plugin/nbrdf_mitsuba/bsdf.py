@@ -302,6 +302,13 @@ class NbrdfMixin(_NativeBSDFMixin):
         return jit.TracedNetwork(layers, weights=mode, anisotropic=self._native.anisotropic,
                                  active_units=self._native.active_units, active=active)
 
+    @property
+    def traced_network(self):
+        """The network as traced into Mitsuba's kernels (a :class:`jit.TracedNetwork`) where the
+        ``jit`` backend evaluates it, else None: an estimate records its adjoints there
+        (:mod:`nbrdf_mitsuba.jit.adjoints`)."""
+        return self._traced if self._textured is None and self._backend.name == "jit" else None
+
     def _traverse_traced(self, put):
         # The network's weights, W1 b1 W2 b2 W3 b3, updatable through params.update(). Only
         # "opaque" weights carry gradients; literals are constants of the kernel, and an update
@@ -410,6 +417,13 @@ class MerlMixin(_NativeBSDFMixin):
         # The library has validated size, header and values.
         stored = np.fromfile(path, dtype="<f8", offset=12)
         return jit.TracedMerl(stored)
+
+    @property
+    def traced_network(self):
+        """The network as traced into Mitsuba's kernels (a :class:`jit.TracedNetwork`) where the
+        ``jit`` backend evaluates it, else None: an estimate records its adjoints there
+        (:mod:`nbrdf_mitsuba.jit.adjoints`)."""
+        return self._traced if self._textured is None and self._backend.name == "jit" else None
 
     def _traverse_traced(self, put):
         pass

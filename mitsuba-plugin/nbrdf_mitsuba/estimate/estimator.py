@@ -5,20 +5,24 @@ fallback, the written result."""
 from __future__ import annotations
 
 import contextlib
+import gc
 import json
 import math
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..jit.adjoints import AdjointRecorder, RecorderOverflow
 from .analytic_start import residual_start
 from .errors import EstimateError, EstimateFailed
 from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
+from .numpy_network import recorded_gradient
 from .optimiser import Descent, Phase
 from .plan import Plan, schedule
 from .priors import albedo_check, pull_penalty, code_penalty
@@ -97,9 +101,38 @@ class Estimator(Descent):
         self.params = mi.traverse(self.scene)
         #: What the model's parameters are called in ``params``: ``PREFIX.weights`` and so on.
         self.prefix = bsdf_key_prefix(self.params, self.bsdf_id)
+        #: Records the network's adjoints in its phases' backward passes (None: Dr.Jit's own
+        #: derivative, as for the analytic models).
+        self.recorder = self._attach_recorder()
+        #: Evaluations a recorded trace may hold: a render's lanes to start with (one evaluation
+        #: per lane and call site, a convex object's), grown where a scene needs more.
+        self.record_capacity = max(self._lanes(i) for i in self.views)
 
-    def render_all(self, step: int, spp: int | None = None) -> list:
-        return [mi.render(self.scene, self.params, sensor=i, integrator=self.integrator, spp=spp or self.spp,
+    def _attach_recorder(self) -> AdjointRecorder | None:
+        if not isinstance(self.model, Network):
+            return None
+        bsdf = self.params.properties[f"{self.prefix}.weights"][2]
+        traced = getattr(bsdf, "traced_network", None)
+        if traced is None:
+            return None
+        traced.recorder = AdjointRecorder()
+        return traced.recorder
+
+    def _lanes(self, view: int) -> int:
+        width, height = self.scene.sensors()[view].film().crop_size()
+        return int(width) * int(height) * self.spp
+
+    def release(self) -> None:
+        """Lets the scene go: Mitsuba's symbolic calls trace every live BSDF, so a scene alive beside
+        the one rendered (the network's most) adds its BSDFs' code to each step's kernels (the
+        analytic fits' steps took twice as long beside the network's scene)."""
+        self.scene = self.params = self.recorder = None
+        gc.collect()
+
+    def render_all(self, step: int, spp: int | None = None, params=None) -> list:
+        """Each view's render; ``params``: what the renders differentiate (else the scene's)."""
+        params = self.params if params is None else params
+        return [mi.render(self.scene, params, sensor=i, integrator=self.integrator, spp=spp or self.spp,
                           seed=render_seed(self.seed, step, i)) for i in self.views]
 
     def view_references(self) -> list:
@@ -126,8 +159,11 @@ class Estimator(Descent):
             self.params.update()
         except ValueError:
             return math.nan, None
-        loss = image_loss(self.render_all(step), self.view_references())
-        dr.backward(loss)
+        if self.recorder is not None and phase.kind != "analytic":
+            loss = self._recorded_backward(step)
+        else:
+            loss = image_loss(self.render_all(step), self.view_references())
+            dr.backward(loss)
         grad = np.asarray(dr.grad(variable).numpy(), dtype=np.float64)
         value = float(loss.array[0]) if hasattr(loss, "array") else float(np.asarray(loss.numpy()).reshape(-1)[0])
         if phase.penalty is not None:
@@ -136,6 +172,27 @@ class Estimator(Descent):
         if not (math.isfinite(value) and np.all(np.isfinite(grad))):
             return math.nan, None
         return value, grad
+
+    def _recorded_backward(self, step: int):
+        """The image loss, its gradient carried to the phase's variable through the network's
+        weights: the renders' backward passes record the network's adjoints, from which NumPy
+        computes the weights' gradient (:mod:`nbrdf_mitsuba.jit.adjoints`)."""
+        weights = self.params[f"{self.prefix}.weights"]  # attached to the phase's variable
+        while True:
+            self.recorder.start(self.record_capacity)
+            try:
+                loss = image_loss(self.render_all(step, params=self.recorder.parameters), self.view_references())
+                dr.backward(loss)
+                x, adjoint = self.recorder.records()
+                break
+            except RecorderOverflow as overflow:
+                # The same step again with room for all (its renders' seeds give the same samples).
+                self.record_capacity = overflow.needed + overflow.needed // 4
+            finally:
+                self.recorder.stop()
+        gradient = recorded_gradient(np.asarray(dr.detach(weights).numpy(), np.float64), x, adjoint)
+        dr.backward(dr.sum(weights * mi.Float(gradient.astype(np.float32))))
+        return loss
 
     def check_first_gradient(self, grad: np.ndarray) -> None:
         if not np.any(grad != 0):
@@ -185,12 +242,12 @@ def estimate(args, on_step=None) -> dict:
         raise EstimateError("--threads must be at least 1")
     previous = dr.thread_count()
     try:
-        return _estimate(args, on_step)
+        return _estimate(args, on_step, previous)
     finally:
         dr.set_thread_count(previous)
 
 
-def _estimate(args, on_step=None) -> dict:
+def _estimate(args, on_step, loading_threads: int) -> dict:
     if args.steps < 1 or args.spp < 1:
         raise EstimateError("--steps and --spp must be at least 1")
     for name, value in (("--pull-strength", args.pull_strength), ("--code-strength", args.code_strength)):
@@ -200,25 +257,32 @@ def _estimate(args, on_step=None) -> dict:
     model = Network(args.model == "nbrdf") if args.model.startswith("nbrdf") else Analytic(args.model)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="nbrdf-estimate-") as workdir:
-        est = Estimator(scene_file, model, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
-        est.on_step = on_step
-        plan = schedule(args.steps, len(est.references), args.pull_strength if model_has_prior(model) else 0.0,
+        def load(fitted) -> Estimator:
+            """An estimator of the model ``fitted`` (the scene with it in the BSDF's place). Loaded
+            with Dr.Jit's threads as they were (Mitsuba builds the Python plugins on its worker
+            threads), then ``--threads``: one thread fixes the order of the gradients' float sums
+            (bit-identical reruns)."""
+            dr.set_thread_count(loading_threads)
+            loaded = Estimator(scene_file, fitted, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
+            if args.threads is not None:
+                dr.set_thread_count(args.threads)
+            return loaded
+
+        plan = schedule(args.steps, len(args.images), args.pull_strength if model_has_prior(model) else 0.0,
                         args.code_strength)
-        # Each analytic candidate's fit renders its own scene (the analytic model in the BSDF's place).
-        analytic = [Estimator(scene_file, Analytic(kind), args.images, args.spp, args.seed, args.max_depth,
-                              Path(workdir)) for kind in (plan.analytic_models if model_has_prior(model) else ())]
-        if args.threads is not None:
-            # One thread fixes the order of the gradients' float sums (bit-identical reruns). Set
-            # after loading: Mitsuba builds the Python plugins on its worker threads.
-            dr.set_thread_count(args.threads)
         from tqdm import tqdm
 
         with tqdm(total=plan.total_steps(), unit="step", desc=f"estimate {args.model}", disable=args.quiet,
                   file=sys.stderr) as bar:
-            result = _optimise(est, model, args, bar, plan, analytic)
+            # The analytic candidates first, each in a scene of its own, none beside another (release).
+            models = plan.analytic_models if model_has_prior(model) else ()
+            analytic = fit_analytic_candidates([lambda kind=kind: load(Analytic(kind)) for kind in models], plan, bar)
+            est = load(model)
+            est.on_step = on_step
+            result = _optimise(est, model, args, bar, plan, analytic, load)
     result["seconds"] = time.perf_counter() - start
     result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
-    result["halvings"] = est.halvings + sum(a.halvings for a in analytic)
+    result["halvings"] = est.halvings + analytic.halvings
     return result
 
 
@@ -355,22 +419,36 @@ def prior_attempt(est: Estimator, decoder, plan: Plan, bar, analytic_losses: dic
     return weights, None, extra, rejected
 
 
-def fit_analytic_candidates(estimators: list, plan: Plan, bar) -> tuple[dict, dict, list]:
-    """Each analytic model (one estimator each) fitted through the training views but the held-out
-    one (the last), as the model's own estimate of the same steps and seed would be on them, and
-    judged on the held-out view. Returns the fitted parameters and the held-out losses by model,
-    and the models whose fit diverged (no candidates)."""
-    thetas, losses, diverged = {}, {}, []
-    for est in estimators:
+@dataclass
+class AnalyticCandidates:
+    """The analytic candidates' fitted parameters and held-out losses by model, the models whose fit
+    diverged (no candidates), and the halvings of their steps."""
+
+    thetas: dict = field(default_factory=dict)
+    losses: dict = field(default_factory=dict)
+    diverged: list = field(default_factory=list)
+    halvings: int = 0
+
+
+def fit_analytic_candidates(loaders: list, plan: Plan, bar) -> AnalyticCandidates:
+    """Each analytic model (``loaders``: one estimator each, loaded when its turn comes and released
+    after) fitted through the training views but the held-out one (the last), as the model's own
+    estimate of the same steps and seed would be on them, and judged on the held-out view."""
+    candidates = AnalyticCandidates()
+    for load in loaders:
+        est = load()
         kind = est.model.kind
         (phase,) = est.model.phases(plan.analytic_steps)
         with est.holding_out() as held_out:
             theta = est.run_candidate(phase, bar, 0)
             if theta is None:
-                diverged.append(kind)
-                continue
-            thetas[kind], losses[kind] = theta, est.held_out_loss(theta, held_out, est.model._apply)
-    return thetas, losses, diverged
+                candidates.diverged.append(kind)
+            else:
+                candidates.thetas[kind] = theta
+                candidates.losses[kind] = est.held_out_loss(theta, held_out, est.model._apply)
+        candidates.halvings += est.halvings
+        est.release()
+    return candidates
 
 
 def refit_analytic(est: Estimator, theta: np.ndarray, plan: Plan, bar) -> dict:
@@ -381,8 +459,9 @@ def refit_analytic(est: Estimator, theta: np.ndarray, plan: Plan, bar) -> dict:
     return est.model.result(est.run(phase, bar, plan.analytic_steps))
 
 
-def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None = None) -> tuple[np.ndarray, dict]:
-    """The analytic candidates (fitted by the estimators ``analytic``, if any), then up to
+def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: AnalyticCandidates,
+                   load) -> tuple[np.ndarray, dict]:
+    """Given the analytic candidates (``analytic``; ``load(model)`` loads an estimator), up to
     ``PRIOR_ATTEMPTS`` attempts of the prior, each with its own render seeds, until the albedo
     check keeps a network or an analytic candidate wins the held-out view (its fit then goes on
     over every view and becomes the network's base, under a zero network); where no attempt keeps
@@ -395,8 +474,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
         decoder = Decoder(args.ae)
     except LatentError as error:
         raise EstimateError(str(error)) from None
-    analytic = analytic or []
-    thetas, analytic_losses, analytic_diverged = fit_analytic_candidates(analytic, plan, bar)
+    analytic_losses = analytic.losses
     seed, rejected_all, diverged_all, attempt_steps, chosen = est.seed, {}, [], plan.attempt_steps(), None
     try:
         for attempt in range(PRIOR_ATTEMPTS):
@@ -427,11 +505,14 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
     finally:
         est.seed = seed
     if chosen is not None:
-        candidate = next(a for a in analytic if a.model.kind == chosen)
-        fitted = refit_analytic(candidate, thetas[chosen], plan, bar)
+        est.release()  # the network's scene would be traced into the refit's every step
+        candidate = load(Analytic(chosen))
+        fitted = refit_analytic(candidate, analytic.thetas[chosen], plan, bar)
+        analytic.halvings += candidate.halvings
+        candidate.release()
         weights = residual_start()
         extra.update({"start": "analytic", "analytic": fitted, "pull_strength": None, "code_strength": None})
-    diverged_all += analytic_diverged
+    diverged_all += analytic.diverged
     if diverged_all:
         extra["diverged"] = diverged_all
     if rejected_all:
@@ -439,7 +520,7 @@ def fit_with_prior(est: Estimator, args, plan: Plan, bar, analytic: list | None 
     return weights, extra
 
 
-def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | None = None) -> dict:
+def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: AnalyticCandidates, load) -> dict:
     summary = {"output": str(args.output), "model": args.model, "steps": args.steps}
     if isinstance(model, Analytic):
         (phase,) = model.phases(args.steps)
@@ -449,7 +530,7 @@ def _optimise(est: Estimator, model, args, bar, plan: Plan, analytic: list | Non
         summary["bsdf"] = fitted
         return summary
     if model.prior:
-        weights, extra = fit_with_prior(est, args, plan, bar, analytic)
+        weights, extra = fit_with_prior(est, args, plan, bar, analytic, load)
         summary.update(extra)
     else:
         weights = est.run(Phase("weights", model.start, args.steps, Network._set_weights, None), bar, 0)

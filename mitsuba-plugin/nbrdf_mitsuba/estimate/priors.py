@@ -11,6 +11,7 @@ import mitsuba as mi
 import numpy as np
 
 from .models import _layers
+from .numpy_network import backpropagate, hidden_and_output
 
 #: Uniform direction pairs (above the horizon, a fixed draw) at which the pull compares the networks.
 PULL_PAIRS = 4096
@@ -62,16 +63,6 @@ def _pull_inputs() -> np.ndarray:
                      for c in x], axis=1)
 
 
-def _hidden_and_output(layers: list, x: np.ndarray):
-    """The hidden layers' pre-activations and the output's log-space value ``z`` (``f = max(e^z - 1,
-    0)``). Float64 twin of ``jit.TracedNetwork.eval_input`` before its output's ``expm1``; held to
-    ``nbrdf_tools.common.network.forward`` by tests/test_estimate.py::test_pull_penalty_against_a_float64_oracle."""
-    (W1, b1), (W2, b2), (W3, b3) = layers
-    z1 = x @ W1 + b1
-    z2 = np.maximum(z1, 0) @ W2 + b2
-    return z1, z2, np.maximum(z2, 0) @ W3 + b3
-
-
 def pull_penalty(center: np.ndarray, strength: float):
     """The weight phase's pull toward the decoded network ``center`` (flat weights): ``strength``
     times the mean squared difference of the two networks' log-space outputs (the ``z`` of ``f =
@@ -82,19 +73,13 @@ def pull_penalty(center: np.ndarray, strength: float):
     if strength == 0:
         return None
     x = _pull_inputs()
-    target = _hidden_and_output(_layers(np.asarray(center, np.float64)), x)[2]
+    target = hidden_and_output(_layers(np.asarray(center, np.float64)), x)[2]
 
     def penalty(flat):
         layers = _layers(flat)
-        (_, _), (W2, _), (W3, _) = layers
-        z1, z2, z3 = _hidden_and_output(layers, x)
+        z1, z2, z3 = hidden_and_output(layers, x)
         d = z3 - target
-        g3 = strength * 2.0 * d / d.size
-        g2 = (g3 @ W3.T) * (z2 > 0)
-        g1 = (g2 @ W2.T) * (z1 > 0)
-        grad = np.concatenate([(x.T @ g1).ravel(), g1.sum(0), (np.maximum(z1, 0).T @ g2).ravel(), g2.sum(0),
-                               (np.maximum(z2, 0).T @ g3).ravel(), g3.sum(0)])
-        return strength * float(np.mean(d * d)), grad
+        return strength * float(np.mean(d * d)), backpropagate(layers, x, z1, z2, strength * 2.0 * d / d.size)
 
     return penalty
 
@@ -136,7 +121,7 @@ def directional_albedo(flat: np.ndarray) -> np.ndarray:
     ``ALBEDO_INCIDENCE`` (:func:`_albedo_quadrature`): at most 1 for a material that conserves
     energy."""
     x, weights = _albedo_quadrature()
-    z = _hidden_and_output(_layers(np.asarray(flat, np.float64)), x)[2]
+    z = hidden_and_output(_layers(np.asarray(flat, np.float64)), x)[2]
     f = np.maximum(np.expm1(z), 0.0).reshape(*weights.shape, 3)
     return np.einsum("knc,kn->kc", f, weights)
 

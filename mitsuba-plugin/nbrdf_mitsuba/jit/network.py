@@ -100,6 +100,8 @@ class TracedNetwork:
         self.shapes = [(int(W.shape[0]), int(W.shape[1])) for W, _ in layers]
         self.parameter_count = sum(i * o + o for i, o in self.shapes)
         self._active_units = active_units
+        #: An :class:`adjoints.AdjointRecorder` while an estimate records this network's adjoints.
+        self.recorder = None
         flat = np.concatenate([np.concatenate([W.ravel(), b.ravel()]) for W, b in layers])
         self.flat = mi.Float(flat.astype(np.float32))
         self.refresh(active)
@@ -129,6 +131,8 @@ class TracedNetwork:
             self._active = self._active_units(values)
         #: The weights of each kind of kernel this network traces: "literal", "parameters".
         self._kernels = {}
+        #: The same as :meth:`_vectorised` rows, by kind of kernel.
+        self._rows = {}
         if self.mode == "literal":
             self._kernels["literal"] = self._split([mi.Float(float(v)) for v in values])
         if self.mode == "opaque":
@@ -138,6 +142,9 @@ class TracedNetwork:
             scalars = [dr.gather(mi.Float, self.flat, k) for k in range(dr.width(self.flat))]
             dr.make_opaque(*scalars)
             self._kernels["parameters"] = self._split(scalars)
+            # Built here, outside any symbolic call: built while Dr.Jit traced one, the rows lost
+            # their AD edges to ``flat``.
+            self._vectorised("parameters")
         elif self.mode == "auto":
             # No AD edges needed: each value becomes its own one-element buffer, no kernel runs.
             scalars = [mi.Float(float(v)) for v in values]
@@ -171,28 +178,41 @@ class TracedNetwork:
             return "literal" if live_networks() <= AUTO_LITERAL_MAX else "parameters"
         return "literal" if self.mode == "literal" else "parameters"
 
+    def _vectorised(self, kernel: str) -> list:
+        """Per layer: the outputs the kernel computes, and per input its weights to them and their
+        biases as ``mi.ArrayXf`` (one Dr.Jit call per input while tracing, not one per weight: the
+        same multiply-adds in the same order). Built once per :meth:`refresh`."""
+        if kernel not in self._rows:
+            if kernel not in self._kernels:  # "auto" makes its literals when it first needs them
+                self._kernels[kernel] = self._split([mi.Float(float(v)) for v in self.good])
+            layers = self._kernels[kernel]
+            active = self.active if kernel == "literal" else None
+            last = len(layers) - 1
+            rows = []
+            for k, (W, b) in enumerate(layers):
+                # A unit that never fires above the horizon outputs exactly 0: left out.
+                kept = [o for o in range(len(b)) if k == last or active is None or active[k][o]]
+                rows.append((kept, [mi.ArrayXf(*[W_i[o] for o in kept]) for W_i in W],
+                             mi.ArrayXf(*[b[o] for o in kept])))
+            self._rows[kernel] = rows
+        return self._rows[kernel]
+
     def eval_input(self, x: list):
         """The network on an input list (``None`` entries are zeros): ``f_r``, clamped at 0 (RGB,
         or a spectral network's ``count`` coefficients as a list)."""
         h = x
-        kernel = self.kernel()
-        if kernel not in self._kernels:  # "auto" makes its literals when it first needs them
-            self._kernels[kernel] = self._split([mi.Float(float(v)) for v in self.good])
-        layers = self._kernels[kernel]
-        active = self.active if kernel == "literal" else None
+        layers = self._vectorised(self.kernel())
         last = len(layers) - 1
-        for k, (W, b) in enumerate(layers):
-            out = []
-            for o in range(len(b)):
-                if k < last and active is not None and not active[k][o]:
-                    out.append(None)  # never fires above the horizon: exactly 0
-                    continue
-                acc = b[o]
-                for i, h_i in enumerate(h):
-                    if h_i is not None:
-                        acc = dr.fma(h_i, W[i][o], acc)
-                out.append(acc)
-            h = [None if v is None else relu(v) for v in out] if k < last else out
+        for k, (kept, W, b) in enumerate(layers):
+            acc = b
+            for h_i, W_i in zip(h, W):
+                if h_i is not None:
+                    acc = dr.fma(h_i, W_i, acc)
+            if k < last:
+                acc = relu(acc)
+            h = [None] * self.shapes[k][1]
+            for j, o in enumerate(kept):
+                h[o] = acc[j]
         out = [relu(expm1(clamp_exp_argument(v))) for v in h]
         # A spectral network's outputs are its B-spline coefficients (spectral_value reads them).
         return out if len(out) != 3 else mi.Color3f(out[0], out[1], out[2])
@@ -201,7 +221,12 @@ class TracedNetwork:
         """``f_r(light, view)``, zero at or below the horizon and for zero or non-finite
         directions (``network/kernel.rs`` ``eval_chunks``): a ``mi.Color3f``, or a spectral
         network's list of coefficients."""
-        f = self.eval_input(network_input(view, light, self.anisotropic))
+        x = network_input(view, light, self.anisotropic)
         ok = both_valid_above(view, light)
+        if self.recorder is not None and self.recorder.recording():
+            with dr.suspend_grad():
+                f = self.eval_input(x)
+            return dr.select(ok, mi.Color3f(*self.recorder.probe(f, x, ok)), 0.0)
+        f = self.eval_input(x)
         return [dr.select(ok, c, 0.0) for c in f] if isinstance(f, list) else dr.select(ok, f, 0.0)
 
