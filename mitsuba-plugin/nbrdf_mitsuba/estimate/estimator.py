@@ -58,6 +58,10 @@ ANALYTIC_MARGIN = 1.08
 PRIOR_ATTEMPTS = 3
 #: Offset of the estimate's seed from one attempt to the next.
 ATTEMPT_SEED_STRIDE = 7919
+#: The most network evaluations one trace of a render may record (``jit.adjoints``; 72 bytes
+#: each, a few traces a render): beyond, a scene (large images, many bounces on the object) is
+#: differentiated by Dr.Jit itself, slower but without the records' memory.
+MAX_RECORDS = 1 << 22
 
 
 def image_loss(images: list, references: list):
@@ -106,7 +110,7 @@ class Estimator(Descent):
         self.recorder = self._attach_recorder()
         #: Evaluations a recorded trace may hold: a render's lanes to start with (one evaluation
         #: per lane and call site, a convex object's), grown where a scene needs more.
-        self.record_capacity = max(self._lanes(i) for i in self.views)
+        self.record_capacity = min(max(self._lanes(i) for i in self.views), MAX_RECORDS)
 
     def _attach_recorder(self) -> AdjointRecorder | None:
         if not isinstance(self.model, Network):
@@ -159,9 +163,8 @@ class Estimator(Descent):
             self.params.update()
         except ValueError:
             return math.nan, None
-        if self.recorder is not None and phase.kind != "analytic":
-            loss = self._recorded_backward(step)
-        else:
+        loss = self._recorded_backward(step) if self.recorder is not None and phase.kind != "analytic" else None
+        if loss is None:
             loss = image_loss(self.render_all(step), self.view_references())
             dr.backward(loss)
         grad = np.asarray(dr.grad(variable).numpy(), dtype=np.float64)
@@ -176,20 +179,26 @@ class Estimator(Descent):
     def _recorded_backward(self, step: int):
         """The image loss, its gradient carried to the phase's variable through the network's
         weights: the renders' backward passes record the network's adjoints, from which NumPy
-        computes the weights' gradient (:mod:`nbrdf_mitsuba.jit.adjoints`)."""
+        computes the weights' gradient (:mod:`nbrdf_mitsuba.jit.adjoints`). None where a scene
+        needs more records than ``MAX_RECORDS`` (the estimate then goes on with Dr.Jit's own
+        derivative)."""
         weights = self.params[f"{self.prefix}.weights"]  # attached to the phase's variable
+        recorder = self.recorder
         while True:
-            self.recorder.start(self.record_capacity)
+            recorder.start(self.record_capacity)
             try:
-                loss = image_loss(self.render_all(step, params=self.recorder.parameters), self.view_references())
+                loss = image_loss(self.render_all(step, params=recorder.parameters), self.view_references())
                 dr.backward(loss)
-                x, adjoint = self.recorder.records()
+                x, adjoint = recorder.records()
                 break
             except RecorderOverflow as overflow:
+                if overflow.needed > MAX_RECORDS:
+                    self.recorder = None
+                    return None
                 # The same step again with room for all (its renders' seeds give the same samples).
-                self.record_capacity = overflow.needed + overflow.needed // 4
+                self.record_capacity = min(overflow.needed + overflow.needed // 4, MAX_RECORDS)
             finally:
-                self.recorder.stop()
+                recorder.stop()
         gradient = recorded_gradient(np.asarray(dr.detach(weights).numpy(), np.float64), x, adjoint)
         dr.backward(dr.sum(weights * mi.Float(gradient.astype(np.float32))))
         return loss
