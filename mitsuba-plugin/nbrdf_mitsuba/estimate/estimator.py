@@ -113,6 +113,7 @@ class Estimator(Descent):
         self.record_capacity = min(max(self._lanes(i) for i in self.views), MAX_RECORDS)
 
     def _attach_recorder(self) -> AdjointRecorder | None:
+        # SceneParameters keeps each parameter's object (value, type, object, flags): the BSDF.
         if not isinstance(self.model, Network):
             return None
         bsdf = self.params.properties[f"{self.prefix}.weights"][2]
@@ -128,8 +129,8 @@ class Estimator(Descent):
 
     def release(self) -> None:
         """Lets the scene go: Mitsuba's symbolic calls trace every live BSDF, so a scene alive beside
-        the one rendered (the network's most) adds its BSDFs' code to each step's kernels (the
-        analytic fits' steps took twice as long beside the network's scene)."""
+        the one rendered adds its BSDFs' code to each step's kernels (the network's most:
+        docs/estimation.md, "Cost")."""
         self.scene = self.params = self.recorder = None
         gc.collect()
 
