@@ -85,6 +85,34 @@ def test_traced_kernels_leave_out_units_that_never_fire(jit_variant, network_fil
     assert not np.array_equal(bsdf_eval(literal, view, light), got)
 
 
+def test_a_layer_that_never_fires_traces_and_renders(jit_variant, network_file, tmp_path):
+    """No unit of the first hidden layer fires: the literal kernel computes only the one unit the
+    library keeps for the layer's width, and the BSDF is what a kernel of every unit computes,
+    alone and in a rendered scene (a symbolic call); a traced network told that a whole layer is
+    dead computes the rest from the next layer's biases."""
+    from nbrdf_mitsuba import jit
+    from nbrdf_testing import write_network
+
+    layers = read_network_layers(network_file)
+    layers[0][1][:] = -10.0 - np.abs(layers[0][0]).sum()  # no unit of the first layer fires
+    path = write_network(tmp_path / "dead-layer.nbrdf.json", layers)
+    literal = mi.load_dict({"type": "nbrdf", "filename": str(path), "backend": "jit"})
+    opaque = mi.load_dict({"type": "nbrdf", "filename": str(path), "backend": "jit", "jit_weights": "opaque"})
+    assert np.count_nonzero(literal._traced.active[0]) <= 1
+    view, light = directions()
+    got = bsdf_eval(literal, view, light)
+    np.testing.assert_array_equal(got, bsdf_eval(opaque, view, light))
+    assert np.all(np.isfinite(got))
+    image = mi.render(mi.load_dict(veach_like({"type": "nbrdf", "filename": str(path), "backend": "jit"}, spp=2)))
+    assert np.all(np.isfinite(np.array(image)))
+    dead = [np.zeros(len(layers[0][1]), bool), np.ones(len(layers[1][1]), bool)]
+    traced = jit.TracedNetwork(layers, weights="literal", active=dead)
+    up = mi.Vector3f(0.0, 0.0, 1.0)
+    f = np.array([v[0] for v in traced.eval(up, up)])
+    (_, _), (_, b2), (W3, b3) = [(W.astype(np.float64), b.astype(np.float64)) for W, b in layers]
+    np.testing.assert_allclose(f, np.maximum(np.expm1(np.maximum(b2, 0) @ W3 + b3), 0), rtol=1e-5, atol=1e-7)
+
+
 def test_the_traced_network_is_the_one_the_library_loaded(jit_variant, network_file):
     """One load: the plugin's kernels take the parameters and the active-unit proof from the
     library's handle (nbrdf_material_network), not from a second read of the file; they are the

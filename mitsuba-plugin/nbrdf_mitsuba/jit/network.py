@@ -142,14 +142,15 @@ class TracedNetwork:
             scalars = [dr.gather(mi.Float, self.flat, k) for k in range(dr.width(self.flat))]
             dr.make_opaque(*scalars)
             self._kernels["parameters"] = self._split(scalars)
-            # Built here, outside any symbolic call: built while Dr.Jit traced one, the rows lost
-            # their AD edges to ``flat``.
-            self._vectorised("parameters")
         elif self.mode == "auto":
             # No AD edges needed: each value becomes its own one-element buffer, no kernel runs.
             scalars = [mi.Float(float(v)) for v in values]
             dr.make_opaque(*scalars)
             self._kernels["parameters"] = self._split(scalars)
+        # The rows are built here, outside any symbolic call: built while Dr.Jit traced one, they
+        # lost their AD edges to ``flat`` (and belong to that trace).
+        for kernel in self._kernels:
+            self._vectorised(kernel)
 
     @property
     def active(self):
@@ -194,6 +195,8 @@ class TracedNetwork:
                 kept = [o for o in range(len(b)) if k == last or active is None or active[k][o]]
                 rows.append((kept, [mi.ArrayXf(*[W_i[o] for o in kept]) for W_i in W],
                              mi.ArrayXf(*[b[o] for o in kept])))
+            if dr.flag(dr.JitFlag.SymbolicScope):
+                return rows  # made inside a trace ("auto"'s literal kernel): not kept for the next
             self._rows[kernel] = rows
         return self._rows[kernel]
 
@@ -204,6 +207,9 @@ class TracedNetwork:
         layers = self._vectorised(self.kernel())
         last = len(layers) - 1
         for k, (kept, W, b) in enumerate(layers):
+            if not kept:  # every unit of the layer proved dead: its outputs are exactly 0
+                h = [None] * self.shapes[k][1]
+                continue
             acc = b
             for h_i, W_i in zip(h, W):
                 if h_i is not None:
