@@ -418,13 +418,6 @@ class MerlMixin(_NativeBSDFMixin):
         stored = np.fromfile(path, dtype="<f8", offset=12)
         return jit.TracedMerl(stored)
 
-    @property
-    def traced_network(self):
-        """The network as traced into Mitsuba's kernels (a :class:`jit.TracedNetwork`) where the
-        ``jit`` backend evaluates it, else None: an estimate records its adjoints there
-        (:mod:`nbrdf_mitsuba.jit.adjoints`)."""
-        return self._traced if self._textured is None and self._backend.name == "jit" else None
-
     def _traverse_traced(self, put):
         pass
 
