@@ -66,15 +66,17 @@ def estimator(scene: Path, images: list[Path], workdir: Path, spp: int = 4):
 
 
 def both_gradients(est, phase, theta) -> tuple[np.ndarray, np.ndarray]:
-    """(recorded, Dr.Jit's own) gradient of one step, the same render seeds."""
+    """(recorded, Dr.Jit's own traced) gradient of one step, the same render seeds."""
     recorder = est.recorder
     assert recorder is not None
     value, recorded = est.loss_and_grad(phase, theta, 5)
     recorder, est.recorder = est.recorder, None  # None where the step fell back to Dr.Jit's derivative
+    dr.set_flag(dr.JitFlag.KernelFreezing, False)  # traced, as written, not replayed
     try:
         reference_value, reference = est.loss_and_grad(phase, theta, 5)
     finally:
         est.recorder = recorder
+        dr.set_flag(dr.JitFlag.KernelFreezing, True)
     assert value == pytest.approx(reference_value, rel=1e-6)
     return recorded, reference
 
@@ -138,7 +140,7 @@ def test_more_evaluations_than_the_capacity_grow_it_and_keep_the_gradient(llvm_v
 
 
 def test_an_overflowing_recorder_says_so_and_isotropic_rgb_only(llvm_variant, tmp_path):
-    from nbrdf_mitsuba.estimate.estimator import image_loss
+    from nbrdf_mitsuba.estimate.renders import image_loss
     from nbrdf_mitsuba.jit.adjoints import RecorderOverflow
 
     scene = write_scene(tmp_path / "scene.xml")
@@ -146,7 +148,9 @@ def test_an_overflowing_recorder_says_so_and_isotropic_rgb_only(llvm_variant, tm
     est = estimator(scene, images, tmp_path)
     recorder = est.recorder
     recorder.start(4)
-    dr.backward(image_loss(est.render_all(0, params=recorder.parameters), est.view_references()))
+    images = [mi.render(est.scene, recorder.parameters, sensor=view, integrator=est.integrator, spp=est.spp, seed=seed)
+              for view, seed in zip(est.views, est.seeds(0))]
+    dr.backward(image_loss(images, est.view_references()))
     with pytest.raises(RecorderOverflow) as raised:
         recorder.records()
     assert raised.value.needed > 4 and "room for 4" in str(raised.value)
@@ -154,3 +158,85 @@ def test_an_overflowing_recorder_says_so_and_isotropic_rgb_only(llvm_variant, tm
         recorder.probe([mi.Float(0)] * 3, [mi.Float(0)] * 6, mi.Bool(True))
     recorder.stop()
     assert not recorder.recording()
+
+
+def weight_steps(est, thetas) -> list[tuple[float, np.ndarray]]:
+    from nbrdf_mitsuba.estimate.models import Network
+    from nbrdf_mitsuba.estimate.optimiser import Phase
+
+    phase = Phase("weights", thetas[0], len(thetas), Network._set_weights, None)
+    return [est.loss_and_grad(phase, theta, step) for step, theta in enumerate(thetas)]
+
+
+def test_frozen_steps_replay_what_traced_steps_compute(llvm_variant, tmp_path):
+    """The recorded step is frozen (``dr.freeze``): after its first recordings the steps are replays,
+    and each gives the loss and gradient the same step traced gives (Dr.Jit's freezing switched
+    off), at new weights and new render seeds."""
+    scene = write_scene(tmp_path / "scene.xml")
+    images = render_views(scene, tmp_path, spp=16)
+    est = estimator(scene, images, tmp_path)
+    start = decoded_mean_network()
+    thetas = [start * (1 + 0.02 * k) for k in range(4)]
+    frozen = weight_steps(est, thetas)
+    assert est._recorded_renders.frozen and est._recorded_renders.recordings < len(thetas)
+    dr.set_flag(dr.JitFlag.KernelFreezing, False)
+    try:
+        traced = weight_steps(est, thetas)
+    finally:
+        dr.set_flag(dr.JitFlag.KernelFreezing, True)
+    assert len({value for value, _ in frozen}) == len(thetas)  # new weights and seeds each step
+    for (value, gradient), (traced_value, traced_gradient) in zip(frozen, traced):
+        assert value == pytest.approx(traced_value, rel=1e-6)
+        assert relative_difference(gradient, traced_gradient) < 1e-5
+
+
+class HiddenAlbedo:
+    """A Python BSDF (made per variant) keeping its albedo where Dr.Jit's traversal does not look:
+    in a plain object's attribute."""
+
+    @staticmethod
+    def make(props):
+        class Hidden(mi.BSDF):
+            def __init__(self, props):
+                mi.BSDF.__init__(self, props)
+                self.hidden = type("Holder", (), {})()
+                self.hidden.albedo = mi.Float(np.float32(0.5)) + mi.Float(np.zeros(1, np.float32))
+                self.m_flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+                self.m_components = [self.m_flags]
+
+            def eval(self, ctx, si, wo, active=True):
+                return mi.Color3f(self.hidden.albedo * dr.maximum(wo.z, 0) / dr.pi)
+
+            def pdf(self, ctx, si, wo, active=True):
+                return mi.warp.square_to_cosine_hemisphere_pdf(wo)
+
+            def eval_pdf(self, ctx, si, wo, active=True):
+                return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+            def sample(self, ctx, si, sample1, sample2, active=True):
+                bs = dr.zeros(mi.BSDFSample3f)
+                bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+                bs.pdf = self.pdf(ctx, si, bs.wo)
+                bs.eta = 1.0
+                bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+                return bs, mi.Color3f(self.hidden.albedo)
+
+        return Hidden(props)
+
+
+def test_another_scene_alive_leaves_the_steps_traced(llvm_variant, tmp_path):
+    """A frozen function's recording must find every live BSDF's arrays among its inputs: with a
+    BSDF alive that hides them (here another scene's Python BSDF), the first recording fails and
+    the steps are traced, with Dr.Jit's gradient."""
+    from nbrdf_mitsuba.estimate.models import Network
+    from nbrdf_mitsuba.estimate.optimiser import Phase
+
+    mi.register_bsdf("hidden_albedo_test", HiddenAlbedo.make)
+    other = mi.load_dict({"type": "scene", "sphere": {"type": "sphere", "bsdf": {"type": "hidden_albedo_test"}}})
+    scene = write_scene(tmp_path / "scene.xml")
+    images = render_views(scene, tmp_path, spp=16)
+    est = estimator(scene, images, tmp_path)
+    theta = decoded_mean_network()
+    recorded, reference = both_gradients(est, Phase("weights", theta, 1, Network._set_weights, None), theta)
+    assert not est._recorded_renders.frozen and other.shapes()
+    assert relative_difference(recorded, reference) < 1e-3

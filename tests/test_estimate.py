@@ -483,22 +483,22 @@ def test_the_analytic_candidates_are_fitted_wherever_the_held_out_view_chooses()
 
 
 def spy_on_views(monkeypatch, estimate_module, judge=None):
-    """Records the views each render_all call renders and the views held_out_loss judges;
-    ``judge(call_index, loss)`` may replace the held-out losses."""
+    """Records the views each step or screening renders (each takes their seeds once) and the views
+    held_out_loss judges; ``judge(call_index, loss)`` may replace the held-out losses."""
     E = estimate_module
     rendered, judged = [], []
-    render_all, held_out_loss = E.Estimator.render_all, E.Estimator.held_out_loss
+    seeds, held_out_loss = E.Estimator.seeds, E.Estimator.held_out_loss
 
-    def spy_render(self, step, spp=None, params=None):
+    def spy_render(self, step):
         rendered.append(tuple(self.views))
-        return render_all(self, step, spp, params)
+        return seeds(self, step)
 
     def spy_judge(self, theta, view, *apply):
         judged.append(view)
         loss = held_out_loss(self, theta, view, *apply)
         return loss if judge is None else judge(len(judged) - 1, loss)
 
-    monkeypatch.setattr(E.Estimator, "render_all", spy_render)
+    monkeypatch.setattr(E.Estimator, "seeds", spy_render)
     monkeypatch.setattr(E.Estimator, "held_out_loss", spy_judge)
     return rendered, judged
 
@@ -643,13 +643,13 @@ def test_image_loss_is_linear_in_the_render(llvm_variant):
     samples miss, a few are bright) the squared error of ``ln(1 + x)`` has no such property."""
     import drjit as dr
 
-    from nbrdf_mitsuba.estimate import estimator
+    from nbrdf_mitsuba.estimate.renders import image_loss
 
     rng = np.random.default_rng(3)
     references = [rng.uniform(0.0, 4.0, (4, 5, 3)) for _ in range(2)]
     images = [r * rng.uniform(0.5, 1.5, r.shape) for r in references]
     oracle = np.mean([np.mean(((x - r) / (1 + r)) ** 2) for x, r in zip(images, references)])
-    value = estimator.image_loss([mi.TensorXf(x) for x in images], [mi.TensorXf(r) for r in references])
+    value = image_loss([mi.TensorXf(x) for x in images], [mi.TensorXf(r) for r in references])
     assert float(np.asarray(value.numpy()).reshape(-1)[0]) == pytest.approx(oracle, rel=1e-5)
 
     def gradient(loss, x, reference):
@@ -665,7 +665,7 @@ def test_image_loss_is_linear_in_the_render(llvm_variant):
     reference = references[0]
     renders = [reference * np.where(rng.random(reference.shape) < 0.125, 6.6, 0.2) for _ in range(64)]
     mean = np.mean(renders, axis=0)
-    for loss, linear in ((estimator.image_loss, True), (log_loss, False)):
+    for loss, linear in ((image_loss, True), (log_loss, False)):
         at_mean = gradient(loss, mean, reference)
         mean_of = np.mean([gradient(loss, x, reference) for x in renders], axis=0)
         close = np.allclose(mean_of, at_mean, rtol=1e-4, atol=1e-6 * np.abs(at_mean).max())

@@ -5,7 +5,7 @@ backend (either one) and adds the base to every value. Sampling picks the base w
 :data:`BASE_SAMPLING_PROBABILITY`, else the network's own strategy, and reports the mixture's
 pdf, so that MIS sees the exact density; a network that is exactly zero (every weight and bias of
 its last layer 0, what ``estimate`` writes where an analytic fit wins) is neither evaluated nor
-sampled.
+sampled (except in a frozen function's recording, :mod:`.freezing`).
 """
 
 from __future__ import annotations
@@ -67,8 +67,20 @@ class OnBase:
 
     def network_changed(self, zero: bool) -> None:
         """Takes the network's new weights into account (``zero``: :func:`network_is_zero`)."""
-        self.skip_network = zero and not self.differentiable
-        self.probability = 1.0 if zero else BASE_SAMPLING_PROBABILITY
+        self.zero = zero
+
+    def _zero_now(self) -> bool:
+        # A frozen function's recording takes the network as non-zero: replayed after an update
+        # that made it non-zero, a recording without it would leave it out.
+        return self.zero and not dr.flag(dr.JitFlag.FreezingScope)
+
+    @property
+    def skip_network(self) -> bool:
+        return self._zero_now() and not self.differentiable
+
+    @property
+    def probability(self) -> float:
+        return 1.0 if self._zero_now() else BASE_SAMPLING_PROBABILITY
 
     def eval(self, ctx, si, wo, active=True):
         f = self.base.eval(ctx, si, wo, active)

@@ -36,6 +36,7 @@ import numpy as np
 from . import _native, base, jit, textured
 from ._native import KIND
 from .backends import JitBackend, RustBackend, prepare_variant, use_wavefront_mode, variant_arrays
+from .freezing import JitState
 from .parameters import SAMPLING_NAMES, SamplingParameters
 from .validation import format_problem, non_finite_name, special_file_problem, strip_function
 
@@ -94,6 +95,8 @@ class _NativeBSDFMixin(SamplingParameters):
 
     def _init_native(self, props) -> None:
         mi.BSDF.__init__(self, props)
+        #: Dr.Jit's frozen functions find this BSDF's arrays through it (:mod:`.freezing`).
+        self._jit_state = JitState(self.__dict__, self._type_name())
         #: How this variant's values become the library's arrays (one direction or wavefronts).
         self._arrays = variant_arrays()
         #: The traced network or table (JIT variants, unless too wide for the traced backend).

@@ -18,13 +18,15 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..jit.adjoints import AdjointRecorder, RecorderOverflow
+from ..freezing import FrozenOrTraced
+from ..jit.adjoints import AdjointRecorder, RecorderOverflow, decode_records
 from .analytic_start import residual_start
 from .errors import EstimateError, EstimateFailed
-from .models import Analytic, Network, _mix64, common_initialisation, fit_sampling, write_network, write_text
+from .models import Analytic, Network, common_initialisation, fit_sampling, write_network, write_text
 from .numpy_network import recorded_gradient
 from .optimiser import Descent, Phase
 from .plan import Plan, schedule
+from .renders import differentiated_renders, forward_loss, recorded_renders, render_seed
 from .priors import albedo_check, pull_penalty, code_penalty
 from .scene import Scene, bsdf_key_prefix, check_paths, load_images, parse_defines, require_differentiable_variant
 
@@ -64,28 +66,6 @@ ATTEMPT_SEED_STRIDE = 7919
 MAX_RECORDS = 1 << 22
 
 
-def image_loss(images: list, references: list):
-    """Mean squared error relative to ``1 + reference``, ``((x - r) / (1 + r))^2``, over every
-    view, pixel and channel: the first-order twin of the squared error of ``ln(1 + x)`` (the
-    weight keeps highlights from swamping the rest of the object), but linear in the render.
-    ``mi.render`` draws the adjoint pass's samples apart from the primal's, so a step's gradient
-    is the loss's derivative at the noisy render times an independent derivative of the render;
-    linear in the render, that derivative's mean is its value at the mean render, and the fit
-    settles where the mean render is the reference. The log's was biased bright where renders
-    are noisy, most around a highlight narrower than a pixel, which it fitted too wide
-    (docs/experiments.md, Estimation: "The image loss linear in the render"). Held to a float64
-    oracle and to that property by tests/test_estimate.py::test_image_loss_is_linear_in_the_render."""
-    total = 0.0
-    for image, reference in zip(images, references):
-        d = (image - reference) / (1.0 + reference)
-        total = total + dr.mean(dr.square(d), axis=None)
-    return total / len(images)
-
-
-def render_seed(seed: int, step: int, view: int) -> int:
-    return (_mix64((seed << 32) ^ (step << 8) ^ view) >> 33) & 0x7FFFFFFF
-
-
 class Estimator(Descent):
     """The loaded scene with the model in place of the marked BSDF, and its optimiser."""
 
@@ -111,6 +91,14 @@ class Estimator(Descent):
         #: Evaluations a recorded trace may hold: a render's lanes to start with (one evaluation
         #: per lane and call site, a convex object's), grown where a scene needs more.
         self.record_capacity = min(max(self._lanes(i) for i in self.views), MAX_RECORDS)
+        #: The recorded step's renders and backward pass, frozen (``dr.freeze``): replayed without
+        #: tracing from the second step on (docs/estimation.md, "Cost").
+        self._recorded_renders = None if self.recorder is None else FrozenOrTraced(recorded_renders(self.recorder))
+        self._forward_loss = FrozenOrTraced(forward_loss)
+        # A network without a recorder (a scene past MAX_RECORDS) is traced: recording Dr.Jit's
+        # derivative of the network, a reduction per weight, took minutes.
+        differentiated = differentiated_renders(self.params)
+        self._differentiated_renders = differentiated if isinstance(model, Network) else FrozenOrTraced(differentiated)
 
     def _attach_recorder(self) -> AdjointRecorder | None:
         # SceneParameters keeps each parameter's object (value, type, object, flags): the BSDF.
@@ -131,17 +119,26 @@ class Estimator(Descent):
         """Lets the scene go: Mitsuba's symbolic calls trace every live BSDF, so a scene alive beside
         the one rendered adds its BSDFs' code to each step's kernels (the network's most:
         docs/estimation.md, "Cost")."""
+        for frozen in (self._recorded_renders, self._forward_loss, self._differentiated_renders):
+            if isinstance(frozen, FrozenOrTraced):
+                frozen.clear()
         self.scene = self.params = self.recorder = None
+        self._recorded_renders = self._forward_loss = self._differentiated_renders = None
         gc.collect()
-
-    def render_all(self, step: int, spp: int | None = None, params=None) -> list:
-        """Each view's render; ``params``: what the renders differentiate (else the scene's)."""
-        params = self.params if params is None else params
-        return [mi.render(self.scene, params, sensor=i, integrator=self.integrator, spp=spp or self.spp,
-                          seed=render_seed(self.seed, step, i)) for i in self.views]
 
     def view_references(self) -> list:
         return [self.references[i] for i in self.views]
+
+    def seeds(self, step: int) -> list:
+        """The training views' render seeds at ``step`` (each step renders them once), opaque: a
+        literal is part of a frozen function's key, and each step's would record anew."""
+        return [dr.opaque(mi.UInt32, render_seed(self.seed, step, view)) for view in self.views]
+
+    def _loss_of(self, views: list[int], seeds: list, spp: int) -> float:
+        """The image loss of the scene as it is on ``views`` (one render each of ``spp`` samples)."""
+        loss = self._forward_loss(self.scene, self.integrator, [self.references[i] for i in views], seeds,
+                                  tuple(views), spp)
+        return float(np.asarray(loss.numpy()).reshape(-1)[0])
 
     def held_out_loss(self, theta: np.ndarray, view: int, apply=Network._set_weights) -> float:
         """The image loss of the parameters ``theta`` (set by ``apply``: by default the network's
@@ -149,10 +146,7 @@ class Estimator(Descent):
         with dr.suspend_grad():
             apply(self.params, self.prefix, mi.Float(np.asarray(theta, np.float32)))
             self.params.update()
-            image = mi.render(self.scene, self.params, sensor=view, integrator=self.integrator,
-                              spp=JUDGE_SPP, seed=render_seed(self.judge_seed, 1 << 20, view))
-            loss = image_loss([image], [self.references[view]])
-        return float(np.asarray(loss.numpy()).reshape(-1)[0])
+        return self._loss_of([view], [dr.opaque(mi.UInt32, render_seed(self.judge_seed, 1 << 20, view))], JUDGE_SPP)
 
     def loss_and_grad(self, phase: Phase, theta: np.ndarray, step: int):
         """(loss, gradient) at ``theta``, or ``(nan, None)`` where either is not finite or the
@@ -166,8 +160,8 @@ class Estimator(Descent):
             return math.nan, None
         loss = self._recorded_backward(step) if self.recorder is not None and phase.kind != "analytic" else None
         if loss is None:
-            loss = image_loss(self.render_all(step), self.view_references())
-            dr.backward(loss)
+            loss = self._differentiated_renders(self.scene, self.integrator, self.view_references(), self.seeds(step),
+                                                tuple(self.views), self.spp)
         grad = np.asarray(dr.grad(variable).numpy(), dtype=np.float64)
         value = float(loss.array[0]) if hasattr(loss, "array") else float(np.asarray(loss.numpy()).reshape(-1)[0])
         if phase.penalty is not None:
@@ -184,22 +178,19 @@ class Estimator(Descent):
         needs more records than ``MAX_RECORDS`` (the estimate then goes on with Dr.Jit's own
         derivative)."""
         weights = self.params[f"{self.prefix}.weights"]  # attached to the phase's variable
-        recorder = self.recorder
+        seeds = self.seeds(step)
         while True:
-            recorder.start(self.record_capacity)
+            loss, received = self._recorded_renders(self.scene, self.integrator, self.view_references(), seeds,
+                                                    tuple(self.views), self.spp, self.record_capacity)
             try:
-                loss = image_loss(self.render_all(step, params=recorder.parameters), self.view_references())
-                dr.backward(loss)
-                x, adjoint = recorder.records()
+                x, adjoint = decode_records(received, self.record_capacity)
                 break
             except RecorderOverflow as overflow:
                 if overflow.needed > MAX_RECORDS:
-                    self.recorder = None
+                    self.recorder = self._recorded_renders = None
                     return None
                 # The same step again with room for all (its renders' seeds give the same samples).
                 self.record_capacity = min(overflow.needed + overflow.needed // 4, MAX_RECORDS)
-            finally:
-                recorder.stop()
         gradient = recorded_gradient(np.asarray(dr.detach(weights).numpy(), np.float64), x, adjoint)
         dr.backward(dr.sum(weights * mi.Float(gradient.astype(np.float32))))
         return loss
@@ -236,8 +227,7 @@ class Estimator(Descent):
             with dr.suspend_grad():
                 self.params[f"{self.prefix}.weights"] = decoder.decode(mi.Float(code.astype(np.float32)))
                 self.params.update()
-                loss = image_loss(self.render_all(-1, max(1, self.spp // 4)), self.view_references())
-            value = float(np.asarray(loss.numpy()).reshape(-1)[0])
+            value = self._loss_of(self.views, self.seeds(-1), max(1, self.spp // 4))
             if value < best_loss:
                 best, best_loss = code, value
         return best
@@ -272,6 +262,9 @@ def _estimate(args, on_step, loading_threads: int) -> dict:
             with Dr.Jit's threads as they were (Mitsuba builds the Python plugins on its worker
             threads), then ``--threads``: one thread fixes the order of the gradients' float sums
             (bit-identical reruns)."""
+            # Garbage freed now, not during the estimate's frozen renders: Dr.Jit's recordings see
+            # every live BSDF (freezing.FrozenOrTraced).
+            gc.collect()
             dr.set_thread_count(loading_threads)
             loaded = Estimator(scene_file, fitted, args.images, args.spp, args.seed, args.max_depth, Path(workdir))
             if args.threads is not None:
@@ -289,7 +282,10 @@ def _estimate(args, on_step, loading_threads: int) -> dict:
             analytic = fit_analytic_candidates([lambda kind=kind: load(Analytic(kind)) for kind in models], plan, bar)
             est = load(model)
             est.on_step = on_step
-            result = _optimise(est, model, args, bar, plan, analytic, load)
+            try:
+                result = _optimise(est, model, args, bar, plan, analytic, load)
+            finally:
+                est.release()
     result["seconds"] = time.perf_counter() - start
     result["loss_first"], result["loss_last"] = est.history[0], est.history[-1]
     result["halvings"] = est.halvings + analytic.halvings

@@ -104,33 +104,46 @@ class AdjointRecorder:
             out.append(value)
         return out
 
+    def received(self) -> list[tuple]:
+        """After the backward pass, before :meth:`stop`: ``(counter, gradient)`` of each trace's
+        records that received adjoints (a primal trace receives none), evaluated in one kernel:
+        a slot, once taken, cannot be computed again. What :func:`decode_records` reads; inside a
+        frozen function, what it returns."""
+        pairs = [(s.counter, dr.grad(s.probes)) for s in self._segments]
+        pairs = [(counter, grad) for counter, grad in pairs if grad.state != dr.VarState.Literal]
+        dr.eval(*[x for pair in pairs for x in pair])
+        return pairs
+
     def records(self) -> tuple[np.ndarray, np.ndarray]:
-        """The recorded evaluations with a non-zero adjoint: network inputs ``(m, 6)`` and output
-        adjoints ``(m, 3)`` (float32, as recorded). Raises :class:`RecorderOverflow` where a trace had more
-        evaluations than the capacity (its gradient would be incomplete)."""
-        # One kernel for the counters and the gradients: a slot, once taken, cannot be computed again.
-        grads = [dr.grad(s.probes) for s in self._segments]
-        dr.eval(*[s.counter for s in self._segments], *[g for g in grads if g.state != dr.VarState.Literal])
-        inputs, adjoints = [], []
-        for segment, grad in zip(self._segments, grads):
-            count = int(segment.counter.numpy()[0])
-            if count > segment.capacity:
-                raise RecorderOverflow(count, segment.capacity)
-            if count == 0 or grad.state == dr.VarState.Literal:
-                continue  # a trace that received no adjoints (a primal one)
-            values = np.asarray(grad.numpy())[:RECORD * count].reshape(count, RECORD)
-            adjoint = values[:, :3]
-            kept = np.any(adjoint != 0, axis=1)
-            values, adjoint = values[kept], adjoint[kept]
-            # x_j from x_j * adjoint_c on the channel of the largest adjoint (float32 products:
-            # about 1e-7 relative error).
-            channel = np.argmax(np.abs(adjoint), axis=1)
-            rows = np.arange(len(values))
-            products = values[:, 3:].reshape(-1, 3, len(RECORDED_INPUTS))[rows, channel]
-            x = np.zeros((len(values), 6), np.float32)
-            x[:, list(RECORDED_INPUTS)] = products / adjoint[rows, channel][:, None]
-            inputs.append(x)
-            adjoints.append(adjoint)
-        if not inputs:
-            return np.zeros((0, 6), np.float32), np.zeros((0, 3), np.float32)
-        return np.concatenate(inputs), np.concatenate(adjoints)
+        """:func:`decode_records` of :meth:`received` at this recorder's capacity."""
+        return decode_records(self.received(), self.capacity)
+
+
+def decode_records(received: list[tuple], capacity: int) -> tuple[np.ndarray, np.ndarray]:
+    """The recorded evaluations with a non-zero adjoint (``received``: :meth:`AdjointRecorder.received`):
+    network inputs ``(m, 6)`` and output adjoints ``(m, 3)`` (float32, as recorded). Raises
+    :class:`RecorderOverflow` where a trace had more evaluations than ``capacity`` (its gradient
+    would be incomplete)."""
+    inputs, adjoints = [], []
+    for counter, grad in received:
+        count = int(counter.numpy()[0])
+        if count > capacity:
+            raise RecorderOverflow(count, capacity)
+        if count == 0:
+            continue
+        values = np.asarray(grad.numpy())[:RECORD * count].reshape(count, RECORD)
+        adjoint = values[:, :3]
+        kept = np.any(adjoint != 0, axis=1)
+        values, adjoint = values[kept], adjoint[kept]
+        # x_j from x_j * adjoint_c on the channel of the largest adjoint (float32 products:
+        # about 1e-7 relative error).
+        channel = np.argmax(np.abs(adjoint), axis=1)
+        rows = np.arange(len(values))
+        products = values[:, 3:].reshape(-1, 3, len(RECORDED_INPUTS))[rows, channel]
+        x = np.zeros((len(values), 6), np.float32)
+        x[:, list(RECORDED_INPUTS)] = products / adjoint[rows, channel][:, None]
+        inputs.append(x)
+        adjoints.append(adjoint)
+    if not inputs:
+        return np.zeros((0, 6), np.float32), np.zeros((0, 3), np.float32)
+    return np.concatenate(inputs), np.concatenate(adjoints)

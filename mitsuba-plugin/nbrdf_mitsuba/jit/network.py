@@ -129,28 +129,23 @@ class TracedNetwork:
         self._active = active
         if self.mode == "literal" and active is None and self._active_units is not None:
             self._active = self._active_units(values)
-        #: The weights of each kind of kernel this network traces: "literal", "parameters".
-        self._kernels = {}
-        #: The same as :meth:`_vectorised` rows, by kind of kernel.
+        #: Each kind of kernel's :meth:`_vectorised` rows ("literal", "parameters"): only these hold
+        #: the weights' variables, so that Dr.Jit's traversal (``freezing.JitState``) visits each once.
         self._rows = {}
         if self.mode == "literal":
-            self._kernels["literal"] = self._split([mi.Float(float(v)) for v in values])
+            self._rows["literal"] = self._make_rows("literal", [mi.Float(float(v)) for v in values])
         if self.mode == "opaque":
             # Gathers at literal indices give one size-1 variable per weight; make_opaque
             # evaluates them in one small kernel so they become kernel parameters, not constants,
             # and keeps their AD edges to ``flat``.
             scalars = [dr.gather(mi.Float, self.flat, k) for k in range(dr.width(self.flat))]
             dr.make_opaque(*scalars)
-            self._kernels["parameters"] = self._split(scalars)
+            self._rows["parameters"] = self._make_rows("parameters", scalars)
         elif self.mode == "auto":
             # No AD edges needed: each value becomes its own one-element buffer, no kernel runs.
             scalars = [mi.Float(float(v)) for v in values]
             dr.make_opaque(*scalars)
-            self._kernels["parameters"] = self._split(scalars)
-        # The rows are built here, outside any symbolic call: built while Dr.Jit traced one, they
-        # lost their AD edges to ``flat`` (and belong to that trace).
-        for kernel in self._kernels:
-            self._vectorised(kernel)
+            self._rows["parameters"] = self._make_rows("parameters", scalars)
 
     @property
     def active(self):
@@ -174,31 +169,39 @@ class TracedNetwork:
         return layers
 
     def kernel(self) -> str:
-        """Which kernel the next trace uses: ``literal`` or ``parameters`` (see the class)."""
+        """Which kernel the next trace uses: ``literal`` or ``parameters`` (see the class). ``auto``
+        takes the parameters while a frozen function records: literals made in the trace would be
+        replayed after an update as they were."""
         if self.mode == "auto":
-            return "literal" if live_networks() <= AUTO_LITERAL_MAX else "parameters"
+            few = live_networks() <= AUTO_LITERAL_MAX and not dr.flag(dr.JitFlag.FreezingScope)
+            return "literal" if few else "parameters"
         return "literal" if self.mode == "literal" else "parameters"
 
     def _vectorised(self, kernel: str) -> list:
+        """The rows of ``kernel`` (:meth:`_make_rows`), built in :meth:`refresh`, outside any symbolic
+        call: built while Dr.Jit traced one, they lost their AD edges to ``flat`` (and belonged to
+        that trace). "auto" makes its literal rows when a trace first needs them, kept only when
+        made outside one."""
+        rows = self._rows.get(kernel)
+        if rows is None:
+            rows = self._make_rows(kernel, [mi.Float(float(v)) for v in self.good])
+            if not dr.flag(dr.JitFlag.SymbolicScope):
+                self._rows[kernel] = rows
+        return rows
+
+    def _make_rows(self, kernel: str, scalars: list) -> list:
         """Per layer: the outputs the kernel computes, and per input its weights to them and their
         biases as ``mi.ArrayXf`` (one Dr.Jit call per input while tracing, not one per weight: the
-        same multiply-adds in the same order). Built once per :meth:`refresh`."""
-        if kernel not in self._rows:
-            if kernel not in self._kernels:  # "auto" makes its literals when it first needs them
-                self._kernels[kernel] = self._split([mi.Float(float(v)) for v in self.good])
-            layers = self._kernels[kernel]
-            active = self.active if kernel == "literal" else None
-            last = len(layers) - 1
-            rows = []
-            for k, (W, b) in enumerate(layers):
-                # A unit that never fires above the horizon outputs exactly 0: left out.
-                kept = [o for o in range(len(b)) if k == last or active is None or active[k][o]]
-                rows.append((kept, [mi.ArrayXf(*[W_i[o] for o in kept]) for W_i in W],
-                             mi.ArrayXf(*[b[o] for o in kept])))
-            if dr.flag(dr.JitFlag.SymbolicScope):
-                return rows  # made inside a trace ("auto"'s literal kernel): not kept for the next
-            self._rows[kernel] = rows
-        return self._rows[kernel]
+        same multiply-adds in the same order); ``scalars``: the flat weights, one variable each."""
+        active = self.active if kernel == "literal" else None
+        layers = self._split(scalars)
+        last = len(layers) - 1
+        rows = []
+        for k, (W, b) in enumerate(layers):
+            # A unit that never fires above the horizon outputs exactly 0: left out.
+            kept = [o for o in range(len(b)) if k == last or active is None or active[k][o]]
+            rows.append((kept, [mi.ArrayXf(*[W_i[o] for o in kept]) for W_i in W], mi.ArrayXf(*[b[o] for o in kept])))
+        return rows
 
     def eval_input(self, x: list):
         """The network on an input list (``None`` entries are zeros): ``f_r``, clamped at 0 (RGB,
