@@ -140,19 +140,18 @@ def test_more_evaluations_than_the_capacity_grow_it_and_keep_the_gradient(llvm_v
 
 
 def test_an_overflowing_recorder_says_so_and_isotropic_rgb_only(llvm_variant, tmp_path):
-    from nbrdf_mitsuba.estimate.renders import image_loss
-    from nbrdf_mitsuba.jit.adjoints import RecorderOverflow
+    from nbrdf_mitsuba.estimate import renders
+    from nbrdf_mitsuba.jit.adjoints import RecorderOverflow, decode_records
 
     scene = write_scene(tmp_path / "scene.xml")
     images = render_views(scene, tmp_path, spp=16)
     est = estimator(scene, images, tmp_path)
     recorder = est.recorder
     recorder.start(4)
-    images = [mi.render(est.scene, recorder.parameters, sensor=view, integrator=est.integrator, spp=est.spp, seed=seed)
-              for view, seed in zip(est.views, est.seeds(0))]
-    dr.backward(image_loss(images, est.view_references()))
+    images = renders.render_views(est.scene, recorder.parameters, est.integrator, est.views, est.seeds(0), est.spp)
+    dr.backward(renders.image_loss(images, est.view_references()))
     with pytest.raises(RecorderOverflow) as raised:
-        recorder.records()
+        decode_records(recorder.received(), 4)
     assert raised.value.needed > 4 and "room for 4" in str(raised.value)
     with pytest.raises(ValueError, match="isotropic RGB"):
         recorder.probe([mi.Float(0)] * 3, [mi.Float(0)] * 6, mi.Bool(True))

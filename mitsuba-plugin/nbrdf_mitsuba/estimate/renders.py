@@ -34,6 +34,13 @@ def render_seed(seed: int, step: int, view: int) -> int:
     return (_mix64((seed << 32) ^ (step << 8) ^ view) >> 33) & 0x7FFFFFFF
 
 
+def render_views(scene, params, integrator, views, seeds, spp) -> list:
+    """One render of each of ``views`` (sensor indices) at its seed; ``params``: what the renders
+    differentiate (None: nothing)."""
+    return [mi.render(scene, params, sensor=view, integrator=integrator, spp=spp, seed=seed)
+            for view, seed in zip(views, seeds)]
+
+
 def recorded_renders(recorder: AdjointRecorder):
     """The renders of a recorded step and their backward pass, ``f(scene, integrator, references,
     seeds, views, spp, capacity) -> (loss, recorder.received())``: what :class:`Estimator` freezes.
@@ -44,9 +51,7 @@ def recorded_renders(recorder: AdjointRecorder):
     def renders(scene, integrator, references, seeds, views, spp, capacity):
         recorder.start(capacity)
         try:
-            images = [mi.render(scene, recorder.parameters, sensor=view, integrator=integrator, spp=spp, seed=seed)
-                      for view, seed in zip(views, seeds)]
-            loss = image_loss(images, references)
+            loss = image_loss(render_views(scene, recorder.parameters, integrator, views, seeds, spp), references)
             dr.backward(loss)
             return loss, recorder.received()
         finally:
@@ -59,12 +64,11 @@ def differentiated_renders(params: mi.SceneParameters):
     """The renders of a step differentiated by Dr.Jit (analytic models, or a network without a
     recorder), ``f(scene, integrator, references, seeds, views, spp) -> loss``, its backward pass
     done: the gradients reach the variables ``params`` were set from. What :class:`Estimator`
-    freezes (a frozen function takes gradients to what its inputs depend on)."""
+    freezes for the analytic models (a frozen function takes gradients to what its inputs depend
+    on); a network's is traced."""
 
     def renders(scene, integrator, references, seeds, views, spp):
-        images = [mi.render(scene, params, sensor=view, integrator=integrator, spp=spp, seed=seed)
-                  for view, seed in zip(views, seeds)]
-        loss = image_loss(images, references)
+        loss = image_loss(render_views(scene, params, integrator, views, seeds, spp), references)
         dr.backward(loss)
         return loss
 
@@ -76,6 +80,4 @@ def forward_loss(scene, integrator, references, seeds, views, spp):
     the screening of codes and the held-out view's judgement (``views`` and ``spp`` are part of the
     frozen function's key)."""
     with dr.suspend_grad():
-        images = [mi.render(scene, sensor=view, integrator=integrator, spp=spp, seed=seed)
-                  for view, seed in zip(views, seeds)]
-        return image_loss(images, references)
+        return image_loss(render_views(scene, None, integrator, views, seeds, spp), references)

@@ -52,8 +52,8 @@ class _Segment:
 class AdjointRecorder:
     """Records the adjoints of one network's evaluations between :meth:`start` and :meth:`stop`:
     attach it as ``TracedNetwork.recorder``, render with :attr:`parameters` as ``mi.render``'s
-    ``params`` (so that the render runs its backward pass), backpropagate the loss, and read
-    :meth:`records`."""
+    ``params`` (so that the render runs its backward pass), backpropagate the loss, take
+    :meth:`received` before :meth:`stop`, and decode it (:func:`decode_records`)."""
 
     def __init__(self):
         self.capacity = 0
@@ -113,10 +113,6 @@ class AdjointRecorder:
         pairs = [(counter, grad) for counter, grad in pairs if grad.state != dr.VarState.Literal]
         dr.eval(*[x for pair in pairs for x in pair])
         return pairs
-
-    def records(self) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`decode_records` of :meth:`received` at this recorder's capacity."""
-        return decode_records(self.received(), self.capacity)
 
 
 def decode_records(received: list[tuple], capacity: int) -> tuple[np.ndarray, np.ndarray]:
