@@ -146,6 +146,18 @@ def test_merl_truths_are_unseen_by_the_prior():
     assert not set(MERL) & (set(split["train"]) | set(split.get("validation", [])))
 
 
+def test_no_models_renders_the_truths_alone(llvm_variant, tmp_path):
+    """``--models , --no-ceiling`` renders each truth's training and novel images and estimates
+    nothing, so that a timed run that follows measures estimates only."""
+    from nbrdf_tools.pages.estimation import main
+
+    work = tmp_path / "work"
+    assert main(["--quick", "--set", "tuning", "--work", str(work), "--models", ",", "--no-ceiling"]) == 0
+    (folder,) = [p for p in work.iterdir() if (p / "truth.xml").is_file()]
+    assert (folder / "train0.exr").is_file() and (folder / "novel-truth-0.exr").is_file()
+    assert not list(work.glob("*/*.result.json")) and not (work / "estimation.md").exists()
+
+
 def test_more_views_keep_the_first_views_images(llvm_variant, tmp_path):
     """``--views N`` adds training images; image i is the same whatever N, so runs with
     different view counts are comparable (their results are not: the next test)."""

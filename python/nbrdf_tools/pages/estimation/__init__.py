@@ -392,7 +392,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--materials", help="comma-separated materials, of any set (default: every truth of --set)")
     p.add_argument("--rgl", type=Path, nargs="+", default=[], metavar="FILE",
                    help="RGL measurements (*_rgb.bsdf) added to the test set as rgl-NAME; none the tuning set holds")
-    p.add_argument("--models", default=",".join(MODELS), help=f"comma-separated models (default: {','.join(MODELS)})")
+    p.add_argument("--models", default=",".join(MODELS),
+                   help=f"comma-separated models (default: {','.join(MODELS)}); with --no-ceiling, an empty list "
+                        "(`--models ,`) renders the truths' images alone")
     p.add_argument("--steps", type=int, help=f"optimisation steps (default: {FULL['steps']})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of each optimisation render (default: {FULL['spp']})")
     p.add_argument("--measure-spp", type=int,
@@ -478,6 +480,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name} {model}: novel RMSE {result['rmse_tonemapped']:.4f}, log error {result['log_error']:.4f}, "
                   f"{result['seconds']:.0f} s", flush=True)
             results.append(result)
+    if not columns:  # `--models , --no-ceiling`: the truths' images alone, ahead of timed estimates
+        print(f"rendered the truths of {len(chosen)} materials under {work}")
+        return 0
     out = args.out or work / "estimation.md"
     command = "python -m nbrdf_tools estimation " + " ".join(argv if argv is not None else sys.argv[1:])
     image = run_page.write(out, command.strip(), results, work, settings, models, chosen, missing,

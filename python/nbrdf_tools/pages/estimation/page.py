@@ -160,19 +160,22 @@ def table(cases: dict) -> list[str]:
 
 
 def seconds(results: list[dict]) -> list[str]:
-    """Per set and model, the wall and CPU seconds of its estimates (the ceiling: its
-    distillation), and the cores they ran on (where recorded)."""
+    """Per set, model and seed (one report run each, whose machine load the set's notes give), the
+    wall and CPU seconds of its estimates (the ceiling: its distillation, no seed), and the cores
+    they ran on (where recorded)."""
     timed = [r for r in results if "seconds" in r]
-    lines = ["| set | model | wall seconds | median wall seconds | CPU seconds | runs | cores |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| set | model | seed | wall seconds | median wall seconds | CPU seconds | runs | cores |",
+             "|---|---|---|---|---|---|---|---|"]
     for which in truths.SETS:
         for model in [*report.MODELS, report.CEILING]:
-            rows = [r for r in timed if r["model"] == model and r["set"] == which]
-            if rows:
+            of_model = [r for r in timed if r["model"] == model and r["set"] == which]
+            for seed in sorted({seeds.seed_of(r) for r in of_model}, key=lambda s: -1 if s is None else s):
+                rows = [r for r in of_model if seeds.seed_of(r) == seed]
                 wall, cpu = [r["seconds"] for r in rows], [r["cpu_seconds"] for r in rows]
                 cores = sorted({r["cores"] for r in rows if "cores" in r})
-                lines.append(f"| {which} | {model} | {min(wall):.0f}-{max(wall):.0f} | {np.median(wall):.0f} | "
-                             f"{min(cpu):.0f}-{max(cpu):.0f} | {len(rows)} | {', '.join(map(str, cores)) or '-'} |")
+                lines.append(f"| {which} | {model} | {'-' if seed is None else seed} | {min(wall):.0f}-{max(wall):.0f} | "
+                             f"{np.median(wall):.0f} | {min(cpu):.0f}-{max(cpu):.0f} | {len(rows)} | "
+                             f"{', '.join(map(str, cores)) or '-'} |")
     return lines
 
 
@@ -206,9 +209,7 @@ def render(stored: dict, stored_arg: str | None) -> str:
     results = results_of(stored)
     cases = seeds.by_case(results)
     by_set = headline.split_by_set(cases, lambda m: next(r["set"] for r in results if r["material"] == m))
-    tuning = [r for r in results if r["set"] == "tuning"]
     tuning_cases = by_set.get("tuning", {})
-    timed_seeds = sorted({seeds.seed_of(r) for r in tuning if "seconds" in r} - {None})
     figure = stored["figure"]
     side = s.get("train_resolution", s["resolution"])
     command = "python -m nbrdf_tools estimation --stored-only" + (f" --stored {stored_arg}" if stored_arg else "")
@@ -270,8 +271,8 @@ def render(stored: dict, stored_arg: str | None) -> str:
         "From the means over seeds:", "",
         *report.summary(seeds.mean_results(tuning_cases)), "",
         "## Seconds per estimate", "",
-        "Wall and CPU seconds of each estimate (the tuning set's at seed " + ", ".join(map(str, timed_seeds))
-        + f"), over the materials. Every model runs the same {s['steps']} steps; a step of an analytic model "
+        "Wall and CPU seconds of each estimate, over the materials, per report run (a seed; the sets' notes say "
+        f"how loaded the machine was). Every model runs the same {s['steps']} steps; a step of an analytic model "
         "costs a fraction of a network's, and the prior runs more phases than the network without it. The first "
         "network estimate of a run includes compiling Mitsuba's kernels (cached afterwards).", "",
         *seconds(results), "",
