@@ -287,7 +287,9 @@ def render(stored: dict, stored_arg: str | None) -> str:
         "```", "",
         "`--set tuning` measures the tuning set the same way. A run's own page (`WORK/estimation.md`) adds "
         "SSIM, HDR-FLIP, the BRDF log error and the candidates the prior chose; the figure is that run's "
-        "(`WORK/images/estimation.png`).", ""]
+        "(`WORK/images/estimation.png`). For seconds of estimates alone on the machine, render the truths' "
+        "images first (`--models , --no-ceiling`, in the same work folder) and run nothing else beside the "
+        "estimates.", ""]
     return "\n".join(lines)
 
 
